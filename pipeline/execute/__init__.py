@@ -1,0 +1,1 @@
+"""Execution on the emulated humanoid in PyBullet (DIRECT mode)."""

@@ -1,0 +1,97 @@
+"""A PyBullet physics client holding one robot, with name-based access to joints and links.
+
+PyBullet writes banners and URDF warnings straight to the process's stdout from C; they are
+silenced while it loads, so the CLI's stdout stays machine-readable. PyBullet reports link
+poses in single precision (about 1e-7 m), which bounds every comparison against it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@contextlib.contextmanager
+def _c_output_silenced() -> Iterator[None]:
+    """Send file descriptors 1 and 2 to /dev/null for the duration (C-level prints)."""
+    saved = [os.dup(1), os.dup(2)]
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, devnull):
+            os.close(fd)
+
+
+with _c_output_silenced():
+    import pybullet as pb
+
+
+@dataclass
+class PyBulletRobot:
+    """One robot loaded into its own PyBullet DIRECT client.
+
+    Attributes:
+        client: the physics client id (passed to every PyBullet call).
+        body: the robot's body id.
+        joint_index: joint name -> PyBullet joint index.
+        link_index: link name -> PyBullet link index (-1 for the root link).
+    """
+
+    client: int
+    body: int
+    joint_index: dict[str, int]
+    link_index: dict[str, int]
+
+    def set_positions(self, names: Sequence[str], q: Sequence[float]) -> None:
+        """Teleport joints ``names`` to positions ``q`` [rad] (no dynamics)."""
+        for name, value in zip(names, q):
+            pb.resetJointState(self.body, self.joint_index[name], float(value), physicsClientId=self.client)
+
+    def link_pose(self, link: str) -> np.ndarray:
+        """World pose of ``link``'s URDF frame (not its centre of mass) as a 4x4 array [m]."""
+        index = self.link_index[link]
+        if index == -1:
+            pos, quat = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        else:
+            state = pb.getLinkState(self.body, index, computeForwardKinematics=True, physicsClientId=self.client)
+            pos, quat = state[4], state[5]
+        T = np.eye(4)
+        T[:3, :3] = np.asarray(pb.getMatrixFromQuaternion(quat, physicsClientId=self.client)).reshape(3, 3)
+        T[:3, 3] = pos
+        return T
+
+    def close(self) -> None:
+        """Disconnect the client."""
+        if pb.isConnected(physicsClientId=self.client):
+            pb.disconnect(physicsClientId=self.client)
+
+    def __enter__(self) -> "PyBulletRobot":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False) -> PyBulletRobot:
+    """Start a DIRECT client and load ``urdf`` with a fixed base at the origin."""
+    with _c_output_silenced():
+        client = pb.connect(pb.DIRECT)
+        flags = pb.URDF_USE_SELF_COLLISION if self_collision else 0
+        body = pb.loadURDF(str(urdf), useFixedBase=True, flags=flags, physicsClientId=client)
+    joint_index: dict[str, int] = {}
+    link_index: dict[str, int] = {pb.getBodyInfo(body, physicsClientId=client)[0].decode(): -1}
+    for i in range(pb.getNumJoints(body, physicsClientId=client)):
+        info = pb.getJointInfo(body, i, physicsClientId=client)
+        joint_index[info[1].decode()] = i
+        link_index[info[12].decode()] = i
+    return PyBulletRobot(client=client, body=body, joint_index=joint_index, link_index=link_index)

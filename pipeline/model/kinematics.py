@@ -1,0 +1,132 @@
+"""Forward kinematics and geometric Jacobians of a chain as CasADi Functions.
+
+The chain's transforms are multiplied out symbolically from the URDF joint descriptions
+(origin, then the joint's motion about or along its axis), so the Functions are exact to
+rounding and can be embedded in larger CasADi graphs (the IK control step) or mapped over many
+configurations at once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import casadi as cs
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pipeline.model.robot import Chain
+from pipeline.model.urdf import JointSpec
+
+
+def origin_matrix(joint: JointSpec) -> np.ndarray:
+    """Homogeneous transform of ``joint``'s frame in its parent link frame (URDF rpy: R = Rz Ry Rx)."""
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("xyz", joint.origin_rpy).as_matrix()
+    T[:3, 3] = joint.origin_xyz
+    return T
+
+
+def _motion(joint: JointSpec, q: cs.SX) -> cs.SX:
+    """Homogeneous transform of the joint's motion by ``q`` [rad or m] (Rodrigues for revolute)."""
+    a = np.asarray(joint.axis)
+    T = cs.SX.eye(4)
+    if joint.type == "prismatic":
+        T[:3, 3] = a * q
+        return T
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    T[:3, :3] = np.eye(3) + cs.sin(q) * K + (1 - cs.cos(q)) * (K @ K)
+    return T
+
+
+@dataclass(frozen=True)
+class ChainFrames:
+    """Symbolic frames along a chain at the symbolic configuration ``q``.
+
+    Attributes:
+        q: the configuration symbol, shape (n, 1).
+        before: for each movable joint, its frame in the chain base before its own motion (4x4 SX).
+        after: for each movable joint, its child link frame after its motion (4x4 SX).
+        tip: the tip frame in the chain base (4x4 SX).
+    """
+
+    q: cs.SX
+    before: tuple[cs.SX, ...]
+    after: tuple[cs.SX, ...]
+    tip: cs.SX
+
+
+def chain_frames(chain: Chain) -> ChainFrames:
+    """Multiply out the chain symbolically."""
+    q = cs.SX.sym("q", chain.dof)
+    T = cs.SX.eye(4)
+    before, after = [], []
+    i = 0
+    for joint in chain.joints:
+        T = T @ origin_matrix(joint)
+        if joint.movable:
+            before.append(T)
+            T = T @ _motion(joint, q[i])
+            after.append(T)
+            i += 1
+    return ChainFrames(q=q, before=tuple(before), after=tuple(after), tip=T)
+
+
+def geometric_jacobian(frames: ChainFrames, chain: Chain) -> cs.SX:
+    """6 x n geometric Jacobian of the tip origin: rows [linear velocity; angular velocity] in the base frame."""
+    p_tip = frames.tip[:3, 3]
+    columns = []
+    movable = [j for j in chain.joints if j.movable]
+    for joint, T in zip(movable, frames.before):
+        z = T[:3, :3] @ np.asarray(joint.axis)
+        if joint.type == "prismatic":
+            columns.append(cs.vertcat(z, cs.SX.zeros(3)))
+        else:
+            columns.append(cs.vertcat(cs.cross(z, p_tip - T[:3, 3]), z))
+    return cs.horzcat(*columns) if columns else cs.SX.zeros(6, 0)
+
+
+@dataclass(frozen=True)
+class ChainKinematics:
+    """Kinematics of one chain.
+
+    Attributes:
+        chain: the chain.
+        fk: CasADi Function ``q (n) -> T (4x4)``, tip pose in the base frame [m].
+        jacobian: CasADi Function ``q (n) -> J (6xn)``, geometric Jacobian of the tip origin,
+            rows [v; w] in the base frame [m/rad; 1].
+    """
+
+    chain: Chain
+    fk: cs.Function
+    jacobian: cs.Function
+
+    @classmethod
+    def of(cls, chain: Chain) -> "ChainKinematics":
+        """Build the Functions for ``chain``."""
+        frames = chain_frames(chain)
+        fk = cs.Function(f"fk_{chain.tip}", [frames.q], [frames.tip], ["q"], ["T"])
+        jac = cs.Function(f"jac_{chain.tip}", [frames.q], [geometric_jacobian(frames, chain)], ["q"], ["J"])
+        return cls(chain=chain, fk=fk, jacobian=jac)
+
+    @cached_property
+    def _fk_flat(self) -> cs.Function:
+        q = cs.SX.sym("q", self.chain.dof)
+        return cs.Function("fk_flat", [q], [cs.reshape(self.fk(q), 16, 1)])
+
+    def pose(self, q: np.ndarray) -> np.ndarray:
+        """Tip pose at one configuration ``q`` (n,) [rad] as a 4x4 array."""
+        return np.asarray(self.fk(np.asarray(q, dtype=float)))
+
+    def poses(self, Q: np.ndarray) -> np.ndarray:
+        """Tip poses at N configurations ``Q`` (N, n) [rad], evaluated with ``Function.map``; (N, 4, 4)."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        flat = np.asarray(self._fk_flat.map(Q.shape[0])(Q.T))  # (16, N), column-major 4x4 per column
+        return flat.T.reshape(-1, 4, 4).transpose(0, 2, 1)
+
+    def jacobians(self, Q: np.ndarray) -> np.ndarray:
+        """Geometric Jacobians at N configurations (N, n) [rad]; (N, 6, n)."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        n = self.chain.dof
+        flat = np.asarray(self.jacobian.map(Q.shape[0])(Q.T))  # (6, N*n)
+        return flat.reshape(6, Q.shape[0], n).transpose(1, 0, 2)

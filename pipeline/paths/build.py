@@ -1,0 +1,162 @@
+"""Task -> :class:`CartesianReference`.
+
+Every move lasts a whole number of control periods and uses the quintic time scaling
+s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5, tau = t / T, whose velocity and acceleration vanish at both
+ends, so the hands stop at every waypoint. Lines interpolate the position linearly in s and the
+orientation by slerp, R(s) = R0 exp(s log(R0^T R1)); arcs turn the position about an axis through a
+centre with the orientation fixed. Repetitions repeat the moves; each sample carries its
+repetition index. For a carried object the slave hand follows the master by MC-Inverse eq (11).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pipeline.errors import UnreachablePoseError, TaskFileError
+from pipeline.model.poses import invert, pose_matrix
+from pipeline.paths.reference import CartesianReference, HandReference
+from pipeline.tasks.load import Task, arm_reach
+from pipeline.tasks.schema import HandMove
+
+#: Largest gap between a repeated path's end and its start [m] and [rad].
+CLOSURE_TOLERANCE = 1e-9
+
+
+def quintic(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Time scaling s(tau) and ds/dtau for tau in [0, 1]."""
+    s = tau**3 * (10 - 15 * tau + 6 * tau**2)
+    ds = 30 * tau**2 * (1 - tau) ** 2
+    return s, ds
+
+
+@dataclass
+class _Samples:
+    """Mutable per-hand sample lists while building."""
+
+    position: list[np.ndarray]
+    rotation: list[np.ndarray]
+    linear_velocity: list[np.ndarray]
+    angular_velocity: list[np.ndarray]
+
+
+def _segment(move: HandMove | None, T0: np.ndarray, task: Task, tau: np.ndarray, duration: float):
+    """Positions, rotations and velocities of one hand over one move, at normalised times tau."""
+    n = len(tau)
+    s, ds = quintic(tau)
+    sdot = ds / duration
+    p0, R0 = T0[:3, 3], T0[:3, :3]
+    position = np.repeat(p0[None], n, axis=0)
+    rotation = np.repeat(R0[None], n, axis=0)
+    velocity = np.zeros((n, 3))
+    omega = np.zeros((n, 3))
+    if move is None or move.kind == "hold":
+        return position, rotation, velocity, omega
+    if move.kind in ("to", "by"):
+        if move.kind == "to":
+            T1 = task.waypoint_pose(move.to)
+            p1, R1 = T1[:3, 3], T1[:3, :3]
+        else:
+            p1, R1 = p0 + np.asarray(move.by), R0
+        position = p0 + s[:, None] * (p1 - p0)
+        velocity = sdot[:, None] * (p1 - p0)
+        phi = Rotation.from_matrix(R0.T @ R1).as_rotvec()
+        rotation = R0 @ Rotation.from_rotvec(s[:, None] * phi).as_matrix()
+        omega = sdot[:, None] * (R0 @ phi)  # R0 exp(s phi) turns about R0 phi at rate s'
+        return position, rotation, velocity, omega
+    axis = np.asarray(move.arc_axis) / np.linalg.norm(move.arc_axis)
+    centre = np.asarray(move.arc_center)
+    turn = Rotation.from_rotvec((s * move.arc_angle_rad)[:, None] * axis)
+    position = centre + turn.apply(p0 - centre)
+    rate = sdot * move.arc_angle_rad
+    velocity = rate[:, None] * np.cross(axis, position - centre)
+    return position, rotation, velocity, omega
+
+
+def _slave_from_master(task: Task, master: HandReference) -> HandReference:
+    """MC-Inverse eq (11): B_T_Tl Tl_T_obj = B_T_Tr Tr_T_obj, so T_r = T_l Tl_T_obj (Tr_T_obj)^-1."""
+    obj = task.spec.object
+    relative = pose_matrix(obj.master_to_object.position, obj.master_to_object.rpy) @ invert(
+        pose_matrix(obj.slave_to_object.position, obj.slave_to_object.rpy)
+    )
+    T = master.poses @ relative
+    offset = T[:, :3, 3] - master.position
+    return HandReference(
+        position=T[:, :3, 3],
+        rotation=T[:, :3, :3],
+        linear_velocity=master.linear_velocity + np.cross(master.angular_velocity, offset),
+        angular_velocity=master.angular_velocity,
+    )
+
+
+def _check_closed(task: Task, hand: str, ref: HandReference) -> None:
+    gap = float(np.linalg.norm(ref.position[-1] - ref.position[0]))
+    angle = float(np.linalg.norm(Rotation.from_matrix(ref.rotation[0].T @ ref.rotation[-1]).as_rotvec()))
+    if gap > CLOSURE_TOLERANCE or angle > CLOSURE_TOLERANCE:
+        raise TaskFileError(
+            f"{task.where('moves')}: the {hand} hand ends {gap:.3g} m / {angle:.3g} rad away from its start, "
+            f"so the path cannot be repeated {task.spec.repetitions} times (end each repetition where it starts)"
+        )
+
+
+def build_reference(task: Task) -> CartesianReference:
+    """Sample the task's hand motions at its control period.
+
+    Raises:
+        TaskFileError: a repeated path does not close on itself.
+        UnreachablePoseError: a sample leaves a hand's workspace (names the move and time).
+    """
+    spec = task.spec
+    period = spec.control_period_s
+    driven = [h for h in spec.hands if not (spec.object is not None and h == spec.object.slave)]
+    samples = {h: _Samples([], [], [], []) for h in driven}
+    current = {h: task.start_pose(h) for h in driven}
+    for h in driven:
+        p, R = current[h][:3, 3], current[h][:3, :3]
+        samples[h].position.append(p[None])
+        samples[h].rotation.append(R[None])
+        samples[h].linear_velocity.append(np.zeros((1, 3)))
+        samples[h].angular_velocity.append(np.zeros((1, 3)))
+    rep, segment = [np.zeros(1, int)], [np.zeros(1, int)]
+    for r in range(spec.repetitions):
+        for i, move in enumerate(spec.moves):
+            steps = int(round(move.duration_s / period))
+            tau = np.arange(1, steps + 1) / steps
+            for h in driven:
+                out = _segment(move.for_hand(h), current[h], task, tau, move.duration_s)
+                for store, values in zip((samples[h].position, samples[h].rotation, samples[h].linear_velocity, samples[h].angular_velocity), out):
+                    store.append(values)
+                current[h] = np.eye(4)
+                current[h][:3, :3], current[h][:3, 3] = out[1][-1], out[0][-1]
+            rep.append(np.full(steps, r))
+            segment.append(np.full(steps, i))
+    hands = {
+        h: HandReference(*(np.concatenate(getattr(samples[h], f)) for f in ("position", "rotation", "linear_velocity", "angular_velocity")))
+        for h in driven
+    }
+    if spec.object is not None:
+        hands[spec.object.slave] = _slave_from_master(task, hands[spec.object.master])
+    rep_index, seg_index = np.concatenate(rep), np.concatenate(segment)
+    n = len(rep_index)
+    if spec.repetitions > 1:
+        for h in driven:
+            _check_closed(task, h, hands[h])
+    for h, ref in hands.items():
+        ok = arm_reach(task, h).within(ref.poses)
+        if not ok.all():
+            k = int(np.argmin(ok))
+            raise UnreachablePoseError(
+                f"{task.where(f'moves[{seg_index[k]}]')}: at t = {k * period:.3f} s (repetition {rep_index[k]}) "
+                f"{arm_reach(task, h).explain(ref.poses[k])}"
+            )
+    return CartesianReference(
+        task=task.name,
+        frame=task.robot.urdf.root,
+        period_s=period,
+        t=np.arange(n) * period,
+        rep=rep_index,
+        segment=seg_index,
+        hands={h: hands[h] for h in spec.hands},
+    )

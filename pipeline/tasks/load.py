@@ -1,0 +1,283 @@
+"""Loading and validating a task file against its robot.
+
+Errors name the file and key at fault (``tasks/triangle.toml:moves[2].left.to: ...``) and are
+raised as :class:`~pipeline.errors.TaskFileError`; the CLI prints them as one line.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+from pydantic import ValidationError
+
+from pipeline.errors import RobotModelError, TaskFileError, UnreachablePoseError
+from pipeline.model.kinematics import ChainKinematics, origin_matrix
+from pipeline.model.poses import pose_matrix
+from pipeline.model.robot import Robot, load_robot
+from pipeline.model.srs import SrsGeometry, srs_geometry
+from pipeline.tasks.schema import TaskSpec
+
+#: Margin kept from the fully stretched or fully folded arm when checking reach [m].
+REACH_MARGIN_M = 1e-3
+
+
+@dataclass(frozen=True)
+class Task:
+    """A validated task.
+
+    Attributes:
+        spec: the parsed file.
+        file: where it was read from.
+        text: the file's exact text (recorded as an attachment).
+        robot: the robot it names.
+        initial_q: the initial configuration, every movable joint of the robot [rad].
+    """
+
+    spec: TaskSpec
+    file: Path
+    text: str
+    robot: Robot
+    initial_q: Mapping[str, float]
+
+    @property
+    def name(self) -> str:
+        """The task's name (also its recordings directory)."""
+        return self.spec.name
+
+    @property
+    def sha256(self) -> str:
+        """SHA-256 of the file's text."""
+        return hashlib.sha256(self.text.encode()).hexdigest()
+
+    def where(self, key: str) -> str:
+        """``file:key`` for error messages."""
+        return f"{self.file}:{key}"
+
+    def hand_chain_from_root(self, hand: str):
+        """The chain from the robot's root link to ``hand``'s tip (waist included)."""
+        return self.robot.chain_between(self.robot.urdf.root, self.robot.hand_chain(hand).tip)
+
+    def initial_hand_pose(self, hand: str) -> np.ndarray:
+        """The pose of ``hand`` at the initial configuration, in the robot base frame (4x4) [m]."""
+        chain = self.hand_chain_from_root(hand)
+        q = [self.initial_q[n] for n in chain.joint_names]
+        return ChainKinematics.of(chain).pose(np.array(q))
+
+    def waypoint_pose(self, name: str) -> np.ndarray:
+        """The 4x4 pose of waypoint ``name`` [m]."""
+        wp = self.spec.waypoints[name]
+        return pose_matrix(wp.position, wp.rpy)
+
+    def start_pose(self, hand: str) -> np.ndarray:
+        """The start pose of a driven hand (``initial`` or a waypoint) [m]."""
+        start = getattr(self.spec.start, hand)
+        return self.initial_hand_pose(hand) if start == "initial" else self.waypoint_pose(start)
+
+
+def _format_location(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "(top level)"
+
+
+def _validation_message(file: Path, exc: ValidationError) -> str:
+    errors = exc.errors()
+    first = errors[0]
+    loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and p.startswith(("function-", "tagged-union"))))
+    message = "unknown key" if first["type"] == "extra_forbidden" else first["msg"]
+    if first["type"] == "missing":
+        message = "missing"
+    more = f" (and {len(errors) - 1} more problems)" if len(errors) > 1 else ""
+    return f"{file}:{_format_location(loc)}: {message}{more}"
+
+
+def _parse(file: Path) -> tuple[str, TaskSpec]:
+    try:
+        text = file.read_text()
+    except FileNotFoundError:
+        raise TaskFileError(f"{file}: task file not found") from None
+    except (IsADirectoryError, UnicodeDecodeError) as exc:
+        raise TaskFileError(f"{file}: cannot read a task file ({exc.__class__.__name__})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise TaskFileError(f"{file}: not valid TOML: {exc}") from None
+    try:
+        return text, TaskSpec.model_validate(data)
+    except ValidationError as exc:
+        raise TaskFileError(_validation_message(file, exc)) from None
+
+
+def _check_joint_names(task_where, names, robot: Robot, key: str) -> None:
+    for name in names:
+        if name not in robot.limits:
+            raise TaskFileError(f"{task_where(key)}.{name}: no such joint in robot '{robot.name}'")
+
+
+def _initial_configuration(file: Path, spec: TaskSpec, robot: Robot) -> dict[str, float]:
+    where = lambda key: f"{file}:{key}"  # noqa: E731
+    if isinstance(spec.initial, str):
+        if spec.initial not in robot.homes:
+            raise TaskFileError(f"{where('initial')}: robot '{robot.name}' has no home pose '{spec.initial}' (homes: {', '.join(robot.homes)})")
+        return dict(robot.home(spec.initial))
+    _check_joint_names(where, spec.initial, robot, "initial")
+    q = {n: 0.0 for n in robot.joint_names}
+    for name, value in spec.initial.items():
+        lim = robot.limits[name]
+        if not lim.lower <= value <= lim.upper:
+            raise TaskFileError(f"{where('initial')}.{name}: {value} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]")
+        q[name] = value
+    return q
+
+
+def _check_structure(task: Task) -> None:
+    spec, robot, where = task.spec, task.robot, task.where
+    for hand in ("left", "right"):
+        start = getattr(spec.start, hand)
+        if start is None:
+            continue
+        if hand not in robot.hands:
+            raise TaskFileError(f"{where('start.' + hand)}: robot '{robot.name}' has no hand '{hand}' (hands: {', '.join(robot.hands)})")
+        if start != "initial" and start not in spec.waypoints:
+            raise TaskFileError(f"{where('start.' + hand)}: no waypoint '{start}' (waypoints: {', '.join(spec.waypoints) or 'none'}; or \"initial\")")
+    started = {h for h in ("left", "right") if getattr(spec.start, h) is not None}
+    for i, move in enumerate(spec.moves):
+        steps = move.duration_s / spec.control_period_s
+        if abs(steps - round(steps)) > 1e-6:
+            raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s} s is not a whole number of control periods ({spec.control_period_s} s)")
+        for hand in ("left", "right"):
+            hand_move = move.for_hand(hand)
+            if hand_move is None:
+                continue
+            if hand not in started:
+                raise TaskFileError(f"{where(f'moves[{i}].{hand}')}: hand '{hand}' has no start pose (add start.{hand})")
+            if hand_move.to is not None and hand_move.to not in spec.waypoints:
+                raise TaskFileError(f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{hand_move.to}' (waypoints: {', '.join(spec.waypoints) or 'none'})")
+    for key in ("velocity", "acceleration"):
+        value = getattr(spec.limits, key)
+        if isinstance(value, dict):
+            _check_joint_names(where, value, robot, f"limits.{key}")
+    if spec.gesture is not None:
+        _check_joint_names(where, spec.gesture.goal_lower, robot, "gesture.goal_lower")
+        _check_joint_names(where, spec.gesture.goal_upper, robot, "gesture.goal_upper")
+        for name, lo in spec.gesture.goal_lower.items():
+            hi = spec.gesture.goal_upper.get(name)
+            if hi is not None and lo > hi:
+                raise TaskFileError(f"{where('gesture.goal_lower')}.{name}: {lo} above goal_upper {hi}")
+    if spec.object is not None:
+        obj = spec.object
+        if obj.master not in started:
+            raise TaskFileError(f"{where('object.master')}: the master hand '{obj.master}' needs a start pose")
+        if obj.slave in started or any(m.for_hand(obj.slave) for m in spec.moves):
+            raise TaskFileError(f"{where('object.slave')}: the slave hand '{obj.slave}' follows the master by eq (11); give it no start or moves")
+    for i, wta in enumerate(spec.wta):
+        if wta.hand not in robot.hands:
+            raise TaskFileError(f"{where(f'wta[{i}].hand')}: robot '{robot.name}' has no hand '{wta.hand}'")
+    names = set(robot.urdf.links) | {o.name for o in spec.environment} | ({spec.object.name} if spec.object else set())
+    for i, pair in enumerate(spec.expected_contacts):
+        for name in pair:
+            if name not in names:
+                raise TaskFileError(f"{where(f'expected_contacts[{i}]')}: '{name}' is neither a robot link nor an object of the task")
+
+
+@dataclass(frozen=True)
+class ArmReach:
+    """The workspace test of one hand: the wrist centre W of a hand pose must lie within
+    [|L2 - L3|, L2 + L3] of the shoulder S (less :data:`REACH_MARGIN_M`). With the waist free, S
+    may move on a sphere about the waist centre, and the test becomes the necessary condition
+    | |W - centre| - |S - centre| | <= L2 + L3.
+
+    Attributes:
+        hand: the hand.
+        geometry: its arm's S-R-S geometry.
+        shoulder: S in the robot base frame at the initial configuration [m].
+        waist_centre: the waist's centre of rotation [m] when the waist is free, else None.
+    """
+
+    hand: str
+    geometry: SrsGeometry
+    shoulder: np.ndarray
+    waist_centre: np.ndarray | None
+
+    def distances(self, T: np.ndarray) -> np.ndarray:
+        """The distance the test bounds, for hand poses T (N, 4, 4) [m]; (N,)."""
+        wrist = self.geometry.wrist_centre(T[:, :3, 3], T[:, :3, :3])
+        if self.waist_centre is None:
+            return np.linalg.norm(wrist - self.shoulder, axis=1)
+        radius = np.linalg.norm(self.shoulder - self.waist_centre)
+        return np.abs(np.linalg.norm(wrist - self.waist_centre, axis=1) - radius)
+
+    def within(self, T: np.ndarray) -> np.ndarray:
+        """Which of the hand poses T (N, 4, 4) pass; (N,) bool."""
+        d = self.distances(T)
+        low = -np.inf if self.waist_centre is not None else self.geometry.min_reach + REACH_MARGIN_M
+        return (d >= low) & (d <= self.geometry.reach - REACH_MARGIN_M)
+
+    def explain(self, T: np.ndarray) -> str:
+        """Why one pose T (4, 4) fails, for an error message."""
+        d = float(self.distances(T[None])[0])
+        p = ", ".join(f"{v:.3f}" for v in T[:3, 3])
+        origin = "the waist's reach" if self.waist_centre is not None else "the shoulder"
+        return (
+            f"the {self.hand} hand cannot reach [{p}] with this orientation: its wrist centre is {d:.3f} m "
+            f"from {origin}, the arm spans {self.geometry.min_reach:.3f}-{self.geometry.reach:.3f} m"
+        )
+
+
+def arm_reach(task: Task, hand: str) -> ArmReach:
+    """The reach test of ``hand`` for ``task`` (waist at its initial configuration, or free)."""
+    robot = task.robot
+    arm = robot.hand_chain(hand)
+    geometry = srs_geometry(arm)
+    to_arm = robot.chain_between(robot.urdf.root, arm.base)
+    T_arm = ChainKinematics.of(to_arm).pose(np.array([task.initial_q[n] for n in to_arm.joint_names]))
+    centre = None
+    if task.spec.waist == "free" and to_arm.dof:
+        frame = np.eye(4)  # the first waist joint's frame, which no waist motion moves
+        for joint in to_arm.joints:
+            frame = frame @ origin_matrix(joint)
+            if joint.movable:
+                break
+        centre = frame[:3, 3]
+    return ArmReach(hand=hand, geometry=geometry, shoulder=T_arm[:3, :3] @ geometry.shoulder + T_arm[:3, 3], waist_centre=centre)
+
+
+def _check_reach(task: Task) -> None:
+    spec = task.spec
+    for hand in spec.hands:
+        names = [getattr(spec.start, hand)] + [m.for_hand(hand).to for m in spec.moves if m.for_hand(hand) is not None]
+        names = [n for n in names if n is not None and n != "initial"]
+        if not names:
+            continue
+        reach = arm_reach(task, hand)
+        for name in dict.fromkeys(names):
+            T = task.waypoint_pose(name)
+            if not reach.within(T[None])[0]:
+                raise UnreachablePoseError(f"{task.where(f'waypoints.{name}')}: {reach.explain(T)}")
+
+
+def load_task(path: str | Path) -> Task:
+    """Read, validate and resolve a task file.
+
+    Raises:
+        TaskFileError: with ``file:key`` and the cause, for any malformed or impossible content.
+    """
+    file = Path(path)
+    text, spec = _parse(file)
+    robot_dir = (file.parent / spec.robot).resolve()
+    try:
+        robot = load_robot(robot_dir)
+    except RobotModelError as exc:
+        raise TaskFileError(f"{file}:robot: {exc}") from None
+    initial = _initial_configuration(file, spec, robot)
+    task = Task(spec=spec, file=file, text=text, robot=robot, initial_q=MappingProxyType(initial))
+    _check_structure(task)
+    _check_reach(task)
+    return task
