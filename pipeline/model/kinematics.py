@@ -130,3 +130,19 @@ class ChainKinematics:
         n = self.chain.dof
         flat = np.asarray(self.jacobian.map(Q.shape[0])(Q.T))  # (6, N*n)
         return flat.reshape(6, Q.shape[0], n).transpose(1, 0, 2)
+
+
+def motion_matrix(joint: JointSpec, q: float) -> np.ndarray:
+    """Homogeneous transform (numpy) of a joint's motion by ``q`` [rad or m]; identity if fixed."""
+    T = np.eye(4)
+    if joint.type == "prismatic":
+        T[:3, 3] = np.asarray(joint.axis) * q
+    elif joint.movable:
+        T[:3, :3] = Rotation.from_rotvec(np.asarray(joint.axis) * q).as_matrix()
+    return T
+
+
+def joint_transforms(joints: tuple[JointSpec, ...], q: dict[str, float]) -> list[tuple[str, str, np.ndarray]]:
+    """(parent link, child link, 4x4 child-in-parent) of every joint at configuration ``q``
+    (joint name -> value; joints not named are at 0)."""
+    return [(j.parent, j.child, origin_matrix(j) @ motion_matrix(j, q.get(j.name, 0.0))) for j in joints]

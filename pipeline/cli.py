@@ -1,0 +1,164 @@
+"""The ``dualarm`` command line (Typer).
+
+User mistakes (a malformed task file, an unknown robot, a corrupt recording, ...) print one line
+on stderr and exit with code 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+from typing import Annotated, Callable, Optional
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from pipeline.errors import DualarmError, NotSRSError
+
+app = typer.Typer(
+    name="dualarm",
+    help="Humanoid dual-arm motion papers as runnable, recorded, repeatable experiments.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+robot_app = typer.Typer(help="Inspect and verify robot descriptions.", no_args_is_help=True)
+app.add_typer(robot_app, name="robot")
+
+out = Console(highlight=False)
+err = Console(stderr=True, highlight=False)
+
+
+def user_errors(func: Callable) -> Callable:
+    """Turn a DualarmError into one line on stderr and exit code 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except DualarmError as exc:
+            err.print(f"error: {exc}", markup=False, soft_wrap=True)
+            raise typer.Exit(2) from None
+
+    return wrapper
+
+
+@app.command()
+@user_errors
+def run(
+    task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
+    stages: Annotated[Optional[str], typer.Option(help="Comma-separated stages to run (default: every available stage).")] = None,
+    out_dir: Annotated[Path, typer.Option("--out", help="Directory that receives <task>/<run-id>/.")] = Path("recordings"),
+    seed: Annotated[int, typer.Option(help="Random seed, recorded in the manifest.")] = 0,
+) -> None:
+    """Run a task through the pipeline and record it; prints the run directory as the last line."""
+    from pipeline.run import run_task
+
+    chosen = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+    with err.status(f"running {task} ..."):
+        directory = run_task(task, stages=chosen, out_dir=out_dir, seed=seed, command=["dualarm", *sys.argv[1:]])
+    out.print(str(directory), markup=False, soft_wrap=True)
+
+
+@app.command()
+@user_errors
+def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>).")]) -> None:
+    """Print a run's status, topics (message counts and time range) and metrics."""
+    from pipeline.record.readback import read_run
+
+    data = read_run(run_dir)
+    m = data.manifest
+    out.print(f"run      {data.run_id}  ({data.status})", markup=False)
+    out.print(f"task     {m.get('task')}  ({m.get('task_file')})", markup=False)
+    out.print(f"stages   {', '.join(m.get('stages', []))}", markup=False)
+    if m.get("error"):
+        out.print(f"error    {m['error']}", markup=False, soft_wrap=True)
+    table = Table(title="topics", title_justify="left")
+    for column in ("topic", "stage", "rows", "t from [s]", "t to [s]"):
+        table.add_column(column, justify="left" if column in ("topic", "stage") else "right")
+    for topic, df in data.topics.items():
+        table.add_row(topic, str(df["stage"].iloc[0]), str(len(df)), f"{df['t'].min():.3f}", f"{df['t'].max():.3f}")
+    out.print(table)
+    metrics = Table(title="metrics", title_justify="left")
+    metrics.add_column("key")
+    metrics.add_column("value", justify="right")
+    for key, value in sorted(data.metrics.items()):
+        metrics.add_row(key, "null" if value is None else f"{value:.6g}")
+    out.print(metrics)
+
+
+@robot_app.command("check")
+@user_errors
+def robot_check(
+    robot_dir: Annotated[Optional[Path], typer.Argument(help="Robot directory holding robot.toml (e.g. robots/humanoid).")] = None,
+    urdf: Annotated[Optional[Path], typer.Option(help="Check one chain of a bare URDF instead (needs --base and --tip).")] = None,
+    base: Annotated[Optional[str], typer.Option(help="Base link of the chain (with --urdf).")] = None,
+    tip: Annotated[Optional[str], typer.Option(help="Tip link of the chain (with --urdf).")] = None,
+    samples: Annotated[int, typer.Option(min=1, help="Random configurations per chain.")] = 1000,
+    seed: Annotated[int, typer.Option(help="Seed of the random configurations.")] = 0,
+) -> None:
+    """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics,
+    PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
+    from pipeline.model.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain
+    from pipeline.model.robot import load_robot, robot_from_urdf
+    from pipeline.model.srs import srs_geometry
+
+    if (robot_dir is None) == (urdf is None):
+        raise DualarmError("give either ROBOT_DIR or --urdf PATH --base LINK --tip LINK")
+    if urdf is not None:
+        if not base or not tip:
+            raise DualarmError("--urdf needs --base LINK and --tip LINK")
+        robot = robot_from_urdf(urdf, base, tip)
+    else:
+        robot = load_robot(robot_dir)
+    out.print(f"robot {robot.name}: {robot.urdf.path}  ({len(robot.joint_names)} movable joints)", markup=False)
+    results = []
+    for chain in robot.chains.values():
+        out.print(f"\nchain {chain.name}: {chain.base} -> {chain.tip}, {chain.dof} DOF" + (f", hand '{chain.hand}'" if chain.hand else ""), markup=False)
+        limits = Table(show_edge=False, pad_edge=False)
+        for column in ("joint", "lower [rad]", "upper [rad]", "vel [rad/s]", "acc [rad/s²]", "jerk [rad/s³]"):
+            limits.add_column(column, justify="left" if column == "joint" else "right")
+        for name in chain.joint_names:
+            lim = robot.limits[name]
+            limits.add_row(name, *(f"{v:.4g}" for v in (lim.lower, lim.upper, lim.velocity, lim.acceleration, lim.jerk)))
+        out.print(limits)
+        if chain.dof == 7:
+            try:
+                g = srs_geometry(chain)
+                out.print(
+                    f"S-R-S: shoulder S = {(np.round(g.shoulder, 4) + 0.0).tolist()} m, L2 = {g.upper_arm:.4f} m, "
+                    f"L3 = {g.forearm:.4f} m, wrist-to-tip = {(np.round(g.tool_from_wrist, 4) + 0.0).tolist()} m",
+                    markup=False,
+                )
+            except NotSRSError as exc:
+                out.print(f"not S-R-S: {exc}", markup=False)
+        with err.status(f"checking {chain.name} on {samples} configurations ..."):
+            results.append(check_chain(robot, chain, samples=samples, seed=seed))
+    table = Table(title=f"kinematics check ({samples} random configurations per chain, seed {seed})", title_justify="left")
+    for column in ("chain", "FK vs adam [m]", "[rad]", "FK vs PyBullet [m]", "[rad]", "Jacobian vs FD", "result"):
+        table.add_column(column, justify="left" if column == "chain" else "right")
+    for r in results:
+        table.add_row(
+            r.chain,
+            f"{r.fk_position_error_m:.2e}",
+            f"{r.fk_rotation_error_rad:.2e}",
+            f"{r.pybullet_position_error_m:.2e}",
+            f"{r.pybullet_rotation_error_rad:.2e}",
+            f"{r.jacobian_error:.2e}",
+            "pass" if r.passed else "FAIL",
+        )
+    out.print(table)
+    out.print(
+        f"tolerances: FK vs adam-robotics (double precision) {FK_TOLERANCE:g} m / rad; FK vs PyBullet "
+        f"{PYBULLET_TOLERANCE:g} (PyBullet reports link poses in single precision); Jacobian {JACOBIAN_TOLERANCE:g}",
+        markup=False,
+    )
+    if not all(r.passed for r in results):
+        raise typer.Exit(1)
+
+
+def main() -> None:  # pragma: no cover - console entry point
+    app()

@@ -1,0 +1,1 @@
+"""Recording runs (MCAP + Rerun + manifest + metrics) and reading them back into pandas."""

@@ -1,0 +1,194 @@
+"""The recorder: each stage hands it its product once; it writes ``run.mcap`` and ``run.rrd``.
+
+MCAP (written with foxglove-sdk, one Context per run so nothing is global): one topic family per
+stage (``/task/...`` for the path stage), ``/tf`` Foxglove FrameTransforms of every robot link,
+``/robot_description`` with the URDF for Foxglove's URDF layer, ``/metrics``; the manifest as
+metadata; the task file, robot.toml and URDF as attachments. Log time is motion time.
+
+Rerun: the URDF per stage under ``/<stage>/<robot>``, reference paths and traces in 3D under
+``/world``, time series under ``/plots``, and a blueprint with a 3D view beside the plots.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+
+import foxglove
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+from foxglove.channels import FrameTransformsChannel, PosesInFrameChannel
+from foxglove.messages import FrameTransform, FrameTransforms, Pose, PosesInFrame, Quaternion, Timestamp, Vector3
+
+from pipeline.model.kinematics import joint_transforms
+from pipeline.model.poses import quaternion_xyzw
+from pipeline.model.robot import Robot
+from pipeline.paths.reference import CartesianReference
+from pipeline.record import schemas
+
+#: MCAP topic family of each stage.
+STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "execute": "/execute"}
+TIMELINE = "time"
+HAND_COLORS = {"left": (40, 120, 230), "right": (230, 90, 40)}
+
+
+def _ns(t: float) -> int:
+    """Motion time [s] -> MCAP log time [ns]."""
+    return int(round(t * 1e9))
+
+
+def _vec(v) -> dict[str, float]:
+    return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
+
+def _quat(q) -> dict[str, float]:
+    return {"x": float(q[0]), "y": float(q[1]), "z": float(q[2]), "w": float(q[3])}
+
+
+class Recorder:
+    """Writes one run's ``run.mcap`` and ``run.rrd`` into ``directory``.
+
+    Args:
+        directory: the (temporary) run directory.
+        run_id: the run's id (also the Rerun recording id).
+        robot: the robot, for /tf and the URDF.
+        attachments: file name -> text, stored in the MCAP (task file, robot.toml, URDF).
+    """
+
+    def __init__(self, directory: Path, run_id: str, robot: Robot, attachments: Mapping[str, str]) -> None:
+        self.directory = directory
+        self.robot = robot
+        self._context = foxglove.Context()
+        self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
+        self._channels: dict[str, foxglove.Channel] = {}
+        self._tf = FrameTransformsChannel("/tf", context=self._context)
+        self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
+        self._rr.save(directory / "run.rrd")
+        self._robots_logged: set[str] = set()
+        self._closed = False
+        for name, text in attachments.items():
+            media = "application/xml" if name.endswith(".urdf") else "application/toml"
+            self._mcap.attach(log_time=0, create_time=0, name=name, media_type=media, data=text.encode())
+        self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log({"data": robot.urdf.path.read_text()}, log_time=0)
+        self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+
+    # -- low level -------------------------------------------------------------------------------
+    def _json(self, topic: str, schema: dict) -> foxglove.Channel:
+        if topic not in self._channels:
+            self._channels[topic] = foxglove.Channel(topic, schema=schema, context=self._context)
+        return self._channels[topic]
+
+    def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
+        """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world."""
+        tree = rr.urdf.UrdfTree.from_file_path(self.robot.urdf.path, entity_path_prefix=stage, frame_prefix=f"{stage}/")
+        if stage not in self._robots_logged:
+            tree.log_urdf_to_recording(self._rr)
+            self._rr.log(
+                f"{stage}/root",
+                rr.Transform3D(parent_frame="tf#/", child_frame=f"{stage}/{self.robot.urdf.root}"),
+                static=True,
+            )
+            self._robots_logged.add(stage)
+        return tree
+
+    # -- products ----------------------------------------------------------------------------------
+    def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
+        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: ``/tf`` and
+        ``<family>/joint_state`` in the MCAP, the animated URDF under ``/<stage>`` in Rerun."""
+        transforms = joint_transforms(self.robot.urdf.joints, dict(q))
+        stamp = Timestamp.from_epoch_secs(t)
+        self._tf.log(
+            FrameTransforms(
+                transforms=[
+                    FrameTransform(
+                        timestamp=stamp,
+                        parent_frame_id=parent,
+                        child_frame_id=child,
+                        translation=Vector3(**_vec(T[:3, 3])),
+                        rotation=Quaternion(**_quat(quaternion_xyzw(T[:3, :3]))),
+                    )
+                    for parent, child, T in transforms
+                ]
+            ),
+            log_time=_ns(t),
+        )
+        family = STAGE_TOPICS.get(stage, f"/{stage}")
+        self._json(f"{family}/joint_state", schemas.JOINT_STATE).log(
+            {"t": t, "rep": rep, "position": {n: float(v) for n, v in q.items()}}, log_time=_ns(t)
+        )
+        tree = self._rerun_robot(stage)
+        self._rr.set_time(TIMELINE, duration=t)
+        for joint in tree.joints():
+            if joint.joint_type != "fixed":
+                self._rr.log(f"{stage}/transforms", joint.compute_transform(float(q.get(joint.name, 0.0)), clamp=False))
+
+    def reference(self, ref: CartesianReference) -> None:
+        """The path stage's product: one ``/task/reference/<hand>`` message per sample, the whole
+        path once on ``/task/reference_path/<hand>`` (Foxglove PosesInFrame), and in Rerun the
+        path as a 3D line strip and the position components as time series."""
+        family = STAGE_TOPICS["path"]
+        for hand, hr in ref.hands.items():
+            channel = self._json(f"{family}/reference/{hand}", schemas.HAND_REFERENCE)
+            quats = quaternion_xyzw(hr.rotation)
+            for k in range(len(ref)):
+                channel.log(
+                    {
+                        "t": float(ref.t[k]),
+                        "rep": int(ref.rep[k]),
+                        "segment": int(ref.segment[k]),
+                        "frame_id": ref.frame,
+                        "position": _vec(hr.position[k]),
+                        "orientation": _quat(quats[k]),
+                        "linear_velocity": _vec(hr.linear_velocity[k]),
+                        "angular_velocity": _vec(hr.angular_velocity[k]),
+                    },
+                    log_time=_ns(ref.t[k]),
+                )
+            PosesInFrameChannel(f"{family}/reference_path/{hand}", context=self._context).log(
+                PosesInFrame(
+                    timestamp=Timestamp.from_epoch_secs(0.0),
+                    frame_id=ref.frame,
+                    poses=[
+                        Pose(position=Vector3(**_vec(p)), orientation=Quaternion(**_quat(q)))
+                        for p, q in zip(hr.position[:: max(1, len(ref) // 400)], quats[:: max(1, len(ref) // 400)])
+                    ],
+                ),
+                log_time=0,
+            )
+            self._rr.log(
+                f"world/reference/{hand}",
+                rr.LineStrips3D([hr.position], colors=[HAND_COLORS.get(hand, (200, 200, 200))], radii=0.003),
+                static=True,
+            )
+            times = rr.TimeColumn(TIMELINE, duration=ref.t)
+            for i, axis in enumerate("xyz"):
+                self._rr.send_columns(
+                    f"plots/reference/{hand}/position/{axis}", indexes=[times], columns=rr.Scalars.columns(scalars=hr.position[:, i])
+                )
+            self._rr.send_columns(f"plots/reference/{hand}/rep", indexes=[times], columns=rr.Scalars.columns(scalars=ref.rep.astype(float)))
+
+    def metrics(self, values: Mapping[str, float], t: float) -> None:
+        """The run's metrics on ``/metrics`` at motion time ``t`` [s]."""
+        self._json("/metrics", schemas.METRICS).log({"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t))
+
+    def close(self, manifest: Mapping[str, object]) -> None:
+        """Write the manifest as MCAP metadata, the Rerun blueprint, and finish both files."""
+        if self._closed:
+            return
+        self._closed = True
+        self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})
+        self._mcap.close()
+        self._rr.send_blueprint(
+            rrb.Blueprint(
+                rrb.Horizontal(
+                    rrb.Spatial3DView(origin="/", name="robot and hand paths"),
+                    rrb.TimeSeriesView(origin="/plots", name="time series"),
+                    column_shares=[3, 2],
+                ),
+                collapse_panels=True,
+            )
+        )
+        self._rr.flush()
+        self._rr.disconnect()

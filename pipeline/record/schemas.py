@@ -1,0 +1,56 @@
+"""JSON Schemas of dualarm's own MCAP messages (self-describing, so Foxglove can plot any field).
+
+Every message carries the motion time ``t`` [s] and the repetition index ``rep``, which the
+pandas read-back turns into columns.
+"""
+
+from __future__ import annotations
+
+_NUMBER = {"type": "number"}
+_VECTOR3 = {"type": "object", "properties": {k: _NUMBER for k in "xyz"}, "required": list("xyz")}
+_QUATERNION = {"type": "object", "properties": {k: _NUMBER for k in "xyzw"}, "required": list("xyzw")}
+
+HAND_REFERENCE = {
+    "title": "dualarm.HandReference",
+    "description": "One sample of a hand's Cartesian reference, in the robot base frame.",
+    "type": "object",
+    "properties": {
+        "t": {**_NUMBER, "description": "motion time [s]"},
+        "rep": {"type": "integer", "description": "repetition index, 0-based"},
+        "segment": {"type": "integer", "description": "index of the task move, 0-based"},
+        "frame_id": {"type": "string"},
+        "position": {**_VECTOR3, "description": "hand frame origin [m]"},
+        "orientation": {**_QUATERNION, "description": "hand frame orientation (unit quaternion)"},
+        "linear_velocity": {**_VECTOR3, "description": "[m/s]"},
+        "angular_velocity": {**_VECTOR3, "description": "in the base frame [rad/s]"},
+    },
+    "required": ["t", "rep", "segment", "frame_id", "position", "orientation", "linear_velocity", "angular_velocity"],
+}
+
+METRICS = {
+    "title": "dualarm.Metrics",
+    "description": "The run's metrics, keys <stage>.<name> with the unit as suffix (as in metrics.json).",
+    "type": "object",
+    "properties": {"t": _NUMBER, "rep": {"type": "integer"}, "values": {"type": "object", "additionalProperties": _NUMBER}},
+    "required": ["t", "rep", "values"],
+}
+
+ROBOT_DESCRIPTION = {
+    "title": "std_msgs/String",
+    "description": "The robot's URDF, for Foxglove's URDF layer (source: topic /robot_description).",
+    "type": "object",
+    "properties": {"data": {"type": "string"}},
+    "required": ["data"],
+}
+
+JOINT_STATE = {
+    "title": "dualarm.JointState",
+    "description": "Joint positions of the robot at one instant [rad].",
+    "type": "object",
+    "properties": {
+        "t": {**_NUMBER, "description": "motion time [s]"},
+        "rep": {"type": "integer"},
+        "position": {"type": "object", "additionalProperties": _NUMBER, "description": "joint name -> position [rad]"},
+    },
+    "required": ["t", "rep", "position"],
+}
