@@ -60,8 +60,11 @@ class PyBulletRobot:
     def link_pose(self, link: str) -> np.ndarray:
         """World pose of ``link``'s URDF frame (not its centre of mass) as a 4x4 array [m]."""
         index = self.link_index[link]
-        if index == -1:
-            pos, quat = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        if index == -1:  # PyBullet places the base at its centre of mass: undo the inertial offset
+            com_pos, com_quat = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+            local_pos, local_quat = pb.getDynamicsInfo(self.body, -1, physicsClientId=self.client)[3:5]
+            inv_pos, inv_quat = pb.invertTransform(local_pos, local_quat, physicsClientId=self.client)
+            pos, quat = pb.multiplyTransforms(com_pos, com_quat, inv_pos, inv_quat, physicsClientId=self.client)
         else:
             state = pb.getLinkState(self.body, index, computeForwardKinematics=True, physicsClientId=self.client)
             pos, quat = state[4], state[5]

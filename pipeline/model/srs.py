@@ -132,7 +132,8 @@ def arm_angle(S, E, W, vertical=(0.0, 0.0, 1.0)):
     The reference plane holds SW and the vertical vector V, with normal n_ref = SW x V; the arm
     plane holds S, E, W, with normal n_arm = SE x SW (the elbow axis direction of eq 6). With this
     orientation psi = 0 when the elbow lies below SW in the vertical plane ("setting the arm angle
-    when the elbow joint is below").
+    when the elbow joint is below"), and psi grows as the elbow turns about -SW, the screw axis
+    xi_SW of eq (5).
 
     Works on numpy arrays (3,) and on CasADi expressions alike.
 
