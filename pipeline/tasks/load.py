@@ -25,6 +25,8 @@ from pipeline.tasks.schema import TaskSpec
 
 #: Margin kept from the fully stretched or fully folded arm when checking reach [m].
 REACH_MARGIN_M = 1e-3
+#: Most samples a task's reference may have (a guard against a mistyped control period).
+MAX_SAMPLES = 5_000_000
 
 
 @dataclass(frozen=True)
@@ -80,22 +82,36 @@ class Task:
         return self.initial_hand_pose(hand) if start == "initial" else self.waypoint_pose(start)
 
 
-def _format_location(loc: tuple) -> str:
-    out = ""
-    for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+def _key_path(error: dict, data: object) -> str:
+    """The task-file key of a pydantic error. Location parts that are not keys of the input (the
+    names pydantic gives union members, such as ``str`` or ``constrained-float``) are dropped by
+    walking the input alongside; a missing key is the one part kept that the input lacks."""
+    out, node = "", data
+    loc = error["loc"]
+    for i, part in enumerate(loc):
+        if isinstance(node, list) and isinstance(part, int) and part < len(node):
+            out, node = f"{out}[{part}]", node[part]
+        elif isinstance(node, dict) and part in node:
+            out, node = (f"{out}.{part}" if out else str(part)), node[part]
+        elif error["type"] == "missing" and i == len(loc) - 1:
+            out = f"{out}.{part}" if out else str(part)
     return out or "(top level)"
 
 
-def _validation_message(file: Path, exc: ValidationError) -> str:
-    errors = exc.errors()
-    first = errors[0]
-    loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and p.startswith(("function-", "tagged-union"))))
-    message = "unknown key" if first["type"] == "extra_forbidden" else first["msg"]
-    if first["type"] == "missing":
+def _validation_message(file: Path, exc: ValidationError, data: object) -> str:
+    errors = [(_key_path(e, data), e) for e in exc.errors()]
+    key, first = max(errors, key=lambda ke: ke[0].count(".") + ke[0].count("["))  # the most specific
+    alternatives = [e["msg"] for k, e in errors if k == key]
+    if first["type"] == "extra_forbidden":
+        message = "unknown key"
+    elif first["type"] == "missing":
         message = "missing"
-    more = f" (and {len(errors) - 1} more problems)" if len(errors) > 1 else ""
-    return f"{file}:{_format_location(loc)}: {message}{more}"
+    elif len(alternatives) > 1:  # a union: say what each alternative wanted
+        message = f"wrong type or value {first['input']!r} ({'; or '.join(alternatives)})"
+    else:
+        message = first["msg"]
+    others = len({k for k, _ in errors}) - 1
+    return f"{file}:{key}: {message}" + (f" (and {others} more problems)" if others else "")
 
 
 def _parse(file: Path) -> tuple[str, TaskSpec]:
@@ -112,7 +128,7 @@ def _parse(file: Path) -> tuple[str, TaskSpec]:
     try:
         return text, TaskSpec.model_validate(data)
     except ValidationError as exc:
-        raise TaskFileError(_validation_message(file, exc)) from None
+        raise TaskFileError(_validation_message(file, exc, data)) from None
 
 
 def _check_joint_names(task_where, names, robot: Robot, key: str) -> None:
@@ -148,10 +164,14 @@ def _check_structure(task: Task) -> None:
         if start != "initial" and start not in spec.waypoints:
             raise TaskFileError(f"{where('start.' + hand)}: no waypoint '{start}' (waypoints: {', '.join(spec.waypoints) or 'none'}; or \"initial\")")
     started = {h for h in ("left", "right") if getattr(spec.start, h) is not None}
+    total = 0.0
     for i, move in enumerate(spec.moves):
         steps = move.duration_s / spec.control_period_s
+        if steps < 1 - 1e-6:
+            raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s} s is shorter than one control period ({spec.control_period_s} s)")
         if abs(steps - round(steps)) > 1e-6:
             raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s} s is not a whole number of control periods ({spec.control_period_s} s)")
+        total += steps * spec.repetitions
         for hand in ("left", "right"):
             hand_move = move.for_hand(hand)
             if hand_move is None:
@@ -160,6 +180,8 @@ def _check_structure(task: Task) -> None:
                 raise TaskFileError(f"{where(f'moves[{i}].{hand}')}: hand '{hand}' has no start pose (add start.{hand})")
             if hand_move.to is not None and hand_move.to not in spec.waypoints:
                 raise TaskFileError(f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{hand_move.to}' (waypoints: {', '.join(spec.waypoints) or 'none'})")
+    if total > MAX_SAMPLES:
+        raise TaskFileError(f"{where('control_period_s')}: {spec.control_period_s} s makes {total:.3g} samples (at most {MAX_SAMPLES:,}); use a longer period")
     for key in ("velocity", "acceleration"):
         value = getattr(spec.limits, key)
         if isinstance(value, dict):

@@ -10,8 +10,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-Float = Annotated[float, Field(strict=True)]
-PositiveFloat = Annotated[float, Field(strict=True, gt=0)]
+Float = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+PositiveFloat = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
 Vec3 = tuple[Float, Float, Float]
 JointValues = dict[str, Float]
 
@@ -108,7 +108,7 @@ class Gesture(_Model):
     """
 
     t_sp_s: PositiveFloat
-    c_tuning: Annotated[float, Field(strict=True, gt=0, le=1)]
+    c_tuning: Annotated[float, Field(strict=True, gt=0, le=1, allow_inf_nan=False)]
     nu: PositiveFloat
     feedback_gain: PositiveFloat
     goal_lower: JointValues

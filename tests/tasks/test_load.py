@@ -198,6 +198,36 @@ def test_invalid_toml(tmp_path: Path):
     assert f"line {index + 1}" in message or f"line {index + 2}" in message, message
 
 
+def test_infinite_duration_is_a_task_file_error(tmp_path: Path):
+    path = variant(tmp_path, (FIRST_MOVE, 'duration_s = inf\nleft = { to = "B" }'))
+    with pytest.raises(TaskFileError) as info:
+        load_task(path)
+    assert str(info.value).startswith(f"{path}:moves[0].duration_s"), str(info.value)
+
+
+def test_wrong_type_for_union_key_names_the_key(tmp_path: Path):
+    path = variant(tmp_path, ('initial = "ready"', "initial = 5"))
+    with pytest.raises(TaskFileError) as info:
+        load_task(path)
+    assert str(info.value).startswith(f"{path}:initial:"), str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("edit", "key"),
+    [
+        (("control_period_s = 0.01", "control_period_s = inf"), "control_period_s"),
+        (("control_period_s = 0.01", "control_period_s = 1e-300"), "control_period_s"),
+        (("control_period_s = 0.01", "control_period_s = 5.0"), "moves[0].duration_s"),
+        (('initial = "ready"', "initial = { left_elbow = \"bent\" }"), "initial.left_elbow"),
+    ],
+)
+def test_extreme_or_mistyped_values_name_their_key(tmp_path: Path, edit, key):
+    path = variant(tmp_path, edit)
+    with pytest.raises(TaskFileError) as info:
+        load_task(path)
+    assert str(info.value).startswith(f"{path}:{key}:"), str(info.value)
+
+
 def test_missing_file(tmp_path: Path):
     path = tmp_path / "nothing.toml"
     with pytest.raises(TaskFileError) as info:

@@ -1,0 +1,52 @@
+"""The command line: help texts, robot check, and one-line errors."""
+
+import pytest
+from typer.testing import CliRunner
+
+from pipeline.cli import app
+from tests.conftest import HUMANOID, TASKS
+
+runner = CliRunner()
+
+
+@pytest.mark.parametrize("command", [[], ["run"], ["inspect"], ["robot"], ["robot", "check"]])
+def test_every_command_has_help(command):
+    result = runner.invoke(app, [*command, "--help"])
+    assert result.exit_code == 0
+    assert "Usage" in result.output and len(result.output.splitlines()) > 3
+
+
+def test_robot_check_humanoid_passes():
+    result = runner.invoke(app, ["robot", "check", str(HUMANOID)])
+    assert result.exit_code == 0, result.output
+    for chain in ("left_arm", "right_arm", "waist"):
+        assert chain in result.stdout
+    assert result.stdout.count("pass") == 3 and "FAIL" not in result.stdout
+    assert "L2 = 0.3200 m" in result.stdout
+
+
+def test_robot_check_bare_urdf(kuka_urdf):
+    result = runner.invoke(app, ["robot", "check", "--urdf", str(kuka_urdf), "--base", "lbr_iiwa_link_0", "--tip", "lbr_iiwa_link_7", "--samples", "200"])
+    assert result.exit_code == 0, result.output
+    assert "7 DOF" in result.stdout and "S-R-S" in result.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["robot", "check"], "give either ROBOT_DIR or --urdf"),
+        (["robot", "check", "robots/none"], "no robot.toml"),
+        (["robot", "check", "--urdf", "x.urdf", "--base", "a"], "--urdf needs --base LINK and --tip LINK"),
+        (["robot", "check", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "torso", "--tip", "foot"], "no link 'foot'"),
+        (["robot", "check", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "left_hand", "--tip", "torso"], "is not below link"),
+        (["run", str(TASKS / "triangle.toml"), "--stages", "ik"], "stage 'ik' is not available yet"),
+        (["run", str(TASKS / "triangle.toml"), "--stages", "fly"], "unknown stage 'fly'"),
+        (["inspect", "recordings/no-such-run"], "no such run directory"),
+    ],
+)
+def test_user_mistakes_give_one_line_and_exit_2(args, needle, tmp_path):
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], result.stderr
+    assert "Traceback" not in result.output
