@@ -158,7 +158,3 @@ def robot_check(
     )
     if not all(r.passed for r in results):
         raise typer.Exit(1)
-
-
-def main() -> None:  # pragma: no cover - console entry point
-    app()

@@ -10,8 +10,6 @@ repetition index. For a carried object the slave hand follows the master by MC-I
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -30,16 +28,6 @@ def quintic(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     s = tau**3 * (10 - 15 * tau + 6 * tau**2)
     ds = 30 * tau**2 * (1 - tau) ** 2
     return s, ds
-
-
-@dataclass
-class _Samples:
-    """Mutable per-hand sample lists while building."""
-
-    position: list[np.ndarray]
-    rotation: list[np.ndarray]
-    linear_velocity: list[np.ndarray]
-    angular_velocity: list[np.ndarray]
 
 
 def _segment(move: HandMove | None, T0: np.ndarray, task: Task, tau: np.ndarray, duration: float):
@@ -111,31 +99,22 @@ def build_reference(task: Task) -> CartesianReference:
     spec = task.spec
     period = spec.control_period_s
     driven = [h for h in spec.hands if not (spec.object is not None and h == spec.object.slave)]
-    samples = {h: _Samples([], [], [], []) for h in driven}
     current = {h: task.start_pose(h) for h in driven}
-    for h in driven:
-        p, R = current[h][:3, 3], current[h][:3, :3]
-        samples[h].position.append(p[None])
-        samples[h].rotation.append(R[None])
-        samples[h].linear_velocity.append(np.zeros((1, 3)))
-        samples[h].angular_velocity.append(np.zeros((1, 3)))
+    # per hand, a list of (position, rotation, linear velocity, angular velocity) pieces
+    pieces = {h: [(T[None, :3, 3], T[None, :3, :3], np.zeros((1, 3)), np.zeros((1, 3)))] for h, T in current.items()}
     rep, segment = [np.zeros(1, int)], [np.zeros(1, int)]
     for r in range(spec.repetitions):
         for i, move in enumerate(spec.moves):
             steps = int(round(move.duration_s / period))
             tau = np.arange(1, steps + 1) / steps
             for h in driven:
-                out = _segment(move.for_hand(h), current[h], task, tau, move.duration_s)
-                for store, values in zip((samples[h].position, samples[h].rotation, samples[h].linear_velocity, samples[h].angular_velocity), out):
-                    store.append(values)
+                piece = _segment(move.for_hand(h), current[h], task, tau, move.duration_s)
+                pieces[h].append(piece)
                 current[h] = np.eye(4)
-                current[h][:3, :3], current[h][:3, 3] = out[1][-1], out[0][-1]
+                current[h][:3, :3], current[h][:3, 3] = piece[1][-1], piece[0][-1]
             rep.append(np.full(steps, r))
             segment.append(np.full(steps, i))
-    hands = {
-        h: HandReference(*(np.concatenate(getattr(samples[h], f)) for f in ("position", "rotation", "linear_velocity", "angular_velocity")))
-        for h in driven
-    }
+    hands = {h: HandReference(*(np.concatenate(column) for column in zip(*pieces[h]))) for h in driven}
     if spec.object is not None:
         hands[spec.object.slave] = _slave_from_master(task, hands[spec.object.master])
     rep_index, seg_index = np.concatenate(rep), np.concatenate(segment)
@@ -144,12 +123,13 @@ def build_reference(task: Task) -> CartesianReference:
         for h in driven:
             _check_closed(task, h, hands[h])
     for h, ref in hands.items():
-        ok = arm_reach(task, h).within(ref.poses)
+        reach = arm_reach(task, h)
+        ok = reach.within(ref.poses)
         if not ok.all():
             k = int(np.argmin(ok))
             raise UnreachablePoseError(
                 f"{task.where(f'moves[{seg_index[k]}]')}: at t = {k * period:.3f} s (repetition {rep_index[k]}) "
-                f"{arm_reach(task, h).explain(ref.poses[k])}"
+                f"{reach.explain(ref.poses[k])}"
             )
     return CartesianReference(
         task=task.name,
