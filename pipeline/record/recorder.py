@@ -66,7 +66,7 @@ class Recorder:
         self._tf = FrameTransformsChannel("/tf", context=self._context)
         self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
         self._rr.save(directory / "run.rrd")
-        self._robots_logged: set[str] = set()
+        self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
         self._closed = False
         for name, text in attachments.items():
             media = "application/xml" if name.endswith(".urdf") else "application/toml"
@@ -81,17 +81,18 @@ class Recorder:
         return self._channels[topic]
 
     def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
-        """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world."""
-        tree = rr.urdf.UrdfTree.from_file_path(self.robot.urdf.path, entity_path_prefix=stage, frame_prefix=f"{stage}/")
-        if stage not in self._robots_logged:
+        """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world
+        (logged on first use)."""
+        if stage not in self._robot_trees:
+            tree = rr.urdf.UrdfTree.from_file_path(self.robot.urdf.path, entity_path_prefix=stage, frame_prefix=f"{stage}/")
             tree.log_urdf_to_recording(self._rr)
             self._rr.log(
                 f"{stage}/root",
                 rr.Transform3D(parent_frame="tf#/", child_frame=f"{stage}/{self.robot.urdf.root}"),
                 static=True,
             )
-            self._robots_logged.add(stage)
-        return tree
+            self._robot_trees[stage] = tree
+        return self._robot_trees[stage]
 
     # -- products ----------------------------------------------------------------------------------
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
