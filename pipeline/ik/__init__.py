@@ -1,0 +1,1 @@
+"""Inverse kinematics: Cartesian reference -> joint path (TV-GDD, pseudoinverse, ...)."""

@@ -1,0 +1,96 @@
+"""The hands of a task stacked over the task's active joints.
+
+The active joints are the arm joints of every hand the task drives, plus the waist when the task
+frees it; locked joints keep their initial values. Hand positions are in the robot base frame, so
+a free waist is shared by both hands' Jacobians (Li-Liang's 17-DOF model); with the waist locked
+the Jacobian is block diagonal, as in TV-GDD eq (13).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import casadi as cs
+import numpy as np
+
+from pipeline.model.kinematics import ChainKinematics
+from pipeline.tasks import Task
+
+
+@dataclass(frozen=True)
+class HandStack:
+    """Stacked hand kinematics.
+
+    Attributes:
+        joint_names: the active joints, the order of the vector theta.
+        hands: the hands, the order of the stacked rows.
+        fixed: values of the locked joints [rad].
+        theta: the CasADi symbol of the active joints, (n, 1).
+        position: SX expression of the stacked hand positions, (3 h, 1) [m].
+        jacobian: SX expression of d position / d theta, (3 h, n).
+        positions: Function ``theta -> position``.
+    """
+
+    joint_names: tuple[str, ...]
+    hands: tuple[str, ...]
+    fixed: Mapping[str, float]
+    theta: cs.SX
+    position: cs.SX
+    jacobian: cs.SX
+    positions: cs.Function
+
+    @property
+    def n(self) -> int:
+        """Number of active joints."""
+        return len(self.joint_names)
+
+    @property
+    def m(self) -> int:
+        """Number of stacked task rows (3 per hand)."""
+        return 3 * len(self.hands)
+
+
+def active_joints(task: Task) -> tuple[str, ...]:
+    """The task's active joints: the waist if free, then each driven hand's arm, in URDF order."""
+    robot = task.robot
+    names: list[str] = []
+    for hand in task.spec.hands:
+        chain = task.hand_chain_from_root(hand)
+        arm = set(robot.hand_chain(hand).joint_names)
+        for name in chain.joint_names:
+            if name not in names and (name in arm or task.spec.waist == "free"):
+                names.append(name)
+    return tuple(names)
+
+
+def hand_stack(task: Task) -> HandStack:
+    """Build the stacked position kinematics of ``task``'s hands."""
+    names = active_joints(task)
+    fixed = {n: v for n, v in task.initial_q.items() if n not in names}
+    theta = cs.SX.sym("theta", len(names))
+    index = {n: i for i, n in enumerate(names)}
+    rows = []
+    for hand in task.spec.hands:
+        chain = task.hand_chain_from_root(hand)
+        q = cs.vertcat(*[theta[index[n]] if n in index else fixed[n] for n in chain.joint_names])
+        rows.append(ChainKinematics.of(chain).fk(q)[:3, 3])
+    position = cs.vertcat(*rows)
+    jacobian = cs.jacobian(position, theta)
+    return HandStack(
+        joint_names=names,
+        hands=tuple(task.spec.hands),
+        fixed=MappingProxyType(fixed),
+        theta=theta,
+        position=position,
+        jacobian=jacobian,
+        positions=cs.Function("hand_positions", [theta], [position], ["theta"], ["r"]),
+    )
+
+
+def stacked_reference(stack: HandStack, reference) -> tuple[np.ndarray, np.ndarray]:
+    """Stacked hand positions (N, 3 h) [m] and velocities (N, 3 h) [m/s] of a CartesianReference."""
+    position = np.hstack([reference.hands[h].position for h in stack.hands])
+    velocity = np.hstack([reference.hands[h].linear_velocity for h in stack.hands])
+    return position, velocity

@@ -1,0 +1,179 @@
+"""TV-GDD: velocity-level QP redundancy resolution with time-varying gesture bounds.
+
+Zhang, Kong, Niu, *A Time-Varying-Constrained Motion Generation Scheme for Humanoid Robot Arms*.
+At every control step the joint velocity is the solution of
+
+    minimize    thetadot^T M thetadot / 2 + b^T thetadot                      (23)
+    subject to  J(theta) thetadot = rdot + K (r - f(theta))                      (24)
+                zeta-(t) <= thetadot <= zeta+(t)                                  (25)
+
+(eq 24 as corrected in the seeds' README: the feedback is K(r - f(theta)) of eq 16, and the linear
+term acts on the velocity) and theta is integrated by Euler, theta_{k+1} = theta_k + tau thetadot_k.
+Schemes (section 2): MVN M = I, b = 0; RMP M = I, b = lambda (theta - theta(0)); MKE M = the
+joint-space inertia matrix from the URDF, b = 0.
+
+Two solvers of the same QP: a CasADi ``conic`` embedded with the kinematics and the bounds in one
+CasADi Function per step, and the paper's own LVI projection-equation solver (eqs 26-27).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as cs
+import numpy as np
+
+from pipeline.errors import StageError
+from pipeline.ik.gesture import position_bounds, velocity_bounds
+from pipeline.ik.stack import HandStack
+
+SCHEMES = ("mvn", "rmp", "mke")
+
+#: The LVI solver's constants as published: omega (the dual bound) and the stop on ||epsilon(u)||.
+LVI_OMEGA = 1e10
+LVI_TOLERANCE = 1e-5
+
+
+@dataclass(frozen=True)
+class TvgddSettings:
+    """Settings of the TV-GDD IK stage.
+
+    Attributes:
+        scheme: ``mvn``, ``rmp`` or ``mke``.
+        period_s: Euler step tau [s].
+        feedback_gain: K of eq (16) [1/s].
+        nu: bound scaling nu of eq (21) [1/s].
+        t_sp_s: T_SP of eq (19) [s].
+        c_tuning: c_tuning of eq (19) [s].
+        rmp_lambda: lambda of the RMP scheme [1/s].
+        qp_plugin: CasADi conic plugin of the ``casadi`` backend.
+    """
+
+    scheme: str = "mvn"
+    period_s: float = 0.01
+    feedback_gain: float = 20.0
+    nu: float = 2.0
+    t_sp_s: float = 0.75
+    c_tuning: float = 1.0
+    rmp_lambda: float = 1.0
+    qp_plugin: str = "daqp"
+
+
+@dataclass(frozen=True)
+class JointBounds:
+    """Per active joint: physical limits and gesture goals.
+
+    Attributes:
+        lower, upper: position limits theta-, theta+ [rad], (n,).
+        goal_lower, goal_upper: theta_goal-, theta_goal+ [rad] (the limits where no goal), (n,).
+        velocity: velocity limits, symmetric, [rad/s], (n,).
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+    goal_lower: np.ndarray
+    goal_upper: np.ndarray
+    velocity: np.ndarray
+
+
+def _inertia(stack: HandStack, urdf_xml: str, all_joints: tuple[str, ...]) -> cs.SX:
+    """Joint-space inertia matrix of the active joints (adam-robotics CRBA), fixed base, as SX."""
+    from adam.casadi import KinDynComputations
+
+    kd = KinDynComputations(urdf_xml, list(all_joints))
+    index = {n: i for i, n in enumerate(stack.joint_names)}
+    s = cs.vertcat(*[stack.theta[index[n]] if n in index else stack.fixed[n] for n in all_joints])
+    full = kd.mass_matrix_fun()(cs.SX.eye(4), s)[6:, 6:]
+    rows = [all_joints.index(n) for n in stack.joint_names]
+    return full[rows, rows]
+
+
+@dataclass(frozen=True)
+class TvgddProblem:
+    """The QP (23)-(25) of one control step as CasADi Functions.
+
+    Attributes:
+        stack: the stacked hands.
+        settings: the settings it was built with.
+        data: Function ``(theta, t, r, rdot, theta0) -> (M, b, J, rhs, zeta_lo, zeta_hi, lower_t, upper_t)``.
+        step: Function ``(theta, t, r, rdot, theta0) -> thetadot``: data and the conic solve in one graph.
+    """
+
+    stack: HandStack
+    settings: TvgddSettings
+    data: cs.Function
+    step: cs.Function
+
+
+def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings, urdf_xml: str = "", all_joints: tuple[str, ...] = ()) -> TvgddProblem:
+    """Formulate the TV-GDD QP for ``stack`` (``urdf_xml`` and ``all_joints`` are needed for MKE)."""
+    if settings.scheme not in SCHEMES:
+        raise StageError(f"unknown TV-GDD scheme '{settings.scheme}' (schemes: {', '.join(SCHEMES)})")
+    n, m = stack.n, stack.m
+    theta = stack.theta
+    t = cs.SX.sym("t")
+    r = cs.SX.sym("r", m)
+    rdot = cs.SX.sym("rdot", m)
+    theta0 = cs.SX.sym("theta0", n)
+    if settings.scheme == "mke":
+        M = _inertia(stack, urdf_xml, all_joints)
+    else:
+        M = cs.SX.eye(n)
+    b = settings.rmp_lambda * (theta - theta0) if settings.scheme == "rmp" else cs.SX.zeros(n)
+    J = stack.jacobian
+    rhs = rdot + settings.feedback_gain * (r - stack.position)  # eq (16)/(24)
+    lower_t, upper_t = position_bounds(t, bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
+    zeta_lo, zeta_hi = velocity_bounds(theta, lower_t, upper_t, -bounds.velocity, bounds.velocity, settings.nu)
+    inputs, names = [theta, t, r, rdot, theta0], ["theta", "t", "r", "rdot", "theta0"]
+    data = cs.Function(
+        "tvgdd_qp_data",
+        inputs,
+        [cs.densify(M), b, cs.densify(J), rhs, zeta_lo, zeta_hi, lower_t, upper_t],
+        names,
+        ["M", "b", "J", "rhs", "zeta_lo", "zeta_hi", "lower_t", "upper_t"],
+    )
+    qp = cs.conic("tvgdd_qp", settings.qp_plugin, {"h": cs.Sparsity.dense(n, n), "a": cs.Sparsity.dense(m, n)}, _plugin_options(settings.qp_plugin))
+    sym = [cs.MX.sym(name, *x.shape) for name, x in zip(names, inputs)]
+    M_, b_, J_, rhs_, lo_, hi_, _, _ = data(*sym)
+    solution = qp(h=M_, g=b_, a=J_, lba=rhs_, uba=rhs_, lbx=lo_, ubx=hi_)
+    step = cs.Function("tvgdd_step", sym, [solution["x"]], names, ["thetadot"])
+    return TvgddProblem(stack=stack, settings=settings, data=data, step=step)
+
+
+def _plugin_options(plugin: str) -> dict:
+    return {
+        "qpoases": {"printLevel": "none", "error_on_fail": True},
+        "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 100000}, "error_on_fail": True},
+        "daqp": {"daqp": {"primal_tol": 1e-12, "dual_tol": 1e-12}, "error_on_fail": True},
+        "proxqp": {"error_on_fail": True},
+        "hpipm": {"error_on_fail": True},
+        "qrqp": {"print_iter": False, "print_header": False, "error_on_fail": True},
+    }.get(plugin, {"error_on_fail": True})
+
+
+def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: float = LVI_TOLERANCE, max_iter: int = 1_000_000):
+    """Solve the QP (23)-(25) by the paper's LVI projection method, eqs (26)-(27).
+
+    u = [thetadot; lambda] solves Phi_Omega(u - (Gamma u + q)) - u = 0 with
+    Gamma = [[M, -J^T], [J, 0]], q = [b; -rhs], Omega = [zeta-, zeta+] x [-omega, omega]^m; the
+    iteration u <- u - ||eps||^2 sigma / ||sigma||^2, eps = u - Phi(u - (Gamma u + q)),
+    sigma = (Gamma^T + I) eps, stops at ||eps||_2 <= tol.
+
+    Returns:
+        (thetadot, u, iterations); raises StageError if ``max_iter`` is reached.
+    """
+    n, m = M.shape[0], J.shape[0]
+    Gamma = np.block([[M, -J.T], [J, np.zeros((m, m))]])
+    q = np.concatenate([b, -rhs])
+    u_lo = np.concatenate([lo, np.full(m, -omega)])
+    u_hi = np.concatenate([hi, np.full(m, omega)])
+    A = Gamma.T + np.eye(n + m)
+    u = np.zeros(n + m) if u0 is None else np.clip(u0, u_lo, u_hi)
+    for k in range(max_iter):
+        eps = u - np.clip(u - (Gamma @ u + q), u_lo, u_hi)  # eq (26) residual
+        e2 = eps @ eps
+        if e2 <= tol * tol:
+            return u[:n], u, k
+        sigma = A @ eps
+        u = u - (e2 / (sigma @ sigma)) * sigma  # eq (27)
+    raise StageError(f"LVI solver did not reach ||eps|| <= {tol} in {max_iter} iterations")
