@@ -50,7 +50,10 @@ def user_errors(func: Callable) -> Callable:
 @user_errors
 def run(
     task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
-    stages: Annotated[Optional[str], typer.Option(help="Comma-separated stages to run (default: every available stage).")] = None,
+    stages: Annotated[Optional[str], typer.Option(help="Comma-separated stages to run (default: path, and ik when --ik is given).")] = None,
+    ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd or pinv.")] = None,
+    scheme: Annotated[str, typer.Option(help="TV-GDD scheme: mvn (minimum velocity norm), rmp (repetitive motion) or mke (minimum kinetic energy).")] = "mvn",
+    qp_backend: Annotated[str, typer.Option(help="TV-GDD QP solver: casadi (DAQP through CasADi conic) or lvi (the paper's projection solver).")] = "casadi",
     out_dir: Annotated[Path, typer.Option("--out", help="Directory that receives <task>/<run-id>/.")] = Path("recordings"),
     seed: Annotated[int, typer.Option(help="Random seed, recorded in the manifest.")] = 0,
 ) -> None:
@@ -59,7 +62,7 @@ def run(
 
     chosen = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     with err.status(f"running {task} ..."):
-        directory = run_task(task, stages=chosen, out_dir=out_dir, seed=seed, command=["dualarm", *sys.argv[1:]])
+        directory = run_task(task, stages=chosen, ik=ik, scheme=scheme, qp_backend=qp_backend, out_dir=out_dir, seed=seed, command=["dualarm", *sys.argv[1:]])
     out.print(str(directory), markup=False, soft_wrap=True)
 
 

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from pipeline import __version__
 from pipeline.errors import DualarmError
+from pipeline.ik.metrics import ik_metrics
 from pipeline.paths import CartesianReference, build_reference
 from pipeline.record.recorder import Recorder
 from pipeline.record.run_dir import RunDirectory, package_versions, sha256_file
@@ -23,7 +25,9 @@ from pipeline.tasks import Task, load_task
 #: Every stage of the pipeline, in order.
 ALL_STAGES = ("path", "ik", "retime", "smooth", "execute")
 #: The stages this version can run.
-AVAILABLE_STAGES = ("path",)
+AVAILABLE_STAGES = ("path", "ik")
+#: IK methods of the ``ik`` stage.
+IK_METHODS = ("tvgdd", "pinv")
 
 
 def path_metrics(ref: CartesianReference) -> dict[str, float]:
@@ -40,10 +44,15 @@ def path_metrics(ref: CartesianReference) -> dict[str, float]:
     }
 
 
-def resolve_stages(stages: Sequence[str] | None) -> tuple[str, ...]:
-    """Validate a stage list (None = every available stage), in pipeline order."""
+def resolve_stages(stages: Sequence[str] | None, ik: str | None = None) -> tuple[str, ...]:
+    """Validate a stage list, in pipeline order. Without one: the path stage, and IK when a method
+    is named."""
+    if ik is not None and ik not in IK_METHODS:
+        raise DualarmError(f"unknown IK method '{ik}' (methods: {', '.join(IK_METHODS)})")
     if not stages:
-        return AVAILABLE_STAGES
+        return ("path", "ik") if ik else ("path",)
+    if "ik" in stages and ik is None:
+        raise DualarmError(f"stage 'ik' needs --ik METHOD (methods: {', '.join(IK_METHODS)})")
     for stage in stages:
         if stage not in ALL_STAGES:
             raise DualarmError(f"unknown stage '{stage}' (stages: {', '.join(ALL_STAGES)})")
@@ -52,7 +61,7 @@ def resolve_stages(stages: Sequence[str] | None) -> tuple[str, ...]:
     return tuple(s for s in ALL_STAGES if s in stages)
 
 
-def _manifest(task: Task, stages: tuple[str, ...], seed: int, command: Sequence[str]) -> dict[str, object]:
+def _manifest(task: Task, stages: tuple[str, ...], seed: int, command: Sequence[str], ik_settings: dict) -> dict[str, object]:
     robot = task.robot
     robot_files = {robot.urdf.path.name: sha256_file(robot.urdf.path)}
     if robot.directory is not None:
@@ -68,21 +77,51 @@ def _manifest(task: Task, stages: tuple[str, ...], seed: int, command: Sequence[
         "robot_sha256": robot_files,
         "seed": seed,
         "stages": list(stages),
-        "settings": {"path": {"control_period_s": task.spec.control_period_s, "time_scaling": "quintic", "repetitions": task.spec.repetitions}},
+        "settings": {
+            "path": {"control_period_s": task.spec.control_period_s, "time_scaling": "quintic", "repetitions": task.spec.repetitions},
+            **({"ik": ik_settings} if "ik" in stages else {}),
+        },
         "packages": package_versions(),
     }
 
 
-def run_task(task_file: str | Path, *, stages: Sequence[str] | None = None, out_dir: str | Path = "recordings", seed: int = 0, command: Sequence[str] | None = None) -> Path:
+def _ik_settings(task: Task, ik: str | None, scheme: str, qp_backend: str):
+    """The IK stage's settings (recorded in the manifest) and the function that runs it."""
+    from pipeline.ik.pinv import solve_pinv
+    from pipeline.ik.tvgdd import SCHEMES, settings_for, solve_tvgdd
+
+    if ik == "tvgdd":
+        if scheme not in SCHEMES:
+            raise DualarmError(f"unknown TV-GDD scheme '{scheme}' (schemes: {', '.join(SCHEMES)})")
+        if qp_backend not in ("casadi", "lvi"):
+            raise DualarmError(f"unknown QP backend '{qp_backend}' (backends: casadi, lvi)")
+        settings = settings_for(task, scheme=scheme)
+        return {"method": ik, "backend": qp_backend, **asdict(settings)}, lambda ref: solve_tvgdd(task, ref, settings, qp_backend)
+    gain = settings_for(task).feedback_gain
+    return {"method": ik, "feedback_gain": gain}, lambda ref: solve_pinv(task, ref, gain)
+
+
+def run_task(
+    task_file: str | Path,
+    *,
+    stages: Sequence[str] | None = None,
+    ik: str | None = None,
+    scheme: str = "mvn",
+    qp_backend: str = "casadi",
+    out_dir: str | Path = "recordings",
+    seed: int = 0,
+    command: Sequence[str] | None = None,
+) -> Path:
     """Run ``task_file`` through ``stages`` and record it; returns the run directory.
 
-    The task is validated before anything is written: a malformed task leaves no run behind. A
-    stage that fails leaves a run marked ``failed`` and re-raises.
+    The task and the options are validated before anything is written: a malformed task leaves no
+    run behind. A stage that fails leaves a run marked ``failed`` and re-raises.
     """
     task = load_task(task_file)
-    chosen = resolve_stages(stages)
+    chosen = resolve_stages(stages, ik)
+    ik_settings, solve_ik = _ik_settings(task, ik, scheme, qp_backend) if "ik" in chosen else ({}, None)
     np.random.seed(seed)
-    run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, chosen, seed, command or sys.argv))
+    run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, chosen, seed, command or sys.argv, ik_settings))
     attachments = {task.file.name: task.text, task.robot.urdf.path.name: task.robot.urdf.path.read_text()}
     if task.robot.directory is not None:
         attachments["robot.toml"] = (task.robot.directory / "robot.toml").read_text()
@@ -93,6 +132,10 @@ def run_task(task_file: str | Path, *, stages: Sequence[str] | None = None, out_
         reference = build_reference(task)
         recorder.reference(reference)
         metrics.update(path_metrics(reference))
+        if solve_ik is not None:
+            joint_path = solve_ik(reference)
+            recorder.joint_path(joint_path)
+            metrics.update(ik_metrics(joint_path, task))
         recorder.metrics(metrics, reference.duration_s)
     except BaseException as exc:
         message = str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}"

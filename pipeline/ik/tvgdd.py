@@ -55,7 +55,7 @@ class TvgddSettings:
     nu: float = 2.0
     t_sp_s: float = 0.75
     c_tuning: float = 1.0
-    rmp_lambda: float = 1.0
+    rmp_lambda: float = 10.0
     qp_plugin: str = "daqp"
 
 
@@ -177,3 +177,117 @@ def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: f
         sigma = A @ eps
         u = u - (e2 / (sigma @ sigma)) * sigma  # eq (27)
     raise StageError(f"LVI solver did not reach ||eps|| <= {tol} in {max_iter} iterations")
+
+
+def joint_bounds(task, stack: HandStack) -> JointBounds:
+    """Physical limits (the task's velocity limit where it sets one) and gesture goals of the
+    stack's joints; a joint without a goal keeps its limits as goals."""
+    limits = task.robot.limits
+    names = stack.joint_names
+    override = task.spec.limits.velocity
+    velocity = [override.get(n, limits[n].velocity) if isinstance(override, dict) else (override or limits[n].velocity) for n in names]
+    gesture = task.spec.gesture
+    goal_lower = gesture.goal_lower if gesture else {}
+    goal_upper = gesture.goal_upper if gesture else {}
+    return JointBounds(
+        lower=np.array([limits[n].lower for n in names]),
+        upper=np.array([limits[n].upper for n in names]),
+        goal_lower=np.array([goal_lower.get(n, limits[n].lower) for n in names]),
+        goal_upper=np.array([goal_upper.get(n, limits[n].upper) for n in names]),
+        velocity=np.array(velocity, dtype=float),
+    )
+
+
+def settings_for(task, *, scheme: str = "mvn", period_s: float | None = None, qp_plugin: str = "daqp") -> TvgddSettings:
+    """TV-GDD settings from a task's ``[gesture]`` table (defaults where it has none)."""
+    g = task.spec.gesture
+    base = TvgddSettings()
+    return TvgddSettings(
+        scheme=scheme,
+        period_s=period_s or task.spec.control_period_s,
+        feedback_gain=g.feedback_gain if g else base.feedback_gain,
+        nu=g.nu if g else base.nu,
+        t_sp_s=g.t_sp_s if g else base.t_sp_s,
+        c_tuning=g.c_tuning if g else base.c_tuning,
+        qp_plugin=qp_plugin,
+    )
+
+
+def _infeasible(problem: TvgddProblem, args, k: int, t: float) -> StageError:
+    """A StageError naming the step, the time and the joints whose bounds collapsed."""
+    _, _, _, _, lo, hi, _, _ = (np.asarray(x).ravel() for x in problem.data(*args))
+    names = problem.stack.joint_names
+    collapsed = [f"{names[i]} [{lo[i]:.4g}, {hi[i]:.4g}] rad/s" for i in np.flatnonzero(lo > hi)]
+    if collapsed:
+        why = "the velocity bounds of " + ", ".join(collapsed) + " collapsed (zeta- > zeta+)"
+    else:
+        at_bound = [names[i] for i in np.flatnonzero(np.isclose(lo, hi, atol=1e-9))]
+        why = "no joint velocity within the bounds meets the hand-velocity equality (24)" + (f"; pinned joints: {', '.join(at_bound)}" if at_bound else "")
+    return StageError(f"TV-GDD step {k} (t = {t:.3f} s) is infeasible: {why}")
+
+
+def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi"):
+    """Run TV-GDD along ``reference``: one QP per sample, Euler integration.
+
+    Args:
+        task: the task (initial configuration, limits, gesture goals).
+        reference: the CartesianReference to follow.
+        settings: scheme, gains and the QP plugin.
+        backend: ``casadi`` (the conic in one CasADi Function per step) or ``lvi`` (eqs 26-27).
+
+    Returns:
+        A JointPath whose extras hold ``theta_lower``/``theta_upper`` (eq 19) and
+        ``zeta_lower``/``zeta_upper`` (eq 22) at every sample.
+
+    Raises:
+        StageError: an infeasible step (names the step, the time and the collapsed joints).
+    """
+    import time
+
+    from pipeline.ik.joint_path import JointPath
+    from pipeline.ik.stack import hand_stack, stacked_reference
+
+    if backend not in ("casadi", "lvi"):
+        raise StageError(f"unknown QP backend '{backend}' (backends: casadi, lvi)")
+    stack = hand_stack(task)
+    bounds = joint_bounds(task, stack)
+    problem = build_problem(stack, bounds, settings, task.robot.urdf.kinematic_xml, task.robot.joint_names)
+    R, V = stacked_reference(stack, reference)
+    N, n = len(reference), stack.n
+    theta0 = np.array([task.initial_q[name] for name in stack.joint_names])
+    q, qd = np.empty((N, n)), np.empty((N, n))
+    solve_time = np.empty(N)
+    theta, u = theta0.copy(), None
+    for k in range(N):
+        q[k] = theta
+        args = (theta, float(reference.t[k]), R[k], V[k], theta0)
+        start = time.perf_counter()
+        try:
+            if backend == "casadi":
+                velocity = np.asarray(problem.step(*args)).ravel()
+            else:
+                M, b, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(*args))
+                velocity, u, _ = lvi_solve(M, b.ravel(), J, rhs.ravel(), lo.ravel(), hi.ravel(), u0=u)
+        except RuntimeError:
+            raise _infeasible(problem, args, k, float(reference.t[k])) from None
+        solve_time[k] = time.perf_counter() - start
+        qd[k] = velocity
+        theta = theta + settings.period_s * velocity  # Euler
+    lower_t, upper_t = position_bounds(reference.t[:, None], bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
+    zeta_lo, zeta_hi = velocity_bounds(q, lower_t, upper_t, -bounds.velocity, bounds.velocity, settings.nu)
+    positions = np.asarray(stack.positions.map(N)(q.T)).T
+    error = np.linalg.norm((R - positions).reshape(N, -1, 3), axis=2)
+    return JointPath(
+        method="tvgdd",
+        joint_names=stack.joint_names,
+        t=reference.t,
+        rep=reference.rep,
+        q=q,
+        qd=qd,
+        status=np.zeros(N, int),
+        solve_time_s=solve_time,
+        hand_error_m=error,
+        hands=stack.hands,
+        fixed=stack.fixed,
+        extras={"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi},
+    )

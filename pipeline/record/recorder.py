@@ -22,6 +22,7 @@ import rerun.blueprint as rrb
 from foxglove.channels import FrameTransformsChannel, PosesInFrameChannel
 from foxglove.messages import FrameTransform, FrameTransforms, Pose, PosesInFrame, Quaternion, Timestamp, Vector3
 
+from pipeline.ik.joint_path import JointPath
 from pipeline.model.kinematics import joint_transforms
 from pipeline.model.poses import quaternion_xyzw
 from pipeline.model.robot import Robot
@@ -63,7 +64,7 @@ class Recorder:
         self._context = foxglove.Context()
         self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
         self._channels: dict[str, foxglove.Channel] = {}
-        self._tf = FrameTransformsChannel("/tf", context=self._context)
+        self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
         self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
         self._rr.save(directory / "run.rrd")
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
@@ -95,18 +96,18 @@ class Recorder:
         return self._robot_trees[stage]
 
     # -- products ----------------------------------------------------------------------------------
-    def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
-        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: ``/tf`` and
-        ``<family>/joint_state`` in the MCAP, the animated URDF under ``/<stage>`` in Rerun."""
-        transforms = joint_transforms(self.robot.urdf.joints, dict(q))
+    def _tf(self, stage: str, t: float, q: Mapping[str, float]) -> None:
+        """The robot's link frames on ``/tf``, prefixed ``<stage>/`` and hung from ``world``."""
+        root = self.robot.urdf.root
+        transforms = [("world", root, np.eye(4))] + joint_transforms(self.robot.urdf.joints, dict(q))
         stamp = Timestamp.from_epoch_secs(t)
-        self._tf.log(
+        self._tf_channel.log(
             FrameTransforms(
                 transforms=[
                     FrameTransform(
                         timestamp=stamp,
-                        parent_frame_id=parent,
-                        child_frame_id=child,
+                        parent_frame_id=parent if parent == "world" else f"{stage}/{parent}",
+                        child_frame_id=f"{stage}/{child}",
                         translation=Vector3(**_vec(T[:3, 3])),
                         rotation=Quaternion(**_quat(quaternion_xyzw(T[:3, :3]))),
                     )
@@ -115,15 +116,66 @@ class Recorder:
             ),
             log_time=_ns(t),
         )
+
+    def _rerun_motion(self, stage: str, t: np.ndarray, q: Mapping[str, np.ndarray]) -> None:
+        """Animate ``stage``'s robot in Rerun: joint name -> positions (N,) at times t (N,) [s]."""
+        tree = self._rerun_robot(stage)
+        times = rr.TimeColumn(TIMELINE, duration=t)
+        for joint in tree.joints():
+            if joint.joint_type != "fixed":
+                values = q.get(joint.name, np.zeros(len(t)))
+                self._rr.send_columns(f"{stage}/transforms/{joint.name}", indexes=[times], columns=joint.compute_transform_columns(np.asarray(values, float), clamp=False))
+
+    def _series(self, prefix: str, t: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
+        """Rerun time series ``plots/<prefix>/<name>``."""
+        times = rr.TimeColumn(TIMELINE, duration=t)
+        for name, v in values.items():
+            self._rr.send_columns(f"plots/{prefix}/{name}", indexes=[times], columns=rr.Scalars.columns(scalars=np.asarray(v, float)))
+
+    # -- products ----------------------------------------------------------------------------------
+    def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
+        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: ``/tf`` (frames
+        ``<stage>/<link>``) and ``<family>/joint_state`` in the MCAP, the URDF under ``/<stage>`` in Rerun."""
+        self._tf(stage, t, q)
         family = STAGE_TOPICS.get(stage, f"/{stage}")
         self._json(f"{family}/joint_state", schemas.JOINT_STATE).log(
             {"t": t, "rep": rep, "position": {n: float(v) for n, v in q.items()}}, log_time=_ns(t)
         )
-        tree = self._rerun_robot(stage)
-        self._rr.set_time(TIMELINE, duration=t)
-        for joint in tree.joints():
-            if joint.joint_type != "fixed":
-                self._rr.log(f"{stage}/transforms", joint.compute_transform(float(q.get(joint.name, 0.0)), clamp=False))
+        self._rerun_motion(stage, np.array([t]), {n: np.array([v]) for n, v in q.items()})
+
+    def joint_path(self, path: JointPath) -> None:
+        """The IK stage's product: ``/ik/sample`` and (TV-GDD) ``/ik/bounds`` per sample, the robot
+        on ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's
+        position, velocity and bounds as time series."""
+        family = STAGE_TOPICS["ik"]
+        names = path.joint_names
+        sample = self._json(f"{family}/sample", schemas.IK_SAMPLE)
+        bounds = self._json(f"{family}/bounds", schemas.JOINT_BOUNDS) if path.extras else None
+        for k in range(len(path)):
+            t, rep = float(path.t[k]), int(path.rep[k])
+            sample.log(
+                {
+                    "t": t,
+                    "rep": rep,
+                    "method": path.method,
+                    "status": int(path.status[k]),
+                    "solve_time_s": float(path.solve_time_s[k]),
+                    "position": dict(zip(names, path.q[k].tolist())),
+                    "velocity": dict(zip(names, path.qd[k].tolist())),
+                    "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist())),
+                },
+                log_time=_ns(t),
+            )
+            if bounds is not None:
+                bounds.log({"t": t, "rep": rep, **{key: dict(zip(names, v[k].tolist())) for key, v in path.extras.items()}}, log_time=_ns(t))
+            self._tf("ik", t, path.configuration(k))
+        self._rerun_motion("ik", path.t, {**{n: np.full(len(path), v) for n, v in path.fixed.items()}, **dict(zip(names, path.q.T))})
+        self._series("ik/position", path.t, dict(zip(names, path.q.T)))
+        self._series("ik/velocity", path.t, dict(zip(names, path.qd.T)))
+        for key, v in path.extras.items():
+            self._series(f"ik/{key}", path.t, dict(zip(names, v.T)))
+        self._series("ik/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T)))
+        self._series("ik/solve_time_s", path.t, {"all": path.solve_time_s})
 
     def reference(self, ref: CartesianReference) -> None:
         """The path stage's product: one ``/task/reference/<hand>`` message per sample, the whole
@@ -163,12 +215,7 @@ class Recorder:
                 rr.LineStrips3D([hr.position], colors=[HAND_COLORS.get(hand, (200, 200, 200))], radii=0.003),
                 static=True,
             )
-            times = rr.TimeColumn(TIMELINE, duration=ref.t)
-            for i, axis in enumerate("xyz"):
-                self._rr.send_columns(
-                    f"plots/reference/{hand}/position/{axis}", indexes=[times], columns=rr.Scalars.columns(scalars=hr.position[:, i])
-                )
-            self._rr.send_columns(f"plots/reference/{hand}/rep", indexes=[times], columns=rr.Scalars.columns(scalars=ref.rep.astype(float)))
+            self._series(f"reference/{hand}", ref.t, {**{f"position/{a}": hr.position[:, i] for i, a in enumerate("xyz")}, "rep": ref.rep})
 
     def metrics(self, values: Mapping[str, float], t: float) -> None:
         """The run's metrics on ``/metrics`` at motion time ``t`` [s]."""

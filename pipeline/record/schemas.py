@@ -54,3 +54,37 @@ JOINT_STATE = {
     },
     "required": ["t", "rep", "position"],
 }
+
+_JOINT_MAP = {"type": "object", "additionalProperties": _NUMBER}
+
+IK_SAMPLE = {
+    "title": "dualarm.IkSample",
+    "description": "One sample of an IK stage's joint path.",
+    "type": "object",
+    "properties": {
+        "t": {**_NUMBER, "description": "motion time [s]"},
+        "rep": {"type": "integer"},
+        "method": {"type": "string"},
+        "status": {"type": "integer", "description": "0 ok, 1 failed"},
+        "solve_time_s": {**_NUMBER, "description": "solver time of this sample [s]"},
+        "position": {**_JOINT_MAP, "description": "joint -> position [rad]"},
+        "velocity": {**_JOINT_MAP, "description": "joint -> commanded velocity [rad/s]"},
+        "hand_error_m": {**_JOINT_MAP, "description": "hand -> |r - f(q)| [m]"},
+    },
+    "required": ["t", "rep", "method", "status", "solve_time_s", "position", "velocity", "hand_error_m"],
+}
+
+JOINT_BOUNDS = {
+    "title": "dualarm.JointBounds",
+    "description": "Time-varying joint bounds of one sample (TV-GDD eqs 19 and 22).",
+    "type": "object",
+    "properties": {
+        "t": _NUMBER,
+        "rep": {"type": "integer"},
+        "theta_lower": {**_JOINT_MAP, "description": "theta_new-(t) [rad]"},
+        "theta_upper": {**_JOINT_MAP, "description": "theta_new+(t) [rad]"},
+        "zeta_lower": {**_JOINT_MAP, "description": "zeta_new-(t) [rad/s]"},
+        "zeta_upper": {**_JOINT_MAP, "description": "zeta_new+(t) [rad/s]"},
+    },
+    "required": ["t", "rep"],
+}

@@ -125,14 +125,14 @@ def test_readback_reference_equals_the_task_waypoints(triangle_run):
 
 
 def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
-    """Composing /tf from base_link to left_hand gives PyBullet's hand pose at the initial configuration."""
+    """Composing /tf from world to path/left_hand gives PyBullet's hand pose at the initial configuration."""
     tf = read_run(triangle_run)["/tf"]
-    assert set(tf["child_frame_id"]) == set(humanoid.urdf.links) - {"base_link"}
+    assert set(tf["child_frame_id"]) == {f"path/{link}" for link in humanoid.urdf.links}
     parent = dict(zip(tf["child_frame_id"], tf["parent_frame_id"]))
     rows = tf.set_index("child_frame_id")
     T = np.eye(4)
-    link = "left_hand"
-    while link != "base_link":
+    link = "path/left_hand"
+    while link != "world":
         r = rows.loc[link]
         step = np.eye(4)
         step[:3, :3] = Rotation.from_quat([r["rotation.x"], r["rotation.y"], r["rotation.z"], r["rotation.w"]]).as_matrix()

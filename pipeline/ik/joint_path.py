@@ -1,0 +1,75 @@
+"""``JointPath``: the output of an IK stage."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+
+#: Per-sample solver status codes.
+OK, FAILED = 0, 1
+
+
+def _frozen(a, shape: tuple, name: str, dtype=float) -> np.ndarray:
+    a = np.array(a, dtype=dtype)
+    if a.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class JointPath:
+    """Joint positions that realise a Cartesian reference, sample by sample.
+
+    Attributes:
+        method: the IK method (``tvgdd``, ``pinv``, ...).
+        joint_names: the active joints, the columns of ``q``.
+        t: sample times (N,) [s].
+        rep: repetition index (N,).
+        q: joint positions (N, n) [rad].
+        qd: joint velocities the method commanded (N, n) [rad/s]; zeros for position-level methods.
+        status: per-sample solver status (N,): 0 ok, 1 failed.
+        solve_time_s: per-sample solve time (N,) [s].
+        hand_error_m: per-sample hand position error |r - f(q)| per hand (N, h) [m].
+        hands: the hands, the columns of ``hand_error_m``.
+        fixed: values of the robot's locked joints [rad].
+        extras: method-specific per-sample arrays (N, n), e.g. TV-GDD bounds.
+    """
+
+    method: str
+    joint_names: tuple[str, ...]
+    t: np.ndarray
+    rep: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    status: np.ndarray
+    solve_time_s: np.ndarray
+    hand_error_m: np.ndarray
+    hands: tuple[str, ...]
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    extras: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        N, n = len(self.t), len(self.joint_names)
+        for name, shape, dtype in (
+            ("t", (N,), float),
+            ("rep", (N,), int),
+            ("q", (N, n), float),
+            ("qd", (N, n), float),
+            ("status", (N,), int),
+            ("solve_time_s", (N,), float),
+            ("hand_error_m", (N, len(self.hands)), float),
+        ):
+            object.__setattr__(self, name, _frozen(getattr(self, name), shape, name, dtype))
+        object.__setattr__(self, "extras", MappingProxyType({k: _frozen(v, (N, n), k) for k, v in self.extras.items()}))
+        object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def configuration(self, k: int) -> dict[str, float]:
+        """Every robot joint at sample ``k`` (active and locked) [rad]."""
+        return {**self.fixed, **dict(zip(self.joint_names, self.q[k].tolist()))}

@@ -1,0 +1,57 @@
+"""The pseudoinverse baseline of TV-GDD eqs (2)-(3).
+
+thetadot = J^+(theta) (rdot + K (r - f(theta))) + (I - J^+ J) w with w = 0, the same position
+feedback as TV-GDD and no limits at all: the scheme the paper shows leaving its bounds.
+"""
+
+from __future__ import annotations
+
+import time
+
+import casadi as cs
+import numpy as np
+
+from pipeline.ik.joint_path import JointPath
+from pipeline.ik.stack import hand_stack, stacked_reference
+
+
+def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = None) -> JointPath:
+    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps.
+
+    Args:
+        task: the task (initial configuration).
+        reference: the CartesianReference.
+        feedback_gain: K [1/s].
+        period_s: Euler step [s] (default: the reference's period).
+    """
+    stack = hand_stack(task)
+    tau = period_s or reference.period_s
+    r, rdot = cs.SX.sym("r", stack.m), cs.SX.sym("rdot", stack.m)
+    J = stack.jacobian
+    rhs = rdot + feedback_gain * (r - stack.position)
+    velocity = J.T @ cs.solve(J @ J.T, rhs)  # J^+ rhs for a full-row-rank J, eqs (2)-(3) with w = 0
+    step = cs.Function("pinv_step", [stack.theta, r, rdot], [velocity], ["theta", "r", "rdot"], ["thetadot"])
+    R, V = stacked_reference(stack, reference)
+    N, n = len(reference), stack.n
+    q, qd, solve_time = np.empty((N, n)), np.empty((N, n)), np.empty(N)
+    theta = np.array([task.initial_q[name] for name in stack.joint_names])
+    for k in range(N):
+        q[k] = theta
+        start = time.perf_counter()
+        qd[k] = np.asarray(step(theta, R[k], V[k])).ravel()
+        solve_time[k] = time.perf_counter() - start
+        theta = theta + tau * qd[k]
+    positions = np.asarray(stack.positions.map(N)(q.T)).T
+    return JointPath(
+        method="pinv",
+        joint_names=stack.joint_names,
+        t=reference.t,
+        rep=reference.rep,
+        q=q,
+        qd=qd,
+        status=np.zeros(N, int),
+        solve_time_s=solve_time,
+        hand_error_m=np.linalg.norm((R - positions).reshape(N, -1, 3), axis=2),
+        hands=stack.hands,
+        fixed=stack.fixed,
+    )
