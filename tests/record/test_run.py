@@ -217,3 +217,20 @@ def test_cli_inspect_refuses_a_corrupt_recording(triangle_run, tmp_path, damage)
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: ") and str(broken) in lines[0]
     assert "Traceback" not in result.output
+
+
+def test_ik_run_records_joints_bounds_and_robot(tmp_path, humanoid):
+    run = run_task(TASKS / "ball_game.toml", ik="tvgdd", out_dir=tmp_path)
+    data = read_run(run)
+    sample, bounds = data["/ik/sample"], data["/ik/bounds"]
+    assert len(sample) == len(bounds) == data.metrics["path.samples"]
+    assert (sample["stage"] == "ik").all() and (sample["method"] == "tvgdd").all()
+    arm_joints = [n for n in humanoid.joint_names if not n.startswith("waist")]
+    for joint in arm_joints:
+        qd = sample[f"velocity.{joint}"].to_numpy()
+        assert np.all(qd >= bounds[f"zeta_lower.{joint}"].to_numpy() - 1e-9) and np.all(qd <= bounds[f"zeta_upper.{joint}"].to_numpy() + 1e-9)
+    errors = sample[["hand_error_m.left", "hand_error_m.right"]].to_numpy()
+    assert data.metrics["ik.position_error_max_m"] == pytest.approx(errors.max(), rel=1e-12)
+    tf = data["/tf"]
+    assert {f"ik/{link}" for link in humanoid.urdf.links} <= set(tf["child_frame_id"])
+    assert json.loads((run / "manifest.json").read_text())["settings"]["ik"]["qp_plugin"] == "daqp"

@@ -1,0 +1,111 @@
+"""TV-GDD and pinv along whole tasks: the paper's ball-game figures, gestures, RMP, infeasibility."""
+
+import dataclasses
+import json
+import re
+
+import numpy as np
+import pytest
+
+from pipeline.errors import StageError
+from pipeline.execute.world import load_pybullet_robot
+from pipeline.ik.metrics import ik_metrics
+from pipeline.ik.pinv import solve_pinv
+from pipeline.ik.tvgdd import settings_for, solve_tvgdd
+from pipeline.paths import build_reference
+from pipeline.run import run_task
+from pipeline.tasks import load_task
+from tests.conftest import HUMANOID, TASKS
+
+# Zhang, Kong, Niu, section 4.2: MAE, AAE, RMSE of the hand positions
+PAPER_MAE_M, PAPER_AAE_M, PAPER_RMSE_M = 2.1832e-5, 6.2e-6, 8.41e-6
+
+
+@pytest.fixture(scope="module")
+def ball_game():
+    task = load_task(TASKS / "ball_game.toml")
+    return task, build_reference(task)
+
+
+@pytest.fixture(scope="module")
+def tvgdd_path(ball_game):
+    task, ref = ball_game
+    return solve_tvgdd(task, ref, settings_for(task))
+
+
+def _variant(tmp_path, text: str):
+    path = tmp_path / "task.toml"
+    path.write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"'))
+    return path
+
+
+def test_ball_game_meets_the_paper_figures(ball_game, tvgdd_path):
+    task, _ = ball_game
+    m = ik_metrics(tvgdd_path, task)
+    assert m["ik.position_error_max_m"] <= PAPER_MAE_M
+    assert m["ik.position_error_mean_m"] < PAPER_AAE_M
+    assert m["ik.position_error_rmse_m"] < PAPER_RMSE_M
+    assert m["ik.joint_limit_violations"] == 0 and m["ik.velocity_limit_violations"] == 0
+    assert m["ik.failures"] == 0
+
+
+def test_gesture_joints_reach_their_goals(ball_game, tvgdd_path):
+    task, _ = ball_game
+    g = task.spec.gesture
+    gesture = [n for n in g.goal_lower if g.goal_lower[n] == g.goal_upper[n]]
+    assert len(gesture) == 4
+    final = dict(zip(tvgdd_path.joint_names, tvgdd_path.q[-1]))
+    for name in gesture:
+        assert abs(final[name] - g.goal_lower[name]) <= 1e-3, name
+
+
+def test_recorded_hand_errors_match_pybullet(ball_game, tvgdd_path):
+    task, ref = ball_game
+    with load_pybullet_robot(task.robot.urdf.path) as sim:
+        for k in range(0, len(tvgdd_path), 150):
+            q = tvgdd_path.configuration(k)
+            sim.set_positions(list(q), list(q.values()))
+            for j, hand in enumerate(tvgdd_path.hands):
+                error = np.linalg.norm(sim.link_pose(f"{hand}_hand")[:3, 3] - ref.hands[hand].position[k])
+                assert abs(error - tvgdd_path.hand_error_m[k, j]) < 1e-6
+
+
+def test_velocities_stay_within_the_time_varying_bounds(tvgdd_path):
+    lo, hi = tvgdd_path.extras["zeta_lower"], tvgdd_path.extras["zeta_upper"]
+    assert np.all(tvgdd_path.qd >= lo - 1e-9) and np.all(tvgdd_path.qd <= hi + 1e-9)
+
+
+def test_pinv_leaves_the_gesture_the_scheme_enforces(ball_game, tvgdd_path):
+    """The paper's contrast: without bounds the wrists keep where the minimum-norm rate leaves them."""
+    task, ref = ball_game
+    pinv = solve_pinv(task, ref, task.spec.gesture.feedback_gain)
+    g = task.spec.gesture
+    final = dict(zip(pinv.joint_names, pinv.q[-1]))
+    missed = [n for n in g.goal_lower if g.goal_lower[n] == g.goal_upper[n] and abs(final[n] - g.goal_lower[n]) > 0.1]
+    assert missed
+    assert ik_metrics(pinv, task)["ik.position_error_max_m"] < 1e-4  # it does track the hands
+
+
+def test_rmp_returns_to_the_start_on_a_closed_path_and_mvn_does_not(tmp_path):
+    text = re.sub(r"\[gesture\].*?(?=\[\[moves\]\])", "", (TASKS / "ball_game.toml").read_text(), flags=re.S)
+    task = load_task(_variant(tmp_path, text))
+    ref = build_reference(task)
+    assert np.allclose(ref.hands["left"].position[-1], ref.hands["left"].position[0], atol=1e-12)
+    closure = {}
+    for scheme in ("mvn", "rmp"):
+        path = solve_tvgdd(task, ref, dataclasses.replace(settings_for(task, scheme=scheme), feedback_gain=50.0))
+        closure[scheme] = np.abs(path.q[-1] - path.q[0]).max()
+    assert closure["rmp"] <= 1e-3 < closure["mvn"]
+
+
+def test_infeasible_step_fails_the_run_naming_step_time_and_joint(tmp_path):
+    """A wrist goal 3.3 rad away reached within 0.1 s: nu (theta_new- - theta) exceeds the 6 rad/s limit."""
+    text = (TASKS / "ball_game.toml").read_text()
+    text = text.replace("t_sp_s = 0.75", "t_sp_s = 0.05").replace("c_tuning = 1.0", "c_tuning = 0.01")
+    text = text.replace("left_wrist_roll = -0.20", "left_wrist_roll = 2.90")
+    task_file = _variant(tmp_path, text)
+    with pytest.raises(StageError, match=r"TV-GDD step \d+ \(t = [\d.]+ s\) is infeasible: .*left_wrist_roll"):
+        run_task(task_file, ik="tvgdd", out_dir=tmp_path / "out")
+    (run,) = (tmp_path / "out" / "ball_game").iterdir()
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["status"] == "failed" and "left_wrist_roll" in manifest["error"]
