@@ -93,6 +93,20 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
     out.print(metrics)
 
 
+@app.command()
+@user_errors
+def report(
+    run_dir: Annotated[Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>).")],
+    out_dir: Annotated[Optional[Path], typer.Option("--out", help="Report directory (default reports/<task>/<run-id>).")] = None,
+) -> None:
+    """Write a markdown summary and the figures a run's recording allows; prints the report directory."""
+    from pipeline.report.run_report import write_report
+
+    with err.status(f"reporting {run_dir} ..."):
+        directory = write_report(run_dir, out_dir)
+    out.print(str(directory), markup=False, soft_wrap=True)
+
+
 @robot_app.command("check")
 @user_errors
 def robot_check(

@@ -18,12 +18,17 @@ from pipeline.ik.stack import hand_stack, stacked_reference
 def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = None) -> JointPath:
     """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps.
 
+    Nothing bounds the joints; for comparison with TV-GDD (the paper's Figs 3-4) the path's extras
+    hold the bands TV-GDD would impose on the same task (:func:`~pipeline.ik.tvgdd.gesture_band`).
+
     Args:
         task: the task (initial configuration).
         reference: the CartesianReference.
         feedback_gain: K [1/s].
         period_s: Euler step [s] (default: the reference's period).
     """
+    from pipeline.ik.tvgdd import gesture_band, joint_bounds, settings_for
+
     stack = hand_stack(task)
     tau = period_s or reference.period_s
     r, rdot = cs.SX.sym("r", stack.m), cs.SX.sym("rdot", stack.m)
@@ -54,4 +59,5 @@ def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = N
         hand_error_m=np.linalg.norm((R - positions).reshape(N, -1, 3), axis=2),
         hands=stack.hands,
         fixed=stack.fixed,
+        extras=gesture_band(joint_bounds(task, stack), settings_for(task), reference.t, q),
     )

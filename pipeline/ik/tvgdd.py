@@ -273,8 +273,6 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
         solve_time[k] = time.perf_counter() - start
         qd[k] = velocity
         theta = theta + settings.period_s * velocity  # Euler
-    lower_t, upper_t = position_bounds(reference.t[:, None], bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
-    zeta_lo, zeta_hi = velocity_bounds(q, lower_t, upper_t, -bounds.velocity, bounds.velocity, settings.nu)
     positions = np.asarray(stack.positions.map(N)(q.T)).T
     error = np.linalg.norm((R - positions).reshape(N, -1, 3), axis=2)
     return JointPath(
@@ -289,5 +287,13 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
         hand_error_m=error,
         hands=stack.hands,
         fixed=stack.fixed,
-        extras={"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi},
+        extras=gesture_band(bounds, settings, reference.t, q),
     )
+
+
+def gesture_band(bounds: JointBounds, settings: TvgddSettings, t: np.ndarray, q: np.ndarray) -> dict[str, np.ndarray]:
+    """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path: t (N,) [s],
+    q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``, ``zeta_upper`` [rad/s], each (N, n)."""
+    lower_t, upper_t = position_bounds(t[:, None], bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
+    zeta_lo, zeta_hi = velocity_bounds(q, lower_t, upper_t, -bounds.velocity, bounds.velocity, settings.nu)
+    return {"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi}

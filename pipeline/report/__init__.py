@@ -1,0 +1,1 @@
+"""Reports from recordings: figures and markdown built only on the pandas read-back."""

@@ -1,0 +1,99 @@
+"""Figures (PNG) from read-back DataFrames; each function returns the file it wrote."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from pipeline.ik.gesture import position_bounds  # noqa: E402
+
+
+def _joints(df: pd.DataFrame, prefix: str) -> list[str]:
+    return [c[len(prefix) + 1 :] for c in df.columns if c.startswith(prefix + ".")]
+
+
+def _grid(n: int):
+    cols = 2 if n > 7 else 1
+    rows = int(np.ceil(n / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(6 * cols, 1.5 * rows + 1), sharex=True, squeeze=False)
+    return fig, axes.T.ravel()  # fill the left column first (left arm), then the right
+
+
+def joints_against_bounds(sample: pd.DataFrame, bounds: pd.DataFrame, kind: str, title: str, path: Path) -> Path:
+    """Each joint's position (``kind="position"``, against theta_new+-) or velocity
+    (``kind="velocity"``, against zeta_new+-) over time; excursions are shaded red."""
+    lower, upper = ("theta_lower", "theta_upper") if kind == "position" else ("zeta_lower", "zeta_upper")
+    unit = "rad" if kind == "position" else "rad/s"
+    joints = _joints(sample, kind)
+    fig, axes = _grid(len(joints))
+    t = sample["t"].to_numpy()
+    for ax, joint in zip(axes, joints):
+        v = sample[f"{kind}.{joint}"].to_numpy()
+        lo, hi = bounds[f"{lower}.{joint}"].to_numpy(), bounds[f"{upper}.{joint}"].to_numpy()
+        ax.fill_between(t, lo, hi, color="tab:green", alpha=0.15, lw=0)
+        ax.plot(t, lo, color="tab:green", lw=0.8)
+        ax.plot(t, hi, color="tab:green", lw=0.8)
+        ax.plot(t, v, color="tab:blue", lw=1.2)
+        out = (v < lo) | (v > hi)
+        if out.any():
+            ax.fill_between(t, v, np.clip(v, lo, hi), where=out, color="tab:red", alpha=0.6, lw=0)
+        ax.set_ylabel(joint.replace("_", " "), fontsize=7)
+        ax.tick_params(labelsize=7)
+        span = np.concatenate([v, np.clip(lo, v.min() - 1, None), np.clip(hi, None, v.max() + 1)])
+        pad = 0.1 * (span.max() - span.min() + 1e-6)
+        ax.set_ylim(span.min() - pad, span.max() + pad)
+    for ax in axes[len(joints) :]:
+        ax.set_visible(False)
+    for ax in axes:
+        if ax.get_visible():
+            ax.set_xlabel("t [s]", fontsize=7)
+    fig.suptitle(f"{title} [{unit}]; green: bounds, red: outside", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def hand_errors(sample: pd.DataFrame, title: str, path: Path) -> Path:
+    """|r - f(q)| of each hand over time (log scale) [m]."""
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    for hand in _joints(sample, "hand_error_m"):
+        ax.semilogy(sample["t"], np.maximum(sample[f"hand_error_m.{hand}"], 1e-12), label=hand, lw=1)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("position error [m]")
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def bound_profiles(duration_s: float, path: Path) -> Path:
+    """TV-GDD eq (19) with theta+- = 0 and theta_goal+- = 5 (the paper's Fig. 2): left, several
+    c_tuning with N = 2; right, several N with c_tuning = 0.9. T_SP = T_d / N."""
+    t = np.linspace(0, duration_s, 600)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.2), sharey=True)
+    for c in (0.1, 0.3, 0.6, 0.9, 1.0):
+        left.plot(t, position_bounds(t, 0.0, 0.0, 5.0, 5.0, duration_s / 2, c)[0], label=f"c = {c}")
+    for n in (1, 2, 4, 8, 16):
+        right.plot(t, position_bounds(t, 0.0, 0.0, 5.0, 5.0, duration_s / n, 0.9)[0], label=f"N = {n}")
+    left.set_title("N = 2, several c_tuning", fontsize=10)
+    right.set_title("c_tuning = 0.9, several N", fontsize=10)
+    for ax in (left, right):
+        ax.set_xlabel("t [s]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    left.set_ylabel("theta_new± [rad]")
+    fig.suptitle(f"TV-GDD bound profiles, eq (19), T_d = {duration_s:g} s", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
