@@ -27,6 +27,8 @@ app = typer.Typer(
 )
 robot_app = typer.Typer(help="Inspect and verify robot descriptions.", no_args_is_help=True)
 app.add_typer(robot_app, name="robot")
+bench_app = typer.Typer(help="Measure speed as ratios against peers run in the same process.", no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
 
 out = Console(highlight=False)
 err = Console(stderr=True, highlight=False)
@@ -105,6 +107,27 @@ def report(
     with err.status(f"reporting {run_dir} ..."):
         directory = write_report(run_dir, out_dir)
     out.print(str(directory), markup=False, soft_wrap=True)
+
+
+@bench_app.command("tvgdd")
+@user_errors
+def bench_tvgdd_command(
+    task: Annotated[Path, typer.Option(help="Task to run TV-GDD on.")] = Path("tasks/ball_game.toml"),
+    repeats: Annotated[int, typer.Option(min=1, help="Repeats of the one-call rollout (best is kept).")] = 5,
+) -> None:
+    """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the
+    whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s."""
+    from pipeline.bench import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
+
+    with err.status("benchmarking ...") as status:
+        rows = bench_tvgdd(task, repeats, progress=lambda text: status.update(text))
+    table = Table(title=f"TV-GDD on {task} ({rows[0].steps} steps)", title_justify="left")
+    for column in ("solver", "median µs", "p99 µs", "task s", "T_ave/ours", "T_sum/ours"):
+        table.add_column(column, justify="left" if column == "solver" else "right")
+    for r in rows:
+        table.add_row(r.name, f"{r.median_s * 1e6:.1f}", f"{r.p99_s * 1e6:.1f}", f"{r.total_s:.4f}", f"{PAPER_T_AVE_S / r.median_s:.1f}x", f"{PAPER_T_SUM_S / r.total_s:.1f}x")
+    out.print(table)
+    out.print(f"per-step median, lvi / casadi: {rows[1].median_s / rows[0].median_s:.1f}x", markup=False)
 
 
 @robot_app.command("check")

@@ -9,7 +9,7 @@ from tests.conftest import HUMANOID, TASKS
 runner = CliRunner()
 
 
-@pytest.mark.parametrize("command", [[], ["run"], ["inspect"], ["report"], ["robot"], ["robot", "check"]])
+@pytest.mark.parametrize("command", [[], ["run"], ["inspect"], ["report"], ["bench"], ["bench", "tvgdd"], ["robot"], ["robot", "check"]])
 def test_every_command_has_help(command):
     result = runner.invoke(app, [*command, "--help"])
     assert result.exit_code == 0

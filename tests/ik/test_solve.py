@@ -113,3 +113,18 @@ def test_infeasible_step_fails_the_run_naming_step_time_and_joint(tmp_path):
     (run,) = (tmp_path / "out" / "ball_game").iterdir()
     manifest = json.loads((run / "manifest.json").read_text())
     assert manifest["status"] == "failed" and "left_wrist_roll" in manifest["error"]
+
+
+def test_rollout_in_one_call_equals_the_step_loop(ball_game, tvgdd_path):
+    """The mapaccum rollout (used by the benchmark) integrates exactly what the per-step loop does."""
+    from pipeline.ik.stack import hand_stack, stacked_reference
+    from pipeline.ik.tvgdd import build_problem, joint_bounds
+
+    task, ref = ball_game
+    stack = hand_stack(task)
+    problem = build_problem(stack, joint_bounds(task, stack), settings_for(task))
+    R, V = stacked_reference(stack, ref)
+    theta0 = tvgdd_path.q[0]
+    theta, velocity = problem.rollout(len(ref))(theta0, np.vstack([ref.t, R.T, V.T]), theta0)
+    np.testing.assert_allclose(np.asarray(theta).T[:-1], tvgdd_path.q[1:], atol=1e-12)
+    np.testing.assert_allclose(np.asarray(velocity).T, tvgdd_path.qd, atol=1e-12)
