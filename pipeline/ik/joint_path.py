@@ -8,16 +8,10 @@ from types import MappingProxyType
 
 import numpy as np
 
+from pipeline.arrays import frozen
+
 #: Per-sample solver status codes.
 OK, FAILED = 0, 1
-
-
-def _frozen(a, shape: tuple, name: str, dtype=float) -> np.ndarray:
-    a = np.array(a, dtype=dtype)
-    if a.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True)
@@ -63,8 +57,8 @@ class JointPath:
             ("solve_time_s", (N,), float),
             ("hand_error_m", (N, len(self.hands)), float),
         ):
-            object.__setattr__(self, name, _frozen(getattr(self, name), shape, name, dtype))
-        object.__setattr__(self, "extras", MappingProxyType({k: _frozen(v, (N, n), k) for k, v in self.extras.items()}))
+            object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
+        object.__setattr__(self, "extras", MappingProxyType({k: frozen(v, (N, n), k) for k, v in self.extras.items()}))
         object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
 
     def __len__(self) -> int:

@@ -12,7 +12,7 @@ import casadi as cs
 import numpy as np
 
 from pipeline.ik.joint_path import JointPath
-from pipeline.ik.stack import hand_stack, stacked_reference
+from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference
 
 
 def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = None) -> JointPath:
@@ -46,18 +46,4 @@ def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = N
         qd[k] = np.asarray(step(theta, R[k], V[k])).ravel()
         solve_time[k] = time.perf_counter() - start
         theta = theta + tau * qd[k]
-    positions = np.asarray(stack.positions.map(N)(q.T)).T
-    return JointPath(
-        method="pinv",
-        joint_names=stack.joint_names,
-        t=reference.t,
-        rep=reference.rep,
-        q=q,
-        qd=qd,
-        status=np.zeros(N, int),
-        solve_time_s=solve_time,
-        hand_error_m=np.linalg.norm((R - positions).reshape(N, -1, 3), axis=2),
-        hands=stack.hands,
-        fixed=stack.fixed,
-        extras=gesture_band(joint_bounds(task, stack), settings_for(task), reference.t, q),
-    )
+    return stack_joint_path("pinv", stack, reference, q, qd, solve_time, gesture_band(joint_bounds(task, stack), settings_for(task), reference.t, q))

@@ -94,3 +94,26 @@ def stacked_reference(stack: HandStack, reference) -> tuple[np.ndarray, np.ndarr
     position = np.hstack([reference.hands[h].position for h in stack.hands])
     velocity = np.hstack([reference.hands[h].linear_velocity for h in stack.hands])
     return position, velocity
+
+
+def stack_joint_path(method: str, stack: HandStack, reference, q: np.ndarray, qd: np.ndarray, solve_time_s: np.ndarray, extras=None):
+    """The JointPath of a velocity-level method on ``stack``: hand errors |r - f(q)| from q (N, n)."""
+    from pipeline.ik.joint_path import JointPath
+
+    R, _ = stacked_reference(stack, reference)
+    N = len(reference)
+    positions = np.asarray(stack.positions.map(N)(q.T)).T
+    return JointPath(
+        method=method,
+        joint_names=stack.joint_names,
+        t=reference.t,
+        rep=reference.rep,
+        q=q,
+        qd=qd,
+        status=np.zeros(N, int),
+        solve_time_s=solve_time_s,
+        hand_error_m=np.linalg.norm((R - positions).reshape(N, -1, 3), axis=2),
+        hands=stack.hands,
+        fixed=stack.fixed,
+        extras=extras or {},
+    )

@@ -265,8 +265,7 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     """
     import time
 
-    from pipeline.ik.joint_path import JointPath
-    from pipeline.ik.stack import hand_stack, stacked_reference
+    from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference
 
     if backend not in ("casadi", "lvi"):
         raise StageError(f"unknown QP backend '{backend}' (backends: casadi, lvi)")
@@ -295,22 +294,7 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
         solve_time[k] = time.perf_counter() - start
         qd[k] = velocity
         theta = theta + settings.period_s * velocity  # Euler
-    positions = np.asarray(stack.positions.map(N)(q.T)).T
-    error = np.linalg.norm((R - positions).reshape(N, -1, 3), axis=2)
-    return JointPath(
-        method="tvgdd",
-        joint_names=stack.joint_names,
-        t=reference.t,
-        rep=reference.rep,
-        q=q,
-        qd=qd,
-        status=np.zeros(N, int),
-        solve_time_s=solve_time,
-        hand_error_m=error,
-        hands=stack.hands,
-        fixed=stack.fixed,
-        extras=gesture_band(bounds, settings, reference.t, q),
-    )
+    return stack_joint_path("tvgdd", stack, reference, q, qd, solve_time, gesture_band(bounds, settings, reference.t, q))
 
 
 def gesture_band(bounds: JointBounds, settings: TvgddSettings, t: np.ndarray, q: np.ndarray) -> dict[str, np.ndarray]:

@@ -8,13 +8,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-
-def _frozen(a: np.ndarray, shape: tuple, name: str, dtype=float) -> np.ndarray:
-    a = np.array(a, dtype=dtype)
-    if a.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
-    a.setflags(write=False)
-    return a
+from pipeline.arrays import frozen
 
 
 @dataclass(frozen=True)
@@ -41,7 +35,7 @@ class HandReference:
             ("linear_velocity", (n, 3)),
             ("angular_velocity", (n, 3)),
         ):
-            object.__setattr__(self, name, _frozen(getattr(self, name), shape, name))
+            object.__setattr__(self, name, frozen(getattr(self, name), shape, name))
 
     @property
     def poses(self) -> np.ndarray:
@@ -78,9 +72,9 @@ class CartesianReference:
 
     def __post_init__(self) -> None:
         n = np.shape(self.t)[0]
-        object.__setattr__(self, "t", _frozen(self.t, (n,), "t"))
-        object.__setattr__(self, "rep", _frozen(self.rep, (n,), "rep", int))
-        object.__setattr__(self, "segment", _frozen(self.segment, (n,), "segment", int))
+        object.__setattr__(self, "t", frozen(self.t, (n,), "t"))
+        object.__setattr__(self, "rep", frozen(self.rep, (n,), "rep", int))
+        object.__setattr__(self, "segment", frozen(self.segment, (n,), "segment", int))
         for hand, ref in self.hands.items():
             if len(ref.position) != n:
                 raise ValueError(f"hand {hand}: {len(ref.position)} samples, t has {n}")
