@@ -58,7 +58,7 @@ def bench_tvgdd(task_file: str | Path, repeats: int = 5, progress=None) -> list[
     stack = hand_stack(task)
     problem = build_problem(stack, joint_bounds(task, stack), settings)
     R, V = stacked_reference(stack, reference)
-    theta0 = np.array([task.initial_q[n] for n in stack.joint_names])
+    theta0 = stack.initial
     rollout = problem.rollout(len(reference))
     U = np.vstack([reference.t, R.T, V.T])
     best = np.inf

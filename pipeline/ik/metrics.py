@@ -21,8 +21,7 @@ def ik_metrics(path: JointPath, task) -> dict[str, float]:
     names = path.joint_names
     lower = np.array([limits[n].lower for n in names])
     upper = np.array([limits[n].upper for n in names])
-    override = task.spec.limits.velocity
-    vmax = np.array([override.get(n, limits[n].velocity) if isinstance(override, dict) else (override or limits[n].velocity) for n in names])
+    vmax = task.velocity_limits(names)
     error = path.hand_error_m
     steps = np.abs(np.diff(path.q, axis=0))
     return {

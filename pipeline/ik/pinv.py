@@ -39,7 +39,7 @@ def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = N
     R, V = stacked_reference(stack, reference)
     N, n = len(reference), stack.n
     q, qd, solve_time = np.empty((N, n)), np.empty((N, n)), np.empty(N)
-    theta = np.array([task.initial_q[name] for name in stack.joint_names])
+    theta = stack.initial
     for k in range(N):
         q[k] = theta
         start = time.perf_counter()

@@ -15,6 +15,7 @@ from types import MappingProxyType
 import casadi as cs
 import numpy as np
 
+from pipeline.arrays import frozen
 from pipeline.model.kinematics import ChainKinematics
 from pipeline.tasks import Task
 
@@ -27,6 +28,7 @@ class HandStack:
         joint_names: the active joints, the order of the vector theta.
         hands: the hands, the order of the stacked rows.
         fixed: values of the locked joints [rad].
+        initial: the task's initial values of the active joints [rad], (n,).
         theta: the CasADi symbol of the active joints, (n, 1).
         position: SX expression of the stacked hand positions, (3 h, 1) [m].
         jacobian: SX expression of d position / d theta, (3 h, n).
@@ -36,6 +38,7 @@ class HandStack:
     joint_names: tuple[str, ...]
     hands: tuple[str, ...]
     fixed: Mapping[str, float]
+    initial: np.ndarray
     theta: cs.SX
     position: cs.SX
     jacobian: cs.SX
@@ -82,6 +85,7 @@ def hand_stack(task: Task) -> HandStack:
         joint_names=names,
         hands=tuple(task.spec.hands),
         fixed=MappingProxyType(fixed),
+        initial=frozen([task.initial_q[n] for n in names], (len(names),), "initial"),
         theta=theta,
         position=position,
         jacobian=jacobian,

@@ -205,8 +205,6 @@ def joint_bounds(task, stack: HandStack) -> JointBounds:
     stack's joints; a joint without a goal keeps its limits as goals."""
     limits = task.robot.limits
     names = stack.joint_names
-    override = task.spec.limits.velocity
-    velocity = [override.get(n, limits[n].velocity) if isinstance(override, dict) else (override or limits[n].velocity) for n in names]
     gesture = task.spec.gesture
     goal_lower = gesture.goal_lower if gesture else {}
     goal_upper = gesture.goal_upper if gesture else {}
@@ -215,7 +213,7 @@ def joint_bounds(task, stack: HandStack) -> JointBounds:
         upper=np.array([limits[n].upper for n in names]),
         goal_lower=np.array([goal_lower.get(n, limits[n].lower) for n in names]),
         goal_upper=np.array([goal_upper.get(n, limits[n].upper) for n in names]),
-        velocity=np.array(velocity, dtype=float),
+        velocity=task.velocity_limits(names),
     )
 
 
@@ -274,7 +272,7 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     problem = build_problem(stack, bounds, settings, task.robot.urdf.kinematic_xml, task.robot.joint_names)
     R, V = stacked_reference(stack, reference)
     N, n = len(reference), stack.n
-    theta0 = np.array([task.initial_q[name] for name in stack.joint_names])
+    theta0 = stack.initial
     q, qd = np.empty((N, n)), np.empty((N, n))
     solve_time = np.empty(N)
     theta, u = theta0.copy(), None

@@ -71,6 +71,14 @@ class Task:
         q = [self.initial_q[n] for n in chain.joint_names]
         return ChainKinematics.of(chain).pose(np.array(q))
 
+    def velocity_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
+        """Velocity limits of ``joint_names`` [rad/s]: the task's ``limits.velocity`` where it sets
+        one, the robot's otherwise."""
+        override, limits = self.spec.limits.velocity, self.robot.limits
+        if isinstance(override, dict):
+            return np.array([override.get(n, limits[n].velocity) for n in joint_names])
+        return np.array([override or limits[n].velocity for n in joint_names])
+
     def waypoint_pose(self, name: str) -> np.ndarray:
         """The 4x4 pose of waypoint ``name`` [m]."""
         wp = self.spec.waypoints[name]

@@ -39,7 +39,7 @@ def quadprog_solve(M, b, J, rhs, lo, hi):
 
 def test_stack_positions_match_pybullet(ball_game):
     task, stack, _, _ = ball_game
-    theta = np.array([task.initial_q[n] for n in stack.joint_names])
+    theta = stack.initial
     r = np.asarray(stack.positions(theta)).ravel()
     with load_pybullet_robot(task.robot.urdf.path) as sim:
         sim.set_positions(list(task.initial_q), list(task.initial_q.values()))
@@ -55,7 +55,7 @@ def test_casadi_step_solves_the_qp_along_the_ball_game(ball_game, scheme):
     settings = TvgddSettings(scheme=scheme, feedback_gain=task.spec.gesture.feedback_gain)
     problem = build_problem(stack, bounds, settings, task.robot.urdf.kinematic_xml, task.robot.joint_names)
     R, V = stacked_reference(stack, ref)
-    theta = theta0 = np.array([task.initial_q[n] for n in stack.joint_names])
+    theta = theta0 = stack.initial
     worst, stride = 0.0, 1 if scheme == "mvn" else 3
     for k in range(0, len(ref), stride):
         args = (theta, ref.t[k], R[k], V[k], theta0)
@@ -75,7 +75,7 @@ def test_lvi_converges_to_the_qp_solution(ball_game):
     task, stack, bounds, ref = ball_game
     problem = build_problem(stack, bounds, TvgddSettings(feedback_gain=task.spec.gesture.feedback_gain))
     R, V = stacked_reference(stack, ref)
-    theta = theta0 = np.array([task.initial_q[n] for n in stack.joint_names])
+    theta = theta0 = stack.initial
     for k in range(1201):
         args = (theta, ref.t[k], R[k], V[k], theta0)
         if k % 400 == 0:
