@@ -139,24 +139,25 @@ def _parse(file: Path) -> tuple[str, TaskSpec]:
         raise TaskFileError(_validation_message(file, exc, data)) from None
 
 
-def _check_joint_names(task_where, names, robot: Robot, key: str) -> None:
+def _check_joint_names(location: str, names, robot: Robot) -> None:
+    """Refuse a joint name the robot lacks, as ``location.name``."""
     for name in names:
         if name not in robot.limits:
-            raise TaskFileError(f"{task_where(key)}.{name}: no such joint in robot '{robot.name}'")
+            raise TaskFileError(f"{location}.{name}: no such joint in robot '{robot.name}'")
 
 
 def _initial_configuration(file: Path, spec: TaskSpec, robot: Robot) -> dict[str, float]:
-    where = lambda key: f"{file}:{key}"  # noqa: E731
+    where = f"{file}:initial"
     if isinstance(spec.initial, str):
         if spec.initial not in robot.homes:
-            raise TaskFileError(f"{where('initial')}: robot '{robot.name}' has no home pose '{spec.initial}' (homes: {', '.join(robot.homes)})")
+            raise TaskFileError(f"{where}: robot '{robot.name}' has no home pose '{spec.initial}' (homes: {', '.join(robot.homes)})")
         return dict(robot.home(spec.initial))
-    _check_joint_names(where, spec.initial, robot, "initial")
+    _check_joint_names(where, spec.initial, robot)
     q = {n: 0.0 for n in robot.joint_names}
     for name, value in spec.initial.items():
         lim = robot.limits[name]
         if not lim.lower <= value <= lim.upper:
-            raise TaskFileError(f"{where('initial')}.{name}: {value} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]")
+            raise TaskFileError(f"{where}.{name}: {value} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]")
         q[name] = value
     return q
 
@@ -193,10 +194,10 @@ def _check_structure(task: Task) -> None:
     for key in ("velocity", "acceleration"):
         value = getattr(spec.limits, key)
         if isinstance(value, dict):
-            _check_joint_names(where, value, robot, f"limits.{key}")
+            _check_joint_names(where(f"limits.{key}"), value, robot)
     if spec.gesture is not None:
-        _check_joint_names(where, spec.gesture.goal_lower, robot, "gesture.goal_lower")
-        _check_joint_names(where, spec.gesture.goal_upper, robot, "gesture.goal_upper")
+        _check_joint_names(where("gesture.goal_lower"), spec.gesture.goal_lower, robot)
+        _check_joint_names(where("gesture.goal_upper"), spec.gesture.goal_upper, robot)
         for name, lo in spec.gesture.goal_lower.items():
             hi = spec.gesture.goal_upper.get(name)
             if hi is not None and lo > hi:
