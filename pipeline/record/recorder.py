@@ -185,6 +185,7 @@ class Recorder:
         for hand, hr in ref.hands.items():
             channel = self._json(f"{family}/reference/{hand}", schemas.HAND_REFERENCE)
             quats = quaternion_xyzw(hr.rotation)
+            stride = max(1, len(ref) // 400)  # at most ~400 poses in the whole-path message
             for k in range(len(ref)):
                 channel.log(
                     {
@@ -205,7 +206,7 @@ class Recorder:
                     frame_id=ref.frame,
                     poses=[
                         Pose(position=Vector3(**_vec(p)), orientation=Quaternion(**_quat(q)))
-                        for p, q in zip(hr.position[:: max(1, len(ref) // 400)], quats[:: max(1, len(ref) // 400)])
+                        for p, q in zip(hr.position[::stride], quats[::stride])
                     ],
                 ),
                 log_time=0,
