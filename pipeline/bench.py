@@ -6,10 +6,12 @@ Never used by the test suite: wall-clock numbers depend on the machine.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+
+from pipeline.quiet import c_output_silenced
 
 #: TV-GDD section 4.2: average computing time per sampling interval and total, on the ball game [s].
 PAPER_T_AVE_S = 0.001
@@ -26,6 +28,9 @@ class BenchRow:
         p99_s: 99th percentile per step [s].
         total_s: time for the whole task [s].
         steps: control steps.
+        velocity_gap_rad_s: largest difference of its joint velocities from the first row's along
+            the task [rad/s].
+        failure: why the run stopped (then the figures are NaN), or empty.
     """
 
     name: str
@@ -33,11 +38,15 @@ class BenchRow:
     p99_s: float
     total_s: float
     steps: int
+    velocity_gap_rad_s: float
+    failure: str = ""
 
 
-def bench_tvgdd(task_file: str | Path, repeats: int = 5, progress=None) -> list[BenchRow]:
-    """TV-GDD on a task: the ``casadi`` backend per step, the same QP as one mapaccum rollout
-    (best of ``repeats``), and the paper's LVI solver per step."""
+def bench_tvgdd(task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...] = (), progress=None) -> list[BenchRow]:
+    """TV-GDD on a task, in rows: the ``casadi`` backend (DAQP) per step, the paper's LVI solver
+    per step, the ``casadi`` backend with each conic plugin in ``plugins`` (e.g. qpoases, osqp,
+    proxqp, qrqp) per step, and the DAQP QP as one mapaccum rollout (best of ``repeats``)."""
+    from pipeline.errors import StageError
     from pipeline.ik.stack import hand_stack, stacked_reference
     from pipeline.ik.tvgdd import build_problem, joint_bounds, settings_for, solve_tvgdd
     from pipeline.paths import build_reference
@@ -46,13 +55,21 @@ def bench_tvgdd(task_file: str | Path, repeats: int = 5, progress=None) -> list[
     task = load_task(task_file)
     reference = build_reference(task)
     settings = settings_for(task)
-    rows = []
-    for backend in ("casadi", "lvi"):
+    rows, first = [], None
+    runs = [(f"casadi {settings.qp_plugin}, per step", settings, "casadi"), ("lvi, per step", settings, "lvi")]
+    runs += [(f"casadi {plugin}, per step", replace(settings, qp_plugin=plugin), "casadi") for plugin in plugins]
+    for name, run_settings, backend in runs:
         if progress:
-            progress(f"TV-GDD, {backend} backend, per step")
-        path = solve_tvgdd(task, reference, settings, backend)
+            progress(f"TV-GDD, {name}")
+        try:
+            with c_output_silenced():  # qpOASES prints its licence from C
+                path = solve_tvgdd(task, reference, run_settings, backend)
+        except StageError as exc:
+            rows.append(BenchRow(name, *[float("nan")] * 3, len(reference), float("nan"), str(exc)))
+            continue
+        first = path.qd if first is None else first
         times = path.solve_time_s
-        rows.append(BenchRow(f"{backend}, per step", float(np.median(times)), float(np.percentile(times, 99)), float(times.sum()), len(times)))
+        rows.append(BenchRow(name, float(np.median(times)), float(np.percentile(times, 99)), float(times.sum()), len(times), float(np.abs(path.qd - first).max())))
     if progress:
         progress("TV-GDD, casadi backend, whole path in one call")
     stack = hand_stack(task)
@@ -61,11 +78,11 @@ def bench_tvgdd(task_file: str | Path, repeats: int = 5, progress=None) -> list[
     theta0 = stack.initial
     rollout = problem.rollout(len(reference))
     U = np.vstack([reference.t, R.T, V.T])
-    best = np.inf
+    best, thetadot = np.inf, None
     for _ in range(repeats):
         start = time.perf_counter()
-        rollout(theta0, U, theta0)
+        _, thetadot = rollout(theta0, U, theta0)
         best = min(best, time.perf_counter() - start)
     n = len(reference)
-    rows.append(BenchRow("casadi, one call", best / n, best / n, best, n))
+    rows.append(BenchRow(f"casadi {settings.qp_plugin}, one call", best / n, best / n, best, n, float(np.abs(np.asarray(thetadot).T - first).max())))
     return rows

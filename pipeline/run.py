@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +17,7 @@ import numpy as np
 from pipeline import __version__
 from pipeline.errors import DualarmError
 from pipeline.ik.metrics import ik_metrics
+from pipeline.ik.tvgdd import LVI_TOLERANCE
 from pipeline.paths import CartesianReference, build_reference
 from pipeline.record.recorder import Recorder
 from pipeline.record.run_dir import RunDirectory, package_versions, sha256_file
@@ -85,7 +86,7 @@ def _manifest(task: Task, stages: tuple[str, ...], seed: int, command: Sequence[
     }
 
 
-def _ik_settings(task: Task, ik: str | None, scheme: str, qp_backend: str):
+def _ik_settings(task: Task, ik: str | None, scheme: str, qp_backend: str, lvi_tolerance: float):
     """The IK stage's settings (recorded in the manifest) and the function that runs it."""
     from pipeline.ik.pinv import solve_pinv
     from pipeline.ik.tvgdd import SCHEMES, settings_for, solve_tvgdd
@@ -95,7 +96,9 @@ def _ik_settings(task: Task, ik: str | None, scheme: str, qp_backend: str):
             raise DualarmError(f"unknown TV-GDD scheme '{scheme}' (schemes: {', '.join(SCHEMES)})")
         if qp_backend not in ("casadi", "lvi"):
             raise DualarmError(f"unknown QP backend '{qp_backend}' (backends: casadi, lvi)")
-        settings = settings_for(task, scheme=scheme)
+        if not lvi_tolerance > 0:
+            raise DualarmError(f"the LVI tolerance must be positive, not {lvi_tolerance}")
+        settings = replace(settings_for(task, scheme=scheme), lvi_tolerance=lvi_tolerance)
         return {"method": ik, "backend": qp_backend, **asdict(settings)}, lambda ref: solve_tvgdd(task, ref, settings, qp_backend)
     gain = settings_for(task).feedback_gain
     return {"method": ik, "feedback_gain": gain}, lambda ref: solve_pinv(task, ref, gain)
@@ -108,6 +111,7 @@ def run_task(
     ik: str | None = None,
     scheme: str = "mvn",
     qp_backend: str = "casadi",
+    lvi_tolerance: float = LVI_TOLERANCE,
     out_dir: str | Path = "recordings",
     seed: int = 0,
     command: Sequence[str] | None = None,
@@ -119,7 +123,7 @@ def run_task(
     """
     task = load_task(task_file)
     chosen = resolve_stages(stages, ik)
-    ik_settings, solve_ik = _ik_settings(task, ik, scheme, qp_backend) if "ik" in chosen else ({}, None)
+    ik_settings, solve_ik = _ik_settings(task, ik, scheme, qp_backend, lvi_tolerance) if "ik" in chosen else ({}, None)
     np.random.seed(seed)
     run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, chosen, seed, command or sys.argv, ik_settings))
     attachments = {task.file.name: task.text, task.robot.urdf.path.name: task.robot.urdf.path.read_text()}
@@ -134,7 +138,7 @@ def run_task(
         metrics.update(path_metrics(reference))
         if solve_ik is not None:
             joint_path = solve_ik(reference)
-            recorder.joint_path(joint_path)
+            recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names))
             metrics.update(ik_metrics(joint_path, task))
         recorder.metrics(metrics, reference.duration_s)
     except BaseException as exc:

@@ -54,3 +54,20 @@ def test_user_mistakes_give_one_line_and_exit_2(args, needle, tmp_path):
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], result.stderr
     assert "Traceback" not in result.output
+
+
+@pytest.mark.parametrize("backend", ["casadi", "lvi"])
+def test_infeasible_ik_step_prints_one_line_even_from_c(backend, tmp_path):
+    """Run in a subprocess, so that anything CasADi prints from C would show on stderr too."""
+    import subprocess
+    import sys
+
+    text = (TASKS / "ball_game.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    task = tmp_path / "ball_game.toml"
+    task.write_text(text.replace("velocity = 6.0", "velocity = 0.01"))
+    command = [sys.executable, "-c", "from pipeline.cli import app; app()", "run", str(task), "--ik", "tvgdd", "--qp-backend", backend, "--out", str(tmp_path / "out")]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: TV-GDD step "), result.stderr
+    assert "meets the hand-velocity equality (24)" in lines[0]

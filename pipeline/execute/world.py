@@ -7,32 +7,16 @@ poses in single precision (about 1e-7 m), which bounds every comparison against 
 
 from __future__ import annotations
 
-import contextlib
-import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-
-@contextlib.contextmanager
-def _c_output_silenced() -> Iterator[None]:
-    """Send file descriptors 1 and 2 to /dev/null for the duration (C-level prints)."""
-    saved = [os.dup(1), os.dup(2)]
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in (*saved, devnull):
-            os.close(fd)
+from pipeline.quiet import c_output_silenced
 
 
-with _c_output_silenced():
+with c_output_silenced():
     import pybullet as pb
 
 
@@ -87,7 +71,7 @@ class PyBulletRobot:
 
 def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False) -> PyBulletRobot:
     """Start a DIRECT client and load ``urdf`` with a fixed base at the origin."""
-    with _c_output_silenced():
+    with c_output_silenced():
         client = pb.connect(pb.DIRECT)
         flags = pb.URDF_USE_SELF_COLLISION if self_collision else 0
         body = pb.loadURDF(str(urdf), useFixedBase=True, flags=flags, physicsClientId=client)

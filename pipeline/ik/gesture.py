@@ -32,7 +32,7 @@ def position_bounds(t, lower, upper, goal_lower, goal_upper, t_sp: float, c_tuni
     return lower + (goal_lower - lower) * sigmoid, upper + (goal_upper - upper) * sigmoid
 
 
-def velocity_bounds(theta, lower_t, upper_t, qd_min, qd_max, nu: float):
+def velocity_bounds(theta, lower_t, upper_t, qd_min, qd_max, nu: float, lower_rate=0.0, upper_rate=0.0):
     """zeta_new-(t), zeta_new+(t) of eqs (21)-(22) [rad/s].
 
     Args:
@@ -40,6 +40,11 @@ def velocity_bounds(theta, lower_t, upper_t, qd_min, qd_max, nu: float):
         lower_t, upper_t: theta_new-(t), theta_new+(t) [rad].
         qd_min, qd_max: joint velocity limits [rad/s].
         nu: scaling nu > 0 of eq (21) [1/s].
+        lower_rate, upper_rate: the bounds' own rates [rad/s], added to eq (21) as a feedforward
+            (not in the paper, which uses 0): without it a joint pressed against a closing bound
+            lags it by about rate / nu.
     """
     lib = _lib(theta, lower_t)
-    return lib.fmax(qd_min, nu * (lower_t - theta)), lib.fmin(qd_max, nu * (upper_t - theta))  # eq (22)
+    lower = nu * (lower_t - theta) + lower_rate  # eq (21)
+    upper = nu * (upper_t - theta) + upper_rate
+    return lib.fmax(qd_min, lower), lib.fmin(qd_max, upper)  # eq (22)

@@ -18,6 +18,7 @@ CasADi Function per step, and the paper's own LVI projection-equation solver (eq
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import casadi as cs
@@ -29,9 +30,14 @@ from pipeline.ik.stack import HandStack
 
 SCHEMES = ("mvn", "rmp", "mke")
 
+#: Largest breach of (24)-(25) [m/s or rad/s] a conic solution may have before its step counts as infeasible.
+FEASIBILITY_TOLERANCE = 1e-6
+
 #: The LVI solver's constants as published: omega (the dual bound) and the stop on ||epsilon(u)||.
 LVI_OMEGA = 1e10
 LVI_TOLERANCE = 1e-5
+#: Iterations after which the ``lvi`` backend declares a step infeasible (the ball game needs at most ~10,000).
+LVI_MAX_ITERATIONS = 200_000
 
 
 @dataclass(frozen=True)
@@ -46,7 +52,11 @@ class TvgddSettings:
         t_sp_s: T_SP of eq (19) [s].
         c_tuning: c_tuning of eq (19) [s].
         rmp_lambda: lambda of the RMP scheme [1/s].
+        bound_feedforward: add the bounds' own rate over the coming step to eq (21), so that a
+            joint pressed against a closing bound moves with it instead of lagging (a departure
+            from the paper, off by default).
         qp_plugin: CasADi conic plugin of the ``casadi`` backend.
+        lvi_tolerance: the ``lvi`` backend's stop on ||epsilon(u)||_2 (the paper's 1e-5).
     """
 
     scheme: str = "mvn"
@@ -56,7 +66,9 @@ class TvgddSettings:
     t_sp_s: float = 0.75
     c_tuning: float = 1.0
     rmp_lambda: float = 10.0
+    bound_feedforward: bool = False
     qp_plugin: str = "daqp"
+    lvi_tolerance: float = LVI_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -96,7 +108,9 @@ class TvgddProblem:
         stack: the stacked hands.
         settings: the settings it was built with.
         data: Function ``(theta, t, r, rdot, theta0) -> (M, b, J, rhs, zeta_lo, zeta_hi, lower_t, upper_t)``.
-        step: Function ``(theta, t, r, rdot, theta0) -> thetadot``: data and the conic solve in one graph.
+        step: Function ``(theta, t, r, rdot, theta0) -> (thetadot, violation)``: data and the conic
+            solve in one graph; ``violation`` is the solution's largest breach of (24) or (25),
+            above :data:`FEASIBILITY_TOLERANCE` when the QP is infeasible.
         packed_step: the same with its inputs stacked into one vector (see :meth:`pack`), which
             halves the cost of a call from Python.
     """
@@ -112,15 +126,48 @@ class TvgddProblem:
         """Stack one step's inputs into the vector :attr:`packed_step` takes."""
         return np.concatenate([theta, [t], r, rdot, theta0])
 
+    def stepper(self):
+        """A callable ``inputs (packed, see :meth:`pack`) -> (thetadot (n,), violation)`` that
+        evaluates :attr:`packed_step` through a CasADi FunctionBuffer, reading and writing numpy
+        arrays in place: it skips the DM conversions of a plain call, which cost three quarters of
+        a step."""
+        buffer, evaluate = self.packed_step.buffer()
+        inputs, thetadot, violation = np.zeros(self.packed_step.size1_in(0)), np.zeros(self.stack.n), np.zeros(1)
+        buffer.set_arg(0, memoryview(inputs))
+        buffer.set_res(0, memoryview(thetadot))
+        buffer.set_res(1, memoryview(violation))
+
+        def step(packed: np.ndarray, _keep=buffer) -> tuple[np.ndarray, float]:
+            inputs[:] = packed
+            evaluate()
+            return thetadot.copy(), float(violation[0])
+
+        return step
+
     def rollout(self, samples: int) -> cs.Function:
         """The whole Euler integration as one CasADi call (``mapaccum``):
         ``(theta0 (n), U (1 + 2m, N), theta_ref0 (n)) -> (theta (n, N), thetadot (n, N))`` where
         column k of U is [t_k; r_k; rdot_k] and theta[:, k] is the state after step k."""
         n, m = self.stack.n, self.stack.m
         theta, u, theta0 = cs.MX.sym("theta", n), cs.MX.sym("u", 1 + 2 * m), cs.MX.sym("theta0", n)
-        velocity = self.step(theta, u[0], u[1 : 1 + m], u[1 + m :], theta0)
+        velocity, _ = self.step(theta, u[0], u[1 : 1 + m], u[1 + m :], theta0)
         one = cs.Function("tvgdd_euler", [theta, u, theta0], [theta + self.settings.period_s * velocity, velocity])
         return one.mapaccum("tvgdd_rollout", samples, [0], [0])
+
+
+def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings):
+    """theta_new-+(t) of eq (19) and zeta_new-+(t) of eqs (21)-(22), with the bounds' rate over
+    the step [t, t + tau] as feedforward when ``settings.bound_feedforward``."""
+    def at(time):
+        return position_bounds(time, bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
+
+    lower_t, upper_t = at(t)
+    rates = (0.0, 0.0)
+    if settings.bound_feedforward:
+        lower_next, upper_next = at(t + settings.period_s)
+        rates = ((lower_next - lower_t) / settings.period_s, (upper_next - upper_t) / settings.period_s)
+    zeta_lo, zeta_hi = velocity_bounds(theta, lower_t, upper_t, -bounds.velocity, bounds.velocity, settings.nu, *rates)
+    return lower_t, upper_t, zeta_lo, zeta_hi
 
 
 def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings, urdf_xml: str = "", all_joints: tuple[str, ...] = ()) -> TvgddProblem:
@@ -140,8 +187,7 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
     b = settings.rmp_lambda * (theta - theta0) if settings.scheme == "rmp" else cs.SX.zeros(n)
     J = stack.jacobian
     rhs = rdot + settings.feedback_gain * (r - stack.position)  # eq (16)/(24)
-    lower_t, upper_t = position_bounds(t, bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
-    zeta_lo, zeta_hi = velocity_bounds(theta, lower_t, upper_t, -bounds.velocity, bounds.velocity, settings.nu)
+    lower_t, upper_t, zeta_lo, zeta_hi = _bands(theta, t, bounds, settings)
     inputs, names = [theta, t, r, rdot, theta0], ["theta", "t", "r", "rdot", "theta0"]
     data = cs.Function(
         "tvgdd_qp_data",
@@ -150,26 +196,36 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
         names,
         ["M", "b", "J", "rhs", "zeta_lo", "zeta_hi", "lower_t", "upper_t"],
     )
-    qp = cs.conic("tvgdd_qp", settings.qp_plugin, {"h": cs.Sparsity.dense(n, n), "a": cs.Sparsity.dense(m, n)}, _plugin_options(settings.qp_plugin))
+    try:
+        qp = cs.conic("tvgdd_qp", settings.qp_plugin, {"h": cs.Sparsity.dense(n, n), "a": cs.Sparsity.dense(m, n)}, _plugin_options(settings.qp_plugin))
+    except RuntimeError as exc:
+        reason = str(exc).strip().splitlines()[-1]
+        raise StageError(f"CasADi conic plugin '{settings.qp_plugin}' cannot take the TV-GDD QP: {reason}") from None
     sym = [cs.MX.sym(name, *x.shape) for name, x in zip(names, inputs)]
     M_, b_, J_, rhs_, lo_, hi_, _, _ = data(*sym)
-    solution = qp(h=M_, g=b_, a=J_, lba=rhs_, uba=rhs_, lbx=lo_, ubx=hi_)
-    step = cs.Function("tvgdd_step", sym, [solution["x"]], names, ["thetadot"])
+    # collapsed bounds (zeta- > zeta+) would trip CasADi's well-posedness assertion: the QP gets
+    # [lo, max(lo, hi)] and the collapse shows up in the violation against the true bounds
+    x = qp(h=M_, g=b_, a=J_, lba=rhs_, uba=rhs_, lbx=lo_, ubx=cs.fmax(lo_, hi_))["x"]
+    violation = cs.mmax(cs.vertcat(cs.fabs(cs.mtimes(J_, x) - rhs_), lo_ - x, x - hi_))
+    step = cs.Function("tvgdd_step", sym, [x, violation], names, ["thetadot", "violation"])
     packed = cs.MX.sym("inputs", 2 * n + 1 + 2 * m)
     pieces = cs.vertsplit(packed, [0, n, n + 1, n + 1 + m, n + 1 + 2 * m, 2 * n + 1 + 2 * m])
-    packed_step = cs.Function("tvgdd_packed_step", [packed], [step(*pieces)], ["inputs"], ["thetadot"])
+    packed_step = cs.Function("tvgdd_packed_step", [packed], step(*pieces), ["inputs"], ["thetadot", "violation"])
     return TvgddProblem(stack=stack, settings=settings, data=data, step=step, packed_step=packed_step)
 
 
 def _plugin_options(plugin: str) -> dict:
-    return {
-        "qpoases": {"printLevel": "none", "error_on_fail": True},
-        "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 100000}, "error_on_fail": True},
-        "daqp": {"daqp": {"primal_tol": 1e-12, "dual_tol": 1e-12}, "error_on_fail": True},
-        "proxqp": {"error_on_fail": True},
-        "hpipm": {"error_on_fail": True},
-        "qrqp": {"print_iter": False, "print_header": False, "error_on_fail": True},
-    }.get(plugin, {"error_on_fail": True})
+    """Quiet, tight options per conic plugin. A failed solve does not raise (CasADi would print
+    every input of the enclosing Functions first); the step's ``violation`` output reports it."""
+    options = {
+        "qpoases": {"printLevel": "none"},
+        "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 100000}},
+        "daqp": {"daqp": {"primal_tol": 1e-12, "dual_tol": 1e-12}},
+        "highs": {"highs": {"output_flag": False}},
+        "proxqp": {"proxqp": {"eps_abs": 1e-10, "eps_rel": 0.0}},
+        "qrqp": {"print_iter": False, "print_header": False, "print_info": False},
+    }.get(plugin, {})
+    return {**options, "error_on_fail": False}
 
 
 def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: float = LVI_TOLERANCE, max_iter: int = 1_000_000):
@@ -180,23 +236,38 @@ def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: f
     iteration u <- u - ||eps||^2 sigma / ||sigma||^2, eps = u - Phi(u - (Gamma u + q)),
     sigma = (Gamma^T + I) eps, stops at ||eps||_2 <= tol.
 
+    The arguments may carry a leading batch axis (B instances, each iterated until its own stop):
+    M (B, n, n), b (B, n), J (B, m, n), rhs (B, m), lo and hi (B, n), u0 (B, n + m).
+
     Returns:
-        (thetadot, u, iterations); raises StageError if ``max_iter`` is reached.
+        (thetadot, u, iterations), batched like the arguments; raises StageError if ``max_iter``
+        is reached.
     """
-    n, m = M.shape[0], J.shape[0]
-    Gamma = np.block([[M, -J.T], [J, np.zeros((m, m))]])
-    q = np.concatenate([b, -rhs])
-    u_lo = np.concatenate([lo, np.full(m, -omega)])
-    u_hi = np.concatenate([hi, np.full(m, omega)])
-    A = Gamma.T + np.eye(n + m)
-    u = np.zeros(n + m) if u0 is None else np.clip(u0, u_lo, u_hi)
+    single = np.ndim(M) == 2
+    M, b, J, rhs, lo, hi = (np.asarray(x, dtype=float)[None] if single else np.asarray(x, dtype=float) for x in (M, b, J, rhs, lo, hi))
+    B, m, n = J.shape
+    Gamma = np.block([[M, -J.transpose(0, 2, 1)], [J, np.zeros((B, m, m))]])
+    q = np.concatenate([b, -rhs], axis=1)
+    u_lo = np.concatenate([lo, np.full((B, m), -omega)], axis=1)
+    u_hi = np.concatenate([hi, np.full((B, m), omega)], axis=1)
+    A = Gamma.transpose(0, 2, 1) + np.eye(n + m)
+    u = np.zeros((B, n + m)) if u0 is None else np.clip(np.reshape(u0, (B, n + m)), u_lo, u_hi)
+    solution, iterations = np.empty_like(u), np.zeros(B, dtype=int)
+    active = np.arange(B)  # instances still iterating; the arrays below hold only those
     for k in range(max_iter):
-        eps = u - np.clip(u - (Gamma @ u + q), u_lo, u_hi)  # eq (26) residual
-        e2 = eps @ eps
-        if e2 <= tol * tol:
-            return u[:n], u, k
-        sigma = A @ eps
-        u = u - (e2 / (sigma @ sigma)) * sigma  # eq (27)
+        # eq (26) residual; minimum/maximum rather than np.clip, which costs more on small arrays
+        eps = u - np.minimum(np.maximum(u - ((Gamma @ u[..., None])[..., 0] + q), u_lo), u_hi)
+        e2 = np.einsum("bi,bi->b", eps, eps)
+        if e2.min() <= tol * tol:
+            done = e2 <= tol * tol
+            solution[active[done]], iterations[active[done]] = u[done], k
+            keep = ~done
+            if not keep.any():
+                thetadot = solution[:, :n]
+                return (thetadot[0], solution[0], int(iterations[0])) if single else (thetadot, solution, iterations)
+            active, Gamma, A, q, u_lo, u_hi, u, eps, e2 = (x[keep] for x in (active, Gamma, A, q, u_lo, u_hi, u, eps, e2))
+        sigma = (A @ eps[..., None])[..., 0]
+        u = u - (e2 / np.einsum("bi,bi->b", sigma, sigma))[:, None] * sigma  # eq (27)
     raise StageError(f"LVI solver did not reach ||eps|| <= {tol} in {max_iter} iterations")
 
 
@@ -228,6 +299,7 @@ def settings_for(task, *, scheme: str = "mvn", period_s: float | None = None, qp
         nu=g.nu if g else base.nu,
         t_sp_s=g.t_sp_s if g else base.t_sp_s,
         c_tuning=g.c_tuning if g else base.c_tuning,
+        bound_feedforward=g.bound_feedforward if g else base.bound_feedforward,
         qp_plugin=qp_plugin,
     )
 
@@ -261,8 +333,6 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     Raises:
         StageError: an infeasible step (names the step, the time and the collapsed joints).
     """
-    import time
-
     from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference
 
     if backend not in ("casadi", "lvi"):
@@ -276,20 +346,25 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     q, qd = np.empty((N, n)), np.empty((N, n))
     solve_time = np.empty(N)
     theta, u = theta0.copy(), None
+    step = problem.stepper()
     for k in range(N):
         q[k] = theta
         args = (theta, float(reference.t[k]), R[k], V[k], theta0)
-        packed = problem.pack(*args)
         start = time.perf_counter()
-        try:
-            if backend == "casadi":
-                velocity = np.asarray(problem.packed_step(packed)).ravel()
-            else:
-                M, b, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(*args))
-                velocity, u, _ = lvi_solve(M, b.ravel(), J, rhs.ravel(), lo.ravel(), hi.ravel(), u0=u)
-        except RuntimeError:
-            raise _infeasible(problem, args, k, float(reference.t[k])) from None
+        if backend == "casadi":
+            velocity, violation = step(problem.pack(*args))
+        else:
+            M, b, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(*args))
+            try:
+                if np.any(lo > hi):  # the projection onto Omega would be undefined
+                    raise StageError("collapsed bounds")
+                velocity, u, _ = lvi_solve(M, b.ravel(), J, rhs.ravel(), lo.ravel(), hi.ravel(), u0=u, tol=settings.lvi_tolerance, max_iter=LVI_MAX_ITERATIONS)
+                violation = 0.0
+            except StageError:  # an infeasible QP has no LVI solution: the iteration runs out
+                violation = np.inf
         solve_time[k] = time.perf_counter() - start
+        if violation > FEASIBILITY_TOLERANCE:
+            raise _infeasible(problem, args, k, float(reference.t[k]))
         qd[k] = velocity
         theta = theta + settings.period_s * velocity  # Euler
     return stack_joint_path("tvgdd", stack, reference, q, qd, solve_time, gesture_band(bounds, settings, reference.t, q))
@@ -298,6 +373,5 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
 def gesture_band(bounds: JointBounds, settings: TvgddSettings, t: np.ndarray, q: np.ndarray) -> dict[str, np.ndarray]:
     """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path: t (N,) [s],
     q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``, ``zeta_upper`` [rad/s], each (N, n)."""
-    lower_t, upper_t = position_bounds(t[:, None], bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
-    zeta_lo, zeta_hi = velocity_bounds(q, lower_t, upper_t, -bounds.velocity, bounds.velocity, settings.nu)
+    lower_t, upper_t, zeta_lo, zeta_hi = _bands(q, t[:, None], bounds, settings)
     return {"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi}

@@ -143,12 +143,18 @@ class Recorder:
         )
         self._rerun_motion(stage, np.array([t]), {n: np.array([v]) for n, v in q.items()})
 
-    def joint_path(self, path: JointPath) -> None:
-        """The IK stage's product: ``/ik/sample`` and (TV-GDD) ``/ik/bounds`` per sample, the robot
-        on ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's
-        position, velocity and bounds as time series."""
+    def joint_path(self, path: JointPath, velocity_limits: np.ndarray) -> None:
+        """The IK stage's product: ``/ik/limits`` once (the robot's position limits and
+        ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` and (TV-GDD)
+        ``/ik/bounds`` per sample, the robot on ``/tf`` as ``ik/<link>``; in Rerun the animated
+        robot under ``/ik`` and every joint's position, velocity and bounds as time series."""
         family = STAGE_TOPICS["ik"]
         names = path.joint_names
+        lower, upper = self.robot.lower_upper(names)
+        self._json(f"{family}/limits", schemas.JOINT_LIMITS).log(
+            {"t": 0.0, "rep": 0, **{key: dict(zip(names, np.asarray(v, dtype=float).tolist())) for key, v in (("lower", lower), ("upper", upper), ("velocity", velocity_limits))}},
+            log_time=0,
+        )
         sample = self._json(f"{family}/sample", schemas.IK_SAMPLE)
         bounds = self._json(f"{family}/bounds", schemas.JOINT_BOUNDS) if path.extras else None
         for k in range(len(path)):

@@ -74,6 +74,20 @@ IK_SAMPLE = {
     "required": ["t", "rep", "method", "status", "solve_time_s", "position", "velocity", "hand_error_m"],
 }
 
+JOINT_LIMITS = {
+    "title": "dualarm.JointLimits",
+    "description": "The physical limits the IK stage was held to, per active joint (the task's velocity limit where it sets one).",
+    "type": "object",
+    "properties": {
+        "t": _NUMBER,
+        "rep": {"type": "integer"},
+        "lower": {**_JOINT_MAP, "description": "position lower limit [rad]"},
+        "upper": {**_JOINT_MAP, "description": "position upper limit [rad]"},
+        "velocity": {**_JOINT_MAP, "description": "velocity limit, symmetric [rad/s]"},
+    },
+    "required": ["t", "rep", "lower", "upper", "velocity"],
+}
+
 JOINT_BOUNDS = {
     "title": "dualarm.JointBounds",
     "description": "Time-varying joint bounds of one sample (TV-GDD eqs 19 and 22).",

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
 
 Float = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 PositiveFloat = Annotated[float, Field(strict=True, gt=0, allow_inf_nan=False)]
@@ -103,6 +103,8 @@ class Gesture(_Model):
         c_tuning: time-tuning parameter, 0 < c <= 1.
         nu: bound-to-velocity scaling nu of eq (21).
         feedback_gain: position-error feedback K of eq (16) [1/s].
+        bound_feedforward: add each bound's own rate to eq (21) so joints pressed against a closing
+            bound stay inside it (not in the paper; see TvgddSettings).
         goal_lower / goal_upper: theta_goal- / theta_goal+ per joint [rad]; a joint whose two goals
             are equal is a gesture joint driven to that value.
     """
@@ -111,8 +113,17 @@ class Gesture(_Model):
     c_tuning: Annotated[float, Field(strict=True, gt=0, le=1, allow_inf_nan=False)]
     nu: PositiveFloat
     feedback_gain: PositiveFloat
+    bound_feedforward: StrictBool = False
     goal_lower: JointValues
     goal_upper: JointValues
+
+    @model_validator(mode="after")
+    def _bounds_do_not_cross(self) -> "Gesture":
+        # with the feedforward the band of eq (19) may shrink at most at the relative rate nu;
+        # it shrinks at up to 1 / c_tuning
+        if self.bound_feedforward and self.nu * self.c_tuning <= 1:
+            raise ValueError(f"bound_feedforward needs nu * c_tuning > 1 (here {self.nu * self.c_tuning:g}), or the lower and upper bounds cross")
+        return self
 
 
 class CarriedObject(_Model):

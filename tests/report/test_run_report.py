@@ -3,6 +3,7 @@
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from typer.testing import CliRunner
 
 from pipeline.cli import app
@@ -10,10 +11,10 @@ from pipeline.ik.pinv import solve_pinv
 from pipeline.ik.tvgdd import settings_for
 from pipeline.paths import build_reference
 from pipeline.record.readback import read_run
-from pipeline.report.run_report import excursions
+from pipeline.report.run_report import excursions, write_report
 from pipeline.run import run_task
 from pipeline.tasks import load_task
-from tests.conftest import TASKS
+from tests.conftest import HUMANOID, TASKS
 
 
 def test_report_of_a_pinv_run(tmp_path):
@@ -36,3 +37,27 @@ def test_report_of_a_pinv_run(tmp_path):
     assert dict(zip(table["joint"], table["max_outside"])).keys() == expected.keys()
     for joint, value in zip(table["joint"], table["max_outside"]):
         assert abs(value - expected[joint]) < 1e-12
+
+
+def test_report_lists_joints_leaving_their_physical_limits(tmp_path):
+    """pinv under a 0.05 rad/s velocity limit it ignores: the report's table of velocity-limit
+    excursions equals the one computed from the solver's velocities and the task's limit."""
+    text = (TASKS / "ball_game.toml").read_text().replace("velocity = 6.0", "velocity = 0.05")
+    assert "velocity = 0.05" in text
+    task_file = tmp_path / "ball_game.toml"
+    task_file.write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"'))
+    run = run_task(task_file, ik="pinv", out_dir=tmp_path / "runs")
+    out = write_report(run, tmp_path / "report")
+
+    task = load_task(task_file)
+    path = solve_pinv(task, build_reference(task), settings_for(task).feedback_gain)
+    fastest = np.abs(path.qd).max(axis=0) - 0.05
+    expected = {n: v for n, v in zip(path.joint_names, fastest) if v > 1e-9}
+    assert expected, "the limit should be exceeded"
+    table = pd.read_csv(out / "velocity_limit_excursions.csv")
+    assert dict(zip(table["joint"], table["max_outside"])).keys() == expected.keys()
+    for joint, value in zip(table["joint"], table["max_outside"]):
+        assert abs(value - expected[joint]) < 1e-9
+    summary = (out / "summary.md").read_text()
+    assert "Joint velocities outside their physical limits:" in summary
+    assert "Joint positions outside their physical limits: none." in summary

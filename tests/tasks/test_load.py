@@ -273,3 +273,15 @@ def test_cli_run_bad_task(tmp_path: Path, edits):
         assert "Traceback" not in text
     assert result.exception is None or isinstance(result.exception, SystemExit)
     assert not out_dir.exists() or not any(out_dir.rglob("*")), list(out_dir.rglob("*"))
+
+
+def test_bound_feedforward_refused_when_the_bounds_would_cross(tmp_path: Path):
+    """With the feedforward, the band of eq (19) (relative shrink rate up to 1/c_tuning) must not
+    close faster than nu: nu * c_tuning = 2 * 0.4 <= 1 is refused, naming the gesture table."""
+    text = (REPO / "tasks" / "ball_game.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{ROBOT_DIR.as_posix()}"')
+    path = tmp_path / "ball_game.toml"
+    path.write_text(text.replace("c_tuning = 1.0", "c_tuning = 0.4"))
+    with pytest.raises(TaskFileError, match=r"ball_game\.toml:gesture: .*nu \* c_tuning > 1 \(here 0\.8\)"):
+        load_task(path)
+    path.write_text(text.replace("c_tuning = 1.0", "c_tuning = 0.4").replace("bound_feedforward = true", "bound_feedforward = false"))
+    assert load_task(path).spec.gesture.c_tuning == 0.4
