@@ -12,7 +12,7 @@ import casadi as cs
 import numpy as np
 
 from pipeline.ik.joint_path import JointPath
-from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference
+from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference, start_configuration
 
 
 def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = None) -> JointPath:
@@ -22,7 +22,7 @@ def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = N
     hold the bands TV-GDD would impose on the same task (:func:`~pipeline.ik.tvgdd.gesture_band`).
 
     Args:
-        task: the task (initial configuration).
+        task: the task (initial configuration, moved onto the path start if it is off it).
         reference: the CartesianReference.
         feedback_gain: K [1/s].
         period_s: Euler step [s] (default: the reference's period).
@@ -39,7 +39,7 @@ def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = N
     R, V = stacked_reference(stack, reference)
     N, n = len(reference), stack.n
     q, qd, solve_time = np.empty((N, n)), np.empty((N, n)), np.empty(N)
-    theta = stack.initial
+    theta = start_configuration(stack, reference, *task.robot.lower_upper(stack.joint_names))
     for k in range(N):
         q[k] = theta
         start = time.perf_counter()

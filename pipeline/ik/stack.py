@@ -16,6 +16,7 @@ import casadi as cs
 import numpy as np
 
 from pipeline.arrays import frozen
+from pipeline.errors import StageError
 from pipeline.model.kinematics import ChainKinematics
 from pipeline.tasks import Task
 
@@ -98,6 +99,32 @@ def stacked_reference(stack: HandStack, reference) -> tuple[np.ndarray, np.ndarr
     position = np.hstack([reference.hands[h].position for h in stack.hands])
     velocity = np.hstack([reference.hands[h].linear_velocity for h in stack.hands])
     return position, velocity
+
+
+#: Largest hand-position gap [m] between the initial configuration and the path start left as is.
+START_TOLERANCE_M = 1e-9
+
+
+def start_configuration(stack: HandStack, reference, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Where a velocity-level method starts [rad], (n,): the task's initial values if they put the
+    hands on the reference's first sample (within :data:`START_TOLERANCE_M`), otherwise the
+    configuration nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares
+    problem min |theta - initial|^2 s.t. f(theta) = r_0 solved by IPOPT through CasADi.
+
+    Raises:
+        StageError: IPOPT finds no such configuration.
+    """
+    r0 = stacked_reference(stack, reference)[0][0]
+    if np.abs(np.asarray(stack.positions(stack.initial)).ravel() - r0).max() <= START_TOLERANCE_M:
+        return stack.initial
+    nlp = {"x": stack.theta, "f": cs.sumsqr(stack.theta - stack.initial), "g": stack.position - r0}
+    options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "constr_viol_tol": 1e-12}}
+    solver = cs.nlpsol("start_configuration", "ipopt", nlp, options)
+    theta = np.asarray(solver(x0=stack.initial, lbx=lower, ubx=upper, lbg=0, ubg=0)["x"]).ravel()
+    gap = np.abs(np.asarray(stack.positions(theta)).ravel() - r0).max()
+    if not solver.stats()["success"] or gap > START_TOLERANCE_M:
+        raise StageError(f"no configuration within the joint limits puts the hands on the path start (IPOPT: {solver.stats()['return_status']}, gap {gap:.3g} m)")
+    return frozen(theta, (stack.n,), "start")
 
 
 def stack_joint_path(method: str, stack: HandStack, reference, q: np.ndarray, qd: np.ndarray, solve_time_s: np.ndarray, extras=None):

@@ -321,7 +321,8 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     """Run TV-GDD along ``reference``: one QP per sample, Euler integration.
 
     Args:
-        task: the task (initial configuration, limits, gesture goals).
+        task: the task (initial configuration, moved onto the path start if it is off it;
+            limits; gesture goals).
         reference: the CartesianReference to follow.
         settings: scheme, gains and the QP plugin.
         backend: ``casadi`` (the conic in one CasADi Function per step) or ``lvi`` (eqs 26-27).
@@ -333,7 +334,7 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     Raises:
         StageError: an infeasible step (names the step, the time and the collapsed joints).
     """
-    from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference
+    from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference, start_configuration
 
     if backend not in ("casadi", "lvi"):
         raise StageError(f"unknown QP backend '{backend}' (backends: casadi, lvi)")
@@ -342,7 +343,7 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     problem = build_problem(stack, bounds, settings, task.robot.urdf.kinematic_xml, task.robot.joint_names)
     R, V = stacked_reference(stack, reference)
     N, n = len(reference), stack.n
-    theta0 = stack.initial
+    theta0 = start_configuration(stack, reference, bounds.lower, bounds.upper)
     q, qd = np.empty((N, n)), np.empty((N, n))
     solve_time = np.empty(N)
     theta, u = theta0.copy(), None

@@ -142,3 +142,35 @@ def test_rollout_in_one_call_equals_the_step_loop(ball_game, tvgdd_path):
     theta, velocity = problem.rollout(len(ref))(theta0, np.vstack([ref.t, R.T, V.T]), theta0)
     np.testing.assert_allclose(np.asarray(theta).T[:-1], tvgdd_path.q[1:], atol=1e-12)
     np.testing.assert_allclose(np.asarray(velocity).T, tvgdd_path.qd, atol=1e-12)
+
+
+def test_one_hand_off_the_path_start_begins_on_it():
+    """triangle: one hand (7 DOF), whose initial configuration is 0.16 m off the path start. The
+    IK starts from the nearest configuration that puts the hand there (checked with PyBullet)."""
+    from pipeline.ik.stack import hand_stack, start_configuration
+
+    task = load_task(TASKS / "triangle.toml")
+    ref = build_reference(task)
+    stack = hand_stack(task)
+    lower, upper = task.robot.lower_upper(stack.joint_names)
+    start = start_configuration(stack, ref, lower, upper)
+    assert stack.n == 7 and np.all(start >= lower) and np.all(start <= upper)
+    with load_pybullet_robot(task.robot.urdf.path) as sim:
+        q = {**task.initial_q, **dict(zip(stack.joint_names, start))}
+        sim.set_positions(list(q), list(q.values()))
+        assert np.linalg.norm(sim.link_pose("left_hand")[:3, 3] - ref.hands["left"].position[0]) < 1e-6
+        sim.set_positions(list(task.initial_q), list(task.initial_q.values()))
+        assert np.linalg.norm(sim.link_pose("left_hand")[:3, 3] - ref.hands["left"].position[0]) > 0.1
+    path = solve_tvgdd(task, ref, settings_for(task))
+    np.testing.assert_allclose(path.q[0], start, atol=1e-12)
+    assert ik_metrics(path, task)["ik.joint_limit_violations"] == 0
+
+
+def test_tvgdd_with_the_waist_free_solves_17_joints(tmp_path):
+    """The ball game with the waist free: 17 active joints, a shared waist in both hands' Jacobians."""
+    task = load_task(_variant(tmp_path, (TASKS / "ball_game.toml").read_text().replace('waist = "locked"', 'waist = "free"')))
+    path = solve_tvgdd(task, build_reference(task), settings_for(task))
+    assert len(path.joint_names) == 17 and sum(n.startswith("waist") for n in path.joint_names) == 3
+    assert np.abs(path.qd[:, [n.startswith("waist") for n in path.joint_names]]).max() > 1e-3  # the waist does move
+    m = ik_metrics(path, task)
+    assert m["ik.position_error_max_m"] <= PAPER_MAE_M and m["ik.joint_limit_violations"] == 0
