@@ -29,6 +29,8 @@ robot_app = typer.Typer(help="Inspect and verify robot descriptions.", no_args_i
 app.add_typer(robot_app, name="robot")
 bench_app = typer.Typer(help="Measure speed as ratios against peers run in the same process.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
+ik_app = typer.Typer(help="Inverse kinematics of single poses.", no_args_is_help=True)
+app.add_typer(ik_app, name="ik")
 
 out = Console(highlight=False, width=None if sys.stdout.isatty() else 120)  # tables unwrapped in pipes and files
 err = Console(stderr=True, highlight=False)
@@ -137,6 +139,71 @@ def bench_tvgdd_command(
     out.print("max |Δq̇|: largest joint-velocity difference from the first row along the task (lvi stops at ||eps|| <= 1e-5, as published)", markup=False)
 
 
+def _robot(robot_dir: Optional[Path], urdf: Optional[Path], base: Optional[str], tip: Optional[str]):
+    """The robot of ``ROBOT_DIR`` or of ``--urdf PATH --base LINK --tip LINK`` (one chain named ``chain``)."""
+    from pipeline.model.robot import load_robot, robot_from_urdf
+
+    if (robot_dir is None) == (urdf is None):
+        raise DualarmError("give either ROBOT_DIR or --urdf PATH --base LINK --tip LINK")
+    if urdf is not None:
+        if not base or not tip:
+            raise DualarmError("--urdf needs --base LINK and --tip LINK")
+        return robot_from_urdf(urdf, base, tip)
+    return load_robot(robot_dir)
+
+
+@ik_app.command("srs")
+@user_errors
+def ik_srs(
+    pose: Annotated[tuple[float, float, float, float, float, float], typer.Option(help="Hand pose in the chain base frame: X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z, as in task files).")],
+    arm_angle: Annotated[float, typer.Option(help="Arm angle psi of MC-Inverse eq (1) [rad].")],
+    robot_dir: Annotated[Optional[Path], typer.Argument(help="Robot directory holding robot.toml (with --arm).")] = None,
+    arm: Annotated[Optional[str], typer.Option(help="Which arm of ROBOT_DIR: left or right.")] = None,
+    urdf: Annotated[Optional[Path], typer.Option(help="A bare URDF instead (needs --base and --tip).")] = None,
+    base: Annotated[Optional[str], typer.Option(help="Base link of the arm chain (with --urdf).")] = None,
+    tip: Annotated[Optional[str], typer.Option(help="Tip link of the arm chain (with --urdf).")] = None,
+    vertical: Annotated[tuple[float, float, float], typer.Option(help="Vertical vector V of the arm angle's reference plane, in the chain base frame.")] = (0.0, 0.0, 1.0),
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON: {chain, pose, arm_angle, candidates: [{q, valid, reason, position_error_m, orientation_error_rad}]}.")] = False,
+) -> None:
+    """The 8 MC-Inverse candidates of one hand pose at one arm angle, with validity and the error
+    of each candidate's forward kinematics (the analogue of the paper's Table I)."""
+    import json
+
+    from pipeline.ik.mc_inverse import REASONS, VALID, McInverse
+    from pipeline.model.check import pose_errors
+    from pipeline.model.kinematics import ChainKinematics
+    from pipeline.model.poses import pose_matrix
+
+    robot = _robot(robot_dir, urdf, base, tip)
+    if urdf is not None:
+        chain = robot.chain("chain")
+    elif arm not in ("left", "right"):
+        raise DualarmError("give --arm left or --arm right with ROBOT_DIR")
+    else:
+        chain = robot.hand_chain(arm)
+    if not np.linalg.norm(vertical) > 0:
+        raise DualarmError("--vertical must not be zero")
+    solver = McInverse.of(chain, tuple(np.asarray(vertical) / np.linalg.norm(vertical)))
+    target = pose_matrix(pose[:3], pose[3:])
+    solution = solver.solve(target, arm_angle)
+    reached = ChainKinematics.of(chain).poses(solution.q)
+    position_error, orientation_error = pose_errors(reached, np.repeat(target[None], len(reached), axis=0))
+    candidates = [
+        {"q": q.tolist(), "valid": bool(r == VALID), "reason": REASONS[int(r)], "position_error_m": float(p), "orientation_error_rad": float(o)}
+        for q, r, p, o in zip(solution.q, solution.reason, position_error, orientation_error)
+    ]
+    if as_json:
+        typer.echo(json.dumps({"chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)}, "pose": list(pose), "arm_angle": arm_angle, "candidates": candidates}, indent=2))
+        return
+    table = Table(title=f"MC-Inverse, {chain.base} -> {chain.tip}, psi = {arm_angle:g} rad", title_justify="left")
+    for column in ("#", *[f"θ{i}" for i in range(1, 8)], "validity", "pos. err [m]", "rot. err [rad]"):
+        table.add_column(column, justify="left" if column == "validity" else "right", no_wrap=True)
+    for i, c in enumerate(candidates):
+        table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}")
+    out.print(table)
+    out.print(f"joints: {', '.join(chain.joint_names)}; {sum(c['valid'] for c in candidates)} of 8 valid", markup=False)
+
+
 @robot_app.command("check")
 @user_errors
 def robot_check(
@@ -150,17 +217,9 @@ def robot_check(
     """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics,
     PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
     from pipeline.model.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain
-    from pipeline.model.robot import load_robot, robot_from_urdf
     from pipeline.model.srs import srs_geometry
 
-    if (robot_dir is None) == (urdf is None):
-        raise DualarmError("give either ROBOT_DIR or --urdf PATH --base LINK --tip LINK")
-    if urdf is not None:
-        if not base or not tip:
-            raise DualarmError("--urdf needs --base LINK and --tip LINK")
-        robot = robot_from_urdf(urdf, base, tip)
-    else:
-        robot = load_robot(robot_dir)
+    robot = _robot(robot_dir, urdf, base, tip)
     out.print(f"robot {robot.name}: {robot.urdf.path}  ({len(robot.joint_names)} movable joints)", markup=False)
     results = []
     for chain in robot.chains.values():

@@ -9,7 +9,7 @@ from tests.conftest import HUMANOID, TASKS
 runner = CliRunner()
 
 
-@pytest.mark.parametrize("command", [[], ["run"], ["inspect"], ["report"], ["bench"], ["bench", "tvgdd"], ["robot"], ["robot", "check"]])
+@pytest.mark.parametrize("command", [[], ["run"], ["inspect"], ["report"], ["bench"], ["bench", "tvgdd"], ["robot"], ["robot", "check"], ["ik"], ["ik", "srs"]])
 def test_every_command_has_help(command):
     result = runner.invoke(app, [*command, "--help"])
     assert result.exit_code == 0
@@ -46,6 +46,8 @@ def test_robot_check_bare_urdf(kuka_urdf):
         (["run", str(TASKS / "ball_game.toml"), "--ik", "tvgdd", "--qp-backend", "gurobi"], "unknown QP backend 'gurobi'"),
         (["run", str(TASKS / "triangle.toml"), "--stages", "fly"], "unknown stage 'fly'"),
         (["inspect", "recordings/no-such-run"], "no such run directory"),
+        (["ik", "srs", str(HUMANOID), "--pose", "0.3", "0.2", "0.1", "0", "0", "0", "--arm-angle", "0"], "give --arm left or --arm right"),
+        (["ik", "srs", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "pelvis", "--tip", "left_hand", "--pose", "0.3", "0.2", "0.1", "0", "0", "0", "--arm-angle", "0"], "10 movable joints"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(args, needle, tmp_path):
@@ -71,3 +73,30 @@ def test_infeasible_ik_step_prints_one_line_even_from_c(backend, tmp_path):
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: TV-GDD step "), result.stderr
     assert "meets the hand-velocity equality (24)" in lines[0]
+
+
+def test_ik_srs_json_lists_8_candidates_that_pybullet_confirms(humanoid):
+    """Table I's analogue: every candidate of the JSON output reaches the pose in PyBullet, the
+    valid ones are inside the limits, and all share the elbow magnitude |theta_4|."""
+    import json
+
+    import numpy as np
+
+    from pipeline.execute.world import load_pybullet_robot
+    from pipeline.model.poses import pose_matrix
+
+    pose = [0.147, 0.404, 0.455, 0.937, 0.560, -0.377]
+    result = runner.invoke(app, ["ik", "srs", str(HUMANOID), "--arm", "left", "--pose", *map(str, pose), "--arm-angle", "2.2", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    candidates = data["candidates"]
+    assert len(candidates) == 8 and {c["reason"] for c in candidates} <= {"valid", "outside limits"}
+    target = pose_matrix(pose[:3], pose[3:])
+    lower, upper = humanoid.lower_upper(tuple(data["chain"]["joints"]))
+    with load_pybullet_robot(humanoid.urdf.path) as sim:
+        for c in candidates:
+            sim.set_positions(data["chain"]["joints"], c["q"])
+            hand = np.linalg.inv(sim.link_pose("torso")) @ sim.link_pose("left_hand")
+            assert np.abs(hand - target).max() < 1e-6 and c["position_error_m"] < 1e-9
+            assert c["valid"] == bool(np.all((np.array(c["q"]) >= lower) & (np.array(c["q"]) <= upper)))
+    assert len({round(abs(c["q"][3]), 12) for c in candidates}) == 1

@@ -46,7 +46,9 @@ CANDIDATES = 8
 
 #: Validity codes of a candidate, in order of precedence.
 VALID, OUT_OF_REACH, SINGULAR, OUTSIDE_LIMITS = 0, 1, 2, 3
-REASONS = {VALID: "valid", OUT_OF_REACH: "out of reach", SINGULAR: "elbow straight / singular", OUTSIDE_LIMITS: "outside joint limits"}
+#: SINGULAR: the elbow is straight, the shoulder-wrist line is vertical (no reference plane), or a
+#: shoulder or wrist middle joint aligns the outer two axes; the solution is not isolated there.
+REASONS = {VALID: "valid", OUT_OF_REACH: "out of reach", SINGULAR: "singular", OUTSIDE_LIMITS: "outside limits"}
 
 #: Sine below which an elbow, shoulder or wrist counts as singular (the solution is not isolated).
 SINGULAR_SINE = 1e-7
