@@ -15,9 +15,10 @@ methods are scored by the same yardstick.
 What the libraries needed (measured with pytracik 0.0.3 and pybullet 3.2.7 on the humanoid):
 
 TRAC-IK
-    - It is handed the URDF text without ``<collision>`` (:attr:`UrdfModel.kinematic_xml`); KDL
-      rejects a root link with an inertia (it prints a warning on stdout), so a dummy root link
-      without inertia is prepended when the root has one. Its C++ code prints straight to stdout
+    - It is handed the URDF text without ``<collision>`` (:attr:`UrdfModel.kinematic_xml`). KDL
+      does not support a root link with an inertia (it warns on stdout and ignores it), so a
+      dummy root link without inertia is prepended when the root has one (the humanoid's
+      ``base_link`` has none; the KUKA iiwa's root does). Its C++ code prints straight to stdout
       (that warning, "Couldn't find chain ..."), so construction runs under
       :func:`~pipeline.quiet.c_output_silenced`.
     - pytracik reads the URDF joint limits in single precision (-2.96706 becomes -2.9670600891, a
@@ -27,11 +28,19 @@ TRAC-IK
       checked against the robot first and the chain length against the robot's chain.
     - ``epsilon`` bounds each component of KDL's twist error, so a success guarantees a position
       error up to sqrt(3) epsilon. Orientation cannot be resolved below about 1e-6 rad whatever
-      epsilon is: KDL's ``Rotation::GetRot`` treats a rotation whose matrix asymmetry is below
-      1e-6 as the identity, and successes were observed with orientation errors up to 7.5e-7 rad
-      at epsilon = 1e-12 (see :data:`KDL_ROTATION_RESOLUTION_RAD`).
+      epsilon is: successes were observed with orientation errors up to 7.5e-7 rad at epsilon
+      1e-12 while positions met it, consistent with KDL's ``Rotation::GetRot`` taking a rotation
+      whose matrix asymmetry is below 1e-6 for the identity (see
+      :data:`KDL_ROTATION_RESOLUTION_RAD`).
     - Tight epsilons cost successes within the timeout: on 400 random arm poses seeded 0.1 rad
-      (sd) away, 400/400 succeeded at epsilon 1e-7 and 390/400 at 1e-9 (5 ms timeout).
+      (sd) away, 400/400 succeeded at epsilon 1e-7 and 390/400 at 1e-9 (5 ms timeout, idle
+      machine; fewer under CPU load, since the timeout is wall-clock).
+    - TRAC-IK sometimes reports success for a wrong answer: for one arm pose with the wrist pitch
+      near its limit, 10/200 repeated solves at epsilon 1e-7 (Speed; 3/200 with Distance)
+      returned "success" with the wrist pitch at its limit, 0.156 m and 2.09 rad off the target
+      (its own FK agrees the answer is off). It is not deterministic, so it looks like a race
+      between TRAC-IK's two solver threads. A result is therefore ``ok`` only when the project's
+      FK confirms the errors are within the tolerances the epsilon promises.
 
 PyBullet
     - It solves for every movable joint of the body. Joints outside the chain are locked with a
@@ -42,9 +51,17 @@ PyBullet
       stalls about 2 cm from the targets. Limits are therefore not handed to PyBullet (it treats
       them as soft anyway); revolute results are wrapped by 2 pi into the limits where that helps
       and clipped otherwise, and the errors are measured after clipping.
+    - With these settings it converges to about 1e-15 m and 2e-9 rad (median; at worst 3e-11 m
+      and 2e-7 rad) when the answer respects the limits; on 200 random arm poses seeded 0.1 rad (sd) away, 191 succeeded and
+      all 9 failures were answers outside the joint limits (clipping a wrist roll leaves only an
+      orientation error).
     - ``residualThreshold`` stops on the position residual only; it is set tiny so the iteration
       also settles the orientation (the iteration converges in a few steps with small damping).
     - ``solver=IK_SDLS`` segfaults on this 17-DOF body (even position-only), so only DLS is used.
+    - Passing the seed as ``currentPositions`` silently changes the frame of the target from the
+      world to the root link's centre-of-mass frame (the KUKA iiwa of ``pybullet_data`` missed
+      every target by its base's inertial offset, 0.12 m); the seed is therefore set as the
+      body's joint state instead, from which the iteration starts.
     - Targets are converted from the chain base frame to PyBullet's world frame with the base
       frame's world pose at the locked configuration, computed by the project's FK in double
       precision; PyBullet's own ``getLinkState`` is single precision (the torso comes out
@@ -90,8 +107,8 @@ class BaselineResult:
     Attributes:
         q: the chain's joint positions, base to tip, shape (n,) [rad] (read-only). On failure the
             library's last answer (inside the limits), never None.
-        ok: the solve succeeded (TRAC-IK: the library's verdict; PyBullet: both errors within the
-            solver's tolerances).
+        ok: the solve succeeded: both errors within the solver's tolerances (and, for TRAC-IK,
+            the library reported success).
         position_error_m: distance of the tip from the target's position, by the project's FK [m].
         orientation_error_rad: angle of the rotation from the tip's to the target's orientation,
             by the project's FK [rad].
@@ -182,6 +199,9 @@ class TracIkSolver:
     upper: np.ndarray
     _solver: object = field(repr=False)
 
+    def __repr__(self) -> str:
+        return f"TracIkSolver({self.chain.name}, timeout_s={self.timeout_s}, epsilon={self.epsilon}, solve_type={self.solve_type!r})"
+
     @classmethod
     def of(
         cls,
@@ -215,7 +235,8 @@ class TracIkSolver:
             raise ValueError(f"timeout_s and epsilon must be positive, got {timeout_s} and {epsilon}")
         chain = _chain(robot, base, tip)
         with c_output_silenced():
-            solver = pytracik.TRAC_IK(base, tip, _xml_for_kdl(robot), float(timeout_s), float(epsilon), getattr(pytracik.SolveType, solve_type))
+            kind = getattr(pytracik.SolveType, solve_type)
+            solver = pytracik.TRAC_IK(base, tip, _xml_for_kdl(robot), float(timeout_s), float(epsilon), kind)
             dof = pytracik.get_num_joints(solver)
         if dof != chain.dof:
             raise RobotModelError(f"{robot.urdf.path}: TRAC-IK found {dof} joints from '{base}' to '{tip}', the URDF has {chain.dof}")
@@ -253,17 +274,22 @@ class TracIkSolver:
                 returns it unchanged when it already meets the target.
 
         Returns:
-            The library's answer, with errors measured by the project's FK.
+            The library's answer, with errors measured by the project's FK; ``ok`` when TRAC-IK
+            reports success and the errors are within :attr:`position_tolerance_m` and
+            :attr:`orientation_tolerance_rad` (TRAC-IK sometimes reports success for a wrong
+            answer, see the module docstring).
         """
         target = _check_target(target)
         seed = _check_seed(seed, self.chain.dof)
         x, y, z = target[:3, 3]
         qx, qy, qz, qw = Rotation.from_matrix(target[:3, :3]).as_quat()
         answer = np.asarray(pytracik.ik(self._solver, seed, x, y, z, qx, qy, qz, qw), dtype=float)
-        ok = answer[0] >= 0  # TRAC-IK's CartToJnt: number of solutions found, negative on failure
+        claimed = answer[0] >= 0  # TRAC-IK's CartToJnt: number of solutions found, negative on failure
         q = answer[1:] if np.isfinite(answer[1:]).all() else seed
         q = np.clip(q, self.lower, self.upper)  # a no-op for TRAC-IK's answers, kept as a guarantee
-        return BaselineResult(q, ok, *pose_errors(self.kinematics, q, target))
+        position, orientation = pose_errors(self.kinematics, q, target)
+        ok = claimed and position <= self.position_tolerance_m and orientation <= self.orientation_tolerance_rad
+        return BaselineResult(q, ok, position, orientation)
 
 
 @dataclass(frozen=True, eq=False)
@@ -279,7 +305,8 @@ class PyBulletIkSolver:
             configuration [m].
         max_iterations: PyBullet's ``maxNumIterations``.
         residual_threshold_m: PyBullet's ``residualThreshold`` (on the position residual only) [m].
-        joint_damping: PyBullet's ``jointDamping`` for the chain's joints [1].
+        joint_damping: PyBullet's ``jointDamping`` for the chain's joints (added to the diagonal of
+            J^T J) [1].
         position_tolerance_m: largest position error counted as a success [m].
         orientation_tolerance_rad: largest orientation error counted as a success [rad].
         lower: lower joint limits, shape (n,) [rad].
@@ -297,12 +324,16 @@ class PyBulletIkSolver:
     orientation_tolerance_rad: float
     lower: np.ndarray
     upper: np.ndarray
-    _dofs: tuple[str, ...] = field(repr=False)  # every movable joint, in PyBullet's order
-    _chain_dofs: np.ndarray = field(repr=False)  # indices of the chain's joints among _dofs
-    _rest: np.ndarray = field(repr=False)  # every DOF's position with the chain at 0 [rad]
+    _chain_dofs: np.ndarray = field(repr=False)  # indices of the chain's joints among PyBullet's DOFs
     _damping: tuple[float, ...] = field(repr=False)
     _revolute: np.ndarray = field(repr=False)  # chain joints that may be wrapped by 2 pi
     _tip_index: int = field(repr=False)
+
+    def __repr__(self) -> str:
+        return (
+            f"PyBulletIkSolver({self.chain.name}, max_iterations={self.max_iterations}, "
+            f"residual_threshold_m={self.residual_threshold_m}, joint_damping={self.joint_damping})"
+        )
 
     @classmethod
     def of(
@@ -326,8 +357,8 @@ class PyBulletIkSolver:
             tip: tip link.
             locked: positions of joints outside the chain [rad] (default 0, clipped into the
                 limits); they stay there during every solve.
-            max_iterations: PyBullet's ``maxNumIterations`` (its default is 20; the iteration
-                usually settles within 5 with the small damping).
+            max_iterations: PyBullet's ``maxNumIterations`` (its default is 20; with the small
+                damping the iteration settled within 20 on every sample tried, 5 was too few).
             residual_threshold_m: PyBullet's ``residualThreshold`` on the position residual [m]
                 (its default is 1e-4); tiny so the orientation settles too.
             joint_damping: damping of the chain's joints in the DLS step (PyBullet's default is
@@ -357,9 +388,9 @@ class PyBulletIkSolver:
             if set(dofs) != set(robot.limits):
                 raise RobotModelError(f"{robot.urdf.path}: PyBullet's movable joints differ from the URDF's")
             rest = np.array([np.clip(locked.get(n, 0.0), robot.limits[n].lower, robot.limits[n].upper) for n in dofs])
-            world.set_positions(dofs, rest)
             chain_dofs = np.array([dofs.index(n) for n in chain.joint_names])
             rest[chain_dofs] = 0.0
+            world.set_positions(dofs, rest)
             damping = np.full(len(dofs), PYBULLET_LOCK_DAMPING)
             damping[chain_dofs] = joint_damping
             # The base frame in PyBullet's world: PyBullet's root pose times the project's FK to the base.
@@ -373,7 +404,7 @@ class PyBulletIkSolver:
             raise
         lower, upper = robot.lower_upper(chain.joint_names)
         revolute = np.array([j.type != "prismatic" for j in chain.joints if j.movable])
-        for a in (base_in_world, lower, upper, rest, chain_dofs, revolute):
+        for a in (base_in_world, lower, upper, chain_dofs, revolute):
             a.setflags(write=False)
         return cls(
             chain,
@@ -387,9 +418,7 @@ class PyBulletIkSolver:
             float(orientation_tolerance_rad),
             lower,
             upper,
-            dofs,
             chain_dofs,
-            rest,
             tuple(damping.tolist()),
             revolute,
             world.link_index[tip],
@@ -403,8 +432,9 @@ class PyBulletIkSolver:
     def solve(self, target: np.ndarray, seed: np.ndarray) -> BaselineResult:
         """Solve for the tip pose ``target`` starting from ``seed``.
 
-        The chain's joints are set to ``seed`` in PyBullet and passed as ``currentPositions``; the
-        answer is wrapped by 2 pi into the limits where possible (revolute joints) and clipped.
+        The chain's joints are set to ``seed`` in PyBullet, where the iteration starts (not passed as
+        ``currentPositions``, which moves the target's frame, see the module docstring); the answer
+        is wrapped by 2 pi into the limits where possible (revolute joints) and clipped.
 
         Args:
             target: 4x4 pose of the tip in the base frame [m].
@@ -417,9 +447,7 @@ class PyBulletIkSolver:
         target = _check_target(target)
         seed = _check_seed(seed, self.chain.dof)
         world = self.world
-        current = self._rest.copy()
-        current[self._chain_dofs] = seed
-        world.set_positions(self.chain.joint_names, seed)
+        world.set_positions(self.chain.joint_names, seed)  # the other joints stay locked where `of` put them
         goal = self.base_in_world @ target
         answer = pb.calculateInverseKinematics(
             world.body,
@@ -427,7 +455,6 @@ class PyBulletIkSolver:
             goal[:3, 3].tolist(),
             Rotation.from_matrix(goal[:3, :3]).as_quat().tolist(),  # x, y, z, w
             jointDamping=list(self._damping),
-            currentPositions=current.tolist(),
             maxNumIterations=self.max_iterations,
             residualThreshold=self.residual_threshold_m,
             physicsClientId=world.client,

@@ -207,8 +207,8 @@ class DlsSolver:
         settings: solver settings.
         evaluate: CasADi Function ``x (n + 16 h) -> (dx (6 h), errors (2 h), J (6 h, n))``, where
             x = [theta; each target's 4x4 column-major], dx stacks [p* - p; log(R* R^T)] per tip
-            [m, rad], errors holds each tip's |p* - p| [m] then its rotation angle [rad], and J is
-            the stacked geometric Jacobian [v; w] in the base frame.
+            [m, rad], errors holds the tips' position errors |p* - p| [m] then their rotation
+            angles [rad], and J is the stacked geometric Jacobian [v; w] in the base frame.
     """
 
     base: str
@@ -326,8 +326,9 @@ class DlsSolver:
         return evaluate
 
     def damping_at(self, q: np.ndarray) -> float:
-        """The rule's damping lambda at configuration ``q`` [rad], (n,) (see :func:`damping`): the
-        lambda of the first step from ``q``, before any Levenberg-Marquardt scaling."""
+        """The rule's damping lambda at configuration ``q`` [rad], (n,), clamped to the limits (see
+        :func:`damping`): the lambda of the first step from ``q``, before any Levenberg-Marquardt
+        scaling."""
         J = self._evaluator([np.eye(4)] * len(self.tips))(self._seed(q))[2]
         return damping(float(np.linalg.svd(J, compute_uv=False)[-1]), self.settings)
 
