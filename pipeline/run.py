@@ -28,7 +28,7 @@ ALL_STAGES = ("path", "ik", "retime", "smooth", "execute")
 #: The stages this version can run.
 AVAILABLE_STAGES = ("path", "ik")
 #: IK methods of the ``ik`` stage.
-IK_METHODS = ("tvgdd", "pinv")
+IK_METHODS = ("tvgdd", "pinv", "mc-inverse")
 
 
 def path_metrics(ref: CartesianReference) -> dict[str, float]:
@@ -100,6 +100,10 @@ def _ik_settings(task: Task, ik: str | None, scheme: str, qp_backend: str, lvi_t
             raise DualarmError(f"the LVI tolerance must be positive, not {lvi_tolerance}")
         settings = replace(settings_for(task, scheme=scheme), lvi_tolerance=lvi_tolerance)
         return {"method": ik, "backend": qp_backend, **asdict(settings)}, lambda ref: solve_tvgdd(task, ref, settings, qp_backend)
+    if ik == "mc-inverse":
+        from pipeline.ik.mc_path import solve_mc_inverse
+
+        return {"method": ik, **task.spec.arm_angle.model_dump()}, lambda ref: solve_mc_inverse(task, ref)
     gain = settings_for(task).feedback_gain
     return {"method": ik, "feedback_gain": gain}, lambda ref: solve_pinv(task, ref, gain)
 

@@ -126,6 +126,46 @@ class Gesture(_Model):
         return self
 
 
+class ArmAngle(_Model):
+    """How MC-Inverse picks the arm angle psi of eq (1) along the path (Zou, Min, Xu, section III.B).
+
+    Attributes:
+        mode: ``initial``: psi of the initial configuration, held; ``constant``: ``value_rad``;
+            ``schedule``: ``schedule`` interpolated linearly in the time since the repetition
+            began; ``auto``: per sample, the psi nearest the initial configuration's for which
+            the kept branch stays ``margin_rad`` inside every joint limit. Each is a function of
+            the pose and its place in the repetition, not of the history, so repeated passes
+            give the same joints.
+        value_rad: psi per hand for ``constant`` [rad].
+        schedule: per hand, (time within a repetition [s], psi [rad]) pairs, times increasing.
+        vertical: the vertical vector V of the reference plane, in the arm's base frame.
+        max_joint_step_rad: largest joint change between samples before the path fails [rad].
+        margin_rad: for ``auto``, the distance to the joint limits to keep [rad].
+    """
+
+    mode: Literal["initial", "constant", "schedule", "auto"] = "initial"
+    value_rad: dict[Literal["left", "right"], Float] = {}
+    schedule: dict[Literal["left", "right"], tuple[tuple[Float, Float], ...]] = {}
+    vertical: Vec3 = (0.0, 0.0, 1.0)
+    max_joint_step_rad: PositiveFloat = 0.2
+    margin_rad: Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)] = 0.05
+
+    @model_validator(mode="after")
+    def _complete(self) -> "ArmAngle":
+        if self.mode == "constant" and not self.value_rad:
+            raise ValueError("mode 'constant' needs value_rad = { left = ..., right = ... }")
+        if self.mode == "schedule":
+            if not self.schedule:
+                raise ValueError("mode 'schedule' needs schedule = { left = [[t, psi], ...] }")
+            for hand, points in self.schedule.items():
+                times = [t for t, _ in points]
+                if not points or any(b <= a for a, b in zip(times, times[1:])):
+                    raise ValueError(f"schedule.{hand}: times must increase")
+        if sum(v * v for v in self.vertical) == 0:
+            raise ValueError("vertical must not be zero")
+        return self
+
+
 class CarriedObject(_Model):
     """An object held by both hands (MC-Inverse section IV, eq 11). The slave hand's pose follows
     from the master's: T_slave = T_master * master_to_object * inverse(slave_to_object)."""
@@ -207,6 +247,7 @@ class TaskSpec(_Model):
     moves: tuple[Move, ...] = ()
     limits: Limits = Limits()
     gesture: Gesture | None = None
+    arm_angle: ArmAngle = ArmAngle()
     object: CarriedObject | None = None
     environment: tuple[EnvironmentObject, ...] = ()
     wta: tuple[WorkspaceTargetArea, ...] = ()
