@@ -80,6 +80,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import RobotModelError
 from pipeline.execute.world import PyBulletRobot, load_pybullet_robot
+from pipeline.model.check import pose_errors
 from pipeline.model.kinematics import ChainKinematics
 from pipeline.model.robot import Chain, Robot
 from pipeline.quiet import c_output_silenced
@@ -130,12 +131,10 @@ class BaselineResult:
         object.__setattr__(self, "orientation_error_rad", float(self.orientation_error_rad))
 
 
-def pose_errors(kinematics: ChainKinematics, q: np.ndarray, target: np.ndarray) -> tuple[float, float]:
+def _tip_errors(kinematics: ChainKinematics, q: np.ndarray, target: np.ndarray) -> tuple[float, float]:
     """Position [m] and orientation [rad] error of the chain's tip at ``q`` from ``target`` (4x4)."""
-    T = kinematics.pose(q)
-    position = float(np.linalg.norm(T[:3, 3] - target[:3, 3]))
-    orientation = float(Rotation.from_matrix(T[:3, :3].T @ target[:3, :3]).magnitude())
-    return position, orientation
+    position, orientation = pose_errors(kinematics.pose(q)[None], np.asarray(target)[None])
+    return float(position[0]), float(orientation[0])
 
 
 def _check_target(target: np.ndarray) -> np.ndarray:
@@ -287,7 +286,7 @@ class TracIkSolver:
         claimed = answer[0] >= 0  # TRAC-IK's CartToJnt: number of solutions found, negative on failure
         q = answer[1:] if np.isfinite(answer[1:]).all() else seed
         q = np.clip(q, self.lower, self.upper)  # a no-op for TRAC-IK's answers, kept as a guarantee
-        position, orientation = pose_errors(self.kinematics, q, target)
+        position, orientation = _tip_errors(self.kinematics, q, target)
         ok = claimed and position <= self.position_tolerance_m and orientation <= self.orientation_tolerance_rad
         return BaselineResult(q, ok, position, orientation)
 
@@ -463,7 +462,7 @@ class PyBulletIkSolver:
         if not np.isfinite(q).all():
             q = seed.copy()
         q = self._into_limits(q, seed)
-        position, orientation = pose_errors(self.kinematics, q, target)
+        position, orientation = _tip_errors(self.kinematics, q, target)
         ok = position <= self.position_tolerance_m and orientation <= self.orientation_tolerance_rad
         return BaselineResult(q, ok, position, orientation)
 

@@ -274,16 +274,16 @@ def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: f
 def joint_bounds(task, stack: HandStack) -> JointBounds:
     """Physical limits (the task's velocity limit where it sets one) and gesture goals of the
     stack's joints; a joint without a goal keeps its limits as goals."""
-    limits = task.robot.limits
     names = stack.joint_names
+    lower, upper = task.robot.lower_upper(names)
     gesture = task.spec.gesture
     goal_lower = gesture.goal_lower if gesture else {}
     goal_upper = gesture.goal_upper if gesture else {}
     return JointBounds(
-        lower=np.array([limits[n].lower for n in names]),
-        upper=np.array([limits[n].upper for n in names]),
-        goal_lower=np.array([goal_lower.get(n, limits[n].lower) for n in names]),
-        goal_upper=np.array([goal_upper.get(n, limits[n].upper) for n in names]),
+        lower=lower,
+        upper=upper,
+        goal_lower=np.array([goal_lower.get(n, lo) for n, lo in zip(names, lower)]),
+        goal_upper=np.array([goal_upper.get(n, hi) for n, hi in zip(names, upper)]),
         velocity=task.velocity_limits(names),
     )
 

@@ -6,16 +6,10 @@ import pytest
 from pipeline.errors import NotSRSError
 from pipeline.execute.world import load_pybullet_robot
 from pipeline.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID, McInverse
+from pipeline.model.check import pose_errors
 from pipeline.model.kinematics import ChainKinematics
 from pipeline.model.robot import Chain, robot_from_urdf
 from pipeline.model.urdf import JointSpec
-
-
-def _rotation_error(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Angle of A^T B [rad], for stacks (..., 3, 3); accurate for tiny angles."""
-    D = np.swapaxes(A, -1, -2) @ B
-    axis = np.stack([D[..., 2, 1] - D[..., 1, 2], D[..., 0, 2] - D[..., 2, 0], D[..., 1, 0] - D[..., 0, 1]], axis=-1)
-    return np.arctan2(np.linalg.norm(axis, axis=-1) / 2, (np.trace(D, axis1=-2, axis2=-1) - 1) / 2)
 
 
 def _roundtrip(mc: McInverse, samples: int, seed: int):
@@ -39,8 +33,8 @@ def test_ik_of_fk_contains_q_and_every_valid_candidate_reaches_the_pose(humanoid
     assert valid.sum() >= 4 * len(Q)  # a pose inside the limits usually has several valid branches
     reached = kin.poses(C[valid])
     targets = np.repeat(T[:, None], 8, axis=1)[valid]
-    assert np.abs(reached[:, :3, 3] - targets[:, :3, 3]).max() <= 1e-9
-    assert _rotation_error(reached[:, :3, :3], targets[:, :3, :3]).max() <= 1e-9
+    position, rotation = pose_errors(reached, targets)
+    assert position.max() <= 1e-9 and rotation.max() <= 1e-9
     angles = mc.kinematics.arm_angles(C[valid])
     expected = np.repeat(psi[:, None], 8, axis=1)[valid]
     assert np.abs(np.angle(np.exp(1j * (angles - expected)))).max() <= 1e-9
@@ -98,8 +92,8 @@ def test_any_srs_arm_the_kuka_iiwa(kuka_urdf, seed=4):
     assert np.abs(C - Q[:, None, :]).max(axis=2).min(axis=1).max() <= 1e-7
     reached = kin.poses(C[reason == VALID])
     targets = np.repeat(T[:, None], 8, axis=1)[reason == VALID]
-    assert np.abs(reached[:, :3, 3] - targets[:, :3, 3]).max() <= 1e-9
-    assert _rotation_error(reached[:, :3, :3], targets[:, :3, :3]).max() <= 1e-9
+    position, rotation = pose_errors(reached, targets)
+    assert position.max() <= 1e-9 and rotation.max() <= 1e-9
 
 
 def test_non_perpendicular_shoulder_axes_are_refused(humanoid):

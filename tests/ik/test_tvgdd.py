@@ -5,7 +5,7 @@ import pytest
 import quadprog
 
 from pipeline.ik.stack import hand_stack, stacked_reference
-from pipeline.ik.tvgdd import JointBounds, TvgddSettings, build_problem, lvi_solve
+from pipeline.ik.tvgdd import TvgddSettings, build_problem, joint_bounds, lvi_solve
 from pipeline.model.check import PYBULLET_TOLERANCE
 from pipeline.execute.world import load_pybullet_robot
 from pipeline.paths import build_reference
@@ -17,17 +17,7 @@ from tests.conftest import TASKS
 def ball_game():
     task = load_task(TASKS / "ball_game.toml")
     stack = hand_stack(task)
-    lim = task.robot.limits
-    names = stack.joint_names
-    g = task.spec.gesture
-    bounds = JointBounds(
-        lower=np.array([lim[n].lower for n in names]),
-        upper=np.array([lim[n].upper for n in names]),
-        goal_lower=np.array([g.goal_lower.get(n, lim[n].lower) for n in names]),
-        goal_upper=np.array([g.goal_upper.get(n, lim[n].upper) for n in names]),
-        velocity=np.full(len(names), task.spec.limits.velocity),
-    )
-    return task, stack, bounds, build_reference(task)
+    return task, stack, joint_bounds(task, stack), build_reference(task)
 
 
 def quadprog_solve(M, b, J, rhs, lo, hi):
