@@ -31,13 +31,20 @@ from pipeline.tasks import Task
 AUTO_GRID = np.linspace(-np.pi, np.pi, 720, endpoint=False)
 
 
-def arm_angles(task: Task, hand: str, reference, solver: McInverse) -> np.ndarray:
-    """psi per sample (N,) [rad] for ``hand`` by the task's ``[arm_angle]`` table (``auto``
-    gives the preferred psi, the initial configuration's; see :func:`_auto`)."""
+def time_in_repetition(reference) -> np.ndarray:
+    """Time since the repetition began, per sample (N,) [s]. Repetition r spans
+    (r T, (r + 1) T] (the first also holds t = 0), so samples at the same place of every
+    repetition get the same value."""
+    period = reference.t[reference.rep == reference.rep[0]][-1] - reference.t[0]
+    return reference.t - reference.t[0] - (reference.rep - reference.rep[0]) * period
+
+
+def arm_angles(task: Task, hand: str, reference, solver: McInverse, q0: np.ndarray) -> np.ndarray:
+    """psi per sample (N,) [rad] for ``hand`` by the task's ``[arm_angle]`` table; ``q0`` is the
+    arm's initial configuration [rad] (``auto`` gives its psi, the preferred one; see :func:`_auto`)."""
     spec = task.spec.arm_angle
     N = len(reference)
     if spec.mode in ("initial", "auto"):
-        q0 = np.array([task.initial_q[n] for n in solver.chain.joint_names])
         return np.full(N, float(solver.kinematics.arm_angles(q0)[0]))
     if spec.mode == "constant":
         if hand not in spec.value_rad:
@@ -46,8 +53,7 @@ def arm_angles(task: Task, hand: str, reference, solver: McInverse) -> np.ndarra
     if hand not in spec.schedule:
         raise StageError(f"arm_angle.schedule has no entry for the {hand} hand")
     times, values = np.array(spec.schedule[hand]).T
-    rep_start = np.array([reference.t[reference.rep == r][0] for r in reference.rep])
-    return np.interp(reference.t - rep_start, times, values)
+    return np.interp(time_in_repetition(reference), times, values)
 
 
 def solve_mc_inverse(task: Task, reference) -> JointPath:
@@ -67,11 +73,11 @@ def solve_mc_inverse(task: Task, reference) -> JointPath:
         root_to_base = ChainKinematics.of(task.robot.chain_between(reference.frame, chain.base))
         base_pose = root_to_base.pose(np.array([task.initial_q[n] for n in root_to_base.chain.joint_names]))
         targets = invert(base_pose)[None] @ reference.hands[hand].poses  # poses in the arm's base frame
-        psi = arm_angles(task, hand, reference, solver)
         q0 = np.array([task.initial_q[n] for n in chain.joint_names])
+        psi = arm_angles(task, hand, reference, solver, q0)
         start = time.perf_counter()
         if spec.mode == "auto":
-            psi = _auto(solver, targets, reference.t, reference.rep, psi[0], q0, spec.margin_rad)
+            psi = _auto(solver, targets, reference, psi[0], q0, spec.margin_rad)
         candidates, reasons = solver.solve_many(targets, psi)
         times += (time.perf_counter() - start) / len(reference)
         q = _kept_branch(hand, chain.joint_names, q0, reference, candidates, reasons, spec.max_joint_step_rad)
@@ -121,15 +127,17 @@ def _kept_branch(hand: str, names, q0: np.ndarray, reference, candidates: np.nda
     return q
 
 
-def _margins(solver: McInverse, targets: np.ndarray, psi: np.ndarray) -> np.ndarray:
+def _margins(solver: McInverse, targets: np.ndarray, psi: np.ndarray, candidates: np.ndarray | None = None, reasons: np.ndarray | None = None) -> np.ndarray:
     """Per pose and candidate, the distance to the nearest joint limit [rad] (-inf where invalid
-    for another reason than the limits): targets (M, 4, 4), psi (M,) -> (M, 8)."""
-    candidates, reasons = solver.solve_many(targets, psi)
+    for another reason than the limits): targets (M, 4, 4), psi (M,) -> (M, 8). Pass the
+    candidates and reasons of ``solver.solve_many(targets, psi)`` when already at hand."""
+    if candidates is None:
+        candidates, reasons = solver.solve_many(targets, psi)
     margin = np.minimum(candidates - solver.lower, solver.upper - candidates).min(axis=2)
     return np.where((reasons == VALID) | (margin < 0), margin, -np.inf)
 
 
-def _auto(solver: McInverse, targets: np.ndarray, t: np.ndarray, rep: np.ndarray, preferred: float, q0: np.ndarray, margin: float) -> np.ndarray:
+def _auto(solver: McInverse, targets: np.ndarray, reference, preferred: float, q0: np.ndarray, margin: float) -> np.ndarray:
     """psi per sample (N,) [rad] that moves only when it must: start at ``preferred`` (or the
     nearest angle with ``margin`` to every limit on the branch nearest ``q0``), and at each sample
     keep the previous angle if the branch still has ``margin`` there, else step to the nearest grid
@@ -137,11 +145,12 @@ def _auto(solver: McInverse, targets: np.ndarray, t: np.ndarray, rep: np.ndarray
     then repeats), and every repetition reuses that profile, so repetitions give identical joints.
     Where no angle keeps the margin, the one with the most is taken (the branch check then names
     the sample if even that is outside the limits)."""
-    first_rep = np.flatnonzero(rep == rep[0])
+    first_rep = np.flatnonzero(reference.rep == reference.rep[0])
     G = len(AUTO_GRID)
     grid = np.angle(np.exp(1j * (AUTO_GRID + preferred)))
-    start = solver.solve_many(np.repeat(targets[:1], G, axis=0), grid)[0]  # (G, 8, 7)
-    m0 = _margins(solver, np.repeat(targets[:1], G, axis=0), grid)
+    start_poses = np.repeat(targets[:1], G, axis=0)
+    start, start_reasons = solver.solve_many(start_poses, grid)  # (G, 8, 7), (G, 8)
+    m0 = _margins(solver, start_poses, grid, start, start_reasons)
     # the branches that can keep the margin all along (best angle per sample, every 5th sample on
     # a 2-degree grid); among them the one nearest q0 at the start
     coarse, picks = grid[::4], first_rep[::5]
@@ -166,8 +175,6 @@ def _auto(solver: McInverse, targets: np.ndarray, t: np.ndarray, rep: np.ndarray
         if abs(np.angle(np.exp(1j * (profile[-1] - psi0)))) < 1e-12:
             break
         psi0 = profile[-1]
-    # later repetitions repeat the first one's poses: sample k matches the first repetition's sample
-    # at the same time modulo its duration (the first repetition also holds the start sample)
-    period = t[first_rep[-1]] - t[first_rep[0]]
-    phase = np.rint((t - t[0] - (rep - rep[0]) * period) / (t[1] - t[0])).astype(int)
+    # later repetitions repeat the first one's poses: the first repetition's sample at the same time
+    phase = np.rint(time_in_repetition(reference) / reference.period_s).astype(int)
     return profile[np.clip(phase, 0, len(profile) - 1)]

@@ -50,3 +50,18 @@ def test_a_joint_jump_fails_naming_the_sample(tmp_path):
     task = load_task(path)
     with pytest.raises(StageError, match=r"MC-Inverse, left arm: left_\w+ jumps [\d.]+ rad between samples 0 and 1 \(t = 0\.010 s\)"):
         solve_mc_inverse(task, build_reference(task))
+
+
+def test_a_scheduled_arm_angle_repeats_with_the_repetitions(tmp_path):
+    """A schedule over the time within a repetition (here 0 -> 0.1 -> 0 rad over carry_box's 4 s
+    repetitions) gives every repetition the first one's joints, sample for sample."""
+    text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    path = tmp_path / "carry_box.toml"
+    path.write_text(text + '\n[arm_angle]\nmode = "schedule"\nschedule = { left = [[0.0, 0.0], [2.0, 0.1], [4.0, 0.0]], right = [[0.0, 0.0], [2.0, -0.1], [4.0, 0.0]] }\n')
+    task = load_task(path)
+    ref = build_reference(task)
+    joints = solve_mc_inverse(task, ref)
+    first = joints.q[ref.rep == 0][1:]
+    assert np.abs(first[199] - joints.q[ref.rep == 0][0]).max() > 1e-3  # the schedule does move the arm
+    for r in range(1, 5):
+        assert np.abs(joints.q[ref.rep == r] - first).max() <= 1e-9
