@@ -30,7 +30,9 @@ mapped over a whole path in one call.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from functools import cached_property
 
 import casadi as cs
 import numpy as np
@@ -56,6 +58,11 @@ SINGULAR_SINE = 1e-7
 REACH_SLACK = 1e-12
 #: Largest cosine between two axes that count as perpendicular.
 PERPENDICULAR_COSINE = 1e-9
+#: Poses per mapped call in :meth:`McInverse.solve_many` (building a map costs time in its size,
+#: so one map of this size is built per solver and reused).
+MAP_CHUNK = 4096
+#: Threads that share a mapped call (one per core).
+MAP_THREADS = os.cpu_count() or 1
 
 
 def _hat(k: np.ndarray) -> np.ndarray:
@@ -202,15 +209,43 @@ class McInverse:
         return McSolution(q=np.asarray(Q).T.copy(), reason=np.asarray(reason).ravel().astype(int))
 
     def solve_many(self, poses: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidates for N poses (N, 4, 4) [m] at arm angles (N,) [rad], in one mapped call.
+        """Candidates for N poses (N, 4, 4) [m] at arm angles (N,) [rad], in mapped calls of
+        :data:`MAP_CHUNK` poses.
 
         Returns:
             q (N, 8, 7) [rad] and reason codes (N, 8).
         """
-        poses = np.asarray(poses, dtype=float)
+        poses = np.asarray(poses, dtype=float).reshape(-1, 4, 4)
+        psi = np.broadcast_to(np.asarray(psi, dtype=float), poses.shape[:1])
         N = poses.shape[0]
-        Q, reason = self.candidates.map(N)(np.hstack(list(poses)), np.asarray(psi, dtype=float).reshape(1, N))
-        return np.asarray(Q).T.reshape(N, CANDIDATES, 7), np.asarray(reason).reshape(N, CANDIDATES).astype(int)
+        q, reason = np.empty((N, CANDIDATES, 7)), np.empty((N, CANDIDATES), int)
+        evaluate, (T, angle, Q, code) = self._mapped
+        for start in range(0, N, MAP_CHUNK):
+            n = min(MAP_CHUNK, N - start)
+            T.reshape(MAP_CHUNK, 4, 4)[:n] = poses[start : start + n].transpose(0, 2, 1)  # column-major
+            angle[:n] = psi[start : start + n]
+            evaluate()
+            q[start : start + n] = Q.reshape(MAP_CHUNK, CANDIDATES, 7)[:n]
+            reason[start : start + n] = code.reshape(MAP_CHUNK, CANDIDATES)[:n]
+        return q, reason
+
+    @cached_property
+    def _mapped(self):
+        """The candidates mapped over :data:`MAP_CHUNK` poses, called through a CasADi
+        FunctionBuffer on flat column-major arrays (a plain call spends most of its time
+        converting the outputs to numpy): ``(evaluate, (T, psi, Q, reason))``."""
+        mapped = self.candidates.map(MAP_CHUNK, "thread", MAP_THREADS)
+        buffer, evaluate = mapped.buffer()
+        arrays = (np.zeros(16 * MAP_CHUNK), np.zeros(MAP_CHUNK), np.zeros(7 * CANDIDATES * MAP_CHUNK), np.zeros(CANDIDATES * MAP_CHUNK))
+        buffer.set_arg(0, memoryview(arrays[0]))
+        buffer.set_arg(1, memoryview(arrays[1]))
+        buffer.set_res(0, memoryview(arrays[2]))
+        buffer.set_res(1, memoryview(arrays[3]))
+
+        def run(_keep=buffer) -> None:
+            evaluate()
+
+        return run, arrays
 
 
 def _triad(x, y):

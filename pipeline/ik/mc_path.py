@@ -27,8 +27,14 @@ from pipeline.model.poses import invert
 from pipeline.tasks import Task
 
 
-#: Offsets of the arm angles the ``auto`` mode searches, around the current one [rad] (0.5 degree).
-AUTO_GRID = np.linspace(-np.pi, np.pi, 720, endpoint=False)
+#: Offsets of the arm angles the ``auto`` mode searches, around the preferred one [rad] (1 degree).
+AUTO_GRID = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+#: Most grid cells the ``auto`` arm angle moves between two samples.
+AUTO_MAX_CELLS = 2
+#: Every how many grid cells the ``auto`` mode tries a start angle.
+START_STRIDE = 2
+#: Weight of the start's distance from the preferred arm angle and the initial joints: a tie-break.
+START_WEIGHT = 0.1
 
 
 def time_in_repetition(reference) -> np.ndarray:
@@ -76,11 +82,12 @@ def solve_mc_inverse(task: Task, reference) -> JointPath:
         q0 = np.array([task.initial_q[n] for n in chain.joint_names])
         psi = arm_angles(task, hand, reference, solver, q0)
         start = time.perf_counter()
+        branch = None
         if spec.mode == "auto":
-            psi = _auto(solver, targets, reference, psi[0], q0, spec.margin_rad)
+            psi, branch = _auto(solver, targets, reference, psi[0], q0, spec, hand)
         candidates, reasons = solver.solve_many(targets, psi)
         times += (time.perf_counter() - start) / len(reference)
-        q = _kept_branch(hand, chain.joint_names, q0, reference, candidates, reasons, spec.max_joint_step_rad)
+        q = _kept_branch(hand, chain.joint_names, q0, reference, candidates, reasons, spec.max_joint_step_rad, branch)
         reached = ChainKinematics.of(chain).poses(q)
         errors.append(np.linalg.norm(reached[:, :3, 3] - targets[:, :3, 3], axis=1))
         names += chain.joint_names
@@ -101,13 +108,14 @@ def solve_mc_inverse(task: Task, reference) -> JointPath:
     )
 
 
-def _kept_branch(hand: str, names, q0: np.ndarray, reference, candidates: np.ndarray, reasons: np.ndarray, max_step: float) -> np.ndarray:
-    """The candidate branch nearest ``q0`` [rad] at sample 0, checked along the path."""
-    valid0 = np.flatnonzero(reasons[0] == VALID)
-    if valid0.size == 0:
-        why = ", ".join(sorted({REASONS[int(r)] for r in reasons[0]}))
-        raise StageError(f"MC-Inverse, {hand} arm: no valid solution at the path start ({why})")
-    branch = valid0[np.argmin(np.abs(candidates[0, valid0] - q0).max(axis=1))]
+def _kept_branch(hand: str, names, q0: np.ndarray, reference, candidates: np.ndarray, reasons: np.ndarray, max_step: float, branch: int | None = None) -> np.ndarray:
+    """The candidate ``branch`` (by default the one nearest ``q0`` [rad] at sample 0), checked along the path."""
+    if branch is None:
+        valid0 = np.flatnonzero(reasons[0] == VALID)
+        if valid0.size == 0:
+            why = ", ".join(sorted({REASONS[int(r)] for r in reasons[0]}))
+            raise StageError(f"MC-Inverse, {hand} arm: no valid solution at the path start ({why})")
+        branch = valid0[np.argmin(np.abs(candidates[0, valid0] - q0).max(axis=1))]
     q = candidates[:, branch]
     invalid = np.flatnonzero(reasons[:, branch] != VALID)
     if invalid.size:
@@ -127,54 +135,112 @@ def _kept_branch(hand: str, names, q0: np.ndarray, reference, candidates: np.nda
     return q
 
 
-def _margins(solver: McInverse, targets: np.ndarray, psi: np.ndarray, candidates: np.ndarray | None = None, reasons: np.ndarray | None = None) -> np.ndarray:
-    """Per pose and candidate, the distance to the nearest joint limit [rad] (-inf where invalid
-    for another reason than the limits): targets (M, 4, 4), psi (M,) -> (M, 8). Pass the
-    candidates and reasons of ``solver.solve_many(targets, psi)`` when already at hand."""
-    if candidates is None:
-        candidates, reasons = solver.solve_many(targets, psi)
-    margin = np.minimum(candidates - solver.lower, solver.upper - candidates).min(axis=2)
+def _margins(solver: McInverse, candidates: np.ndarray, reasons: np.ndarray) -> np.ndarray:
+    """Distance to the nearest joint limit [rad] per candidate, -inf where a candidate is invalid
+    for another reason than the limits: candidates (..., 8, 7), reasons (..., 8) -> (..., 8)."""
+    margin = np.minimum(candidates - solver.lower, solver.upper - candidates).min(axis=-1)
     return np.where((reasons == VALID) | (margin < 0), margin, -np.inf)
 
 
-def _auto(solver: McInverse, targets: np.ndarray, reference, preferred: float, q0: np.ndarray, margin: float) -> np.ndarray:
-    """psi per sample (N,) [rad] that moves only when it must: start at ``preferred`` (or the
-    nearest angle with ``margin`` to every limit on the branch nearest ``q0``), and at each sample
-    keep the previous angle if the branch still has ``margin`` there, else step to the nearest grid
-    angle that has. The first repetition is walked until it ends where it began (a closed path
-    then repeats), and every repetition reuses that profile, so repetitions give identical joints.
-    Where no angle keeps the margin, the one with the most is taken (the branch check then names
-    the sample if even that is outside the limits)."""
-    first_rep = np.flatnonzero(reference.rep == reference.rep[0])
-    G = len(AUTO_GRID)
-    grid = np.angle(np.exp(1j * (AUTO_GRID + preferred)))
-    start_poses = np.repeat(targets[:1], G, axis=0)
-    start, start_reasons = solver.solve_many(start_poses, grid)  # (G, 8, 7), (G, 8)
-    m0 = _margins(solver, start_poses, grid, start, start_reasons)
-    # the branches that can keep the margin all along (best angle per sample, every 5th sample on
-    # a 2-degree grid); among them the one nearest q0 at the start
-    coarse, picks = grid[::4], first_rep[::5]
-    reach = _margins(solver, np.repeat(targets[picks], len(coarse), axis=0), np.tile(coarse, len(picks))).reshape(len(picks), len(coarse), 8)
-    worst = reach.max(axis=1).min(axis=0)  # (8,)
-    usable = worst >= margin if (worst >= margin).any() else worst == worst.max()
-    cost = np.where((m0 >= margin) & usable[None], np.abs(start - q0).max(axis=2), np.inf)
-    if not np.isfinite(cost).any():
-        cost = np.where(usable[None], -m0, np.inf)
-    g, branch = np.unravel_index(np.argmin(cost), cost.shape)
-    psi0 = preferred if m0[np.argmin(np.abs(grid - preferred)), branch] >= margin else grid[g]
-    for _ in range(3):  # walk the repetition until it closes on its start angle
-        profile = np.empty(len(first_rep))
-        current = psi0
-        for i, k in enumerate(first_rep):
-            if _margins(solver, targets[k : k + 1], np.array([current]))[0, branch] < margin:
-                around = np.angle(np.exp(1j * (AUTO_GRID + current)))
-                m = _margins(solver, np.repeat(targets[k : k + 1], G, axis=0), around)[:, branch]
-                distance = np.abs(np.angle(np.exp(1j * (around - current))))
-                current = around[np.argmin(np.where(m >= margin, distance, np.inf))] if (m >= margin).any() else around[np.argmax(m)]
-            profile[i] = current
-        if abs(np.angle(np.exp(1j * (profile[-1] - psi0)))) < 1e-12:
-            break
-        psi0 = profile[-1]
+def _wrap(angle):
+    return np.angle(np.exp(1j * np.asarray(angle)))
+
+
+def _auto(solver: McInverse, targets: np.ndarray, reference, preferred: float, q0: np.ndarray, spec, hand: str) -> tuple[np.ndarray, int]:
+    """The arm angle per sample (N,) [rad] and the branch (0-7) for the ``auto`` mode.
+
+    A shortest path over the grid of (sample, arm angle) of the first repetition, per branch:
+    a node is allowed where the branch is valid within the limits and psi within
+    the open interval ``spec.range_rad``, a step where psi moves at most :data:`AUTO_MAX_CELLS` grid cells and no
+    joint more than ``spec.max_joint_step_rad``. The cost is the path's travel, sum over steps of
+    |change of psi| + the largest joint change [rad], plus per sample how far the branch comes
+    closer than ``spec.margin_rad`` to a limit [rad], plus, weighted by
+    :data:`START_WEIGHT`, the start's distance from ``preferred`` and its largest joint distance
+    from ``q0`` [rad]. On a closed path the profile must end on the angle it began with, so that
+    every repetition repeats it and gives the same joints. The least-cost branch is kept.
+
+    Raises:
+        StageError: no branch has such a path; names the sample where the longest one ends.
+    """
+    first = np.flatnonzero(reference.rep == reference.rep[0])
+    n, G = len(first), len(AUTO_GRID)
+    grid = _wrap(preferred + AUTO_GRID)
+    candidates, reasons = solver.solve_many(np.repeat(targets[first], G, axis=0), np.tile(grid, n))
+    candidates, reasons = candidates.reshape(n, G, 8, 7), reasons.reshape(n, G, 8)
+    margins = np.where(((grid > spec.range_rad[0]) & (grid < spec.range_rad[1]))[None, :, None], _margins(solver, candidates, reasons), -np.inf)
+    margin, max_step = spec.margin_rad, spec.max_joint_step_rad
+    closed = bool(np.abs(targets[first[0]] - targets[first[-1]]).max() < 1e-9)
+    best, reached = None, 0
+    for branch in range(8):
+        q = candidates[:, :, branch]
+        node = np.where(margins[:, :, branch] >= 0, np.maximum(0.0, margin - margins[:, :, branch]), np.inf)
+        start = node[0] + START_WEIGHT * (np.abs(_wrap(grid - preferred)) + np.abs(q[0] - q0).max(axis=1))
+        steps = _step_costs(q, max_step)
+        plan = _cheapest_profile(node, steps, start, closed)
+        if isinstance(plan, int):
+            reached = max(reached, plan)
+        elif best is None or plan[0] < best[0]:
+            best = (plan[0], plan[1], branch)
+    if best is None:
+        k = first[reached]
+        raise StageError(
+            f"MC-Inverse, {hand} arm: no arm angle in arm_angle.range_rad keeps any branch inside the joint limits "
+            f"with joint steps within arm_angle.max_joint_step_rad = {max_step} beyond sample {k} (t = {reference.t[k]:.3f} s)"
+        )
+    _, cells, branch = best
+    profile = grid[cells]
     # later repetitions repeat the first one's poses: the first repetition's sample at the same time
     phase = np.rint(time_in_repetition(reference) / reference.period_s).astype(int)
-    return profile[np.clip(phase, 0, len(profile) - 1)]
+    return profile[np.clip(phase, 0, n - 1)], branch
+
+
+def _step_costs(q: np.ndarray, max_step: float) -> np.ndarray:
+    """Largest joint change [rad] of the step into grid cell g at sample k from cell g - d at
+    k - 1, d = -W..W, inf where it exceeds ``max_step``: q (n, G, 7) [rad] -> (n - 1, G, 2 W + 1)."""
+    shifts = range(-AUTO_MAX_CELLS, AUTO_MAX_CELLS + 1)
+    with np.errstate(invalid="ignore"):
+        change = np.stack([np.abs(q[1:] - np.roll(q[:-1], d, axis=1)).max(axis=2) for d in shifts], axis=2)
+    return np.where(change <= max_step, change, np.inf)
+
+
+def _cheapest_profile(node: np.ndarray, steps: np.ndarray, start: np.ndarray, closed: bool):
+    """Dynamic programming over the (sample, grid cell) graph of :func:`_auto`: node costs
+    (n, G), step costs (n - 1, G, 2 W + 1) (see :func:`_step_costs`), start costs (G,). Returns (cost, cells (n,)) of the
+    cheapest profile (ending on its start cell when ``closed``), or, when there is none, the
+    first sample that no profile reaches."""
+    n, G = node.shape
+    shifts = np.arange(-AUTO_MAX_CELLS, AUTO_MAX_CELLS + 1)
+    move = np.abs(shifts) * (2 * np.pi / G)
+
+    def forward(cost: np.ndarray, keep: bool):
+        back = np.zeros((n, *cost.shape), np.int8) if keep else None
+        for k in range(1, n):
+            best = np.full(cost.shape, np.inf)
+            for j, (d, m) in enumerate(zip(shifts, move)):
+                option = np.roll(cost, d, axis=-1) + (m + steps[k - 1, :, j])
+                if keep:
+                    back[k][option < best] = j
+                np.minimum(best, option, out=best)
+            cost = best + node[k]
+            if not np.isfinite(cost).any():
+                return k, None
+        return cost, back
+
+    starts = np.flatnonzero(np.isfinite(start))[::START_STRIDE]
+    if starts.size == 0:
+        return 0
+    initial = np.full((starts.size, G), np.inf)
+    initial[np.arange(starts.size), starts] = start[starts]
+    end, _ = forward(initial, keep=False)
+    if isinstance(end, int):
+        return end
+    total = end[np.arange(starts.size), starts] if closed else end.min(axis=1)
+    if not np.isfinite(total).any():
+        return n - 1
+    i = int(np.argmin(total))
+    end, back = forward(initial[i], keep=True)
+    cells = np.empty(n, int)
+    cells[-1] = starts[i] if closed else int(np.argmin(end))
+    for k in range(n - 1, 0, -1):
+        cells[k - 1] = (cells[k] - shifts[back[k, cells[k]]]) % G
+    return float(total[i]), cells

@@ -6,6 +6,8 @@ Units are in the key names: ``_s`` seconds, ``_m`` metres, ``_rad`` radians. Pos
 
 from __future__ import annotations
 
+import math
+
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
@@ -132,8 +134,9 @@ class ArmAngle(_Model):
     Attributes:
         mode: ``initial``: psi of the initial configuration, held; ``constant``: ``value_rad``;
             ``schedule``: ``schedule`` interpolated linearly in the time since the repetition
-            began; ``auto``: per sample, the psi nearest the initial configuration's for which
-            the kept branch stays ``margin_rad`` inside every joint limit. Each is a function of
+            began; ``auto``: the branch and psi profile of least joint and arm-angle travel that
+            stays inside the joint limits (``margin_rad`` from them where it can) and within
+            ``range_rad``, the same in every repetition (see ``mc_path._auto``). Each is a function of
             the pose and its place in the repetition, not of the history, so repeated passes
             give the same joints.
         value_rad: psi per hand for ``constant`` [rad].
@@ -141,6 +144,8 @@ class ArmAngle(_Model):
         vertical: the vertical vector V of the reference plane, in the arm's base frame.
         max_joint_step_rad: largest joint change between samples before the path fails [rad].
         margin_rad: for ``auto``, the distance to the joint limits to keep [rad].
+        range_rad: for ``auto``, the open interval psi must stay in [rad] (the MC-Inverse paper keeps
+            it in (-pi, 0) for human-like motion).
     """
 
     mode: Literal["initial", "constant", "schedule", "auto"] = "initial"
@@ -149,9 +154,13 @@ class ArmAngle(_Model):
     vertical: Vec3 = (0.0, 0.0, 1.0)
     max_joint_step_rad: PositiveFloat = 0.2
     margin_rad: Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)] = 0.05
+    range_rad: tuple[Float, Float] = (-math.pi, math.pi)
 
     @model_validator(mode="after")
     def _complete(self) -> "ArmAngle":
+        low, high = self.range_rad
+        if not -math.pi <= low < high <= math.pi:
+            raise ValueError(f"range_rad must be an interval within [-pi, pi] (here [{low:g}, {high:g}])")
         if self.mode == "constant" and not self.value_rad:
             raise ValueError("mode 'constant' needs value_rad = { left = ..., right = ... }")
         if self.mode == "schedule":

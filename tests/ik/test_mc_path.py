@@ -1,10 +1,14 @@
 """MC-Inverse along a path: master-slave, repetition consistency, named failures."""
 
+import re
+
 import numpy as np
 import pytest
 
 from pipeline.errors import StageError
+from pipeline.ik.mc_inverse import McInverse
 from pipeline.ik.mc_path import solve_mc_inverse
+from pipeline.model.check import adam_poses, pose_errors
 from pipeline.model.kinematics import ChainKinematics
 from pipeline.model.poses import invert
 from pipeline.paths import build_reference
@@ -65,3 +69,41 @@ def test_a_scheduled_arm_angle_repeats_with_the_repetitions(tmp_path):
     assert np.abs(first[199] - joints.q[ref.rep == 0][0]).max() > 1e-3  # the schedule does move the arm
     for r in range(1, 5):
         assert np.abs(joints.q[ref.rep == r] - first).max() <= 1e-9
+
+
+@pytest.mark.parametrize("name", ["triangle", "circle"])
+def test_auto_arm_angle_completes_the_papers_repeated_paths(name):
+    """Triangle and circle with ``mode = "auto"`` and the paper's psi range (-pi, 0): adam's
+    double-precision forward kinematics of the joints meets the path to 1e-9 m / 1e-9 rad at every
+    sample, every joint is inside its URDF limits, psi(q) by eq (1) stays in the range and is the
+    same in every repetition, and repetitions give identical joints."""
+    task = load_task(TASKS / f"{name}.toml")
+    ref = build_reference(task)
+    path = solve_mc_inverse(task, ref)
+    chain = task.robot.hand_chain("left")
+    q = np.array([[path.configuration(k)[n] for n in chain.joint_names] for k in range(len(path))])
+    lower, upper = task.robot.lower_upper(chain.joint_names)
+    assert ((q >= lower) & (q <= upper)).all()
+    torso = task.robot.chain_between(ref.frame, chain.base)
+    base = ChainKinematics.of(torso).pose(np.array([task.initial_q[n] for n in torso.joint_names]))
+    position, rotation = pose_errors(base[None] @ adam_poses(task.robot, chain, q), ref.hands["left"].poses)
+    assert position.max() <= 1e-9 and rotation.max() <= 1e-9
+    psi = McInverse.of(chain).kinematics.arm_angles(q)
+    assert ((psi > -np.pi) & (psi < 0)).all()
+    first = q[ref.rep == 0][1:]
+    for r in range(1, 5):
+        assert np.abs(q[ref.rep == r] - first).max() <= 1e-9
+    assert np.abs(np.diff(q, axis=0)).max() <= task.spec.arm_angle.max_joint_step_rad
+
+
+def test_auto_fails_naming_the_sample_when_the_range_is_too_narrow(tmp_path):
+    """psi held in (-0.3, 0.3) cannot follow the triangle: one line naming the sample and its time."""
+    text = (TASKS / "triangle.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    path = tmp_path / "triangle.toml"
+    path.write_text(text.replace("range_rad = [-3.141592653589793, 0.0]", "range_rad = [-0.3, 0.3]"))
+    task = load_task(path)
+    ref = build_reference(task)
+    with pytest.raises(StageError, match=r"^MC-Inverse, left arm: no arm angle in arm_angle.range_rad .* beyond sample \d+ \(t = [\d.]+ s\)$") as failure:
+        solve_mc_inverse(task, ref)
+    k, t = re.search(r"sample (\d+) \(t = ([\d.]+) s\)", str(failure.value)).groups()
+    assert 0 < int(k) < len(ref) and float(t) == pytest.approx(ref.t[int(k)], abs=1e-3)
