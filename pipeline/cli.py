@@ -122,7 +122,7 @@ def bench_tvgdd_command(
     """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the
     whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s (optionally other
     conic plugins for the casadi backend)."""
-    from pipeline.bench import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
+    from pipeline.bench.tvgdd import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
 
     with err.status("benchmarking ...") as status:
         rows = bench_tvgdd(task, repeats, tuple(p.strip() for p in plugins.split(",") if p.strip()), progress=lambda text: status.update(text))

@@ -30,7 +30,6 @@ mapped over a whole path in one call.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -38,6 +37,8 @@ import casadi as cs
 import numpy as np
 
 from pipeline.errors import NotSRSError
+from pipeline.ik.batched import BatchedCandidates
+from pipeline.ik.subproblems import euler, into_limits, rotate, rotation, triad
 from pipeline.model.kinematics import chain_frames
 from pipeline.model.robot import Chain
 from pipeline.model.srs import SrsKinematics
@@ -58,62 +59,6 @@ SINGULAR_SINE = 1e-7
 REACH_SLACK = 1e-12
 #: Largest cosine between two axes that count as perpendicular.
 PERPENDICULAR_COSINE = 1e-9
-#: Poses per mapped call in :meth:`McInverse.solve_many` (building a map costs time in its size,
-#: so one map of this size is built per solver and reused).
-MAP_CHUNK = 4096
-#: Threads that share a mapped call (one per core).
-MAP_THREADS = os.cpu_count() or 1
-
-
-def _hat(k: np.ndarray) -> np.ndarray:
-    return np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-
-
-def _rotation(k: np.ndarray, c, s) -> cs.SX:
-    """exp([k] angle) for a constant unit axis ``k``, given c = cos and s = sin of the angle (Rodrigues)."""
-    K = _hat(k)
-    return cs.SX.eye(3) + s * K + (1 - c) * (K @ K)
-
-
-def _rotate(k: np.ndarray, c, s, x):
-    """exp([k] angle) x for a constant unit axis ``k``, given c = cos and s = sin of the angle (Rodrigues)."""
-    return c * x + s * cs.cross(k, x) + (1 - c) * cs.dot(k, x) * k
-
-
-def _turn(k: np.ndarray, p, q):
-    """Angle about unit axis ``k`` that turns vector p onto vector q (Paden-Kahan sub-problem 1)."""
-    return cs.atan2(cs.dot(k, cs.cross(p, q)), cs.dot(p, q) - cs.dot(k, p) * cs.dot(k, q))
-
-
-def _euler(Q, ka: np.ndarray, kb: np.ndarray, kc: np.ndarray):
-    """Both solutions of Q = exp(ka ta) exp(kb tb) exp(kc tc) for perpendicular ka, kb and kb, kc
-    (eqs 9 and 10 for ZYZ axes): a list of two (ta, tb, tc), and |sin| of the middle angle
-    measured from its singular positions (0 where ta and tc are not separable)."""
-    phi = float(np.arctan2(ka @ np.cross(kb, kc), ka @ kc))  # ka . exp(kb t) kc = cos(t - phi)
-    v = Q @ kc
-    s = cs.norm_2(cs.cross(ka, v))  # |sin(tb - phi)|, accurate near 0 and pi
-    c = cs.dot(ka, v)
-    solutions = []
-    for sign in (1.0, -1.0):
-        delta = cs.atan2(sign * s, c)  # tb - phi
-        cb, sb = cs.cos(delta + phi), cs.sin(delta + phi)
-        ta = _turn(ka, _rotate(kb, cb, sb, cs.SX(kc)), v)
-        # tc from what is left of Q once ta and tb are undone, so the three reproduce Q to rounding
-        # even near the singularity, where ta alone is ill-conditioned
-        rest = _rotation(kb, cb, -sb) @ _rotation(ka, cs.cos(ta), -cs.sin(ta)) @ Q
-        tc = _turn(kc, cs.SX(kb), rest @ kb)
-        solutions.append((ta, cs.atan2(sb, cb), tc))
-    return solutions, s
-
-
-def _into_limits(angle, lower: float, upper: float):
-    """An angle in (-pi, pi] moved by 2 pi into [lower, upper] where that helps (only for limits
-    that reach beyond +-pi)."""
-    if lower < -np.pi:
-        angle = cs.if_else(angle > upper, angle - 2 * np.pi, angle)
-    if upper > np.pi:
-        angle = cs.if_else(angle < lower, angle + 2 * np.pi, angle)
-    return angle
 
 
 @dataclass(frozen=True)
@@ -189,14 +134,14 @@ class McInverse:
             theta4 = cs.atan2(cs.sin(elbow * beta - phi0), cs.cos(elbow * beta - phi0))  # eq (4), both signs
             c4, s4 = cs.cos(theta4), cs.sin(theta4)
             # sub-problem 2: the shoulder rotation turns SE(0) onto SE and the forearm onto EW (eqs 6-8)
-            Q = _triad(E - S, W - E) @ _triad(cs.SX(E0 - S), _rotate(a4, c4, s4, cs.SX(W0 - E0))).T
-            shoulders, s_shoulder = _euler(Q, k[0], k[1], k[2])  # eqs (9)-(10)
-            arm = Q @ _rotation(a4, c4, s4)  # exp(k1 t1) ... exp(k4 t4): both shoulder triples reproduce Q
-            wrists, s_wrist = _euler(arm.T @ R @ tip0.T, k[4], k[5], k[6])  # sub-problem 3
+            Q = triad(E - S, W - E) @ triad(cs.SX(E0 - S), rotate(a4, c4, s4, cs.SX(W0 - E0))).T
+            shoulders, s_shoulder = euler(Q, k[0], k[1], k[2])  # eqs (9)-(10)
+            arm = Q @ rotation(a4, c4, s4)  # exp(k1 t1) ... exp(k4 t4): both shoulder triples reproduce Q
+            wrists, s_wrist = euler(arm.T @ R @ tip0.T, k[4], k[5], k[6])  # sub-problem 3
             singular = cs.logic_or(singular_elbow, cs.fmin(s_shoulder, s_wrist) < SINGULAR_SINE)
             for t1, t2, t3 in shoulders:
                 for t5, t6, t7 in wrists:
-                    q = cs.vertcat(*[_into_limits(a, lo, hi) for a, lo, hi in zip((t1, t2, t3, theta4, t5, t6, t7), lower, upper)])
+                    q = cs.vertcat(*[into_limits(a, lo, hi) for a, lo, hi in zip((t1, t2, t3, theta4, t5, t6, t7), lower, upper)])
                     outside = cs.logic_or(cs.mmax(q - upper) > 0, cs.mmax(lower - q) > 0)
                     reasons.append(cs.if_else(out_of_reach, OUT_OF_REACH, cs.if_else(singular, SINGULAR, cs.if_else(outside, OUTSIDE_LIMITS, VALID))))
                     columns.append(q)
@@ -209,51 +154,16 @@ class McInverse:
         return McSolution(q=np.asarray(Q).T.copy(), reason=np.asarray(reason).ravel().astype(int))
 
     def solve_many(self, poses: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidates for N poses (N, 4, 4) [m] at arm angles (N,) [rad], in mapped calls of
-        :data:`MAP_CHUNK` poses.
+        """Candidates for N poses (N, 4, 4) [m] at arm angles (N,) [rad], in mapped calls.
 
         Returns:
             q (N, 8, 7) [rad] and reason codes (N, 8).
         """
-        poses = np.asarray(poses, dtype=float).reshape(-1, 4, 4)
-        psi = np.broadcast_to(np.asarray(psi, dtype=float), poses.shape[:1])
-        N = poses.shape[0]
-        q, reason = np.empty((N, CANDIDATES, 7)), np.empty((N, CANDIDATES), int)
-        evaluate, (T, angle, Q, code) = self._mapped
-        for start in range(0, N, MAP_CHUNK):
-            n = min(MAP_CHUNK, N - start)
-            T.reshape(MAP_CHUNK, 4, 4)[:n] = poses[start : start + n].transpose(0, 2, 1)  # column-major
-            angle[:n] = psi[start : start + n]
-            evaluate()
-            q[start : start + n] = Q.reshape(MAP_CHUNK, CANDIDATES, 7)[:n]
-            reason[start : start + n] = code.reshape(MAP_CHUNK, CANDIDATES)[:n]
-        return q, reason
+        return self._batched(poses, psi)
 
     @cached_property
-    def _mapped(self):
-        """The candidates mapped over :data:`MAP_CHUNK` poses, called through a CasADi
-        FunctionBuffer on flat column-major arrays (a plain call spends most of its time
-        converting the outputs to numpy): ``(evaluate, (T, psi, Q, reason))``."""
-        mapped = self.candidates.map(MAP_CHUNK, "thread", MAP_THREADS)
-        buffer, evaluate = mapped.buffer()
-        arrays = (np.zeros(16 * MAP_CHUNK), np.zeros(MAP_CHUNK), np.zeros(7 * CANDIDATES * MAP_CHUNK), np.zeros(CANDIDATES * MAP_CHUNK))
-        buffer.set_arg(0, memoryview(arrays[0]))
-        buffer.set_arg(1, memoryview(arrays[1]))
-        buffer.set_res(0, memoryview(arrays[2]))
-        buffer.set_res(1, memoryview(arrays[3]))
-
-        def run(_keep=buffer) -> None:
-            evaluate()
-
-        return run, arrays
-
-
-def _triad(x, y):
-    """Orthonormal frame [x^, y'^, x^ x y'^] from two non-parallel vectors (Gram-Schmidt)."""
-    e1 = x / cs.norm_2(x)
-    y = y - cs.dot(y, e1) * e1
-    e2 = y / cs.norm_2(y)
-    return cs.horzcat(e1, e2, cs.cross(e1, e2))
+    def _batched(self) -> BatchedCandidates:
+        return BatchedCandidates(self.candidates)
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""``dualarm bench``: speed measured as ratios against peers run in the same process.
+"""``dualarm bench tvgdd``: the TV-GDD step, per backend and CasADi conic plugin.
 
 Never used by the test suite: wall-clock numbers depend on the machine.
 """

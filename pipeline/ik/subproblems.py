@@ -1,0 +1,72 @@
+"""Closed-form pieces of S-R-S inverse kinematics, as CasADi expressions of constant unit axes.
+
+Rotations are products of exponentials exp([k] angle) about axes k given at the zero
+configuration (see :mod:`pipeline.ik.mc_inverse`). Paden-Kahan sub-problem 1 turns one vector onto
+another about one axis; :func:`euler` solves three consecutive perpendicular axes (MC-Inverse
+sub-problems 2 and 3, eqs 9-10 for ZYZ axes); :func:`into_limits` moves an angle by 2 pi into
+limits that reach past +-pi.
+"""
+
+from __future__ import annotations
+
+import casadi as cs
+import numpy as np
+
+
+def hat(k: np.ndarray) -> np.ndarray:
+    return np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+
+
+def rotation(k: np.ndarray, c, s) -> cs.SX:
+    """exp([k] angle) for a constant unit axis ``k``, given c = cos and s = sin of the angle (Rodrigues)."""
+    K = hat(k)
+    return cs.SX.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def rotate(k: np.ndarray, c, s, x):
+    """exp([k] angle) x for a constant unit axis ``k``, given c = cos and s = sin of the angle (Rodrigues)."""
+    return c * x + s * cs.cross(k, x) + (1 - c) * cs.dot(k, x) * k
+
+
+def turn(k: np.ndarray, p, q):
+    """Angle about unit axis ``k`` that turns vector p onto vector q (Paden-Kahan sub-problem 1)."""
+    return cs.atan2(cs.dot(k, cs.cross(p, q)), cs.dot(p, q) - cs.dot(k, p) * cs.dot(k, q))
+
+
+def euler(Q, ka: np.ndarray, kb: np.ndarray, kc: np.ndarray):
+    """Both solutions of Q = exp(ka ta) exp(kb tb) exp(kc tc) for perpendicular ka, kb and kb, kc
+    (eqs 9 and 10 for ZYZ axes): a list of two (ta, tb, tc), and |sin| of the middle angle
+    measured from its singular positions (0 where ta and tc are not separable)."""
+    phi = float(np.arctan2(ka @ np.cross(kb, kc), ka @ kc))  # ka . exp(kb t) kc = cos(t - phi)
+    v = Q @ kc
+    s = cs.norm_2(cs.cross(ka, v))  # |sin(tb - phi)|, accurate near 0 and pi
+    c = cs.dot(ka, v)
+    solutions = []
+    for sign in (1.0, -1.0):
+        delta = cs.atan2(sign * s, c)  # tb - phi
+        cb, sb = cs.cos(delta + phi), cs.sin(delta + phi)
+        ta = turn(ka, rotate(kb, cb, sb, cs.SX(kc)), v)
+        # tc from what is left of Q once ta and tb are undone, so the three reproduce Q to rounding
+        # even near the singularity, where ta alone is ill-conditioned
+        rest = rotation(kb, cb, -sb) @ rotation(ka, cs.cos(ta), -cs.sin(ta)) @ Q
+        tc = turn(kc, cs.SX(kb), rest @ kb)
+        solutions.append((ta, cs.atan2(sb, cb), tc))
+    return solutions, s
+
+
+def into_limits(angle, lower: float, upper: float):
+    """An angle in (-pi, pi] moved by 2 pi into [lower, upper] where that helps (only for limits
+    that reach beyond +-pi)."""
+    if lower < -np.pi:
+        angle = cs.if_else(angle > upper, angle - 2 * np.pi, angle)
+    if upper > np.pi:
+        angle = cs.if_else(angle < lower, angle + 2 * np.pi, angle)
+    return angle
+
+
+def triad(x, y):
+    """Orthonormal frame [x^, y'^, x^ x y'^] from two non-parallel vectors (Gram-Schmidt)."""
+    e1 = x / cs.norm_2(x)
+    y = y - cs.dot(y, e1) * e1
+    e2 = y / cs.norm_2(y)
+    return cs.horzcat(e1, e2, cs.cross(e1, e2))
