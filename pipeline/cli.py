@@ -55,7 +55,7 @@ def user_errors(func: Callable) -> Callable:
 def run(
     task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
     stages: Annotated[Optional[str], typer.Option(help="Comma-separated stages to run (default: path, and ik when --ik is given).")] = None,
-    ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd or pinv.")] = None,
+    ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd, pinv, mc-inverse, trac-ik, pybullet, dls-svd or ikfast-style.")] = None,
     scheme: Annotated[str, typer.Option(help="TV-GDD scheme: mvn (minimum velocity norm), rmp (repetitive motion) or mke (minimum kinetic energy).")] = "mvn",
     qp_backend: Annotated[str, typer.Option(help="TV-GDD QP solver: casadi (DAQP through CasADi conic) or lvi (the paper's projection solver).")] = "casadi",
     lvi_tolerance: Annotated[float, typer.Option(help="Stop of the lvi backend on ||eps(u)||_2 (the paper's 1e-5; its velocity error can be ~35x this, see docs).")] = 1e-5,
@@ -109,6 +109,36 @@ def report(
 
     with err.status(f"reporting {run_dir} ..."):
         directory = write_report(run_dir, out_dir)
+    out.print(str(directory), markup=False, soft_wrap=True)
+
+
+@app.command()
+@user_errors
+def consistency(
+    task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
+    methods: Annotated[str, typer.Option(help="Comma-separated IK methods to compare.")] = "mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd",
+    reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
+    out_dir: Annotated[Optional[Path], typer.Option("--out", help="Output directory (default consistency/<task>).")] = None,
+    seed: Annotated[int, typer.Option(help="Random seed, recorded in each run's manifest.")] = 0,
+) -> None:
+    """Run each IK method on a repeated task as a recorded run and compare repetition by
+    repetition: consistency.csv, consistency.md and figures; prints the table and the directory."""
+    from pipeline.report.consistency import run_consistency
+
+    chosen = [m.strip() for m in methods.split(",") if m.strip()]
+    directory = out_dir or Path("consistency") / task.stem
+    with err.status("consistency ...") as status:
+        result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: status.update(text))
+    shown = {"rep_joint_deviation_max_rad": "rep Δq max rad", "rep_arm_angle_deviation_max_rad": "rep Δψ max rad", "closure_error_max_rad": "closure rad", "failed_reps": "failed reps", "failures": "failed samples", "max_joint_step_rad": "max step rad", "solve_time_mean_s": "solve ms/sample"}
+    table = Table(title=f"{task}: consistency over repetitions (all columns in {result.csv})", title_justify="left")
+    for column in ("method", *shown.values()):
+        table.add_column(column, justify="left" if column == "method" else "right")
+    for _, row in result.table.iterrows():
+        if row["status"] != "complete":
+            table.add_row(row["method"], f"failed: {row['error']}", *[""] * (len(shown) - 1))
+            continue
+        table.add_row(row["method"], *(f"{row[c] * (1e3 if c.endswith('_s') else 1):.3g}" for c in shown))
+    out.print(table)
     out.print(str(directory), markup=False, soft_wrap=True)
 
 

@@ -16,7 +16,8 @@ import numpy as np
 
 from pipeline import __version__
 from pipeline.errors import DualarmError
-from pipeline.ik.metrics import ik_metrics
+from pipeline.ik.metrics import arm_angles, consistency_metrics, ik_metrics
+from pipeline.ik.pointwise import POINTWISE_METHODS
 from pipeline.ik.tvgdd import LVI_TOLERANCE
 from pipeline.paths import CartesianReference, build_reference
 from pipeline.record.recorder import Recorder
@@ -28,7 +29,7 @@ ALL_STAGES = ("path", "ik", "retime", "smooth", "execute")
 #: The stages this version can run.
 AVAILABLE_STAGES = ("path", "ik")
 #: IK methods of the ``ik`` stage.
-IK_METHODS = ("tvgdd", "pinv", "mc-inverse")
+IK_METHODS = ("tvgdd", "pinv", "mc-inverse", *POINTWISE_METHODS)
 
 
 def path_metrics(ref: CartesianReference) -> dict[str, float]:
@@ -104,6 +105,10 @@ def _ik_settings(task: Task, ik: str | None, scheme: str, qp_backend: str, lvi_t
         from pipeline.ik.mc_path import solve_mc_inverse
 
         return {"method": ik, **task.spec.arm_angle.model_dump()}, lambda ref: solve_mc_inverse(task, ref)
+    if ik in POINTWISE_METHODS:
+        from pipeline.ik.pointwise import pointwise_settings, solve_pointwise
+
+        return {"method": ik, **pointwise_settings(ik)}, lambda ref: solve_pointwise(ik, task, ref)
     gain = settings_for(task).feedback_gain
     return {"method": ik, "feedback_gain": gain}, lambda ref: solve_pinv(task, ref, gain)
 
@@ -118,6 +123,7 @@ def run_task(
     lvi_tolerance: float = LVI_TOLERANCE,
     out_dir: str | Path = "recordings",
     seed: int = 0,
+    repetitions: int | None = None,
     command: Sequence[str] | None = None,
 ) -> Path:
     """Run ``task_file`` through ``stages`` and record it; returns the run directory.
@@ -142,8 +148,9 @@ def run_task(
         metrics.update(path_metrics(reference))
         if solve_ik is not None:
             joint_path = solve_ik(reference)
-            recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names))
+            recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names), arm_angles(joint_path, task))
             metrics.update(ik_metrics(joint_path, task))
+            metrics.update(consistency_metrics(joint_path, task, reference))
         recorder.metrics(metrics, reference.duration_s)
     except BaseException as exc:
         message = str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}"

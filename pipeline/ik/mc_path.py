@@ -10,7 +10,7 @@ that branch is invalid, or where a joint moves more than ``max_joint_step_rad`` 
 fails the stage with the sample, the time and the joint named; nothing is silently swapped.
 
 Each arm is solved in its chain base frame (the torso); a free waist is held at its initial
-value, because MC-Inverse solves 7-DOF arms.
+value, because MC-Inverse solves 7-DOF arms (see :mod:`pipeline.ik.arms`).
 """
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ import time
 import numpy as np
 
 from pipeline.errors import StageError
+from pipeline.ik.arms import ArmSolution, arm_problems, joint_path
 from pipeline.ik.joint_path import JointPath
 from pipeline.ik.mc_inverse import REASONS, VALID, McInverse
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.poses import invert
+from pipeline.paths.reference import first_repetition_index, time_in_repetition
 from pipeline.tasks import Task
 
 
@@ -35,14 +35,6 @@ AUTO_MAX_CELLS = 2
 START_STRIDE = 2
 #: Weight of the start's distance from the preferred arm angle and the initial joints: a tie-break.
 START_WEIGHT = 0.1
-
-
-def time_in_repetition(reference) -> np.ndarray:
-    """Time since the repetition began, per sample (N,) [s]. Repetition r spans
-    (r T, (r + 1) T] (the first also holds t = 0), so samples at the same place of every
-    repetition get the same value."""
-    period = reference.t[reference.rep == reference.rep[0]][-1] - reference.t[0]
-    return reference.t - reference.t[0] - (reference.rep - reference.rep[0]) * period
 
 
 def arm_angles(task: Task, hand: str, reference, solver: McInverse, q0: np.ndarray) -> np.ndarray:
@@ -59,7 +51,7 @@ def arm_angles(task: Task, hand: str, reference, solver: McInverse, q0: np.ndarr
     if hand not in spec.schedule:
         raise StageError(f"arm_angle.schedule has no entry for the {hand} hand")
     times, values = np.array(spec.schedule[hand]).T
-    return np.interp(time_in_repetition(reference), times, values)
+    return np.interp(time_in_repetition(reference.t, reference.rep), times, values)
 
 
 def solve_mc_inverse(task: Task, reference) -> JointPath:
@@ -71,41 +63,20 @@ def solve_mc_inverse(task: Task, reference) -> JointPath:
     """
     spec = task.spec.arm_angle
     vertical = tuple(np.asarray(spec.vertical) / np.linalg.norm(spec.vertical))
-    names: list[str] = []
-    columns, errors, times = [], [], np.zeros(len(reference))
-    for hand in task.spec.hands:
-        chain = task.robot.hand_chain(hand)
-        solver = McInverse.of(chain, vertical)
-        root_to_base = ChainKinematics.of(task.robot.chain_between(reference.frame, chain.base))
-        base_pose = root_to_base.pose(np.array([task.initial_q[n] for n in root_to_base.chain.joint_names]))
-        targets = invert(base_pose)[None] @ reference.hands[hand].poses  # poses in the arm's base frame
-        q0 = np.array([task.initial_q[n] for n in chain.joint_names])
-        psi = arm_angles(task, hand, reference, solver, q0)
+    problems = arm_problems(task, reference)
+    solutions = []
+    for arm in problems:
+        solver = McInverse.of(arm.chain, vertical)
+        psi = arm_angles(task, arm.hand, reference, solver, arm.q0)
         start = time.perf_counter()
         branch = None
         if spec.mode == "auto":
-            psi, branch = _auto(solver, targets, reference, psi[0], q0, spec, hand)
-        candidates, reasons = solver.solve_many(targets, psi)
-        times += (time.perf_counter() - start) / len(reference)
-        q = _kept_branch(hand, chain.joint_names, q0, reference, candidates, reasons, spec.max_joint_step_rad, branch)
-        reached = ChainKinematics.of(chain).poses(q)
-        errors.append(np.linalg.norm(reached[:, :3, 3] - targets[:, :3, 3], axis=1))
-        names += chain.joint_names
-        columns.append(q)
-    q = np.hstack(columns)
-    return JointPath(
-        method="mc-inverse",
-        joint_names=tuple(names),
-        t=reference.t,
-        rep=reference.rep,
-        q=q,
-        qd=np.gradient(q, reference.t, axis=0),
-        status=np.zeros(len(reference), int),
-        solve_time_s=times,
-        hand_error_m=np.stack(errors, axis=1),
-        hands=tuple(task.spec.hands),
-        fixed={n: v for n, v in task.initial_q.items() if n not in names},
-    )
+            psi, branch = _auto(solver, arm.targets, reference, psi[0], arm.q0, spec, arm.hand)
+        candidates, reasons = solver.solve_many(arm.targets, psi)
+        elapsed = time.perf_counter() - start
+        q = _kept_branch(arm.hand, arm.chain.joint_names, arm.q0, reference, candidates, reasons, spec.max_joint_step_rad, branch)
+        solutions.append(ArmSolution(q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))))
+    return joint_path("mc-inverse", task, reference, problems, solutions)
 
 
 def _kept_branch(hand: str, names, q0: np.ndarray, reference, candidates: np.ndarray, reasons: np.ndarray, max_step: float, branch: int | None = None) -> np.ndarray:
@@ -190,8 +161,7 @@ def _auto(solver: McInverse, targets: np.ndarray, reference, preferred: float, q
     _, cells, branch = best
     profile = grid[cells]
     # later repetitions repeat the first one's poses: the first repetition's sample at the same time
-    phase = np.rint(time_in_repetition(reference) / reference.period_s).astype(int)
-    return profile[np.clip(phase, 0, n - 1)], branch
+    return profile[first_repetition_index(reference.t, reference.rep, reference.period_s)], branch
 
 
 def _step_costs(q: np.ndarray, max_step: float) -> np.ndarray:

@@ -5,9 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.ik.joint_path import JointPath
+from pipeline.model.srs import SrsKinematics
+from pipeline.paths.reference import CartesianReference, first_repetition_index
 
 #: Slack allowed before a joint position or velocity counts as a violation [rad] / [rad/s].
 VIOLATION_TOLERANCE = 1e-9
+#: Largest hand pose difference [m, and rotation matrix entries] between repetition ends for a
+#: path to count as closed.
+CLOSED_TOLERANCE_M = 1e-9
 
 
 def ik_metrics(path: JointPath, task) -> dict[str, float]:
@@ -36,3 +41,51 @@ def ik_metrics(path: JointPath, task) -> dict[str, float]:
         "ik.solve_time_total_s": float(path.solve_time_s.sum()),
         "ik.failures": float((path.status != 0).sum()),
     }
+
+
+def arm_angles(path: JointPath, task) -> dict[str, np.ndarray]:
+    """Arm angle psi of eq (1) of MC-Inverse per hand along the path (N,) [rad], with the task's
+    ``arm_angle.vertical``; hands whose arm joints are not all in the path are left out."""
+    vertical = np.asarray(task.spec.arm_angle.vertical, dtype=float)
+    angles = {}
+    for hand in task.spec.hands:
+        chain = task.robot.hand_chain(hand)
+        if set(chain.joint_names) <= set(path.joint_names):
+            columns = [path.joint_names.index(n) for n in chain.joint_names]
+            kinematics = SrsKinematics.of(chain, tuple(vertical / np.linalg.norm(vertical)))
+            angles[hand] = kinematics.arm_angles(path.q[:, columns])
+    return angles
+
+
+def consistency_metrics(path: JointPath, task, reference: CartesianReference) -> dict[str, float]:
+    """``ik.*`` consistency across repetitions (DESIGN.md; rep 0 is the reference), for a path of
+    two or more repetitions.
+
+    - ``failed_reps``: repetitions with a failed sample.
+    - ``rep_joint_deviation_max_rad``: largest |q_r - q_0| between samples at the same place of
+      repetition r and the first, where both succeeded.
+    - ``rep_arm_angle_deviation_max_rad``: the same for every hand's arm angle (wrapped).
+    - ``closure_error_max_rad``: when the hands' path ends each repetition where it began, the
+      largest joint difference between a repetition's last sample and its first (the previous
+      repetition's last).
+    """
+    reps = np.unique(path.rep)
+    if len(reps) < 2:
+        return {}
+    index = first_repetition_index(path.t, path.rep, reference.period_s)
+    first = np.flatnonzero(path.rep == reps[0])
+    later = np.flatnonzero(path.rep != reps[0])
+    match = first[np.clip(index[later], 0, len(first) - 1)]
+    both = (path.status[later] == 0) & (path.status[match] == 0)
+    a, b = later[both], match[both]
+    metrics = {"ik.failed_reps": float(sum(bool((path.status[path.rep == r] != 0).any()) for r in reps))}
+    if a.size:
+        metrics["ik.rep_joint_deviation_max_rad"] = float(np.abs(path.q[a] - path.q[b]).max())
+        angles = arm_angles(path, task)
+        if angles:
+            metrics["ik.rep_arm_angle_deviation_max_rad"] = float(max(np.abs(np.angle(np.exp(1j * (psi[a] - psi[b])))).max() for psi in angles.values()))
+    ends = np.array([0, *[np.flatnonzero(path.rep == r)[-1] for r in reps]])
+    poses = np.stack([h.poses[ends] for h in reference.hands.values()])
+    if np.abs(poses - poses[:, :1]).max() < CLOSED_TOLERANCE_M:
+        metrics["ik.closure_error_max_rad"] = float(np.abs(np.diff(path.q[ends], axis=0)).max())
+    return metrics

@@ -87,3 +87,16 @@ class CartesianReference:
     def duration_s(self) -> float:
         """Time of the last sample [s]."""
         return float(self.t[-1])
+
+
+def time_in_repetition(t: np.ndarray, rep: np.ndarray) -> np.ndarray:
+    """Time since the repetition began, per sample (N,) [s], for sample times ``t`` [s] and
+    repetition indices ``rep``. Repetition r spans (r T, (r + 1) T] (the first also holds t = 0),
+    so samples at the same place of every repetition get the same value."""
+    period = t[rep == rep[0]][-1] - t[0]
+    return t - t[0] - (rep - rep[0]) * period
+
+
+def first_repetition_index(t: np.ndarray, rep: np.ndarray, period_s: float) -> np.ndarray:
+    """Per sample, the index of the sample at the same place in the first repetition (N,)."""
+    return np.rint(time_in_repetition(t, rep) / period_s).astype(int)

@@ -143,11 +143,12 @@ class Recorder:
         )
         self._rerun_motion(stage, np.array([t]), {n: np.array([v]) for n, v in q.items()})
 
-    def joint_path(self, path: JointPath, velocity_limits: np.ndarray) -> None:
+    def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray]) -> None:
         """The IK stage's product: ``/ik/limits`` once (the robot's position limits and
-        ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` and (TV-GDD)
-        ``/ik/bounds`` per sample, the robot on ``/tf`` as ``ik/<link>``; in Rerun the animated
-        robot under ``/ik`` and every joint's position, velocity and bounds as time series."""
+        ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` (with each hand's
+        ``arm_angles`` [rad], (N,) per hand) and (TV-GDD) ``/ik/bounds`` per sample, the robot on
+        ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's
+        position, velocity and bounds and the arm angles as time series."""
         family = STAGE_TOPICS["ik"]
         names = path.joint_names
         lower, upper = self.robot.lower_upper(names)
@@ -169,6 +170,7 @@ class Recorder:
                     "position": dict(zip(names, path.q[k].tolist())),
                     "velocity": dict(zip(names, path.qd[k].tolist())),
                     "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist())),
+                    "arm_angle_rad": {hand: float(psi[k]) for hand, psi in arm_angles.items()},
                 },
                 log_time=_ns(t),
             )
@@ -182,6 +184,7 @@ class Recorder:
             self._series(f"ik/{key}", path.t, dict(zip(names, v.T)))
         self._series("ik/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T)))
         self._series("ik/solve_time_s", path.t, {"all": path.solve_time_s})
+        self._series("ik/arm_angle_rad", path.t, arm_angles)
 
     def reference(self, ref: CartesianReference) -> None:
         """The path stage's product: one ``/task/reference/<hand>`` message per sample, the whole

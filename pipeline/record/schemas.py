@@ -70,8 +70,9 @@ IK_SAMPLE = {
         "position": {**_JOINT_MAP, "description": "joint -> position [rad]"},
         "velocity": {**_JOINT_MAP, "description": "joint -> commanded velocity [rad/s]"},
         "hand_error_m": {**_JOINT_MAP, "description": "hand -> |r - f(q)| [m]"},
+        "arm_angle_rad": {**_JOINT_MAP, "description": "hand -> arm angle psi of MC-Inverse eq (1) [rad]"},
     },
-    "required": ["t", "rep", "method", "status", "solve_time_s", "position", "velocity", "hand_error_m"],
+    "required": ["t", "rep", "method", "status", "solve_time_s", "position", "velocity", "hand_error_m", "arm_angle_rad"],
 }
 
 JOINT_LIMITS = {

@@ -12,6 +12,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from pipeline.ik.gesture import position_bounds  # noqa: E402
+from pipeline.paths.reference import time_in_repetition  # noqa: E402
 
 
 def _joints(df: pd.DataFrame, prefix: str) -> list[str]:
@@ -95,5 +96,62 @@ def bound_profiles(duration_s: float, path: Path) -> Path:
     fig.suptitle(f"TV-GDD bound profiles, eq (19), T_d = {duration_s:g} s", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+#: Repetition labels, as in the MC-Inverse paper's figures.
+ROMAN = ("I", "II", "III", "IV", "V", "VI", "VII", "VIII", "IX", "X")
+
+
+def _per_repetition(ax, sample: pd.DataFrame, column: str, colours) -> None:
+    """``column`` of ``sample`` against the time within the repetition, one line per repetition;
+    failed samples are left out."""
+    phase = time_in_repetition(sample["t"].to_numpy(), sample["rep"].to_numpy())
+    values = np.where(sample["status"].to_numpy() == 0, sample[column].to_numpy(), np.nan)
+    for i, rep in enumerate(np.unique(sample["rep"])):
+        mine = sample["rep"].to_numpy() == rep
+        ax.plot(phase[mine], values[mine], color=colours[i % len(colours)], lw=1.0, label=ROMAN[i] if i < len(ROMAN) else str(rep + 1))
+
+
+def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], title: str, path: Path) -> Path:
+    """The MC-Inverse paper's Figs 9 and 12: each joint of ``joints`` (columns) per method (rows)
+    against the time within the repetition, one line per repetition (I, II, ...), so a method
+    that repeats itself draws one line [rad]."""
+    colours = plt.get_cmap("tab10").colors
+    fig, axes = plt.subplots(len(samples), len(joints), figsize=(2.1 * len(joints), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
+    for row, (method, sample) in zip(axes, samples.items()):
+        for ax, joint in zip(row, joints):
+            _per_repetition(ax, sample, f"position.{joint}", colours)
+            ax.tick_params(labelsize=6)
+        row[0].set_ylabel(method, fontsize=8)
+    for ax, joint in zip(axes[0], joints):
+        ax.set_title(joint.replace("_", " "), fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("t in repetition [s]", fontsize=7)
+    axes[0, -1].legend(fontsize=6, title="rep", title_fontsize=6, loc="best")
+    fig.suptitle(f"{title} [rad]; one line per repetition", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str], title: str, path: Path) -> Path:
+    """The MC-Inverse paper's Figs 10, 13 and 16: each hand's arm angle psi (columns) per method
+    (rows) against the time within the repetition, one line per repetition [rad]."""
+    colours = plt.get_cmap("tab10").colors
+    fig, axes = plt.subplots(len(samples), len(hands), figsize=(5 * len(hands), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
+    for row, (method, sample) in zip(axes, samples.items()):
+        for ax, hand in zip(row, hands):
+            _per_repetition(ax, sample, f"arm_angle_rad.{hand}", colours)
+            ax.set_ylabel(f"{method}\n{hand} psi", fontsize=8)
+            ax.tick_params(labelsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("t in repetition [s]", fontsize=8)
+    axes[0, -1].legend(fontsize=6, title="rep", title_fontsize=6, loc="best")
+    fig.suptitle(f"{title} [rad]; one line per repetition", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
     plt.close(fig)
     return path

@@ -294,14 +294,19 @@ def _check_reach(task: Task) -> None:
                 raise UnreachablePoseError(f"{task.where(f'waypoints.{name}')}: {reach.explain(T)}")
 
 
-def load_task(path: str | Path) -> Task:
-    """Read, validate and resolve a task file.
+def load_task(path: str | Path, repetitions: int | None = None) -> Task:
+    """Read, validate and resolve a task file; ``repetitions`` overrides the file's.
 
     Raises:
-        TaskFileError: with ``file:key`` and the cause, for any malformed or impossible content.
+        TaskFileError: with ``file:key`` and the cause, for any malformed or impossible content,
+            or a ``repetitions`` override below 1.
     """
     file = Path(path)
     text, spec = _parse(file)
+    if repetitions is not None:
+        if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
+            raise TaskFileError(f"{file}:repetitions: the override must be a positive integer, not {repetitions!r}")
+        spec = spec.model_copy(update={"repetitions": repetitions})
     robot_dir = (file.parent / spec.robot).resolve()
     try:
         robot = load_robot(robot_dir)

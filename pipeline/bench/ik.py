@@ -1,0 +1,262 @@
+"""``dualarm bench ik``: position-level IK of one arm, MC-Inverse against iterative solvers.
+
+Measured in one process, on the same random reachable poses of an arm chain: each pose is the
+forward kinematics of a configuration drawn uniformly within the joint limits (fixed seed), so
+every pose is reachable, and its arm angle psi is that configuration's (eq 1 of MC-Inverse).
+
+- MC-Inverse called singly: one Python call of :meth:`McInverse.solve` per pose (all 8
+  candidates); time per call.
+- MC-Inverse batched: :meth:`McInverse.solve_many` over all poses in one call, after one warm-up
+  call (the first builds the mapped Function); time per pose, the call's time divided by the
+  poses, over :data:`BATCH_REPEATS` calls. The poses go through mapped calls of a fixed chunk
+  (4096), so with few poses the padding dominates and the time per pose is overstated.
+- DLS-SVD (:class:`~pipeline.ik.dls.DlsSolver`, default settings: 1e-9 m / 1e-9 rad), TRAC-IK
+  (:class:`~pipeline.ik.baselines.TracIkSolver`, defaults) and PyBullet
+  (:class:`~pipeline.ik.baselines.PyBulletIkSolver`, defaults): one call per pose, seeded from the
+  original configuration plus N(0, :data:`SEED_NOISE_RAD`) noise clipped to the limits (fixed
+  seed, the same seeds for the three); time per call.
+
+Success: for MC-Inverse, the original configuration is among the valid candidates to
+:data:`MATCH_TOLERANCE_RAD` in every joint; for the others, the solver's own flag (``converged``,
+or ``ok``, which for the baselines is already confirmed by the project's FK).
+
+Never used by the test suite: wall-clock numbers depend on the machine.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from pipeline.model.robot import Robot
+from pipeline.quiet import c_output_silenced
+
+if TYPE_CHECKING:
+    from pipeline.ik.mc_inverse import McInverse
+
+#: Row names, in the order of :func:`bench_ik`'s rows.
+MC_SINGLE = "MC-Inverse, single"
+MC_BATCHED = "MC-Inverse, batched"
+DLS = "DLS-SVD"
+TRAC_IK = "TRAC-IK"
+PYBULLET = "PyBullet"
+
+#: Largest joint difference between a candidate and the original configuration that counts as
+#: finding it [rad].
+MATCH_TOLERANCE_RAD = 1e-9
+#: Standard deviation of the noise added to the original configuration to seed the iterative
+#: solvers [rad].
+SEED_NOISE_RAD = 0.1
+#: Timed calls of the batched MC-Inverse over all poses (after the warm-up).
+BATCH_REPEATS = 5
+#: Targets of the issue: batched MC-Inverse time per pose [s] and DLS-SVD success rate [1].
+TARGET_BATCHED_S = 5e-6
+TARGET_DLS_SUCCESS = 0.999
+
+#: ``progress(name, done, total)``: ``done`` of ``total`` poses of the solver ``name`` measured.
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class IkBenchRow:
+    """One measured solver.
+
+    Attributes:
+        name: what was measured (one of :data:`MC_SINGLE`, :data:`MC_BATCHED`, :data:`DLS`,
+            :data:`TRAC_IK`, :data:`PYBULLET`).
+        poses: poses solved.
+        mean_s: mean time per pose [s].
+        median_s: median time per pose [s] (for the batched row: median over the repeated calls
+            of the call's time divided by the poses).
+        success_rate: fraction of the poses solved [1], in [0, 1].
+        note: how the row was measured and what its failures were.
+    """
+
+    name: str
+    poses: int
+    mean_s: float
+    median_s: float
+    success_rate: float
+    note: str = ""
+
+
+def ratios(rows: Sequence[IkBenchRow], reference_name: str = MC_BATCHED) -> dict[str, float]:
+    """Mean time per pose of every row divided by that of the row ``reference_name``.
+
+    Args:
+        rows: rows of :func:`bench_ik`.
+        reference_name: the row the others are compared with (default: batched MC-Inverse).
+
+    Returns:
+        Row name -> mean-time ratio [1] (> 1: slower than the reference).
+
+    Raises:
+        KeyError: no row named ``reference_name``.
+    """
+    reference = {r.name: r for r in rows}[reference_name].mean_s
+    return {r.name: r.mean_s / reference for r in rows}
+
+
+def reachable_poses(robot: Robot, arm: str, poses: int, seed: int, mc: McInverse | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random reachable hand poses of the arm chain of hand ``arm``.
+
+    Args:
+        robot: the robot.
+        arm: hand of the chain, ``left`` or ``right``.
+        poses: number of poses.
+        seed: seed of the configurations.
+        mc: the arm's :class:`~pipeline.ik.mc_inverse.McInverse` if already built (for psi).
+
+    Returns:
+        The configurations Q (N, 7) [rad] drawn uniformly within the limits, their hand poses
+        (N, 4, 4) in the chain base frame [m], and their arm angles psi (N,) [rad].
+    """
+    from pipeline.ik.mc_inverse import McInverse
+    from pipeline.model.check import random_configurations
+    from pipeline.model.kinematics import ChainKinematics
+
+    chain = robot.hand_chain(arm)
+    Q = random_configurations(robot, chain, poses, seed)
+    T = ChainKinematics.of(chain).poses(Q)
+    psi = (mc or McInverse.of(chain)).kinematics.arm_angles(Q)
+    return Q, T, psi
+
+
+def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, seed: int = 0, progress: Progress | None = None) -> list[IkBenchRow]:
+    """Time and success rate of MC-Inverse (single and batched), DLS-SVD, TRAC-IK and PyBullet on
+    the same random reachable poses of one arm (see the module docstring).
+
+    Args:
+        robot: the robot, or its directory (as for :func:`~pipeline.model.robot.load_robot`).
+        arm: hand whose arm chain is solved, ``left`` or ``right``.
+        poses: number of random poses (a few tens for a quick check).
+        seed: seed of the configurations; the seeds' noise uses ``seed + 1``.
+        progress: called as ``progress(name, done, total)`` when a solver starts, about every 1 %
+            of the poses, and when it ends.
+
+    Returns:
+        Rows in the order MC-Inverse single, MC-Inverse batched, DLS-SVD, TRAC-IK, PyBullet.
+
+    Raises:
+        ValueError: ``poses`` below 1.
+        RobotModelError: no hand ``arm``.
+        NotSRSError: the arm chain is not S-R-S.
+    """
+    from pipeline.ik.baselines import PyBulletIkSolver, TracIkSolver
+    from pipeline.ik.batched import BatchedCandidates
+    from pipeline.ik.dls import DlsSolver
+    from pipeline.ik.mc_inverse import McInverse
+    from pipeline.model.robot import load_robot
+
+    if isinstance(poses, bool) or not isinstance(poses, int) or poses < 1:
+        raise ValueError(f"poses: must be a positive integer, got {poses!r}")
+    if not isinstance(robot, Robot):
+        robot = load_robot(robot)
+    chain = robot.hand_chain(arm)
+    mc = McInverse.of(chain)
+    Q, T, psi = reachable_poses(robot, arm, poses, seed, mc)
+    lower, upper = robot.lower_upper(chain.joint_names)
+    seeds = np.clip(Q + np.random.default_rng(seed + 1).normal(0.0, SEED_NOISE_RAD, Q.shape), lower, upper)
+    every = max(1, poses // 100)
+    report = progress or (lambda name, done, total: None)
+
+    def per_pose(name: str, solve: Callable[[int], bool]) -> IkBenchRow:
+        """Time ``solve(i)`` (returning success) for every pose, one perf_counter pair per call."""
+        times, ok = np.empty(poses), np.zeros(poses, dtype=bool)
+        report(name, 0, poses)
+        for i in range(poses):
+            start = time.perf_counter()
+            ok[i] = solve(i)
+            times[i] = time.perf_counter() - start
+            if (i + 1) % every == 0 or i + 1 == poses:
+                report(name, i + 1, poses)
+        return IkBenchRow(name, poses, float(times.mean()), float(np.median(times)), float(ok.mean()))
+
+    rows = []
+
+    # 1. MC-Inverse, one call per pose; the success test is outside the timed call.
+    solutions = []
+
+    def mc_single(i: int) -> bool:
+        solutions.append(mc.solve(T[i], psi[i]))
+        return True
+
+    mc.solve(T[0], psi[0])  # the Function's first call
+    row = per_pose(MC_SINGLE, mc_single)
+    distance = np.array([_closest(s.q, s.reason, q) for s, q in zip(solutions, Q)])
+    rows.append(replace(row, success_rate=float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note=_mc_note(distance)))
+    del solutions
+
+    # 2. MC-Inverse, all poses in one call.
+    report(MC_BATCHED, 0, poses)
+    mc.solve_many(T, psi)  # warm-up: builds the mapped Function
+    calls = []
+    for _ in range(BATCH_REPEATS):
+        start = time.perf_counter()
+        q_all, reason_all = mc.solve_many(T, psi)
+        calls.append((time.perf_counter() - start) / poses)
+    report(MC_BATCHED, poses, poses)
+    distance = np.array([_closest(c, r, q) for c, r, q in zip(q_all, reason_all, Q)])
+    note = f"{_mc_note(distance)}; best of {BATCH_REPEATS} calls {min(calls) * 1e6:.2f} µs/pose"
+    chunk = BatchedCandidates.chunk
+    if poses % chunk:
+        note += f"; mapped calls of {chunk} poses, so {chunk - poses % chunk} padding poses were evaluated too"
+    rows.append(IkBenchRow(MC_BATCHED, poses, float(np.mean(calls)), float(np.median(calls)), float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note))
+
+    # 3. Iterative solvers from perturbed seeds.
+    dls = DlsSolver.of(robot, chain.base, [chain.tip])
+    order = [dls.joint_names.index(name) for name in chain.joint_names]  # DLS q -> chain order (identity for an arm)
+    dls_seeds = np.empty_like(seeds)
+    dls_seeds[:, order] = seeds
+    iterations = []
+
+    def dls_solve(i: int) -> bool:
+        result = dls.solve([T[i]], dls_seeds[i])
+        iterations.append(result.iterations)
+        return result.converged
+
+    row = per_pose(DLS, dls_solve)
+    tolerances = f"{dls.settings.position_tolerance_m:g} m, {dls.settings.orientation_tolerance_rad:g} rad"
+    rows.append(replace(row, note=f"tolerances {tolerances}; median {np.median(iterations):.0f} iterations, at most {max(iterations)}"))
+
+    with c_output_silenced():  # TRAC-IK's C++ prints on construction
+        trac = TracIkSolver.of(robot, chain.base, chain.tip)
+    row = per_pose(TRAC_IK, lambda i: trac.solve(T[i], seeds[i]).ok)
+    rows.append(replace(row, note=f"timeout {trac.timeout_s * 1e3:g} ms, epsilon {trac.epsilon:g}, {trac.solve_type}; ok confirmed by FK"))
+
+    with c_output_silenced():  # PyBullet's banner
+        bullet = PyBulletIkSolver.of(robot, chain.base, chain.tip)
+    with bullet:
+        row = per_pose(PYBULLET, lambda i: bullet.solve(T[i], seeds[i]).ok)
+    rows.append(replace(row, note=f"{bullet.max_iterations} iterations max, tolerances {bullet.position_tolerance_m:g} m, {bullet.orientation_tolerance_rad:g} rad by FK"))
+    return rows
+
+
+def _closest(candidates: np.ndarray, reason: np.ndarray, q: np.ndarray) -> float:
+    """Largest joint difference [rad] between ``q`` (7,) and the closest valid row of
+    ``candidates`` (8, 7); inf when no candidate is valid."""
+    from pipeline.ik.mc_inverse import VALID
+
+    valid = candidates[reason == VALID]
+    return float(np.abs(valid - q).max(axis=1).min()) if valid.size else float("inf")
+
+
+def _mc_note(distance: np.ndarray) -> str:
+    """How MC-Inverse was scored and what its misses were, from the distances of :func:`_closest`."""
+    text = f"8 candidates; original q among the valid to {MATCH_TOLERANCE_RAD:g} rad"
+    missed = distance > MATCH_TOLERANCE_RAD
+    if missed.any():
+        none_valid = int(np.isinf(distance).sum())
+        off = distance[missed & np.isfinite(distance)]
+        text += f"; {int(missed.sum())} missed: {none_valid} with no valid candidate"
+        if off.size:
+            text += f", {off.size} off by up to {off.max():.2g} rad"
+    finite = distance[np.isfinite(distance)]
+    if finite.size:
+        text += f"; closest valid candidate at most {finite.max():.2g} rad off"
+    return text

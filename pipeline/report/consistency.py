@@ -1,0 +1,150 @@
+"""``dualarm consistency``: IK methods compared on one repeated task, repetition by repetition.
+
+The MC-Inverse paper's experiments (section V.B-V.D): the same task is repeated and each IK method
+is judged by whether its joints and arm angles repeat. Every method is run as a normal recorded
+run (``DIR/runs/<task>/<run-id>``); the comparison reads the runs back like any report and writes
+``DIR/consistency.csv`` (a row per method), ``DIR/consistency.md`` and the figures. A method that
+fails is a row with its error, not the end of the comparison.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.errors import DualarmError
+from pipeline.record.readback import RunData, read_run
+from pipeline.report import figures
+
+#: Columns of consistency.csv after ``method``: DESIGN.md's ``ik.*`` metric names without the prefix.
+COLUMNS = (
+    "rep_joint_deviation_max_rad",
+    "rep_arm_angle_deviation_max_rad",
+    "closure_error_max_rad",
+    "failed_reps",
+    "failures",
+    "max_joint_step_rad",
+    "position_error_max_m",
+    "solve_time_mean_s",
+    "solve_time_median_s",
+    "solve_time_total_s",
+)
+#: Methods compared by default: MC-Inverse and the paper's baselines, then the other pose-level solvers.
+DEFAULT_METHODS = ("mc-inverse", "trac-ik", "ikfast-style", "pybullet", "dls-svd")
+#: The MC-Inverse paper's figures that the joint and arm-angle plots of a task correspond to.
+PAPER_FIGURES = {"triangle": ("Fig. 9", "Fig. 10"), "circle": ("Fig. 12", "Fig. 13"), "carry_box": ("-", "Fig. 16")}
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """What :func:`run_consistency` wrote.
+
+    Attributes:
+        table: a row per method: ``method``, ``status``, ``error``, ``run`` and :data:`COLUMNS`.
+        csv: consistency.csv.
+        markdown: consistency.md.
+        figures: the PNG files.
+    """
+
+    table: pd.DataFrame
+    csv: Path
+    markdown: Path
+    figures: tuple[Path, ...]
+
+
+def run_consistency(
+    task_file: str | Path,
+    methods: Sequence[str],
+    out_dir: str | Path,
+    repetitions: int | None = None,
+    seed: int = 0,
+    progress: Callable[[str], None] | None = None,
+) -> Consistency:
+    """Run ``methods`` on ``task_file`` (``repetitions`` overriding the file's) and compare them.
+
+    Raises:
+        DualarmError: an unknown method or a malformed task, before anything runs.
+    """
+    from pipeline.run import IK_METHODS, run_task
+    from pipeline.tasks import load_task
+
+    unknown = [m for m in methods if m not in IK_METHODS]
+    if unknown or not methods:
+        raise DualarmError(f"unknown IK method '{(unknown or [''])[0]}' (methods: {', '.join(IK_METHODS)})")
+    task = load_task(task_file, repetitions)
+    out_dir = Path(out_dir)
+    runs_dir = out_dir / "runs"
+    rows, samples = [], {}
+    for method in methods:
+        if progress is not None:
+            progress(f"{task.name}: {method} ...")
+        before = set((runs_dir / task.name).glob("*")) if (runs_dir / task.name).exists() else set()
+        try:
+            run = read_run(run_task(task_file, ik=method, out_dir=runs_dir, seed=seed, repetitions=repetitions, command=["dualarm", "consistency", str(task_file), "--methods", method]))
+        except DualarmError as exc:
+            failed = sorted(set((runs_dir / task.name).glob("*")) - before)
+            rows.append({"method": method, "status": "failed", "error": str(exc), "run": str(failed[-1]) if failed else ""})
+            continue
+        rows.append(_row(method, run))
+        samples[method] = run["/ik/sample"]
+    table = pd.DataFrame(rows, columns=["method", "status", "error", "run", *COLUMNS])
+    written = _figures(task, samples, out_dir)
+    csv = _write(out_dir / "consistency.csv", table[["method", *COLUMNS, "status", "error", "run"]].to_csv(index=False))
+    markdown = _write(out_dir / "consistency.md", _markdown(task, table, written, repetitions))
+    return Consistency(table=table, csv=csv, markdown=markdown, figures=written)
+
+
+def _row(method: str, run: RunData) -> dict[str, object]:
+    metrics = {k.removeprefix("ik."): v for k, v in run.metrics.items() if k.startswith("ik.")}
+    return {"method": method, "status": run.status, "error": "", "run": str(run.directory), **{c: metrics.get(c, np.nan) for c in COLUMNS}}
+
+
+def _write(path: Path, text: str) -> Path:
+    """Write, then rename: a file that exists is complete."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f".{path.name}.partial")
+    partial.write_text(text)
+    os.replace(partial, path)
+    return path
+
+
+def _figures(task, samples: dict[str, pd.DataFrame], out_dir: Path) -> tuple[Path, ...]:
+    if not samples:
+        return ()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    joints_figure, angle_figure = PAPER_FIGURES.get(task.name, ("-", "-"))
+    written = []
+    for hand in task.spec.hands:
+        joints = list(task.robot.hand_chain(hand).joint_names)
+        title = f"{task.name}: {hand} arm joints per repetition" + (f" (cf. MC-Inverse {joints_figure})" if joints_figure != "-" else "")
+        written.append(figures.joints_per_repetition(samples, joints, title, out_dir / f"joints_{hand}.png"))
+    title = f"{task.name}: arm angle per repetition" + (f" (cf. MC-Inverse {angle_figure})" if angle_figure != "-" else "")
+    written.append(figures.arm_angle_per_repetition(samples, list(task.spec.hands), title, out_dir / "arm_angle.png"))
+    return tuple(written)
+
+
+def _markdown(task, table: pd.DataFrame, written: tuple[Path, ...], repetitions: int | None) -> str:
+    reps = repetitions or task.spec.repetitions
+    lines = [f"# Consistency: {task.name}, {reps} repetitions", "", f"Task file `{task.file}`. Rep 0 is the reference; deviations compare samples at the same place of every repetition where both succeeded.", ""]
+    header = ["method", *COLUMNS]
+    lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for _, row in table.iterrows():
+        if row["status"] != "complete":
+            lines.append(f"| {row['method']} | failed: {row['error']} |" + " |" * (len(COLUMNS) - 1))
+            continue
+        lines.append("| " + " | ".join([row["method"], *(_cell(row[c]) for c in COLUMNS)]) + " |")
+    lines += ["", "Runs:", ""] + [f"- {row['method']}: `{row['run']}`" for _, row in table.iterrows() if row["run"]]
+    if written:
+        lines += ["", "Figures:", ""] + [f"![{p.stem}]({p.name})" for p in written]
+    return "\n".join(lines) + "\n"
+
+
+def _cell(value: float) -> str:
+    if pd.isna(value):
+        return "-"
+    return f"{value:.0f}" if float(value).is_integer() and abs(value) < 1e6 else f"{value:.3g}"
