@@ -234,6 +234,44 @@ def ik_srs(
     out.print(f"joints: {', '.join(chain.joint_names)}; {sum(c['valid'] for c in candidates)} of 8 valid", markup=False)
 
 
+@bench_app.command("ik")
+@user_errors
+def bench_ik_command(
+    robot_dir: Annotated[Path, typer.Argument(help="Robot directory.")] = Path("robots/humanoid"),
+    arm: Annotated[str, typer.Option(help="Arm whose chain is solved: left or right.")] = "left",
+    poses: Annotated[int, typer.Option(min=1, help="Random reachable poses.")] = 10_000,
+    seed: Annotated[int, typer.Option(help="Seed of the random configurations.")] = 0,
+) -> None:
+    """MC-Inverse time per pose called singly and batched (all 8 candidates), and DLS-SVD, TRAC-IK
+    and PyBullet IK time and success rate, on the same random reachable poses, with ratios."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from pipeline.bench.ik import MC_BATCHED, TARGET_BATCHED_S, TARGET_DLS_SUCCESS, bench_ik, ratios
+    from pipeline.model.robot import load_robot
+
+    model = load_robot(robot_dir)
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True) as bar:
+        tasks: dict[str, object] = {}
+
+        def progress(name: str, done: int, total: int) -> None:
+            if name not in tasks:
+                tasks[name] = bar.add_task(name, total=total)
+            bar.update(tasks[name], completed=done)
+
+        rows = bench_ik(model, arm, poses, seed, progress)
+    ratio = ratios(rows)
+    table = Table(title=f"IK of the {arm} arm of {model.name} on {poses} random reachable poses (seed {seed})", title_justify="left")
+    for column in ("solver", "mean µs/pose", "median µs/pose", "success", f"time / {MC_BATCHED}"):
+        table.add_column(column, justify="left" if column == "solver" else "right")
+    for r in rows:
+        table.add_row(r.name, f"{r.mean_s * 1e6:.2f}", f"{r.median_s * 1e6:.2f}", f"{r.success_rate:.2%}", f"{ratio[r.name]:.1f}x")
+    out.print(table)
+    for r in rows:
+        out.print(f"- {r.name}: {r.note}", markup=False, soft_wrap=True)
+    by_name = {r.name: r for r in rows}
+    out.print(f"targets: batched MC-Inverse <= {TARGET_BATCHED_S * 1e6:.0f} µs/pose ({by_name[MC_BATCHED].mean_s * 1e6:.2f}), DLS-SVD success >= {TARGET_DLS_SUCCESS:.1%} ({by_name['DLS-SVD'].success_rate:.2%})")
+
+
 @robot_app.command("check")
 @user_errors
 def robot_check(

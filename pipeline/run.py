@@ -129,9 +129,10 @@ def run_task(
     """Run ``task_file`` through ``stages`` and record it; returns the run directory.
 
     The task and the options are validated before anything is written: a malformed task leaves no
-    run behind. A stage that fails leaves a run marked ``failed`` and re-raises.
+    run behind. A stage that fails leaves a run marked ``failed`` and re-raises. ``repetitions``
+    overrides the task file's.
     """
-    task = load_task(task_file)
+    task = load_task(task_file, repetitions)
     chosen = resolve_stages(stages, ik)
     ik_settings, solve_ik = _ik_settings(task, ik, scheme, qp_backend, lvi_tolerance) if "ik" in chosen else ({}, None)
     np.random.seed(seed)

@@ -8,8 +8,8 @@ every pose is reachable, and its arm angle psi is that configuration's (eq 1 of 
   candidates); time per call.
 - MC-Inverse batched: :meth:`McInverse.solve_many` over all poses in one call, after one warm-up
   call (the first builds the mapped Function); time per pose, the call's time divided by the
-  poses, over :data:`BATCH_REPEATS` calls. The poses go through mapped calls of a fixed chunk
-  (4096), so with few poses the padding dominates and the time per pose is overstated.
+  poses, over :data:`BATCH_REPEATS` calls (mapped calls spread over the machine's cores, see
+  :mod:`pipeline.ik.batched`).
 - DLS-SVD (:class:`~pipeline.ik.dls.DlsSolver`, default settings: 1e-9 m / 1e-9 rad), TRAC-IK
   (:class:`~pipeline.ik.baselines.TracIkSolver`, defaults) and PyBullet
   (:class:`~pipeline.ik.baselines.PyBulletIkSolver`, defaults): one call per pose, seeded from the
@@ -148,7 +148,7 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
         NotSRSError: the arm chain is not S-R-S.
     """
     from pipeline.ik.baselines import PyBulletIkSolver, TracIkSolver
-    from pipeline.ik.batched import BatchedCandidates
+    from pipeline.ik.batched import THREADS, BatchedCandidates
     from pipeline.ik.dls import DlsSolver
     from pipeline.ik.mc_inverse import McInverse
     from pipeline.model.robot import load_robot
@@ -203,9 +203,7 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
     report(MC_BATCHED, poses, poses)
     distance = np.array([_closest(c, r, q) for c, r, q in zip(q_all, reason_all, Q)])
     note = f"{_mc_note(distance)}; best of {BATCH_REPEATS} calls {min(calls) * 1e6:.2f} µs/pose"
-    chunk = BatchedCandidates.chunk
-    if poses % chunk:
-        note += f"; mapped calls of {chunk} poses, so {chunk - poses % chunk} padding poses were evaluated too"
+    note += f"; mapped calls of {BatchedCandidates.chunk} poses on {THREADS} threads"
     rows.append(IkBenchRow(MC_BATCHED, poses, float(np.mean(calls)), float(np.median(calls)), float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note))
 
     # 3. Iterative solvers from perturbed seeds.

@@ -1,0 +1,68 @@
+"""Consistency metrics across repetitions, against deviations planted in a known path."""
+
+import numpy as np
+import pytest
+
+from pipeline.ik.joint_path import JointPath
+from pipeline.ik.mc_inverse import McInverse
+from pipeline.ik.mc_path import solve_mc_inverse
+from pipeline.ik.metrics import consistency_metrics
+from pipeline.model.kinematics import ChainKinematics
+from pipeline.paths import build_reference
+from pipeline.tasks import load_task
+from tests.conftest import TASKS
+
+
+@pytest.fixture(scope="module")
+def carry():
+    task = load_task(TASKS / "carry_box.toml", repetitions=3)
+    ref = build_reference(task)
+    return task, ref, solve_mc_inverse(task, ref)
+
+
+def _with(path: JointPath, q: np.ndarray, status: np.ndarray | None = None) -> JointPath:
+    fields = {f: getattr(path, f) for f in ("method", "joint_names", "t", "rep", "qd", "solve_time_s", "hand_error_m", "hands", "fixed")}
+    return JointPath(**fields, q=q, status=path.status if status is None else status)
+
+
+def test_planted_deviations_are_measured(carry):
+    """Repetition 2 moved at one sample by 0.3 rad in one joint, and repetition 1 failing at one
+    sample: the joint deviation is 0.3, the closure is untouched, one repetition failed."""
+    task, ref, path = carry
+    base = consistency_metrics(path, task, ref)
+    assert base["ik.rep_joint_deviation_max_rad"] <= 1e-9 and base["ik.failed_reps"] == 0
+    q = path.q.copy()
+    k = np.flatnonzero(ref.rep == 2)[100]
+    q[k, 3] += 0.3
+    status = path.status.copy()
+    status[np.flatnonzero(ref.rep == 1)[50]] = 1
+    m = consistency_metrics(_with(path, q, status), task, ref)
+    assert m["ik.rep_joint_deviation_max_rad"] == pytest.approx(0.3, abs=1e-9)
+    assert m["ik.failed_reps"] == 1
+    assert m["ik.closure_error_max_rad"] == pytest.approx(base["ik.closure_error_max_rad"], abs=1e-12)
+
+
+def test_arm_angle_deviation_is_the_self_motion_planted(carry):
+    """Repetition 1 of the left arm re-solved by MC-Inverse at psi + 0.2 rad (the same hand poses,
+    the arm turned about its shoulder-wrist line): the arm-angle deviation is 0.2 rad."""
+    task, ref, path = carry
+    chain = task.robot.hand_chain("left")
+    columns = [path.joint_names.index(n) for n in chain.joint_names]
+    solver = McInverse.of(chain)
+    rep1 = np.flatnonzero(ref.rep == 1)
+    arm_q = path.q[:, columns]
+    hand = ChainKinematics.of(chain).poses(arm_q[rep1])
+    psi = solver.kinematics.arm_angles(arm_q[rep1])
+    candidates, reasons = solver.solve_many(hand, psi + 0.2)
+    branch = np.argmin(np.abs(solver.solve_many(hand[:1], psi[:1])[0][0] - arm_q[rep1[0]]).max(axis=1))
+    assert (reasons[:, branch] == 0).all()
+    q = path.q.copy()
+    q[np.ix_(rep1, columns)] = candidates[:, branch]
+    m = consistency_metrics(_with(path, q), task, ref)
+    assert m["ik.rep_arm_angle_deviation_max_rad"] == pytest.approx(0.2, abs=1e-9)
+
+
+def test_single_repetition_has_no_consistency_metrics():
+    task = load_task(TASKS / "carry_box.toml", repetitions=1)
+    ref = build_reference(task)
+    assert consistency_metrics(solve_mc_inverse(task, ref), task, ref) == {}
