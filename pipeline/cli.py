@@ -116,16 +116,16 @@ def report(
 @user_errors
 def consistency(
     task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
-    methods: Annotated[str, typer.Option(help="Comma-separated IK methods to compare.")] = "mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd",
+    methods: Annotated[Optional[str], typer.Option(help="Comma-separated IK methods to compare (default: mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd,tvgdd,pinv).")] = None,
     reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
     out_dir: Annotated[Optional[Path], typer.Option("--out", help="Output directory (default consistency/<task>).")] = None,
     seed: Annotated[int, typer.Option(help="Random seed, recorded in each run's manifest.")] = 0,
 ) -> None:
     """Run each IK method on a repeated task as a recorded run and compare repetition by
     repetition: consistency.csv, consistency.md and figures; prints the table and the directory."""
-    from pipeline.report.consistency import run_consistency
+    from pipeline.report.consistency import DEFAULT_METHODS, run_consistency
 
-    chosen = [m.strip() for m in methods.split(",") if m.strip()]
+    chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else list(DEFAULT_METHODS)
     directory = out_dir or Path("consistency") / task.stem
     with err.status("consistency ...") as status:
         result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: status.update(text))

@@ -190,7 +190,6 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
     row = per_pose(MC_SINGLE, mc_single)
     distance = np.array([_closest(s.q, s.reason, q) for s, q in zip(solutions, Q)])
     rows.append(replace(row, success_rate=float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note=_mc_note(distance)))
-    del solutions
 
     # 2. MC-Inverse, all poses in one call.
     report(MC_BATCHED, 0, poses)

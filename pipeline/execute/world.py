@@ -7,7 +7,7 @@ poses in single precision (about 1e-7 m), which bounds every comparison against 
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 

@@ -46,8 +46,7 @@ from pipeline.ik.mc_inverse import (
     McInverse,
     McSolution,
 )
-from pipeline.ik.subproblems import euler, into_limits, rotate, rotation, turn
-from pipeline.model.kinematics import chain_frames
+from pipeline.ik.subproblems import euler, into_limits, rotate, rotation, subproblem2, zero_axes
 from pipeline.model.robot import Chain
 from pipeline.model.srs import SrsKinematics
 
@@ -59,17 +58,6 @@ FREE_JOINT = 2
 DEFAULT_RESOLUTION_RAD = 0.01
 
 
-def _zero_configuration(chain: Chain) -> tuple[list[np.ndarray], np.ndarray]:
-    """Joint axes k_i at q = 0 in the chain base frame (unit, (3,) each) and the tip rotation at
-    q = 0 (3x3), as McInverse.of derives them."""
-    movable = [j for j in chain.joints if j.movable]
-    frames = chain_frames(chain)
-    zero = cs.Function("zero", [frames.q], [*frames.before, frames.tip])(np.zeros(len(movable)))
-    zero = [np.asarray(T) for T in zero]
-    k = [zero[i][:3, :3] @ np.asarray(j.axis, dtype=float) for i, j in enumerate(movable)]
-    return k, zero[-1][:3, :3]
-
-
 def _free_grid(lower: float, upper: float, resolution: float) -> np.ndarray:
     """Values of the free joint from ``lower`` to ``upper`` [rad], both included, evenly spaced at
     most ``resolution`` [rad] apart (+-pi for an unlimited joint)."""
@@ -78,34 +66,6 @@ def _free_grid(lower: float, upper: float, resolution: float) -> np.ndarray:
     if hi <= lo:
         return np.array([lo])
     return np.linspace(lo, hi, int(math.ceil((hi - lo) / resolution - 1e-9)) + 1)
-
-
-def _subproblem2(k1: np.ndarray, k2: np.ndarray, v, u):
-    """Paden-Kahan sub-problem 2: exp(k1 t1) exp(k2 t2) v = u for unit axes k1, k2 through one
-    point (the shoulder), |u| = |v|, general axes (k1 . k2 may be any value but +-1).
-
-    The intermediate vector c = exp(k2 t2) v = exp(-k1 t1) u keeps v's component along k2 and u's
-    along k1: c = a k1 + b k2 + gamma (k1 x k2), with gamma^2 = (|v|^2 - |a k1 + b k2|^2) / |k1 x k2|^2.
-
-    Returns:
-        ([(t1, t2) for gamma >= 0, (t1, t2) for gamma <= 0], gamma^2 / |v|^2 (negative: no
-        solution), |gamma| |k1 x k2| / |v| (the sine of c from the k1-k2 plane: 0 where the two
-        roots merge)).
-    """
-    c12 = float(k1 @ k2)
-    n = np.cross(k1, k2)
-    n2 = float(n @ n)  # 1 - c12^2
-    ku, kv = cs.dot(k1, u), cs.dot(k2, v)
-    a = (ku - c12 * kv) / n2
-    b = (kv - c12 * ku) / n2
-    vv = cs.dot(v, v)
-    gamma2 = (vv - a**2 - b**2 - 2 * a * b * c12) / n2
-    gamma = cs.sqrt(cs.fmax(gamma2, 0))
-    roots = []
-    for sign in (1.0, -1.0):
-        c = a * k1 + b * k2 + sign * gamma * n
-        roots.append((turn(k1, c, u), turn(k2, v, c)))  # two sub-problem 1: c -> u about k1, v -> c about k2
-    return roots, gamma2 * n2 / vv, gamma * math.sqrt(n2) / cs.sqrt(vv)
 
 
 def _candidates(kin: SrsKinematics, k: list[np.ndarray], tip0: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> cs.Function:
@@ -135,7 +95,7 @@ def _candidates(kin: SrsKinematics, k: list[np.ndarray], tip0: np.ndarray, lower
         # S -> W with the shoulder at zero and theta3, theta4 applied
         v = rotate(a3, c3, s3, cs.SX(E0 - S) + rotate(a4, c4, s4, cs.SX(W0 - E0)))
         # Paden-Kahan sub-problem 2: exp(k1 t1) exp(k2 t2) v = W - S
-        shoulders, gamma2, s_gamma = _subproblem2(k[0], k[1], v, sw)
+        shoulders, gamma2, s_gamma = subproblem2(k[0], k[1], v, sw)
         out_of_reach = cs.logic_or(out_of_reach_elbow, gamma2 < -REACH_SLACK)
         # t1 undefined with W on axis 1, t2 with v on axis 2; the two roots merge at gamma = 0
         s_axes = cs.fmin(cs.norm_2(cs.cross(k[0], sw)) / d, cs.norm_2(cs.cross(k[1], v)) / cs.norm_2(v))
@@ -196,7 +156,7 @@ class IkfastStyle:
         if not resolution_rad > 0:
             raise ValueError(f"resolution_rad must be positive, got {resolution_rad}")
         mc = McInverse.of(chain)  # validates the chain
-        k, tip0 = _zero_configuration(chain)
+        k, tip0 = zero_axes(chain)
         return cls(
             kinematics=mc.kinematics,
             lower=mc.lower,

@@ -38,8 +38,7 @@ import numpy as np
 
 from pipeline.errors import NotSRSError
 from pipeline.ik.batched import BatchedCandidates
-from pipeline.ik.subproblems import euler, into_limits, rotate, rotation, triad
-from pipeline.model.kinematics import chain_frames
+from pipeline.ik.subproblems import euler, into_limits, rotate, rotation, triad, zero_axes
 from pipeline.model.robot import Chain
 from pipeline.model.srs import SrsKinematics
 
@@ -93,15 +92,11 @@ class McInverse:
         kin = SrsKinematics.of(chain, vertical)
         geo = kin.geometry
         movable = [j for j in chain.joints if j.movable]
-        frames = chain_frames(chain)
-        zero = cs.Function("zero", [frames.q], [*frames.before, frames.after[3], frames.tip])(np.zeros(7))
-        zero = [np.asarray(T) for T in zero]
-        k = [zero[i][:3, :3] @ np.asarray(j.axis) for i, j in enumerate(movable)]  # axes at q = 0
+        k, tip0 = zero_axes(chain)  # axes and tip rotation at q = 0
         for a, b in ((0, 1), (1, 2), (4, 5), (5, 6)):
             if abs(k[a] @ k[b]) > PERPENDICULAR_COSINE:
                 raise NotSRSError(f"chain '{chain.name}': the axes of {movable[a].name} and {movable[b].name} are not perpendicular, which MC-Inverse needs")
         S, E0, W0 = (np.asarray(x).ravel() for x in kin.points(np.zeros(7)))
-        tip0 = zero[-1][:3, :3]
         lower = np.array([j.lower for j in movable])
         upper = np.array([j.upper for j in movable])
 

@@ -3,9 +3,11 @@
 Zou, Min, Xu's consistency argument (section III.B, V): when the arm angle psi is a function of
 where the hand is on the task, and not of how it got there, and the same solution branch is kept
 throughout, then every repetition of a path gives the same joints. Here psi follows the task's
-``[arm_angle]`` table (the initial configuration's psi held, a constant, or a schedule over the
-time within a repetition). The branch (elbow, shoulder and wrist root of the 8 candidates) is
-the one nearest the initial configuration at the first sample, and it is kept. A sample where
+``[arm_angle]`` table (the initial configuration's psi held, a constant, a schedule over the
+time within a repetition, or ``auto``: the least-travel profile within the limits found over the
+first repetition, see :func:`_auto`). The branch (elbow, shoulder and wrist root of the 8
+candidates) is the one nearest the initial configuration at the first sample (``auto`` picks it
+with the profile), and it is kept. A sample where
 that branch is invalid, or where a joint moves more than ``max_joint_step_rad`` between samples,
 fails the stage with the sample, the time and the joint named; nothing is silently swapped.
 

@@ -2,15 +2,21 @@
 
 Rotations are products of exponentials exp([k] angle) about axes k given at the zero
 configuration (see :mod:`pipeline.ik.mc_inverse`). Paden-Kahan sub-problem 1 turns one vector onto
-another about one axis; :func:`euler` solves three consecutive perpendicular axes (MC-Inverse
+another about one axis, :func:`subproblem2` one vector onto another by two rotations about
+intersecting axes; :func:`euler` solves three consecutive perpendicular axes (MC-Inverse
 sub-problems 2 and 3, eqs 9-10 for ZYZ axes); :func:`into_limits` moves an angle by 2 pi into
 limits that reach past +-pi.
 """
 
 from __future__ import annotations
 
+import math
+
 import casadi as cs
 import numpy as np
+
+from pipeline.model.kinematics import chain_frames
+from pipeline.model.robot import Chain
 
 
 def hat(k: np.ndarray) -> np.ndarray:
@@ -70,3 +76,42 @@ def triad(x, y):
     y = y - cs.dot(y, e1) * e1
     e2 = y / cs.norm_2(y)
     return cs.horzcat(e1, e2, cs.cross(e1, e2))
+
+
+def subproblem2(k1: np.ndarray, k2: np.ndarray, v, u):
+    """Paden-Kahan sub-problem 2: exp(k1 t1) exp(k2 t2) v = u for unit axes k1, k2 through one
+    point (the shoulder), |u| = |v|, general axes (k1 . k2 may be any value but +-1).
+
+    The intermediate vector c = exp(k2 t2) v = exp(-k1 t1) u keeps v's component along k2 and u's
+    along k1: c = a k1 + b k2 + gamma (k1 x k2), with gamma^2 = (|v|^2 - |a k1 + b k2|^2) / |k1 x k2|^2.
+
+    Returns:
+        ([(t1, t2) for gamma >= 0, (t1, t2) for gamma <= 0], gamma^2 / |v|^2 (negative: no
+        solution), |gamma| |k1 x k2| / |v| (the sine of c from the k1-k2 plane: 0 where the two
+        roots merge)).
+    """
+    c12 = float(k1 @ k2)
+    n = np.cross(k1, k2)
+    n2 = float(n @ n)  # 1 - c12^2
+    ku, kv = cs.dot(k1, u), cs.dot(k2, v)
+    a = (ku - c12 * kv) / n2
+    b = (kv - c12 * ku) / n2
+    vv = cs.dot(v, v)
+    gamma2 = (vv - a**2 - b**2 - 2 * a * b * c12) / n2
+    gamma = cs.sqrt(cs.fmax(gamma2, 0))
+    roots = []
+    for sign in (1.0, -1.0):
+        c = a * k1 + b * k2 + sign * gamma * n
+        roots.append((turn(k1, c, u), turn(k2, v, c)))  # two sub-problem 1: c -> u about k1, v -> c about k2
+    return roots, gamma2 * n2 / vv, gamma * math.sqrt(n2) / cs.sqrt(vv)
+
+
+def zero_axes(chain: Chain) -> tuple[list[np.ndarray], np.ndarray]:
+    """Joint axes k_i at q = 0 in the chain base frame (unit, (3,) each) and the tip rotation at
+    q = 0 (3x3)."""
+    movable = [j for j in chain.joints if j.movable]
+    frames = chain_frames(chain)
+    zero = cs.Function("zero", [frames.q], [*frames.before, frames.tip])(np.zeros(len(movable)))
+    zero = [np.asarray(T) for T in zero]
+    k = [zero[i][:3, :3] @ np.asarray(j.axis, dtype=float) for i, j in enumerate(movable)]
+    return k, zero[-1][:3, :3]

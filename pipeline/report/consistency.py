@@ -34,8 +34,9 @@ COLUMNS = (
     "solve_time_median_s",
     "solve_time_total_s",
 )
-#: Methods compared by default: MC-Inverse and the paper's baselines, then the other pose-level solvers.
-DEFAULT_METHODS = ("mc-inverse", "trac-ik", "ikfast-style", "pybullet", "dls-svd")
+#: Methods compared by default: MC-Inverse and the paper's baselines, the other pose-level solvers,
+#: then the velocity-level ones of TV-GDD.
+DEFAULT_METHODS = ("mc-inverse", "trac-ik", "ikfast-style", "pybullet", "dls-svd", "tvgdd", "pinv")
 #: The MC-Inverse paper's figures that the joint and arm-angle plots of a task correspond to.
 PAPER_FIGURES = {"triangle": ("Fig. 9", "Fig. 10"), "circle": ("Fig. 12", "Fig. 13"), "carry_box": ("-", "Fig. 16")}
 

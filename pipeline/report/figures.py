@@ -100,6 +100,8 @@ def bound_profiles(duration_s: float, path: Path) -> Path:
     return path
 
 
+#: Smallest y range of a per-repetition plot [rad].
+MIN_SPAN_RAD = 0.1
 #: Repetition labels, as in the MC-Inverse paper's figures.
 ROMAN = ("I", "II", "III", "IV", "V", "VI", "VII", "VIII", "IX", "X")
 
@@ -112,6 +114,10 @@ def _per_repetition(ax, sample: pd.DataFrame, column: str, colours) -> None:
     for i, rep in enumerate(np.unique(sample["rep"])):
         mine = sample["rep"].to_numpy() == rep
         ax.plot(phase[mine], values[mine], color=colours[i % len(colours)], lw=1.0, label=ROMAN[i] if i < len(ROMAN) else str(rep + 1))
+    low, high = np.nanmin(values, initial=np.inf), np.nanmax(values, initial=-np.inf)
+    if np.isfinite(low) and high - low < MIN_SPAN_RAD:  # a constant curve is drawn flat, not as rounding noise
+        middle = (low + high) / 2
+        ax.set_ylim(middle - MIN_SPAN_RAD / 2, middle + MIN_SPAN_RAD / 2)
 
 
 def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], title: str, path: Path) -> Path:
@@ -141,7 +147,7 @@ def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str],
     """The MC-Inverse paper's Figs 10, 13 and 16: each hand's arm angle psi (columns) per method
     (rows) against the time within the repetition, one line per repetition [rad]."""
     colours = plt.get_cmap("tab10").colors
-    fig, axes = plt.subplots(len(samples), len(hands), figsize=(5 * len(hands), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
+    fig, axes = plt.subplots(len(samples), len(hands), figsize=(max(7.5, 5 * len(hands)), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
     for row, (method, sample) in zip(axes, samples.items()):
         for ax, hand in zip(row, hands):
             _per_repetition(ax, sample, f"arm_angle_rad.{hand}", colours)
