@@ -120,6 +120,15 @@ def _per_repetition(ax, sample: pd.DataFrame, column: str, colours) -> None:
         ax.set_ylim(middle - MIN_SPAN_RAD / 2, middle + MIN_SPAN_RAD / 2)
 
 
+def _finish_per_repetition(fig, axes, title: str, path: Path) -> Path:
+    axes[0, -1].legend(fontsize=6, title="rep", title_fontsize=6, loc="best")
+    fig.suptitle(f"{title} [rad]; one line per repetition", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
 def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], title: str, path: Path) -> Path:
     """The MC-Inverse paper's Figs 9 and 12: each joint of ``joints`` (columns) per method (rows)
     against the time within the repetition, one line per repetition (I, II, ...), so a method
@@ -135,12 +144,7 @@ def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], t
         ax.set_title(joint.replace("_", " "), fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("t in repetition [s]", fontsize=7)
-    axes[0, -1].legend(fontsize=6, title="rep", title_fontsize=6, loc="best")
-    fig.suptitle(f"{title} [rad]; one line per repetition", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _finish_per_repetition(fig, axes, title, path)
 
 
 def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str], title: str, path: Path) -> Path:
@@ -155,9 +159,4 @@ def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str],
             ax.tick_params(labelsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("t in repetition [s]", fontsize=8)
-    axes[0, -1].legend(fontsize=6, title="rep", title_fontsize=6, loc="best")
-    fig.suptitle(f"{title} [rad]; one line per repetition", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _finish_per_repetition(fig, axes, title, path)

@@ -4,13 +4,11 @@ kinematics (adam-robotics), reachability per free value, nearest-solution select
 import numpy as np
 import pytest
 
-from pipeline.errors import NotSRSError
 from pipeline.ik.ikfast_style import IkfastStyle
 from pipeline.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID
 from pipeline.model.check import adam_poses, pose_errors, random_configurations
 from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.robot import Chain, robot_from_urdf
-from pipeline.model.urdf import JointSpec
+from pipeline.model.robot import robot_from_urdf
 
 #: Largest joint difference [rad] between IK(FK(q)) and q. The KUKA URDF writes pi/2 as
 #: 1.57079632679, so its axes meet and are perpendicular only to ~5e-12; near a wrist singularity
@@ -143,20 +141,3 @@ def test_out_of_reach_pose_keeps_the_seed(humanoid):
     result = ik.nearest(far, seed)
     assert not result.ok
     assert np.array_equal(result.q, seed) and np.isnan(result.free_value)
-
-
-def test_non_perpendicular_shoulder_axes_are_refused(humanoid):
-    chain = humanoid.chain("left_arm")
-    joints = list(chain.joints)
-    i = next(k for k, j in enumerate(joints) if j.name == "left_shoulder_pitch")
-    j = joints[i]
-    tilted = np.array([0.0, 1.0, 0.2]) / np.linalg.norm([0.0, 1.0, 0.2])
-    joints[i] = JointSpec(**{**j.__dict__, "axis": tuple(tilted)})
-    broken = Chain(name="tilted", base=chain.base, tip=chain.tip, joints=tuple(joints))
-    with pytest.raises(NotSRSError, match="left_shoulder_yaw and left_shoulder_pitch are not perpendicular"):
-        IkfastStyle.of(broken)
-
-
-def test_waist_and_arm_is_not_srs(humanoid):
-    with pytest.raises(NotSRSError, match="10 movable joints"):
-        IkfastStyle.of(humanoid.chain_between("pelvis", "left_hand"))

@@ -5,6 +5,7 @@ import pytest
 
 from pipeline.errors import NotSRSError
 from pipeline.execute.world import load_pybullet_robot
+from pipeline.ik.ikfast_style import IkfastStyle
 from pipeline.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID, McInverse
 from pipeline.model.check import pose_errors
 from pipeline.model.kinematics import ChainKinematics
@@ -96,7 +97,8 @@ def test_any_srs_arm_the_kuka_iiwa(kuka_urdf, seed=4):
     assert position.max() <= 1e-9 and rotation.max() <= 1e-9
 
 
-def test_non_perpendicular_shoulder_axes_are_refused(humanoid):
+@pytest.mark.parametrize("solver", [McInverse, IkfastStyle])
+def test_non_perpendicular_shoulder_axes_are_refused(humanoid, solver):
     chain = humanoid.chain("left_arm")
     joints = list(chain.joints)
     i = next(k for k, j in enumerate(joints) if j.name == "left_shoulder_pitch")
@@ -105,9 +107,10 @@ def test_non_perpendicular_shoulder_axes_are_refused(humanoid):
     joints[i] = JointSpec(**{**j.__dict__, "axis": tuple(tilted)})
     broken = Chain(name="tilted", base=chain.base, tip=chain.tip, joints=tuple(joints))
     with pytest.raises(NotSRSError, match="left_shoulder_yaw and left_shoulder_pitch are not perpendicular"):
-        McInverse.of(broken)
+        solver.of(broken)
 
 
-def test_waist_and_arm_is_not_srs(humanoid):
+@pytest.mark.parametrize("solver", [McInverse, IkfastStyle])
+def test_waist_and_arm_is_not_srs(humanoid, solver):
     with pytest.raises(NotSRSError, match="10 movable joints"):
-        McInverse.of(humanoid.chain_between("pelvis", "left_hand"))
+        solver.of(humanoid.chain_between("pelvis", "left_hand"))
