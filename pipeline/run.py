@@ -149,9 +149,10 @@ def run_task(
         metrics.update(path_metrics(reference))
         if solve_ik is not None:
             joint_path = solve_ik(reference)
-            recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names), arm_angles(joint_path, task))
+            angles = arm_angles(joint_path, task)
+            recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names), angles)
             metrics.update(ik_metrics(joint_path, task))
-            metrics.update(consistency_metrics(joint_path, task, reference))
+            metrics.update(consistency_metrics(joint_path, reference, angles))
         recorder.metrics(metrics, reference.duration_s)
     except BaseException as exc:
         message = str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}"

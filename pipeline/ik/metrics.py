@@ -57,9 +57,9 @@ def arm_angles(path: JointPath, task) -> dict[str, np.ndarray]:
     return angles
 
 
-def consistency_metrics(path: JointPath, task, reference: CartesianReference) -> dict[str, float]:
+def consistency_metrics(path: JointPath, reference: CartesianReference, angles: dict[str, np.ndarray]) -> dict[str, float]:
     """``ik.*`` consistency across repetitions (DESIGN.md; rep 0 is the reference), for a path of
-    two or more repetitions.
+    two or more repetitions, with the hands' arm angles ``angles`` (see :func:`arm_angles`) [rad].
 
     - ``failed_reps``: repetitions with a failed sample.
     - ``rep_joint_deviation_max_rad``: largest |q_r - q_0| between samples at the same place of
@@ -81,7 +81,6 @@ def consistency_metrics(path: JointPath, task, reference: CartesianReference) ->
     metrics = {"ik.failed_reps": float(sum(bool((path.status[path.rep == r] != 0).any()) for r in reps))}
     if a.size:
         metrics["ik.rep_joint_deviation_max_rad"] = float(np.abs(path.q[a] - path.q[b]).max())
-        angles = arm_angles(path, task)
         if angles:
             metrics["ik.rep_arm_angle_deviation_max_rad"] = float(max(np.abs(np.angle(np.exp(1j * (psi[a] - psi[b])))).max() for psi in angles.values()))
     ends = np.array([0, *[np.flatnonzero(path.rep == r)[-1] for r in reps]])

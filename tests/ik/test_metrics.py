@@ -6,7 +6,7 @@ import pytest
 from pipeline.ik.joint_path import JointPath
 from pipeline.ik.mc_inverse import McInverse
 from pipeline.ik.mc_path import solve_mc_inverse
-from pipeline.ik.metrics import consistency_metrics
+from pipeline.ik.metrics import arm_angles, consistency_metrics
 from pipeline.model.kinematics import ChainKinematics
 from pipeline.paths import build_reference
 from pipeline.tasks import load_task
@@ -29,14 +29,15 @@ def test_planted_deviations_are_measured(carry):
     """Repetition 2 moved at one sample by 0.3 rad in one joint, and repetition 1 failing at one
     sample: the joint deviation is 0.3, the closure is untouched, one repetition failed."""
     task, ref, path = carry
-    base = consistency_metrics(path, task, ref)
+    base = consistency_metrics(path, ref, arm_angles(path, task))
     assert base["ik.rep_joint_deviation_max_rad"] <= 1e-9 and base["ik.failed_reps"] == 0
     q = path.q.copy()
     k = np.flatnonzero(ref.rep == 2)[100]
     q[k, 3] += 0.3
     status = path.status.copy()
     status[np.flatnonzero(ref.rep == 1)[50]] = 1
-    m = consistency_metrics(_with(path, q, status), task, ref)
+    changed = _with(path, q, status)
+    m = consistency_metrics(changed, ref, arm_angles(changed, task))
     assert m["ik.rep_joint_deviation_max_rad"] == pytest.approx(0.3, abs=1e-9)
     assert m["ik.failed_reps"] == 1
     assert m["ik.closure_error_max_rad"] == pytest.approx(base["ik.closure_error_max_rad"], abs=1e-12)
@@ -58,11 +59,13 @@ def test_arm_angle_deviation_is_the_self_motion_planted(carry):
     assert (reasons[:, branch] == 0).all()
     q = path.q.copy()
     q[np.ix_(rep1, columns)] = candidates[:, branch]
-    m = consistency_metrics(_with(path, q), task, ref)
+    changed = _with(path, q)
+    m = consistency_metrics(changed, ref, arm_angles(changed, task))
     assert m["ik.rep_arm_angle_deviation_max_rad"] == pytest.approx(0.2, abs=1e-9)
 
 
 def test_single_repetition_has_no_consistency_metrics():
     task = load_task(TASKS / "carry_box.toml", repetitions=1)
     ref = build_reference(task)
-    assert consistency_metrics(solve_mc_inverse(task, ref), task, ref) == {}
+    path = solve_mc_inverse(task, ref)
+    assert consistency_metrics(path, ref, arm_angles(path, task)) == {}
