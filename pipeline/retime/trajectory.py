@@ -1,0 +1,52 @@
+"""``JointTrajectory``: joints over time, the output of the retime and smooth stages."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+
+from pipeline.arrays import frozen
+
+
+@dataclass(frozen=True)
+class JointTrajectory:
+    """Joint positions, velocities and accelerations sampled over time.
+
+    Attributes:
+        stage: the stage that made it (``retime`` or ``smooth``).
+        joint_names: the active joints, the columns of ``q``.
+        t: sample times (M,) [s], increasing, t[0] = 0.
+        q: joint positions (M, n) [rad].
+        qd: joint velocities (M, n) [rad/s].
+        qdd: joint accelerations (M, n) [rad/s^2].
+        rep: repetition index of each sample (M,) (that of the joint-path sample it came from).
+        fixed: values of the robot's locked joints [rad].
+    """
+
+    stage: str
+    joint_names: tuple[str, ...]
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    rep: np.ndarray
+    fixed: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        M, n = len(self.t), len(self.joint_names)
+        for name, shape, dtype in (("t", (M,), float), ("q", (M, n), float), ("qd", (M, n), float), ("qdd", (M, n), float), ("rep", (M,), int)):
+            object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
+        if M and (self.t[0] != 0 or (np.diff(self.t) <= 0).any()):
+            raise ValueError("t: must start at 0 and increase")
+        object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def duration_s(self) -> float:
+        """Time of the last sample [s]."""
+        return float(self.t[-1])

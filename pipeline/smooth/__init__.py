@@ -1,0 +1,1 @@
+"""The smooth stage: a timed joint trajectory -> a jerk-limited one at the control period (Ruckig)."""
