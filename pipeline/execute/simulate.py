@@ -1,0 +1,196 @@
+"""The execute stage: a joint trajectory played on the humanoid in PyBullet, measured every step.
+
+The robot is loaded in DIRECT mode with a fixed base and self-collision on, with the task's fixed
+objects (:class:`~pipeline.tasks.schema.EnvironmentObject`) as static bodies. Link pairs that touch
+by construction are not collision-checked: a pair whose kinematic path passes only through links
+without collision geometry (the pelvis and the torso through the waist's yaw and pitch links, the
+forearm and the palm through the wrist links) always overlaps; the others are checked, as MoveIt
+disables "adjacent" pairs.
+
+Each physics step (``step_s``, 1 kHz by default) the joints are driven by PyBullet's position
+motors with the robot's effort limits. PyBullet's motor asks for the joint velocity
+v = velocity_gain qd* + position_gain (q* - q) / step_s; it is given the trajectory's state
+(q*, qd*) at the start of the step, so with velocity_gain = 1 the joint ends the step near the
+trajectory's position at the step's end, which is where the measured state is logged (with the
+trajectory's position there, ``q_command``). Without the velocity term (velocity_gain = 0) the
+motors went unstable on the triangle at position gains of 0.5 and 1. Locked joints are held by the
+same motors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pipeline.arrays import frozen
+from pipeline.errors import StageError
+from pipeline.execute.world import load_pybullet_robot, pb
+from pipeline.model.poses import pose_matrix
+from pipeline.model.robot import Robot
+from pipeline.retime.trajectory import JointTrajectory
+
+
+@dataclass(frozen=True)
+class ExecutionSettings:
+    """Settings of the simulation.
+
+    Attributes:
+        step_s: physics step [s].
+        position_gain: PyBullet's ``positionGain`` of the joint motors [1].
+        velocity_gain: PyBullet's ``velocityGain`` [1].
+        gravity_m_s2: gravity along -z [m/s^2].
+    """
+
+    step_s: float = 0.001
+    position_gain: float = 0.2
+    velocity_gain: float = 1.0
+    gravity_m_s2: float = 9.81
+
+
+@dataclass(frozen=True)
+class ExecutionLog:
+    """What the simulator did.
+
+    Attributes:
+        joint_names: the driven joints, the columns of ``q``.
+        t: step end times (K,) [s].
+        q: measured joint positions (K, n) [rad].
+        qd: measured joint velocities (K, n) [rad/s].
+        q_command: the trajectory's positions at ``t`` (K, n) [rad].
+        rep: repetition index (K,).
+        hand_poses: per hand, the measured hand link pose in the world (K, 4, 4) [m].
+        self_contacts: robot-robot contact points per step (K,).
+        environment_contacts: robot-environment contact points per step (K,).
+        contact_pairs: the distinct (link, link or object) pairs that touched.
+    """
+
+    joint_names: tuple[str, ...]
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    q_command: np.ndarray
+    rep: np.ndarray
+    hand_poses: Mapping[str, np.ndarray]
+    self_contacts: np.ndarray
+    environment_contacts: np.ndarray
+    contact_pairs: tuple[tuple[str, str], ...] = ()
+    fixed: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        K, n = len(self.t), len(self.joint_names)
+        for name, shape, dtype in (("t", (K,), float), ("q", (K, n), float), ("qd", (K, n), float), ("q_command", (K, n), float), ("rep", (K,), int), ("self_contacts", (K,), int), ("environment_contacts", (K,), int)):
+            object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
+        object.__setattr__(self, "hand_poses", MappingProxyType({h: frozen(p, (K, 4, 4), f"hand_poses[{h}]") for h, p in self.hand_poses.items()}))
+        object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
+
+
+def _collision_links(sim, body: int) -> set[int]:
+    return {i for i in [-1, *range(pb.getNumJoints(body, physicsClientId=sim.client))] if pb.getCollisionShapeData(body, i, physicsClientId=sim.client)}
+
+
+def _disable_touching_by_construction(sim) -> None:
+    """No collision check between links joined only through links without collision geometry."""
+    body, client = sim.body, sim.client
+    parent = {i: pb.getJointInfo(body, i, physicsClientId=client)[16] for i in range(pb.getNumJoints(body, physicsClientId=client))}
+    solid = _collision_links(sim, body)
+    for link in solid:
+        up = parent.get(link, None)
+        while up is not None and up not in solid:
+            up = parent.get(up) if up != -1 else None
+        if up is not None:
+            pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
+
+
+def _add_environment(sim, objects) -> dict[int, str]:
+    """Static bodies for the task's fixed objects; body id -> name."""
+    bodies = {}
+    for obj in objects:
+        if obj.shape == "box":
+            shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[s / 2 for s in obj.size_m], physicsClientId=sim.client)
+        elif obj.shape == "cylinder":
+            shape = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=obj.radius_m, height=obj.height_m, physicsClientId=sim.client)
+        else:
+            shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=obj.radius_m, physicsClientId=sim.client)
+        T = pose_matrix(obj.pose.position, obj.pose.rpy)
+        body = pb.createMultiBody(0.0, shape, basePosition=T[:3, 3].tolist(), baseOrientation=Rotation.from_matrix(T[:3, :3]).as_quat().tolist(), physicsClientId=sim.client)
+        bodies[body] = obj.name
+    return bodies
+
+
+def execute(trajectory: JointTrajectory, robot: Robot, hands: Sequence[str], environment=(), settings: ExecutionSettings = ExecutionSettings()) -> ExecutionLog:
+    """Play ``trajectory`` on ``robot`` in PyBullet and measure it each step.
+
+    Raises:
+        StageError: a trajectory joint the robot does not have, or a non-positive step.
+    """
+    if not settings.step_s > 0:
+        raise StageError(f"execute: the physics step must be positive, not {settings.step_s}")
+    with load_pybullet_robot(robot.urdf.path, self_collision=True) as sim:
+        missing = [n for n in (*trajectory.joint_names, *trajectory.fixed) if n not in sim.joint_index]
+        if missing:
+            raise StageError(f"execute: the robot has no joint {missing[0]}")
+        _disable_touching_by_construction(sim)
+        objects = _add_environment(sim, environment)
+        client, body = sim.client, sim.body
+        pb.setGravity(0, 0, -settings.gravity_m_s2, physicsClientId=client)
+        pb.setTimeStep(settings.step_s, physicsClientId=client)
+        names = list(trajectory.joint_names) + list(trajectory.fixed)
+        index = [sim.joint_index[n] for n in names]
+        effort = [robot.limits[n].effort for n in names]
+        sim.set_positions(names, [*trajectory.q[0], *trajectory.fixed.values()])
+        t_end = np.arange(1, int(np.ceil(trajectory.duration_s / settings.step_s - 1e-9)) + 1) * settings.step_s
+        t_start = t_end - settings.step_s
+        command, command_velocity = (np.stack([np.interp(t_start, trajectory.t, x[:, j]) for j in range(x.shape[1])], axis=1) for x in (trajectory.q, trajectory.qd))
+        expected = np.stack([np.interp(t_end, trajectory.t, trajectory.q[:, j]) for j in range(trajectory.q.shape[1])], axis=1)
+        held = np.array(list(trajectory.fixed.values()))
+        K, n = len(t_end), len(trajectory.joint_names)
+        q, qd = np.empty((K, n)), np.empty((K, n))
+        hand_links = {h: sim.link_index[robot.hand_chain(h).tip] for h in hands}
+        hand_poses = {h: np.empty((K, 4, 4)) for h in hands}
+        self_contacts, environment_contacts = np.zeros(K, int), np.zeros(K, int)
+        pairs: set[tuple[str, str]] = set()
+        link_name = {i: n for n, i in sim.link_index.items()}
+        for k in range(K):
+            pb.setJointMotorControlArray(
+                body,
+                index,
+                pb.POSITION_CONTROL,
+                targetPositions=[*command[k], *held],
+                targetVelocities=[*command_velocity[k], *np.zeros(len(held))],
+                forces=effort,
+                positionGains=[settings.position_gain] * len(index),
+                velocityGains=[settings.velocity_gain] * len(index),
+                physicsClientId=client,
+            )
+            pb.stepSimulation(physicsClientId=client)
+            states = pb.getJointStates(body, index[:n], physicsClientId=client)
+            q[k] = [s[0] for s in states]
+            qd[k] = [s[1] for s in states]
+            for h, link in hand_links.items():
+                hand_poses[h][k] = sim.link_pose(link_name[link])
+            for contact in pb.getContactPoints(bodyA=body, physicsClientId=client):
+                other = contact[2]
+                if other == body:
+                    self_contacts[k] += 1
+                    pairs.add(tuple(sorted((link_name[contact[3]], link_name[contact[4]]))))
+                else:
+                    environment_contacts[k] += 1
+                    pairs.add((link_name[contact[3]], objects.get(other, str(other))))
+        rep = trajectory.rep[np.clip(np.searchsorted(trajectory.t, t_end, side="right") - 1, 0, len(trajectory) - 1)]
+        return ExecutionLog(
+            joint_names=trajectory.joint_names,
+            t=t_end,
+            q=q,
+            qd=qd,
+            q_command=expected,
+            rep=rep,
+            hand_poses=hand_poses,
+            self_contacts=self_contacts,
+            environment_contacts=environment_contacts,
+            contact_pairs=tuple(sorted(pairs)),
+            fixed=trajectory.fixed,
+        )
