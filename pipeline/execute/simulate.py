@@ -143,9 +143,8 @@ def execute(trajectory: JointTrajectory, robot: Robot, hands: Sequence[str], env
         effort = [robot.limits[n].effort for n in names]
         sim.set_positions(names, [*trajectory.q[0], *trajectory.fixed.values()])
         t_end = np.arange(1, int(np.ceil(trajectory.duration_s / settings.step_s - 1e-9)) + 1) * settings.step_s
-        t_start = t_end - settings.step_s
-        command, command_velocity = (np.stack([np.interp(t_start, trajectory.t, x[:, j]) for j in range(x.shape[1])], axis=1) for x in (trajectory.q, trajectory.qd))
-        expected = np.stack([np.interp(t_end, trajectory.t, trajectory.q[:, j]) for j in range(trajectory.q.shape[1])], axis=1)
+        command, command_velocity, _, _ = trajectory.interpolate(t_end - settings.step_s)
+        expected, _, _, rep = trajectory.interpolate(t_end)
         held = np.array(list(trajectory.fixed.values()))
         K, n = len(t_end), len(trajectory.joint_names)
         q, qd = np.empty((K, n)), np.empty((K, n))
@@ -180,7 +179,6 @@ def execute(trajectory: JointTrajectory, robot: Robot, hands: Sequence[str], env
                 else:
                     environment_contacts[k] += 1
                     pairs.add((link_name[contact[3]], objects.get(other, str(other))))
-        rep = trajectory.rep[np.clip(np.searchsorted(trajectory.t, t_end, side="right") - 1, 0, len(trajectory) - 1)]
         return ExecutionLog(
             joint_names=trajectory.joint_names,
             t=t_end,

@@ -38,7 +38,6 @@ from pipeline.ik.mc_inverse import (
     CANDIDATES,
     OUT_OF_REACH,
     OUTSIDE_LIMITS,
-    REACH_SLACK,
     REASONS,
     SINGULAR,
     SINGULAR_SINE,
@@ -46,7 +45,7 @@ from pipeline.ik.mc_inverse import (
     McInverse,
     McSolution,
 )
-from pipeline.ik.subproblems import euler, into_limits, rotate, rotation, subproblem2, zero_axes
+from pipeline.ik.subproblems import REACH_SLACK, elbow, euler, into_limits, rotate, rotation, subproblem2, zero_axes
 from pipeline.model.robot import Chain
 from pipeline.model.srs import SrsKinematics
 
@@ -70,27 +69,18 @@ def _free_grid(lower: float, upper: float, resolution: float) -> np.ndarray:
 
 def _candidates(kin: SrsKinematics, k: list[np.ndarray], tip0: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> cs.Function:
     """The CasADi Function ``(T (4x4) [m], theta3 [rad]) -> (Q (7x8) [rad], reason (1x8))``."""
-    geo = kin.geometry
     S, E0, W0 = (np.asarray(x).ravel() for x in kin.points(np.zeros(7)))
 
     T, theta3 = cs.SX.sym("T", 4, 4), cs.SX.sym("theta3")
-    p, R = T[:3, 3], T[:3, :3]
-    L2, L3 = geo.upper_arm, geo.forearm
-    W = p - R @ geo.tool_from_wrist  # MC-Inverse eq (2): the wrist centre
-    sw = W - S
-    d = cs.norm_2(sw)
-    # sub-problem 1 (MC-Inverse eqs 3-4): the elbow from |SW|, independent of the free joint
-    cos_beta = (L2**2 + L3**2 - d**2) / (2 * L2 * L3)
-    out_of_reach_elbow = cs.fabs(cos_beta) > 1 + REACH_SLACK
-    beta = cs.acos(cs.fmin(1, cs.fmax(-1, cos_beta)))
-    singular_elbow = cs.sin(beta) < SINGULAR_SINE  # straight or folded elbow
+    R = T[:3, :3]
     a3, a4 = k[2], k[3]
-    phi0 = np.arctan2(a4 @ np.cross(S - E0, W0 - E0), (S - E0) @ (W0 - E0))  # elbow's zero angle
+    # sub-problem 1 (MC-Inverse eqs 2-4): the wrist centre and the elbow from |SW|, independent of the free joint
+    W, sw, d, out_of_reach_elbow, beta, elbows = elbow(kin.geometry, S, E0, W0, a4, T)
+    singular_elbow = cs.sin(beta) < SINGULAR_SINE  # straight or folded elbow
     c3, s3 = cs.cos(theta3), cs.sin(theta3)
 
     columns, reasons = [], []
-    for elbow in (1.0, -1.0):
-        theta4 = cs.atan2(cs.sin(elbow * beta - phi0), cs.cos(elbow * beta - phi0))  # eq (4), both signs
+    for theta4 in elbows:
         c4, s4 = cs.cos(theta4), cs.sin(theta4)
         # S -> W with the shoulder at zero and theta3, theta4 applied
         v = rotate(a3, c3, s3, cs.SX(E0 - S) + rotate(a4, c4, s4, cs.SX(W0 - E0)))

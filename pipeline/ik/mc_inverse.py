@@ -38,7 +38,7 @@ import numpy as np
 
 from pipeline.errors import NotSRSError
 from pipeline.ik.batched import BatchedCandidates
-from pipeline.ik.subproblems import euler, into_limits, rotate, rotation, triad, zero_axes
+from pipeline.ik.subproblems import elbow, euler, into_limits, rotate, rotation, triad, zero_axes
 from pipeline.model.robot import Chain
 from pipeline.model.srs import SrsKinematics
 
@@ -54,8 +54,6 @@ REASONS = {VALID: "valid", OUT_OF_REACH: "out of reach", SINGULAR: "singular", O
 
 #: Sine below which an elbow, shoulder or wrist counts as singular (the solution is not isolated).
 SINGULAR_SINE = 1e-7
-#: Relative slack on the law-of-cosines argument before a wrist centre counts as out of reach.
-REACH_SLACK = 1e-12
 #: Largest cosine between two axes that count as perpendicular.
 PERPENDICULAR_COSINE = 1e-9
 
@@ -101,16 +99,11 @@ class McInverse:
         upper = np.array([j.upper for j in movable])
 
         T, psi = cs.SX.sym("T", 4, 4), cs.SX.sym("psi")
-        p, R = T[:3, 3], T[:3, :3]
+        R = T[:3, :3]
         L2, L3 = geo.upper_arm, geo.forearm
-        W = p - R @ geo.tool_from_wrist  # eq (2): SW = OT - OS - WT
-        sw = W - S
-        d = cs.norm_2(sw)
+        a4 = k[3]
+        W, sw, d, out_of_reach, beta, elbows = elbow(geo, S, E0, W0, a4, T)  # eqs (2)-(4)
         u = sw / d
-        cos_beta = (L2**2 + L3**2 - d**2) / (2 * L2 * L3)  # eq (3)
-        out_of_reach = cs.fabs(cos_beta) > 1 + REACH_SLACK
-        cos_beta = cs.fmin(1, cs.fmax(-1, cos_beta))
-        beta = cs.acos(cos_beta)
         # the elbow circle: alpha at S between SW and SE; psi = 0 with the elbow below SW in the
         # vertical plane, psi growing for a turn about -SW (eq 5)
         cos_alpha = cs.fmin(1, cs.fmax(-1, (L2**2 + d**2 - L3**2) / (2 * L2 * d)))
@@ -121,12 +114,9 @@ class McInverse:
         E = S + L2 * (cos_alpha * u + cs.sqrt(1 - cos_alpha**2) * n)  # eq (5)
         singular_reference = cs.norm_2(cs.cross(u, V)) < SINGULAR_SINE  # SW vertical: no reference plane
 
-        a4 = k[3]
-        phi0 = np.arctan2(a4 @ np.cross(S - E0, W0 - E0), (S - E0) @ (W0 - E0))  # elbow's zero angle
         singular_elbow = cs.logic_or(cs.sin(beta) < SINGULAR_SINE, singular_reference)
         columns, reasons = [], []
-        for elbow in (1.0, -1.0):
-            theta4 = cs.atan2(cs.sin(elbow * beta - phi0), cs.cos(elbow * beta - phi0))  # eq (4), both signs
+        for theta4 in elbows:
             c4, s4 = cs.cos(theta4), cs.sin(theta4)
             # sub-problem 2: the shoulder rotation turns SE(0) onto SE and the forearm onto EW (eqs 6-8)
             Q = triad(E - S, W - E) @ triad(cs.SX(E0 - S), rotate(a4, c4, s4, cs.SX(W0 - E0))).T

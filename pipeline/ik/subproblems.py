@@ -2,7 +2,7 @@
 
 Rotations are products of exponentials exp([k] angle) about axes k given at the zero
 configuration (see :mod:`pipeline.ik.mc_inverse`). Paden-Kahan sub-problem 1 turns one vector onto
-another about one axis, :func:`subproblem2` one vector onto another by two rotations about
+another about one axis, :func:`elbow` is MC-Inverse's sub-problem 1, :func:`subproblem2` one vector onto another by two rotations about
 intersecting axes; :func:`euler` solves three consecutive perpendicular axes (MC-Inverse
 sub-problems 2 and 3, eqs 9-10 for ZYZ axes); :func:`into_limits` moves an angle by 2 pi into
 limits that reach past +-pi.
@@ -17,6 +17,10 @@ import numpy as np
 
 from pipeline.model.kinematics import chain_frames
 from pipeline.model.robot import Chain
+
+
+#: Relative slack on the law-of-cosines argument before a wrist centre counts as out of reach.
+REACH_SLACK = 1e-12
 
 
 def hat(k: np.ndarray) -> np.ndarray:
@@ -115,3 +119,21 @@ def zero_axes(chain: Chain) -> tuple[list[np.ndarray], np.ndarray]:
     zero = [np.asarray(T) for T in zero]
     k = [zero[i][:3, :3] @ np.asarray(j.axis, dtype=float) for i, j in enumerate(movable)]
     return k, zero[-1][:3, :3]
+
+
+def elbow(geometry, S: np.ndarray, E0: np.ndarray, W0: np.ndarray, a4: np.ndarray, T):
+    """MC-Inverse sub-problem 1 (eqs 2-4) for a hand pose T (4x4): the wrist centre W, SW = W - S,
+    d = |SW| [m], whether d is out of the elbow's reach, the elbow's interior angle beta [rad],
+    and the two elbow joint angles theta4 = +-beta - phi0 [rad] (phi0: the elbow joint's angle
+    at q = 0, from S, E0, W0 at q = 0 and its axis a4)."""
+    p, R = T[:3, 3], T[:3, :3]
+    L2, L3 = geometry.upper_arm, geometry.forearm
+    W = p - R @ geometry.tool_from_wrist  # eq (2): SW = OT - OS - WT
+    sw = W - S
+    d = cs.norm_2(sw)
+    cos_beta = (L2**2 + L3**2 - d**2) / (2 * L2 * L3)  # eq (3)
+    out_of_reach = cs.fabs(cos_beta) > 1 + REACH_SLACK
+    beta = cs.acos(cs.fmin(1, cs.fmax(-1, cos_beta)))
+    phi0 = np.arctan2(a4 @ np.cross(S - E0, W0 - E0), (S - E0) @ (W0 - E0))
+    roots = [cs.atan2(cs.sin(sign * beta - phi0), cs.cos(sign * beta - phi0)) for sign in (1.0, -1.0)]  # eq (4)
+    return W, sw, d, out_of_reach, beta, roots

@@ -205,7 +205,6 @@ def smooth(
             reference is empty or not finite, or Ruckig fails (naming the joint and the time).
     """
     names = reference.joint_names
-    n = len(names)
     v = _limits("velocity", velocity, names)
     a = _limits("acceleration", acceleration, names)
     j = _limits("jerk", jerk, names)
@@ -224,8 +223,7 @@ def smooth(
     t = np.arange(len(q_out)) * dt
     jerk_out = np.zeros_like(qdd_out)
     jerk_out[1:] = np.diff(qdd_out, axis=0) / dt
-    q_ref = np.column_stack([np.interp(t, reference.t, reference.q[:, i]) for i in range(n)])
-    rep_at = np.searchsorted(reference.t, t, side="right") - 1
+    q_ref, _, _, rep = reference.interpolate(t)
     traj = JointTrajectory(
         stage=STAGE,
         joint_names=names,
@@ -233,7 +231,7 @@ def smooth(
         q=q_out,
         qd=qd_out,
         qdd=qdd_out,
-        rep=reference.rep[rep_at],
+        rep=rep,
         fixed=dict(reference.fixed),
     )
     return Smoothed(
@@ -268,13 +266,8 @@ class _Targets:
         n = len(ref.joint_names)
         end = max(0, math.ceil(ref.duration_s / dt * (1 - DURATION_SLACK)))
         t = np.arange(end) * dt
-        p = np.empty((end + 1, n))
-        v = np.zeros((end + 1, n))
-        acc = np.zeros((end + 1, n))
-        for i in range(n):
-            p[:end, i] = np.interp(t, ref.t, ref.q[:, i])
-            v[:end, i] = np.interp(t, ref.t, ref.qd[:, i])
-            acc[:end, i] = np.interp(t, ref.t, ref.qdd[:, i])
+        p, v, acc = (np.zeros((end + 1, n)) for _ in range(3))
+        p[:end], v[:end], acc[:end], _ = ref.interpolate(t)
         p[end] = ref.q[-1]
         v = np.clip(v, -vmax, vmax)
         headroom = np.maximum(vmax - np.abs(v), 0.0)
