@@ -54,20 +54,27 @@ def user_errors(func: Callable) -> Callable:
 @user_errors
 def run(
     task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
-    stages: Annotated[Optional[str], typer.Option(help="Comma-separated stages to run (default: path, and ik when --ik is given).")] = None,
+    stages: Annotated[Optional[str], typer.Option(help="Comma-separated stages to run: path, ik, retime, smooth, execute (default: all of them when --ik is given, else path).")] = None,
     ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd, pinv, mc-inverse, trac-ik, pybullet, dls-svd or ikfast-style.")] = None,
     scheme: Annotated[str, typer.Option(help="TV-GDD scheme: mvn (minimum velocity norm), rmp (repetitive motion) or mke (minimum kinetic energy).")] = "mvn",
     qp_backend: Annotated[str, typer.Option(help="TV-GDD QP solver: casadi (DAQP through CasADi conic) or lvi (the paper's projection solver).")] = "casadi",
     lvi_tolerance: Annotated[float, typer.Option(help="Stop of the lvi backend on ||eps(u)||_2 (the paper's 1e-5; its velocity error can be ~35x this, see docs).")] = 1e-5,
     out_dir: Annotated[Path, typer.Option("--out", help="Directory that receives <task>/<run-id>/.")] = Path("recordings"),
     seed: Annotated[int, typer.Option(help="Random seed, recorded in the manifest.")] = 0,
+    reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
+    timing: Annotated[Optional[str], typer.Option(help="Retime: optimal (TOPP-RA) or task (the task's own timing, checked against the limits); default: the task file's retime.timing.")] = None,
+    gui: Annotated[bool, typer.Option("--gui", help="Show the execution in a PyBullet window (needs a display).")] = False,
 ) -> None:
     """Run a task through the pipeline and record it; prints the run directory as the last line."""
     from pipeline.run import run_task
 
     chosen = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
-    with err.status(f"running {task} ..."):
-        directory = run_task(task, stages=chosen, ik=ik, scheme=scheme, qp_backend=qp_backend, lvi_tolerance=lvi_tolerance, out_dir=out_dir, seed=seed, command=["dualarm", *sys.argv[1:]])
+    with err.status(f"running {task} ...") as status:
+        directory = run_task(
+            task, stages=chosen, ik=ik, scheme=scheme, qp_backend=qp_backend, lvi_tolerance=lvi_tolerance, out_dir=out_dir, seed=seed,
+            repetitions=reps, timing=timing, gui=gui, command=["dualarm", *sys.argv[1:]],
+            progress=lambda stage: status.update(f"running {task}: {stage} ..."),
+        )
     out.print(str(directory), markup=False, soft_wrap=True)
 
 

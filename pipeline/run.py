@@ -2,13 +2,14 @@
 
 Data flows one way, task -> reference -> joint path -> timed trajectory -> smoothed trajectory ->
 executed log; each stage is a function from one contract to the next, and the recorder sees each
-product once. Stages that have not landed yet are refused by name.
+product once. With an IK method every stage runs by default; ``stages`` picks a subset, each with
+the stage it needs.
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -26,8 +27,11 @@ from pipeline.tasks import Task, load_task
 
 #: Every stage of the pipeline, in order.
 ALL_STAGES = ("path", "ik", "retime", "smooth", "execute")
-#: The stages this version can run.
-AVAILABLE_STAGES = ("path", "ik")
+#: The stage whose product each stage needs (execute plays the smoothed trajectory when smooth
+#: runs, else the retimed one).
+NEEDS = {"ik": "path", "retime": "ik", "smooth": "retime", "execute": "retime"}
+#: Timings of the retime stage (the task file's ``retime.timing`` unless given).
+TIMINGS = ("optimal", "task")
 #: IK methods of the ``ik`` stage.
 IK_METHODS = ("tvgdd", "pinv", "mc-inverse", *POINTWISE_METHODS)
 
@@ -47,23 +51,23 @@ def path_metrics(ref: CartesianReference) -> dict[str, float]:
 
 
 def resolve_stages(stages: Sequence[str] | None, ik: str | None = None) -> tuple[str, ...]:
-    """Validate a stage list, in pipeline order. Without one: the path stage, and IK when a method
-    is named."""
+    """Validate a stage list, in pipeline order. Without one: every stage when an IK method is
+    named, else the path stage alone."""
     if ik is not None and ik not in IK_METHODS:
         raise DualarmError(f"unknown IK method '{ik}' (methods: {', '.join(IK_METHODS)})")
     if not stages:
-        return ("path", "ik") if ik else ("path",)
-    if "ik" in stages and ik is None:
-        raise DualarmError(f"stage 'ik' needs --ik METHOD (methods: {', '.join(IK_METHODS)})")
+        return ALL_STAGES if ik else ("path",)
     for stage in stages:
         if stage not in ALL_STAGES:
             raise DualarmError(f"unknown stage '{stage}' (stages: {', '.join(ALL_STAGES)})")
-        if stage not in AVAILABLE_STAGES:
-            raise DualarmError(f"stage '{stage}' is not available yet (available: {', '.join(AVAILABLE_STAGES)})")
+        if stage in NEEDS and NEEDS[stage] not in stages:
+            raise DualarmError(f"stage '{stage}' needs stage '{NEEDS[stage]}' (stages: {', '.join(ALL_STAGES)})")
+    if "ik" in stages and ik is None:
+        raise DualarmError(f"stage 'ik' needs --ik METHOD (methods: {', '.join(IK_METHODS)})")
     return tuple(s for s in ALL_STAGES if s in stages)
 
 
-def _manifest(task: Task, stages: tuple[str, ...], seed: int, command: Sequence[str], ik_settings: dict) -> dict[str, object]:
+def _manifest(task: Task, stages: tuple[str, ...], seed: int, command: Sequence[str], ik_settings: dict, back_half: dict) -> dict[str, object]:
     robot = task.robot
     robot_files = {robot.urdf.path.name: sha256_file(robot.urdf.path)}
     if robot.directory is not None:
@@ -82,6 +86,7 @@ def _manifest(task: Task, stages: tuple[str, ...], seed: int, command: Sequence[
         "settings": {
             "path": {"control_period_s": task.spec.control_period_s, "time_scaling": "quintic", "repetitions": task.spec.repetitions},
             **({"ik": ik_settings} if "ik" in stages else {}),
+            **{stage: settings for stage, settings in back_half.items() if stage in stages},
         },
         "packages": package_versions(),
     }
@@ -124,36 +129,68 @@ def run_task(
     out_dir: str | Path = "recordings",
     seed: int = 0,
     repetitions: int | None = None,
+    timing: str | None = None,
+    gui: bool = False,
     command: Sequence[str] | None = None,
+    progress: Callable[[str], None] = lambda stage: None,
 ) -> Path:
     """Run ``task_file`` through ``stages`` and record it; returns the run directory.
 
     The task and the options are validated before anything is written: a malformed task leaves no
     run behind. A stage that fails leaves a run marked ``failed`` and re-raises. ``repetitions``
-    overrides the task file's.
+    overrides the task file's, ``timing`` its ``retime.timing``; ``gui`` shows the execution in a
+    PyBullet window. ``progress`` is told each stage's name as it starts.
     """
+    from pipeline.execute.simulate import ExecutionSettings
+    from pipeline.stages import CONTROL_PERIOD_S, execute_stage, retime_stage, smooth_stage
+
     task = load_task(task_file, repetitions)
     chosen = resolve_stages(stages, ik)
+    if timing is not None and timing not in TIMINGS:
+        raise DualarmError(f"unknown timing '{timing}' (timings: {', '.join(TIMINGS)})")
     ik_settings, solve_ik = _ik_settings(task, ik, scheme, qp_backend, lvi_tolerance) if "ik" in chosen else ({}, None)
+    execution = ExecutionSettings(gui=gui)
+    back_half = {
+        "retime": {**task.spec.retime.model_dump(), "timing": timing or task.spec.retime.timing, "sample_period_s": CONTROL_PERIOD_S, "parametrizer": "ParametrizeConstAccel"},
+        "smooth": {"method": "ruckig online tracking", "control_period_s": CONTROL_PERIOD_S},
+        "execute": {**asdict(execution), "simulator": "pybullet"},
+    }
     np.random.seed(seed)
-    run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, chosen, seed, command or sys.argv, ik_settings))
+    run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, chosen, seed, command or sys.argv, ik_settings, back_half))
     attachments = {task.file.name: task.text, task.robot.urdf.path.name: task.robot.urdf.path.read_text()}
     if task.robot.directory is not None:
         attachments["robot.toml"] = (task.robot.directory / "robot.toml").read_text()
     recorder = Recorder(run.staging, run.run_id, task.robot, attachments)
     metrics: dict[str, float] = {}
     try:
+        progress("path")
         recorder.robot_state("path", 0.0, task.initial_q)
         reference = build_reference(task)
         recorder.reference(reference)
         metrics.update(path_metrics(reference))
+        end = reference.duration_s
         if solve_ik is not None:
+            progress("ik")
             joint_path = solve_ik(reference)
             angles = arm_angles(joint_path, task)
             recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names), angles)
             metrics.update(ik_metrics(joint_path, task))
             metrics.update(consistency_metrics(joint_path, reference, angles))
-        recorder.metrics(metrics, reference.duration_s)
+        if "retime" in chosen:
+            progress("retime")
+            trajectory, stage_metrics = retime_stage(task, joint_path, recorder, timing)
+            metrics.update(stage_metrics)
+            end = trajectory.duration_s
+        if "smooth" in chosen:
+            progress("smooth")
+            trajectory, stage_metrics = smooth_stage(task, trajectory, recorder)
+            metrics.update(stage_metrics)
+            end = trajectory.duration_s
+        if "execute" in chosen:
+            progress("execute")
+            _, stage_metrics = execute_stage(task, trajectory, recorder, execution)
+            metrics.update(stage_metrics)
+        recorder.metrics(metrics, end)
     except BaseException as exc:
         message = str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}"
         run.conclude(message)

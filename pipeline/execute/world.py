@@ -7,12 +7,15 @@ poses in single precision (about 1e-7 m), which bounds every comparison against 
 
 from __future__ import annotations
 
+import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from pipeline.errors import StageError
 from pipeline.quiet import c_output_silenced
 
 
@@ -69,10 +72,18 @@ class PyBulletRobot:
         self.close()
 
 
-def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False) -> PyBulletRobot:
-    """Start a DIRECT client and load ``urdf`` with a fixed base at the origin."""
+def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: bool = False) -> PyBulletRobot:
+    """Start a client (DIRECT, or a window with ``gui``) and load ``urdf`` with a fixed base at the origin.
+
+    Raises:
+        StageError: ``gui`` on a Linux machine without a display.
+    """
+    if gui and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise StageError("execute: --gui needs a display, and this machine has none (DISPLAY is not set)")
     with c_output_silenced():
-        client = pb.connect(pb.DIRECT)
+        client = pb.connect(pb.GUI if gui else pb.DIRECT)
+        if client < 0:
+            raise StageError("execute: PyBullet could not open its window")
         flags = pb.URDF_USE_SELF_COLLISION if self_collision else 0
         body = pb.loadURDF(str(urdf), useFixedBase=True, flags=flags, physicsClientId=client)
     joint_index: dict[str, int] = {}

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import casadi as cs
+from collections.abc import Mapping
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -132,17 +134,21 @@ class ChainKinematics:
         return flat.reshape(6, Q.shape[0], n).transpose(1, 0, 2)
 
 
-def motion_matrix(joint: JointSpec, q: float) -> np.ndarray:
-    """Homogeneous transform (numpy) of a joint's motion by ``q`` [rad or m]; identity if fixed."""
-    T = np.eye(4)
+def motion_matrix(joint: JointSpec, q: float | np.ndarray) -> np.ndarray:
+    """Homogeneous transforms (numpy) of a joint's motion by ``q`` [rad or m], a number or (K,)
+    values -> (4, 4) or (K, 4, 4); identity if fixed."""
+    q = np.asarray(q, dtype=float)
+    T = np.broadcast_to(np.eye(4), (*q.shape, 4, 4)).copy()
     if joint.type == "prismatic":
-        T[:3, 3] = np.asarray(joint.axis) * q
+        T[..., :3, 3] = np.asarray(joint.axis) * q[..., None]
     elif joint.movable:
-        T[:3, :3] = Rotation.from_rotvec(np.asarray(joint.axis) * q).as_matrix()
+        T[..., :3, :3] = Rotation.from_rotvec((np.asarray(joint.axis) * q[..., None]).reshape(-1, 3)).as_matrix().reshape(*q.shape, 3, 3)
     return T
 
 
-def joint_transforms(joints: tuple[JointSpec, ...], q: dict[str, float]) -> list[tuple[str, str, np.ndarray]]:
-    """(parent link, child link, 4x4 child-in-parent) of every joint at configuration ``q``
-    (joint name -> value; joints not named are at 0)."""
-    return [(j.parent, j.child, origin_matrix(j) @ motion_matrix(j, q.get(j.name, 0.0))) for j in joints]
+def joint_transforms(joints: tuple[JointSpec, ...], q: Mapping[str, float | np.ndarray]) -> list[tuple[str, str, np.ndarray]]:
+    """(parent link, child link, child-in-parent transform) of every joint at configuration ``q``
+    (joint name -> a value, or (K,) values for K configurations; joints not named are at 0).
+    The transforms are (4, 4), or (K, 4, 4) when any value is an array of K."""
+    shape = np.broadcast_shapes(*(np.shape(v) for v in q.values()))
+    return [(j.parent, j.child, origin_matrix(j) @ motion_matrix(j, np.broadcast_to(q.get(j.name, 0.0), shape))) for j in joints]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import foxglove
 import numpy as np
@@ -28,11 +29,17 @@ from pipeline.model.poses import quaternion_xyzw
 from pipeline.model.robot import Robot
 from pipeline.paths.reference import CartesianReference
 from pipeline.record import schemas
+from pipeline.retime.trajectory import JointTrajectory
+
+if TYPE_CHECKING:  # pybullet is imported only by runs that execute
+    from pipeline.execute.simulate import ExecutionLog
 
 #: MCAP topic family of each stage.
 STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "execute": "/execute"}
 TIMELINE = "time"
 HAND_COLORS = {"left": (40, 120, 230), "right": (230, 90, 40)}
+#: Period of the robot's animation (/tf and the Rerun URDF) for stages sampled faster [s].
+ANIMATION_PERIOD_S = 0.01
 
 
 def _ns(t: float) -> int:
@@ -96,26 +103,31 @@ class Recorder:
         return self._robot_trees[stage]
 
     # -- products ----------------------------------------------------------------------------------
-    def _tf(self, stage: str, t: float, q: Mapping[str, float]) -> None:
-        """The robot's link frames on ``/tf``, prefixed ``<stage>/`` and hung from ``world``."""
+    def _tf(self, stage: str, t: np.ndarray | float, q: Mapping[str, np.ndarray | float]) -> None:
+        """The robot's link frames on ``/tf`` at times ``t`` (K,) [s] (joint name -> (K,) positions
+        [rad]), prefixed ``<stage>/`` and hung from ``world``."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        q = {name: np.broadcast_to(np.asarray(v, dtype=float), t.shape) for name, v in q.items()}
         root = self.robot.urdf.root
-        transforms = [("world", root, np.eye(4))] + joint_transforms(self.robot.urdf.joints, dict(q))
-        stamp = Timestamp.from_epoch_secs(t)
-        self._tf_channel.log(
-            FrameTransforms(
-                transforms=[
-                    FrameTransform(
-                        timestamp=stamp,
-                        parent_frame_id=parent if parent == "world" else f"{stage}/{parent}",
-                        child_frame_id=f"{stage}/{child}",
-                        translation=Vector3(**_vec(T[:3, 3])),
-                        rotation=Quaternion(**_quat(quaternion_xyzw(T[:3, :3]))),
-                    )
-                    for parent, child, T in transforms
-                ]
-            ),
-            log_time=_ns(t),
-        )
+        links = [("world", root, np.broadcast_to(np.eye(4), (len(t), 4, 4)))] + joint_transforms(self.robot.urdf.joints, q)
+        frames = [(parent if parent == "world" else f"{stage}/{parent}", f"{stage}/{child}", T[:, :3, 3].tolist(), quaternion_xyzw(T[:, :3, :3]).tolist()) for parent, child, T in links]
+        for k, time in enumerate(t.tolist()):
+            stamp = Timestamp.from_epoch_secs(time)
+            self._tf_channel.log(
+                FrameTransforms(
+                    transforms=[
+                        FrameTransform(
+                            timestamp=stamp,
+                            parent_frame_id=parent,
+                            child_frame_id=child,
+                            translation=Vector3(x=p[k][0], y=p[k][1], z=p[k][2]),
+                            rotation=Quaternion(x=r[k][0], y=r[k][1], z=r[k][2], w=r[k][3]),
+                        )
+                        for parent, child, p, r in frames
+                    ]
+                ),
+                log_time=_ns(time),
+            )
 
     def _rerun_motion(self, stage: str, t: np.ndarray, q: Mapping[str, np.ndarray]) -> None:
         """Animate ``stage``'s robot in Rerun: joint name -> positions (N,) at times t (N,) [s]."""
@@ -151,11 +163,7 @@ class Recorder:
         position, velocity and bounds and the arm angles as time series."""
         family = STAGE_TOPICS["ik"]
         names = path.joint_names
-        lower, upper = self.robot.lower_upper(names)
-        self._json(f"{family}/limits", schemas.JOINT_LIMITS).log(
-            {"t": 0.0, "rep": 0, **{key: dict(zip(names, np.asarray(v, dtype=float).tolist())) for key, v in (("lower", lower), ("upper", upper), ("velocity", velocity_limits))}},
-            log_time=0,
-        )
+        self._limits("ik", names, {"velocity": velocity_limits})
         sample = self._json(f"{family}/sample", schemas.IK_SAMPLE)
         bounds = self._json(f"{family}/bounds", schemas.JOINT_BOUNDS) if path.extras else None
         for k in range(len(path)):
@@ -176,7 +184,7 @@ class Recorder:
             )
             if bounds is not None:
                 bounds.log({"t": t, "rep": rep, **{key: dict(zip(names, v[k].tolist())) for key, v in path.extras.items()}}, log_time=_ns(t))
-            self._tf("ik", t, path.configuration(k))
+        self._tf("ik", path.t, {**path.fixed, **dict(zip(names, path.q.T))})
         self._rerun_motion("ik", path.t, {**{n: np.full(len(path), v) for n, v in path.fixed.items()}, **dict(zip(names, path.q.T))})
         self._series("ik/position", path.t, dict(zip(names, path.q.T)))
         self._series("ik/velocity", path.t, dict(zip(names, path.qd.T)))
@@ -185,6 +193,108 @@ class Recorder:
         self._series("ik/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T)))
         self._series("ik/solve_time_s", path.t, {"all": path.solve_time_s})
         self._series("ik/arm_angle_rad", path.t, arm_angles)
+
+    def _animation(self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> None:
+        """The robot of ``stage`` on ``/tf`` and in Rerun, every :data:`ANIMATION_PERIOD_S` and at
+        the last sample."""
+        stride = max(1, int(round(ANIMATION_PERIOD_S / float(np.median(np.diff(t))))) if len(t) > 1 else 1)
+        rows = np.unique(np.r_[np.arange(0, len(t), stride), len(t) - 1])
+        self._tf(stage, t[rows], {**fixed, **dict(zip(names, q[rows].T))})
+        self._rerun_motion(stage, t[rows], {**{n: np.full(len(rows), v) for n, v in fixed.items()}, **dict(zip(names, q[rows].T))})
+
+    def _limits(self, stage: str, names: tuple[str, ...], limits: Mapping[str, np.ndarray]) -> None:
+        lower, upper = self.robot.lower_upper(names)
+        values = {"lower": lower, "upper": upper, **limits}
+        self._json(f"{STAGE_TOPICS[stage]}/limits", schemas.JOINT_LIMITS).log(
+            {"t": 0.0, "rep": 0, **{key: dict(zip(names, np.asarray(v, dtype=float).tolist())) for key, v in values.items()}}, log_time=0
+        )
+
+    def _hand_traces(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
+        for hand, p in positions.items():
+            self._rr.log(f"world/{stage}/{hand}", rr.LineStrips3D([p], colors=[HAND_COLORS.get(hand, (200, 200, 200))], radii=0.0015), static=True)
+
+    def trajectory(
+        self,
+        traj: JointTrajectory,
+        limits: Mapping[str, np.ndarray],
+        hand_positions: Mapping[str, np.ndarray],
+        extras: Mapping[str, np.ndarray] = {},
+    ) -> None:
+        """A retime or smooth stage's product (``traj.stage``).
+
+        MCAP: ``/<stage>/limits`` once (position limits and ``limits``: kind -> (n,) values, kinds
+        ``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3]), ``/<stage>/sample``
+        per sample (with ``extras``: name -> (M, n), e.g. ``jerk``, ``deviation_rad``, and the
+        hands' ``hand_positions``: hand -> (M, 3) [m]), the robot on ``/tf`` as ``<stage>/<link>``.
+        Rerun: the robot under ``/<stage>``, the hand traces under ``/world/<stage>``, and under
+        ``/plots/<stage>`` the positions and each quantity's ratio to its limit (|x| / limit,
+        with the limit as the line ``limit`` at 1).
+        """
+        stage, names = traj.stage, traj.joint_names
+        self._limits(stage, names, limits)
+        channel = self._json(f"{STAGE_TOPICS[stage]}/sample", schemas.TRAJECTORY_SAMPLE)
+        series = {"velocity": traj.qd, "acceleration": traj.qdd, **extras}
+        for k in range(len(traj)):
+            t = float(traj.t[k])
+            channel.log(
+                {
+                    "t": t,
+                    "rep": int(traj.rep[k]),
+                    "position": dict(zip(names, traj.q[k].tolist())),
+                    **{key: dict(zip(names, v[k].tolist())) for key, v in series.items()},
+                    "hand_position": {hand: _vec(p[k]) for hand, p in hand_positions.items()},
+                },
+                log_time=_ns(t),
+            )
+        self._animation(stage, traj.t, names, traj.q, traj.fixed)
+        self._hand_traces(stage, hand_positions)
+        self._series(f"{stage}/position", traj.t, dict(zip(names, traj.q.T)))
+        for kind, limit in limits.items():
+            ratio = np.abs(series[kind]) / np.asarray(limit, dtype=float)
+            self._series(f"{stage}/{kind}_ratio", traj.t, {**dict(zip(names, ratio.T)), "limit": np.ones(len(traj))})
+        if "deviation_rad" in extras:
+            self._series(f"{stage}/deviation_rad", traj.t, dict(zip(names, extras["deviation_rad"].T)))
+
+    def execution(self, log: "ExecutionLog", hand_error_m: Mapping[str, np.ndarray], expected: set[tuple[str, str]]) -> None:
+        """The execute stage's product.
+
+        MCAP: ``/execute/sample`` per physics step (measured joints, the command, hand positions,
+        ``hand_error_m``: hand -> (K,) [m], contact counts), ``/execute/contacts`` once per pair
+        that touched (``expected``: sorted pairs the task expects), the robot on ``/tf`` as
+        ``execute/<link>``. Rerun: the robot under ``/execute``, the measured hand traces under
+        ``/world/execute``, and under ``/plots/execute`` the hand errors, contacts and the joints'
+        tracking error.
+        """
+        names = log.joint_names
+        channel = self._json(f"{STAGE_TOPICS['execute']}/sample", schemas.EXECUTED_SAMPLE)
+        positions = {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()}
+        for k in range(len(log.t)):
+            t = float(log.t[k])
+            channel.log(
+                {
+                    "t": t,
+                    "rep": int(log.rep[k]),
+                    "position": dict(zip(names, log.q[k].tolist())),
+                    "velocity": dict(zip(names, log.qd[k].tolist())),
+                    "command": dict(zip(names, log.q_command[k].tolist())),
+                    "hand_position": {hand: _vec(p[k]) for hand, p in positions.items()},
+                    "hand_error_m": {hand: float(e[k]) for hand, e in hand_error_m.items()},
+                    "self_contacts": int(log.self_contacts[k]),
+                    "environment_contacts": int(log.environment_contacts[k]),
+                    "expected_contacts": int(log.expected_contacts[k]),
+                },
+                log_time=_ns(t),
+            )
+        end = float(log.t[-1]) if len(log.t) else 0.0
+        contacts = self._json(f"{STAGE_TOPICS['execute']}/contacts", schemas.CONTACT_PAIR)
+        for (first, second), steps in log.contact_pairs.items():
+            contacts.log({"t": end, "rep": 0, "first": first, "second": second, "expected": (first, second) in expected, "steps": int(steps)}, log_time=_ns(end))
+        if len(log.t):
+            self._animation("execute", log.t, names, log.q, log.fixed)
+        self._hand_traces("execute", positions)
+        self._series("execute/hand_error_m", log.t, hand_error_m)
+        self._series("execute/tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
+        self._series("execute/contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
 
     def reference(self, ref: CartesianReference) -> None:
         """The path stage's product: one ``/task/reference/<hand>`` message per sample, the whole

@@ -77,7 +77,7 @@ IK_SAMPLE = {
 
 JOINT_LIMITS = {
     "title": "dualarm.JointLimits",
-    "description": "The physical limits the IK stage was held to, per active joint (the task's velocity limit where it sets one).",
+    "description": "The physical limits a stage was held to, per active joint (the task's limits where it sets them).",
     "type": "object",
     "properties": {
         "t": _NUMBER,
@@ -85,6 +85,8 @@ JOINT_LIMITS = {
         "lower": {**_JOINT_MAP, "description": "position lower limit [rad]"},
         "upper": {**_JOINT_MAP, "description": "position upper limit [rad]"},
         "velocity": {**_JOINT_MAP, "description": "velocity limit, symmetric [rad/s]"},
+        "acceleration": {**_JOINT_MAP, "description": "acceleration limit, symmetric [rad/s^2] (retime, smooth)"},
+        "jerk": {**_JOINT_MAP, "description": "jerk limit, symmetric [rad/s^3] (smooth)"},
     },
     "required": ["t", "rep", "lower", "upper", "velocity"],
 }
@@ -102,4 +104,55 @@ JOINT_BOUNDS = {
         "zeta_upper": {**_JOINT_MAP, "description": "zeta_new+(t) [rad/s]"},
     },
     "required": ["t", "rep"],
+}
+
+TRAJECTORY_SAMPLE = {
+    "title": "dualarm.TrajectorySample",
+    "description": "One sample of a timed joint trajectory (retime or smooth stage).",
+    "type": "object",
+    "properties": {
+        "t": {**_NUMBER, "description": "motion time [s]"},
+        "rep": {"type": "integer"},
+        "position": {**_JOINT_MAP, "description": "joint -> position [rad]"},
+        "velocity": {**_JOINT_MAP, "description": "joint -> velocity [rad/s]"},
+        "acceleration": {**_JOINT_MAP, "description": "joint -> acceleration [rad/s^2]"},
+        "jerk": {**_JOINT_MAP, "description": "joint -> mean jerk over the period ending here [rad/s^3] (smooth)"},
+        "deviation_rad": {**_JOINT_MAP, "description": "joint -> |q - q_retimed| at the same time [rad] (smooth)"},
+        "hand_position": {"type": "object", "additionalProperties": _VECTOR3, "description": "hand -> position by forward kinematics [m]"},
+    },
+    "required": ["t", "rep", "position", "velocity", "acceleration", "hand_position"],
+}
+
+EXECUTED_SAMPLE = {
+    "title": "dualarm.ExecutedSample",
+    "description": "One physics step of the execute stage, measured at its end.",
+    "type": "object",
+    "properties": {
+        "t": {**_NUMBER, "description": "simulation time [s]"},
+        "rep": {"type": "integer"},
+        "position": {**_JOINT_MAP, "description": "joint -> measured position [rad]"},
+        "velocity": {**_JOINT_MAP, "description": "joint -> measured velocity [rad/s]"},
+        "command": {**_JOINT_MAP, "description": "joint -> the trajectory's position at t [rad]"},
+        "hand_position": {"type": "object", "additionalProperties": _VECTOR3, "description": "hand -> measured position (PyBullet) [m]"},
+        "hand_error_m": {**_JOINT_MAP, "description": "hand -> |measured - forward kinematics of the command| [m]"},
+        "self_contacts": {"type": "integer", "description": "unexpected robot-robot contact points"},
+        "environment_contacts": {"type": "integer", "description": "unexpected robot-environment contact points"},
+        "expected_contacts": {"type": "integer", "description": "contact points of pairs the task expects"},
+    },
+    "required": ["t", "rep", "position", "velocity", "command", "hand_position", "hand_error_m", "self_contacts", "environment_contacts", "expected_contacts"],
+}
+
+CONTACT_PAIR = {
+    "title": "dualarm.ContactPair",
+    "description": "A pair of bodies that touched during execution (logged once per pair, at the end).",
+    "type": "object",
+    "properties": {
+        "t": _NUMBER,
+        "rep": {"type": "integer"},
+        "first": {"type": "string", "description": "robot link or object"},
+        "second": {"type": "string", "description": "robot link or object"},
+        "expected": {"type": "boolean", "description": "named in the task's expected_contacts"},
+        "steps": {"type": "integer", "description": "physics steps in which they touched"},
+    },
+    "required": ["t", "rep", "first", "second", "expected", "steps"],
 }

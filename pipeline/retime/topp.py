@@ -171,7 +171,28 @@ class LimitRatios:
     acceleration_time_s: float
 
 
-def retime(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, sample_period_s: float = 0.001, keep_timing: bool = False) -> JointTrajectory:
+@dataclass(frozen=True)
+class Retimed:
+    """The retime stage's product.
+
+    Attributes:
+        trajectory: the sampled trajectory (stage ``retime``).
+        method: ``topp-ra`` or ``keep_timing``.
+        sample_times_s: when the trajectory passes each joint-path sample (N,) [s].
+        stretch: the uniform slow-down applied to meet the limits between gridpoints and at the
+            samples (>= 1).
+        path_deviation_max_rad: largest joint difference between the trajectory at
+            ``sample_times_s`` and the joint-path samples [rad].
+    """
+
+    trajectory: JointTrajectory
+    method: str
+    sample_times_s: np.ndarray
+    stretch: float
+    path_deviation_max_rad: float
+
+
+def retime(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, sample_period_s: float = 0.001, keep_timing: bool = False) -> Retimed:
     """Time a joint path within joint limits and sample it.
 
     Args:
@@ -182,7 +203,8 @@ def retime(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, s
         keep_timing: keep the path's own timing instead of the time-optimal one, and check it.
 
     Returns:
-        The trajectory, rest to rest, sampled every ``sample_period_s`` plus its final time.
+        The trajectory, rest to rest, sampled every ``sample_period_s`` plus its final time, with
+        when it passes the samples and how closely.
 
     Raises:
         StageError: a limit is not a positive finite number, the path has non-finite joints,
@@ -194,15 +216,15 @@ def retime(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, s
     traj = timing.sample(sample_period_s)
     if keep_timing:
         check_limits(traj, velocity, acceleration)
-        return traj
-    for _ in range(SAFEGUARD_PASSES):  # the samples themselves within the limits (rarely needed)
-        r = limit_ratios(traj, velocity, acceleration)
-        k = max(r.velocity_ratio_max, np.sqrt(r.acceleration_ratio_max))
-        if k <= 1:
-            break
-        timing = timing.slowed(k * (1 + 1e-12))
-        traj = timing.sample(sample_period_s)
-    return traj
+    else:
+        for _ in range(SAFEGUARD_PASSES):  # the samples themselves within the limits (rarely needed)
+            r = limit_ratios(traj, velocity, acceleration)
+            k = max(r.velocity_ratio_max, np.sqrt(r.acceleration_ratio_max))
+            if k <= 1:
+                break
+            timing = timing.slowed(k * (1 + 1e-12))
+            traj = timing.sample(sample_period_s)
+    return Retimed(traj, timing.method, timing.sample_times_s, timing.stretch, path_deviation_max_rad(timing, path))
 
 
 def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, keep_timing: bool = False) -> Timing:

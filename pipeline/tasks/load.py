@@ -74,10 +74,35 @@ class Task:
     def velocity_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
         """Velocity limits of ``joint_names`` [rad/s]: the task's ``limits.velocity`` where it sets
         one, the robot's otherwise."""
-        override, limits = self.spec.limits.velocity, self.robot.limits
+        return self._limits("velocity", joint_names)
+
+    def acceleration_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
+        """Acceleration limits of ``joint_names`` [rad/s^2]: the task's ``limits.acceleration``
+        where it sets one, the robot's otherwise."""
+        return self._limits("acceleration", joint_names)
+
+    def jerk_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
+        """The robot's jerk limits of ``joint_names`` [rad/s^3]."""
+        return np.array([self.robot.limits[n].jerk for n in joint_names])
+
+    def _limits(self, kind: str, joint_names: tuple[str, ...]) -> np.ndarray:
+        override = getattr(self.spec.limits, kind)
+        robot = [getattr(self.robot.limits[n], kind) for n in joint_names]
         if isinstance(override, dict):
-            return np.array([override.get(n, limits[n].velocity) for n in joint_names])
-        return np.array([override or limits[n].velocity for n in joint_names])
+            return np.array([override.get(n, r) for n, r in zip(joint_names, robot)])
+        return np.array([override or r for r in robot])
+
+    def hand_poses(self, joint_names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """Each driven hand's pose (N, 4, 4) [m] at configurations ``q`` (N, n) [rad] of
+        ``joint_names``, the other joints at ``fixed`` or else at their initial values."""
+        q = np.asarray(q, dtype=float).reshape(-1, len(joint_names))
+        columns = {n: q[:, i] for i, n in enumerate(joint_names)}
+        poses = {}
+        for hand in self.spec.hands:
+            chain = self.hand_chain_from_root(hand)
+            Q = np.stack([columns[n] if n in columns else np.full(len(q), fixed.get(n, self.initial_q[n])) for n in chain.joint_names], axis=1)
+            poses[hand] = ChainKinematics.of(chain).poses(Q)
+        return poses
 
     def waypoint_pose(self, name: str) -> np.ndarray:
         """The 4x4 pose of waypoint ``name`` [m]."""

@@ -97,6 +97,24 @@ class Limits(_Model):
     acceleration: PositiveFloat | dict[str, PositiveFloat] | None = None
 
 
+class Retime(_Model):
+    """How the retime stage times the joint path.
+
+    Attributes:
+        timing: ``optimal``: time-optimal within the limits (TOPP-RA); ``task``: the task's own
+            timing (its moves' durations), checked against the limits.
+        velocity_fraction / acceleration_fraction: for ``optimal``, the share of the velocity and
+            acceleration limits TOPP-RA may use. The rest is the smooth stage's headroom: a
+            time-optimal profile switches its acceleration instantly (an infinite jerk), and a
+            jerk-limited tracker lags behind each switch; with headroom it catches up. The
+            reported ratios are always against the full limits.
+    """
+
+    timing: Literal["optimal", "task"] = "optimal"
+    velocity_fraction: Annotated[float, Field(strict=True, gt=0, le=1, allow_inf_nan=False)] = 0.9
+    acceleration_fraction: Annotated[float, Field(strict=True, gt=0, le=1, allow_inf_nan=False)] = 0.3
+
+
 class Gesture(_Model):
     """TV-GDD time-varying gesture bounds (Zhang, Kong, Niu, eqs 19-22).
 
@@ -255,6 +273,7 @@ class TaskSpec(_Model):
     start: Start
     moves: tuple[Move, ...] = ()
     limits: Limits = Limits()
+    retime: Retime = Retime()
     gesture: Gesture | None = None
     arm_angle: ArmAngle = ArmAngle()
     object: CarriedObject | None = None

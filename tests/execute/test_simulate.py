@@ -48,8 +48,21 @@ def test_a_box_in_the_way_is_a_named_environment_contact(triangle):
     hand = ChainKinematics.of(chain).pose(np.array([q[n] for n in chain.joint_names]))
     box = EnvironmentObject(name="obstacle", shape="box", pose={"position": tuple(hand[:3, 3]), "rpy": (0.0, 0.0, 0.0)}, size_m=(0.05, 0.05, 0.05))
     log = execute(trajectory, task.robot, ("left",), environment=(box,))
-    assert log.environment_contacts.sum() > 0
-    assert any(other == "obstacle" for _, other in log.contact_pairs)
+    assert log.environment_contacts.sum() > 0 and log.expected_contacts.sum() == 0
+    touched = [pair for pair in log.contact_pairs if "obstacle" in pair]
+    assert touched and all(log.contact_pairs[pair] > 0 for pair in touched)
+    # named as expected (in the other order), the same contacts are counted apart
+    expected = execute(trajectory, task.robot, ("left",), environment=(box,), expected_contacts=[pair[::-1] for pair in touched])
+    assert expected.environment_contacts.sum() == 0
+    assert expected.expected_contacts.sum() == log.environment_contacts.sum()
+
+
+def test_gui_without_a_display_is_one_clear_error(triangle, monkeypatch):
+    task, trajectory = triangle
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(StageError, match="needs a display"):
+        execute(trajectory, task.robot, ("left",), settings=ExecutionSettings(gui=True))
 
 
 def test_a_bad_step_is_refused(triangle):

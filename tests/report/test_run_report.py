@@ -46,7 +46,7 @@ def test_report_lists_joints_leaving_their_physical_limits(tmp_path):
     assert "velocity = 0.05" in text
     task_file = tmp_path / "ball_game.toml"
     task_file.write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"'))
-    run = run_task(task_file, ik="pinv", out_dir=tmp_path / "runs")
+    run = run_task(task_file, stages=("path", "ik"), ik="pinv", out_dir=tmp_path / "runs")
     out = write_report(run, tmp_path / "report")
 
     task = load_task(task_file)

@@ -161,7 +161,7 @@ def test_two_arms_with_holds_are_one_synchronised_path():
 def test_a_short_motion_keeps_its_ends():
     """A motion shorter than half a sample period still gives t = [0, duration], at rest at both ends."""
     q = np.array([[0.0] * 7, [1e-7] * 7])
-    traj = retime(joint_path(q, np.array([0.0, 1.0]), ARM), V7, A7, sample_period_s=DT)
+    traj = retime(joint_path(q, np.array([0.0, 1.0]), ARM), V7, A7, sample_period_s=DT).trajectory
     assert len(traj) == 2 and traj.t[0] == 0 and 0 < traj.t[1] < 0.5 * DT
     assert np.abs(traj.q - q).max() <= 1e-15 and np.abs(traj.qd).max() <= 1e-12
 
@@ -193,7 +193,7 @@ def test_the_samples_are_checked_last(monkeypatch):
     monkeypatch.setattr(topp, "CHECK_POINTS_PER_STAGE", 1)
     path = reversal()
     assert (np.abs(plan(path, V7, A7).sample(DT).qdd) / A7).max() > 1.01
-    traj = retime(path, V7, A7, sample_period_s=DT)
+    traj = retime(path, V7, A7, sample_period_s=DT).trajectory
     ratios = limit_ratios(traj, V7, A7)
     assert ratios.velocity_ratio_max <= 1 + 1e-9 and ratios.acceleration_ratio_max <= 1 + 1e-9
 
@@ -203,7 +203,7 @@ def test_repeated_samples_give_the_same_trajectory(arm):
     index = np.sort(np.concatenate([np.arange(len(path)), [0, 0, 50, 50, 50, 120, 299, 299]]))
     held = joint_path(path.q[index], np.linspace(0.0, 10.0, len(index)), ARM)
     assert len(chord_parameter(held.q)[1]) == len(path)
-    again = retime(held, V7, A7, sample_period_s=DT)
+    again = retime(held, V7, A7, sample_period_s=DT).trajectory
     assert len(again) == len(traj)
     for name in ("t", "q", "qd", "qdd"):
         assert np.abs(getattr(again, name) - getattr(traj, name)).max() <= 1e-12
@@ -213,7 +213,7 @@ def test_repeated_samples_give_the_same_trajectory(arm):
 def test_a_path_that_does_not_move_gives_one_sample_at_rest(N):
     q = np.tile(np.linspace(-0.5, 0.5, 7), (N, 1))
     path = joint_path(q, np.arange(N, dtype=float), ARM, rep=np.arange(N))
-    traj = retime(path, V7, A7)
+    traj = retime(path, V7, A7).trajectory
     assert len(traj) == 1 and traj.t[0] == 0 and traj.rep[0] == N - 1
     assert np.array_equal(traj.q[0], q[0]) and not traj.qd.any() and not traj.qdd.any()
 
@@ -251,7 +251,7 @@ def test_keep_timing_a_slow_path_keeps_its_timing():
     t = np.linspace(5.0, 25.0, 201)  # the path's clock need not start at 0
     path = joint_path(rest_to_rest(t, 7, 2.0), t, ARM)
     timing = plan(path, V7, A7, keep_timing=True)
-    traj = retime(path, V7, A7, keep_timing=True)
+    traj = retime(path, V7, A7, keep_timing=True).trajectory
     assert traj.duration_s == pytest.approx(20.0, abs=1e-12)
     assert np.allclose(timing.sample_times_s, t - 5.0, rtol=0, atol=1e-12)
     assert path_deviation_max_rad(timing, path) <= 1e-12
