@@ -1,0 +1,159 @@
+"""The whole default pipeline, path -> ik -> retime -> smooth -> execute, checked from its recording.
+
+Every limit check here is computed from the samples read back from ``run.mcap`` (finite
+differences of the recorded positions, velocities and accelerations) against the limits in the
+robot and task files, not from the stages' own metrics; the executed hands are compared with
+PyBullet's forward kinematics of the recorded commands.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pipeline.cli import app
+from pipeline.execute.world import load_pybullet_robot
+from pipeline.record.readback import read_run
+from pipeline.run import run_task
+from pipeline.tasks import load_task
+from tests.conftest import HUMANOID, TASKS
+
+TRIANGLE = TASKS / "triangle.toml"
+SLACK = 1 + 1e-6
+
+
+@pytest.fixture(scope="module")
+def triangle(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs")
+    run = run_task(TRIANGLE, ik="mc-inverse", repetitions=1, out_dir=out)
+    return load_task(TRIANGLE, 1), run, read_run(run)
+
+
+def _joints(df, field: str, names) -> np.ndarray:
+    return df[[f"{field}.{n}" for n in names]].to_numpy()
+
+
+def _limits(data, stage: str):
+    row = data[f"/{stage}/limits"].iloc[0]
+    names = [c.split(".", 1)[1] for c in data[f"/{stage}/limits"].columns if c.startswith("velocity.")]
+    return names, {kind: np.array([row[f"{kind}.{n}"] for n in names]) for kind in ("velocity", "acceleration", "jerk") if f"{kind}.{names[0]}" in row}
+
+
+def test_every_stage_runs_by_default_and_is_recorded(triangle):
+    task, run, data = triangle
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["status"] == "complete" and manifest["stages"] == ["path", "ik", "retime", "smooth", "execute"]
+    for topic in ("/retime/sample", "/retime/limits", "/smooth/sample", "/smooth/limits", "/execute/sample"):
+        assert len(data[topic]) > 0, topic
+    frames = set(data["/tf"]["child_frame_id"])
+    for stage in ("ik", "retime", "smooth", "execute"):
+        assert f"{stage}/left_hand" in frames
+
+
+def test_recorded_limits_are_the_robot_files(triangle):
+    task, _, data = triangle
+    for stage in ("retime", "smooth"):
+        names, limits = _limits(data, stage)
+        assert np.array_equal(limits["velocity"], task.velocity_limits(tuple(names)))
+        assert np.array_equal(limits["acceleration"], [task.robot.limits[n].acceleration for n in names])
+    names, limits = _limits(data, "smooth")
+    assert np.array_equal(limits["jerk"], [task.robot.limits[n].jerk for n in names])
+
+
+def test_retimed_samples_stay_within_velocity_and_acceleration_limits(triangle):
+    task, run, data = triangle
+    names, limits = _limits(data, "retime")
+    df = data["/retime/sample"]
+    t, q, qd, qdd = df["t"].to_numpy(), _joints(df, "position", names), _joints(df, "velocity", names), _joints(df, "acceleration", names)
+    assert (np.abs(qd) / limits["velocity"]).max() <= SLACK
+    assert (np.abs(qdd) / limits["acceleration"]).max() <= SLACK
+    # the recorded velocities are the positions' derivative: mean velocity over each step within the limit too
+    assert (np.abs(np.diff(q, axis=0) / np.diff(t)[:, None]) / limits["velocity"]).max() <= SLACK
+    assert np.abs(np.diff(q, axis=0) / np.diff(t)[:, None] - 0.5 * (qd[1:] + qd[:-1])).max() < 1e-3
+    assert np.allclose(qd[[0, -1]], 0) and np.allclose(q[0], data["/ik/sample"][[f"position.{n}" for n in names]].to_numpy()[0])
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["retime.velocity_ratio_max"] == pytest.approx((np.abs(qd) / limits["velocity"]).max(), rel=1e-9)
+
+
+def test_retimed_trajectory_passes_the_ik_samples(triangle):
+    """Every IK sample lies on the retimed trajectory: within 1e-6 rad of the nearest point of its
+    1 ms samples once the step between samples is accounted for (|q̇| dt / 2)."""
+    _, run, data = triangle
+    names, limits = _limits(data, "retime")
+    q = _joints(data["/retime/sample"], "position", names)
+    ik = _joints(data["/ik/sample"], "position", names)
+    step = np.abs(np.diff(q, axis=0)).max()
+    nearest = np.array([np.abs(q - sample).max(axis=1).min() for sample in ik])
+    assert nearest.max() <= step / 2 + 1e-6
+    assert json.loads((run / "metrics.json").read_text())["retime.path_deviation_max_rad"] <= 1e-6
+
+
+def test_smoothed_samples_stay_within_velocity_acceleration_and_jerk_limits(triangle):
+    _, run, data = triangle
+    names, limits = _limits(data, "smooth")
+    df = data["/smooth/sample"]
+    t, q, qd, qdd = df["t"].to_numpy(), _joints(df, "position", names), _joints(df, "velocity", names), _joints(df, "acceleration", names)
+    dt = np.diff(t)[:, None]
+    assert np.allclose(dt, 0.001)
+    jerk = np.diff(qdd, axis=0) / dt
+    for values, limit in ((qd, "velocity"), (qdd, "acceleration"), (jerk, "jerk"), (np.diff(q, axis=0) / dt, "velocity"), (np.diff(qd, axis=0) / dt, "acceleration")):
+        assert (np.abs(values) / limits[limit]).max() <= SLACK, limit
+    assert np.allclose(qd[[0, -1]], 0) and np.allclose(qdd[[0, -1]], 0)  # rest to rest
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["smooth.jerk_ratio_max"] == pytest.approx((np.abs(jerk) / limits["jerk"]).max(), rel=1e-6)
+    # the deviation from the retimed reference, recomputed from both recordings
+    retimed = data["/retime/sample"]
+    reference = np.stack([np.interp(t, retimed["t"], retimed[f"position.{n}"]) for n in names], axis=1)
+    assert metrics["smooth.path_deviation_max_rad"] == pytest.approx(np.abs(q - reference).max(), rel=1e-6, abs=1e-12)
+
+
+def test_execution_tracks_the_command_within_2_mm_by_pybullet_fk(triangle):
+    task, run, data = triangle
+    df = data["/execute/sample"]
+    names = [c.split(".", 1)[1] for c in df.columns if c.startswith("command.")]
+    rows = np.linspace(0, len(df) - 1, 60).astype(int)
+    with load_pybullet_robot(HUMANOID / "humanoid.urdf") as sim:
+        sim.set_positions(list(task.initial_q), list(task.initial_q.values()))
+        for k in rows:
+            sim.set_positions(names, df.iloc[k][[f"command.{n}" for n in names]].to_numpy(float))
+            commanded = sim.link_pose("left_hand")[:3, 3]
+            measured = df.iloc[k][["hand_position.left.x", "hand_position.left.y", "hand_position.left.z"]].to_numpy(float)
+            assert np.linalg.norm(measured - commanded) <= 2e-3, k
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["execute.tracking_error_max_m"] <= 2e-3
+    assert metrics["execute.self_collisions"] == 0 == metrics["execute.environment_collisions"]
+    assert (df["self_contacts"] == 0).all()
+
+
+def test_rerun_file_has_an_animated_robot_per_stage(triangle):
+    _, run, _ = triangle
+    rerun = Path(sys.executable).parent / "rerun"
+    printed = subprocess.run([str(rerun), "rrd", "print", str(run / "run.rrd")], capture_output=True, text=True, env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
+    for entity in ("/ik/transforms/", "/retime/transforms/", "/smooth/transforms/", "/execute/transforms/", "/world/execute/left", "/plots/smooth/jerk_ratio/"):
+        assert entity in printed, entity
+
+
+def test_task_timing_too_fast_for_a_tightened_limit_is_one_line_and_a_failed_run(tmp_path):
+    """The triangle at its own timing (2 s per edge) with every velocity limit at 0.05 rad/s."""
+    text = TRIANGLE.read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    task_file = tmp_path / "triangle.toml"
+    task_file.write_text(text + "\n[limits]\nvelocity = 0.05\n\n[retime]\ntiming = \"task\"\n")
+    result = CliRunner().invoke(app, ["run", str(task_file), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and "keep_timing" in lines[0] and "velocity limit" in lines[0], result.output
+    (run,) = (tmp_path / "runs" / "triangle").iterdir()
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["status"] == "failed" and not (run / "metrics.json").exists() or json.loads((run / "metrics.json").read_text()) in ({}, None)
+
+
+def test_stages_subset_stops_after_retime(tmp_path):
+    run = run_task(TRIANGLE, stages=["path", "ik", "retime"], ik="mc-inverse", repetitions=1, out_dir=tmp_path)
+    data = read_run(run)
+    assert "/retime/sample" in data.topics and "/smooth/sample" not in data.topics and "/execute/sample" not in data.topics
+    assert not any(key.startswith(("smooth.", "execute.")) for key in data.metrics)
