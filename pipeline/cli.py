@@ -279,6 +279,23 @@ def bench_ik_command(
     out.print(f"targets: batched MC-Inverse <= {TARGET_BATCHED_S * 1e6:.0f} µs/pose ({by_name[MC_BATCHED].mean_s * 1e6:.2f}), DLS-SVD success >= {TARGET_DLS_SUCCESS:.1%} ({by_name['DLS-SVD'].success_rate:.2%})")
 
 
+@bench_app.command("pipeline")
+@user_errors
+def bench_pipeline_command() -> None:
+    """Each stage's share of a whole recorded run, on the triangle and the circle (MC-Inverse) and
+    the ball game (TV-GDD)."""
+    from pipeline.bench.pipeline import PARTS, bench_pipeline
+
+    with err.status("benchmarking ...") as status:
+        timings = bench_pipeline(progress=lambda text: status.update(f"benchmarking {text} ..."))
+    table = Table(title="share of a whole run (dualarm run TASK --ik METHOD, recording included)", title_justify="left")
+    for column in ("task", "ik", *PARTS, "total s", "motion s", "run / motion"):
+        table.add_column(column, justify="left" if column in ("task", "ik") else "right")
+    for r in timings:
+        table.add_row(r.task, r.ik, *(f"{r.seconds.get(p, 0.0) / r.total_s:.1%}" for p in PARTS), f"{r.total_s:.2f}", f"{r.motion_s:.2f}", f"{r.total_s / r.motion_s:.2f}x" if r.motion_s else "-")
+    out.print(table)
+
+
 @robot_app.command("check")
 @user_errors
 def robot_check(

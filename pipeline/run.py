@@ -139,7 +139,8 @@ def run_task(
     The task and the options are validated before anything is written: a malformed task leaves no
     run behind. A stage that fails leaves a run marked ``failed`` and re-raises. ``repetitions``
     overrides the task file's, ``timing`` its ``retime.timing``; ``gui`` shows the execution in a
-    PyBullet window. ``progress`` is told each stage's name as it starts.
+    PyBullet window. ``progress`` is told each stage's name as it starts, and ``record`` when the
+    files are being closed.
     """
     from pipeline.execute.simulate import ExecutionSettings
     from pipeline.stages import CONTROL_PERIOD_S, execute_stage, retime_stage, smooth_stage
@@ -191,6 +192,7 @@ def run_task(
             _, stage_metrics = execute_stage(task, trajectory, recorder, execution)
             metrics.update(stage_metrics)
         recorder.metrics(metrics, end)
+        progress("record")
     except BaseException as exc:
         message = str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}"
         run.conclude(message)

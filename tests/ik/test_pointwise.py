@@ -44,4 +44,5 @@ def test_each_method_follows_the_path_checked_by_pybullet(short_circle, method):
     lower, upper = task.robot.lower_upper(path.joint_names)
     assert ((path.q >= lower - 1e-12) & (path.q <= upper + 1e-12)).all()
     if method != "trac-ik":  # TRAC-IK's random restarts may jump anywhere; the others are local
-        assert np.abs(np.diff(path.q[ok], axis=0)).max() < 1.0
+        consecutive = ok[1:] & ok[:-1]  # after failed samples a solver may land elsewhere
+        assert np.abs(np.diff(path.q, axis=0)[consecutive]).max() < 1.0

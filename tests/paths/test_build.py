@@ -215,7 +215,7 @@ def test_circle_geometry(circle):
     assert radius == pytest.approx(0.15, abs=1e-12)
     hand = circle.hands["left"]
     np.testing.assert_allclose(np.linalg.norm(hand.position - centre, axis=1), 0.15, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(hand.position[:, 0], 0.293, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(hand.position[:, 0], centre[0], rtol=0, atol=1e-12)
     np.testing.assert_allclose(hand.rotation, np.broadcast_to(rot(wp["rpy"]), hand.rotation.shape), rtol=0, atol=1e-12)
     np.testing.assert_allclose(hand.angular_velocity, 0.0, rtol=0, atol=1e-12)
     np.testing.assert_allclose(hand.position[-1], hand.position[0], rtol=0, atol=1e-12)
@@ -246,7 +246,7 @@ def test_circle_velocity_matches_finite_difference(circle):
     vmax = np.linalg.norm(hand.linear_velocity, axis=1).max()
     np.testing.assert_allclose(hand.linear_velocity[1:-1], fd, rtol=0, atol=1e-3 * vmax)
     # tangent to the circle
-    centre = np.array([0.293, 0.0, 1.05])
+    centre = np.asarray(toml("circle")["moves"][0]["left"]["arc_center"])
     np.testing.assert_allclose(np.einsum("ij,ij->i", hand.linear_velocity, hand.position - centre), 0.0, rtol=0, atol=1e-12)
 
 
@@ -410,7 +410,8 @@ def test_arc_leaving_the_workspace(tmp_path: Path):
     path = variant(
         tmp_path,
         "circle",
-        ("position = [0.293, 0.15, 1.05]", f"position = [{BIG_START[0]}, {BIG_START[1]}, {BIG_START[2]}]"),
+        ("position = [0.31, 0.24, 1.05]", f"position = [{BIG_START[0]}, {BIG_START[1]}, {BIG_START[2]}]"),
+        ("arc_center = [0.31, 0.09, 1.05]", f"arc_center = [{BIG_CENTRE[0]}, {BIG_CENTRE[1]}, {BIG_CENTRE[2]}]"),
         ("repetitions = 5", "repetitions = 1"),
     )
     task = load_task(path)  # the start waypoint itself is within reach
@@ -436,10 +437,11 @@ def test_arc_leaving_the_workspace(tmp_path: Path):
 
 
 def test_big_arc_closed_form_matches_reference(tmp_path: Path):
-    """The same arc, shrunk to stay reachable (radius 0.15 m from a +y start), matches its closed
-    form: checks _big_arc_position's conventions used above against a reachable case."""
+    """The same arc, shrunk to stay reachable (radius 0.15 m from a +y start: the paper's circle),
+    matches its closed form: checks _big_arc_position's conventions used above against a reachable case."""
     data = toml("circle")
-    ref = build_reference(load_task(variant(tmp_path, "circle", ("repetitions = 5", "repetitions = 1"))))
+    edits = (("position = [0.31, 0.24, 1.05]", "position = [0.293, 0.15, 1.05]"), ("arc_center = [0.31, 0.09, 1.05]", "arc_center = [0.293, 0.0, 1.05]"), ("repetitions = 5", "repetitions = 1"))
+    ref = build_reference(load_task(variant(tmp_path, "circle", *edits)))
     tau = ref.t / data["moves"][0]["duration_s"]
     theta = (10 * tau**3 - 15 * tau**4 + 6 * tau**5) * data["moves"][0]["left"]["arc_angle_rad"]
     expected = BIG_CENTRE + np.stack([np.zeros_like(theta), 0.15 * np.cos(theta), 0.15 * np.sin(theta)], axis=-1)

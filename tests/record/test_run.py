@@ -175,7 +175,7 @@ def _task_copy(tmp_path: Path, text: str) -> Path:
 
 def test_failed_stage_leaves_a_failed_run(tmp_path):
     """A circle whose far side is out of reach: the path stage fails mid-way, the run is kept as failed."""
-    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.293, 0.0, 1.05]", "arc_center = [0.293, -0.40, 1.05]")
+    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, 0.09, 1.05]", "arc_center = [0.31, -0.40, 1.05]")
     task = _task_copy(tmp_path, text)
     with pytest.raises(UnreachablePoseError, match=r"moves\[0\]"):
         run_task(task, out_dir=tmp_path / "out")
