@@ -15,7 +15,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 run: install
-	$(BIN)/dualarm run tasks/triangle.toml --stages path
+	$(BIN)/dualarm run tasks/triangle.toml --ik mc-inverse
 
 test: install
 	$(BIN)/python -m pytest
