@@ -157,3 +157,14 @@ def test_stages_subset_stops_after_retime(tmp_path):
     data = read_run(run)
     assert "/retime/sample" in data.topics and "/smooth/sample" not in data.topics and "/execute/sample" not in data.topics
     assert not any(key.startswith(("smooth.", "execute.")) for key in data.metrics)
+
+
+def test_a_task_without_moves_runs_every_stage_at_rest(tmp_path):
+    """bowl_grasp has no moves yet (it is planned, not tracked): one IK sample, a trajectory that
+    does not move, and an execution that holds the start without contact."""
+    run = run_task(TASKS / "bowl_grasp.toml", ik="dls-svd", out_dir=tmp_path)
+    data = read_run(run)
+    assert data.status == "complete"
+    assert data.metrics["retime.duration_s"] == 0 and data.metrics["smooth.velocity_ratio_max"] == 0
+    assert data.metrics["execute.self_collisions"] == 0 == data.metrics["execute.environment_collisions"]
+    assert data.metrics["execute.tracking_error_max_m"] <= 2e-3

@@ -79,7 +79,7 @@ def joint_path(method: str, task: Task, reference, problems: Sequence[ArmProblem
         t=reference.t,
         rep=reference.rep,
         q=q,
-        qd=np.gradient(q, reference.t, axis=0),
+        qd=np.gradient(q, reference.t, axis=0) if len(q) > 1 else np.zeros_like(q),  # a task without moves: one sample
         status=np.where(ok, 0, 1),
         solve_time_s=np.sum([s.solve_time_s for s in solutions], axis=0),
         hand_error_m=np.stack(errors, axis=1),
