@@ -118,6 +118,20 @@ def _ik_settings(task: Task, ik: str | None, scheme: str, qp_backend: str, lvi_t
     return {"method": ik, "feedback_gain": gain}, lambda ref: solve_pinv(task, ref, gain)
 
 
+def _back_half_settings(task: Task, timing: str | None, gui: bool):
+    """The retime, smooth and execute stages' settings (recorded in the manifest), and the
+    simulation's. Imported only by runs that retime: toppra, ruckig and pybullet load slowly."""
+    from pipeline.execute.simulate import ExecutionSettings
+    from pipeline.stages import CONTROL_PERIOD_S
+
+    execution = ExecutionSettings(gui=gui)
+    return {
+        "retime": {**task.spec.retime.model_dump(), "timing": timing or task.spec.retime.timing, "sample_period_s": CONTROL_PERIOD_S, "parametrizer": "ParametrizeConstAccel"},
+        "smooth": {"method": "ruckig online tracking", "control_period_s": CONTROL_PERIOD_S},
+        "execute": {**asdict(execution), "simulator": "pybullet"},
+    }, execution
+
+
 def run_task(
     task_file: str | Path,
     *,
@@ -142,20 +156,12 @@ def run_task(
     PyBullet window. ``progress`` is told each stage's name as it starts, and ``record`` when the
     files are being closed.
     """
-    from pipeline.execute.simulate import ExecutionSettings
-    from pipeline.stages import CONTROL_PERIOD_S, execute_stage, retime_stage, smooth_stage
-
     task = load_task(task_file, repetitions)
     chosen = resolve_stages(stages, ik)
     if timing is not None and timing not in TIMINGS:
         raise DualarmError(f"unknown timing '{timing}' (timings: {', '.join(TIMINGS)})")
     ik_settings, solve_ik = _ik_settings(task, ik, scheme, qp_backend, lvi_tolerance) if "ik" in chosen else ({}, None)
-    execution = ExecutionSettings(gui=gui)
-    back_half = {
-        "retime": {**task.spec.retime.model_dump(), "timing": timing or task.spec.retime.timing, "sample_period_s": CONTROL_PERIOD_S, "parametrizer": "ParametrizeConstAccel"},
-        "smooth": {"method": "ruckig online tracking", "control_period_s": CONTROL_PERIOD_S},
-        "execute": {**asdict(execution), "simulator": "pybullet"},
-    }
+    back_half, execution = _back_half_settings(task, timing, gui) if "retime" in chosen else ({}, None)
     np.random.seed(seed)
     run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, chosen, seed, command or sys.argv, ik_settings, back_half))
     attachments = {task.file.name: task.text, task.robot.urdf.path.name: task.robot.urdf.path.read_text()}
@@ -177,7 +183,9 @@ def run_task(
             recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names), angles)
             metrics.update(ik_metrics(joint_path, task))
             metrics.update(consistency_metrics(joint_path, reference, angles))
-        if "retime" in chosen:
+        if "retime" in chosen:  # smooth and execute need it (NEEDS): their imports are made here
+            from pipeline.stages import execute_stage, retime_stage, smooth_stage
+
             progress("retime")
             trajectory, stage_metrics = retime_stage(task, joint_path, recorder, timing)
             metrics.update(stage_metrics)

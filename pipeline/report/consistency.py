@@ -58,6 +58,10 @@ class Consistency:
     figures: tuple[Path, ...]
 
 
+#: Consistency is a property of the joint path: the runs stop after IK.
+CONSISTENCY_STAGES = ("path", "ik")
+
+
 def run_consistency(
     task_file: str | Path,
     methods: Sequence[str],
@@ -86,7 +90,7 @@ def run_consistency(
             progress(f"{task.name}: {method} ...")
         before = set((runs_dir / task.name).glob("*")) if (runs_dir / task.name).exists() else set()
         try:
-            run = read_run(run_task(task_file, ik=method, out_dir=runs_dir, seed=seed, repetitions=repetitions, command=["dualarm", "consistency", str(task_file), "--methods", method]))
+            run = read_run(run_task(task_file, stages=CONSISTENCY_STAGES, ik=method, out_dir=runs_dir, seed=seed, repetitions=repetitions, command=["dualarm", "consistency", str(task_file), "--methods", method]))
         except DualarmError as exc:
             failed = sorted(set((runs_dir / task.name).glob("*")) - before)
             rows.append({"method": method, "status": "failed", "error": str(exc), "run": str(failed[-1]) if failed else ""})

@@ -220,7 +220,7 @@ def test_cli_inspect_refuses_a_corrupt_recording(triangle_run, tmp_path, damage)
 
 
 def test_ik_run_records_joints_bounds_and_robot(tmp_path, humanoid):
-    run = run_task(TASKS / "ball_game.toml", ik="tvgdd", out_dir=tmp_path)
+    run = run_task(TASKS / "ball_game.toml", stages=("path", "ik"), ik="tvgdd", out_dir=tmp_path)
     data = read_run(run)
     sample, bounds = data["/ik/sample"], data["/ik/bounds"]
     assert len(sample) == len(bounds) == data.metrics["path.samples"]

@@ -18,7 +18,7 @@ from tests.conftest import HUMANOID, TASKS
 
 
 def test_report_of_a_pinv_run(tmp_path):
-    run = run_task(TASKS / "ball_game.toml", ik="pinv", out_dir=tmp_path / "runs")
+    run = run_task(TASKS / "ball_game.toml", stages=("path", "ik"), ik="pinv", out_dir=tmp_path / "runs")
     result = CliRunner().invoke(app, ["report", str(run), "--out", str(tmp_path / "report")])
     assert result.exit_code == 0, result.output
     out = Path(result.stdout.strip().splitlines()[-1])
