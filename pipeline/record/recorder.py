@@ -184,8 +184,7 @@ class Recorder:
             )
             if bounds is not None:
                 bounds.log({"t": t, "rep": rep, **{key: dict(zip(names, v[k].tolist())) for key, v in path.extras.items()}}, log_time=_ns(t))
-        self._tf("ik", path.t, {**path.fixed, **dict(zip(names, path.q.T))})
-        self._rerun_motion("ik", path.t, {**{n: np.full(len(path), v) for n, v in path.fixed.items()}, **dict(zip(names, path.q.T))})
+        self._animation("ik", path.t, names, path.q, path.fixed)
         self._series("ik/position", path.t, dict(zip(names, path.q.T)))
         self._series("ik/velocity", path.t, dict(zip(names, path.qd.T)))
         for key, v in path.extras.items():

@@ -177,17 +177,13 @@ class Retimed:
 
     Attributes:
         trajectory: the sampled trajectory (stage ``retime``).
-        method: ``topp-ra`` or ``keep_timing``.
-        sample_times_s: when the trajectory passes each joint-path sample (N,) [s].
         stretch: the uniform slow-down applied to meet the limits between gridpoints and at the
             samples (>= 1).
-        path_deviation_max_rad: largest joint difference between the trajectory at
-            ``sample_times_s`` and the joint-path samples [rad].
+        path_deviation_max_rad: largest joint difference between the trajectory at the times it
+            passes the joint-path samples (:attr:`Timing.sample_times_s`) and the samples [rad].
     """
 
     trajectory: JointTrajectory
-    method: str
-    sample_times_s: np.ndarray
     stretch: float
     path_deviation_max_rad: float
 
@@ -224,7 +220,7 @@ def retime(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, s
                 break
             timing = timing.slowed(k * (1 + 1e-12))
             traj = timing.sample(sample_period_s)
-    return Retimed(traj, timing.method, timing.sample_times_s, timing.stretch, path_deviation_max_rad(timing, path))
+    return Retimed(traj, timing.stretch, path_deviation_max_rad(timing, path))
 
 
 def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, keep_timing: bool = False) -> Timing:
