@@ -29,12 +29,10 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from pipeline.arrays import frozen
 from pipeline.errors import StageError
-from pipeline.execute.world import load_pybullet_robot, pb
-from pipeline.model.poses import pose_matrix
+from pipeline.execute.world import add_environment, load_pybullet_robot, pb
 from pipeline.model.robot import Robot
 from pipeline.retime.trajectory import JointTrajectory
 
@@ -99,37 +97,17 @@ class ExecutionLog:
         object.__setattr__(self, "contact_pairs", MappingProxyType(dict(self.contact_pairs)))
 
 
-def _collision_links(sim, body: int) -> set[int]:
-    return {i for i in [-1, *range(pb.getNumJoints(body, physicsClientId=sim.client))] if pb.getCollisionShapeData(body, i, physicsClientId=sim.client)}
-
-
 def _disable_touching_by_construction(sim) -> None:
     """No collision check between links joined only through links without collision geometry."""
     body, client = sim.body, sim.client
     parent = {i: pb.getJointInfo(body, i, physicsClientId=client)[16] for i in range(pb.getNumJoints(body, physicsClientId=client))}
-    solid = _collision_links(sim, body)
+    solid = sim.collision_links()
     for link in solid:
         up = parent.get(link, None)
         while up is not None and up not in solid:
             up = parent.get(up) if up != -1 else None
         if up is not None:
             pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
-
-
-def _add_environment(sim, objects) -> dict[int, str]:
-    """Static bodies for the task's fixed objects; body id -> name."""
-    bodies = {}
-    for obj in objects:
-        if obj.shape == "box":
-            shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[s / 2 for s in obj.size_m], physicsClientId=sim.client)
-        elif obj.shape == "cylinder":
-            shape = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=obj.radius_m, height=obj.height_m, physicsClientId=sim.client)
-        else:
-            shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=obj.radius_m, physicsClientId=sim.client)
-        T = pose_matrix(obj.pose.position, obj.pose.rpy)
-        body = pb.createMultiBody(0.0, shape, basePosition=T[:3, 3].tolist(), baseOrientation=Rotation.from_matrix(T[:3, :3]).as_quat().tolist(), physicsClientId=sim.client)
-        bodies[body] = obj.name
-    return bodies
 
 
 def execute(
@@ -162,7 +140,7 @@ def execute(
         if missing:
             raise StageError(f"execute: the robot has no joint {missing[0]}")
         _disable_touching_by_construction(sim)
-        objects = _add_environment(sim, environment)
+        objects = add_environment(sim, environment)
         client, body = sim.client, sim.body
         pb.setGravity(0, 0, -settings.gravity_m_s2, physicsClientId=client)
         pb.setTimeStep(settings.step_s, physicsClientId=client)

@@ -14,8 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from pipeline.errors import StageError
+from pipeline.model.poses import pose_matrix
 from pipeline.quiet import c_output_silenced
 
 
@@ -60,6 +62,10 @@ class PyBulletRobot:
         T[:3, 3] = pos
         return T
 
+    def collision_links(self) -> set[int]:
+        """Indices of the robot's links that have collision geometry."""
+        return {i for i in self.link_index.values() if pb.getCollisionShapeData(self.body, i, physicsClientId=self.client)}
+
     def close(self) -> None:
         """Disconnect the client."""
         if pb.isConnected(physicsClientId=self.client):
@@ -93,3 +99,20 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
         joint_index[info[1].decode()] = i
         link_index[info[12].decode()] = i
     return PyBulletRobot(client=client, body=body, joint_index=joint_index, link_index=link_index)
+
+
+def add_environment(sim: PyBulletRobot, objects) -> dict[int, str]:
+    """Static bodies in ``sim``'s client for a task's fixed objects
+    (:class:`~pipeline.tasks.schema.EnvironmentObject`); body id -> object name."""
+    bodies = {}
+    for obj in objects:
+        if obj.shape == "box":
+            shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[s / 2 for s in obj.size_m], physicsClientId=sim.client)
+        elif obj.shape == "cylinder":
+            shape = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=obj.radius_m, height=obj.height_m, physicsClientId=sim.client)
+        else:
+            shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=obj.radius_m, physicsClientId=sim.client)
+        T = pose_matrix(obj.pose.position, obj.pose.rpy)
+        body = pb.createMultiBody(0.0, shape, basePosition=T[:3, 3].tolist(), baseOrientation=Rotation.from_matrix(T[:3, :3]).as_quat().tolist(), physicsClientId=sim.client)
+        bodies[body] = obj.name
+    return bodies

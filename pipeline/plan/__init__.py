@@ -1,0 +1,2 @@
+"""Collision-avoiding dual-arm planning (Li & Liang): Workspace Target Areas, collision checking,
+MCIKRRT and the OMPL RRTConnect baseline."""

@@ -1,0 +1,206 @@
+"""Collision checking of configurations and joint-space segments for the planners.
+
+The humanoid's collision shapes are capsules (arms, torso, pelvis) and a sphere (head); the task's
+fixed objects are boxes, cylinders and spheres. Checking is PyBullet's own narrow phase (exact
+convex distance, GJK/EPA) on a copy of the robot whose every collision shape is inflated by the
+safety margin: the URDF is rewritten with each capsule's, sphere's and cylinder's radius (and each
+box's half-extents) grown by ``margin_m``. So a configuration is free exactly when every checked
+robot link keeps ``margin_m`` from every object and ``2 margin_m`` from every other checked link.
+One check teleports the joints (``resetJointStatesMultiDof``), runs
+``performCollisionDetection`` (the broad phase prefilters the pairs by their bounding boxes) and
+reads the contact points with a negative distance.
+
+Pairs not checked: a link and its parent link (PyBullet's own rule for self-collision), and two
+links joined only through links without collision geometry that overlap at the zero configuration
+(the pelvis and the torso through the waist's yaw and pitch links; the forearm and the palm through
+the wrist links), which touch by construction. Unlike the execute stage, which skips every pair
+joined through links without geometry, the upper arms are checked against the torso: they keep
+45 mm from it at rest, and an arm swung across the chest does hit it.
+
+Segments are checked at configurations spaced at most ``resolution_rad`` apart in every joint
+(the max-norm), end points excluded (a tree's nodes are checked when they are made).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import StageError
+from pipeline.execute.world import PyBulletRobot, add_environment, load_pybullet_robot, pb
+from pipeline.model.robot import Robot
+
+
+def inflated_urdf(text: str, margin_m: float) -> str:
+    """The URDF ``text`` with every ``<collision>`` shape grown by ``margin_m`` [m] on every side."""
+    root = ET.fromstring(text)
+    for geometry in root.iter("collision"):
+        for shape in geometry.iter():
+            if shape.tag in ("capsule", "sphere", "cylinder"):
+                shape.set("radius", repr(float(shape.get("radius")) + margin_m))
+                if shape.tag == "cylinder":
+                    shape.set("length", repr(float(shape.get("length")) + 2 * margin_m))
+            elif shape.tag == "box":
+                shape.set("size", " ".join(repr(float(s) + 2 * margin_m) for s in shape.get("size").split()))
+            elif shape.tag == "mesh":
+                raise StageError("collision checking: mesh collision shapes cannot be inflated by the safety margin (use capsules, spheres, cylinders or boxes)")
+    return ET.tostring(root, encoding="unicode")
+
+
+def bisection_order(steps: int) -> np.ndarray:
+    """The integers 1 .. steps - 1 in bisection order: the middle first, then the middles of the
+    two halves, and so on (each once)."""
+    order, seen, spans = [], set(), [(0, steps)]
+    while spans:
+        next_spans = []
+        for lo, hi in spans:
+            if hi - lo > 1:
+                mid = (lo + hi) // 2
+                if mid not in seen:
+                    seen.add(mid)
+                    order.append(mid)
+                next_spans += [(lo, mid), (mid, hi)]
+        spans = next_spans
+    return np.array(order, dtype=float)
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A checked pair that is closer than the margin allows.
+
+    Attributes:
+        a: a robot link.
+        b: another robot link, or an environment object's name.
+        depth_m: how far the inflated shapes overlap [m] (> 0).
+    """
+
+    a: str
+    b: str
+    depth_m: float
+
+
+class CollisionChecker:
+    """Checks configurations of ``joint_names`` (the others at ``fixed``) against self-collision
+    and the task's fixed objects, with a safety margin. Pairs in ``allowed_contacts`` (a task's
+    ``expected_contacts``: a palm on the bowl it grasps) are not checked.
+
+    Attributes:
+        joint_names: the planned joints, the order of every configuration.
+        margin_m: safety margin [m] (see the module docstring).
+        resolution_rad: largest joint step between the configurations checked along a segment [rad].
+        checks: configurations checked so far.
+        check_time_s: time spent in checks so far [s].
+    """
+
+    def __init__(self, robot: Robot, joint_names: Sequence[str], fixed: Mapping[str, float], environment=(), allowed_contacts: Sequence[tuple[str, str]] = (), margin_m: float = 0.01, resolution_rad: float = 0.02):
+        if not (np.isfinite(margin_m) and margin_m >= 0):
+            raise StageError(f"collision checking: the safety margin must be a non-negative number of metres, not {margin_m}")
+        if not (np.isfinite(resolution_rad) and resolution_rad > 0):
+            raise StageError(f"collision checking: the segment resolution must be a positive number of radians, not {resolution_rad}")
+        self.joint_names = tuple(joint_names)
+        self.margin_m = float(margin_m)
+        self.resolution_rad = float(resolution_rad)
+        self.checks = 0
+        self.check_time_s = 0.0
+        with tempfile.TemporaryDirectory() as tmp:
+            urdf = Path(tmp) / robot.urdf.path.name
+            urdf.write_text(inflated_urdf(robot.urdf.path.read_text(), self.margin_m))
+            self._sim = load_pybullet_robot(urdf, self_collision=True)
+        sim = self._sim
+        missing = [n for n in (*self.joint_names, *fixed) if n not in sim.joint_index]
+        if missing:
+            raise StageError(f"collision checking: the robot has no joint {missing[0]}")
+        self._index = [sim.joint_index[n] for n in self.joint_names]
+        sim.set_positions(list(fixed), list(fixed.values()))
+        self.unchecked_pairs = self._filter_pairs(sim)
+        self._objects = add_environment(sim, environment)
+        self._link_name = {i: n for n, i in sim.link_index.items()}
+        bodies = {name: body for body, name in self._objects.items()}
+        for a, b in allowed_contacts:
+            link, other = (a, b) if a in sim.link_index else (b, a)
+            if link not in sim.link_index:
+                raise StageError(f"collision checking: allowed contact ({a}, {b}) names no robot link")
+            if other in bodies:
+                pb.setCollisionFilterPair(sim.body, bodies[other], sim.link_index[link], -1, enableCollision=0, physicsClientId=sim.client)
+            elif other in sim.link_index:
+                pb.setCollisionFilterPair(sim.body, sim.body, sim.link_index[link], sim.link_index[other], enableCollision=0, physicsClientId=sim.client)
+            else:
+                raise StageError(f"collision checking: allowed contact ({a}, {b}): '{other}' is neither a robot link nor an object of the task")
+
+    @staticmethod
+    def _filter_pairs(sim: PyBulletRobot) -> frozenset[tuple[str, str]]:
+        """Disable the pairs that are not checked (module docstring); returns them by name."""
+        body, client = sim.body, sim.client
+        parent = {i: pb.getJointInfo(body, i, physicsClientId=client)[16] for i in range(pb.getNumJoints(body, physicsClientId=client))}
+        solid = sim.collision_links()
+        name = {i: n for n, i in sim.link_index.items()}
+        zero = {joint: 0.0 for joint in sim.joint_index}
+        saved = {joint: pb.getJointState(body, i, physicsClientId=client)[0] for joint, i in sim.joint_index.items()}
+        sim.set_positions(list(zero), list(zero.values()))
+        skipped = set()
+        for link in solid:
+            up, through_bare = parent.get(link), False
+            while up is not None and up != -1 and up not in solid:
+                up, through_bare = parent.get(up), True
+            if up is None or up == -1:
+                continue
+            overlaps = bool(pb.getClosestPoints(body, body, 0.0, link, up, physicsClientId=client))
+            if through_bare and not overlaps:
+                continue
+            pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
+            skipped.add(tuple(sorted((name[link], name[up]))))
+        sim.set_positions(list(saved), list(saved.values()))
+        return frozenset(skipped)
+
+    def _contact_points(self, q: np.ndarray) -> list:
+        """PyBullet's contact points of the robot at ``q`` [rad] (timed and counted as a check)."""
+        started = time.perf_counter()
+        sim = self._sim
+        pb.resetJointStatesMultiDof(sim.body, self._index, [[float(v)] for v in q], physicsClientId=sim.client)
+        pb.performCollisionDetection(physicsClientId=sim.client)
+        points = pb.getContactPoints(bodyA=sim.body, physicsClientId=sim.client)
+        self.checks += 1
+        self.check_time_s += time.perf_counter() - started
+        return points
+
+    def contacts(self, q: np.ndarray) -> list[Contact]:
+        """Every checked pair closer than the margin at ``q`` [rad], deepest first."""
+        deepest: dict[tuple[str, str], float] = {}
+        for point in self._contact_points(q):
+            if point[8] < 0.0:
+                other = self._link_name[point[4]] if point[2] == self._sim.body else self._objects[point[2]]
+                key = (self._link_name[point[3]], other)
+                deepest[key] = max(deepest.get(key, 0.0), -point[8])
+        return sorted((Contact(a, b, d) for (a, b), d in deepest.items()), key=lambda c: -c.depth_m)
+
+    def free(self, q: np.ndarray) -> bool:
+        """No checked pair is closer than the margin at ``q`` [rad]."""
+        return all(point[8] >= 0.0 for point in self._contact_points(q))
+
+    def segment_configurations(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The configurations checked strictly between ``a`` and ``b`` [rad], evenly spaced at
+        most :attr:`resolution_rad` apart in every joint, in bisection order (the midpoint, then
+        the quarter points, ...) so that a blocked segment is found blocked early; (k, n), k may be 0."""
+        steps = int(np.ceil(np.abs(b - a).max() / self.resolution_rad))
+        return a + bisection_order(steps)[:, None] / max(steps, 1) * (b - a)
+
+    def segment_free(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """The straight joint-space segment from ``a`` to ``b`` is free at :attr:`resolution_rad`
+        (the ends are not checked)."""
+        return all(self.free(q) for q in self.segment_configurations(a, b))
+
+    def close(self) -> None:
+        """Disconnect PyBullet."""
+        self._sim.close()
+
+    def __enter__(self) -> "CollisionChecker":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
