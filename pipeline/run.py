@@ -12,6 +12,7 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,11 +26,15 @@ from pipeline.record.recorder import Recorder
 from pipeline.record.run_dir import RunDirectory, package_versions, sha256_file
 from pipeline.tasks import Task, load_task
 
-#: Every stage of the pipeline, in order.
-ALL_STAGES = ("path", "ik", "retime", "smooth", "execute")
-#: The stage whose product each stage needs (execute plays the smoothed trajectory when smooth
+if TYPE_CHECKING:
+    from pipeline.plan.mcikrrt import PlanResult
+    from pipeline.plan.problem import PlanningSettings
+
+#: Every stage of the pipeline, in order (a run makes its joint path by ik or by plan).
+ALL_STAGES = ("path", "ik", "plan", "retime", "smooth", "execute")
+#: The stages one of which each stage needs (execute plays the smoothed trajectory when smooth
 #: runs, else the retimed one).
-NEEDS = {"ik": "path", "retime": "ik", "smooth": "retime", "execute": "retime"}
+NEEDS = {"ik": ("path",), "plan": ("path",), "retime": ("ik", "plan"), "smooth": ("retime",), "execute": ("retime",)}
 #: Timings of the retime stage (the task file's ``retime.timing`` unless given).
 TIMINGS = ("optimal", "task")
 #: IK methods of the ``ik`` stage.
@@ -50,20 +55,30 @@ def path_metrics(ref: CartesianReference) -> dict[str, float]:
     }
 
 
-def resolve_stages(stages: Sequence[str] | None, ik: str | None = None) -> tuple[str, ...]:
-    """Validate a stage list, in pipeline order. Without one: every stage when an IK method is
-    named, else the path stage alone."""
+def resolve_stages(stages: Sequence[str] | None, ik: str | None = None, planner: str | None = None) -> tuple[str, ...]:
+    """Validate a stage list, in pipeline order. Without one: every stage but plan when an IK
+    method is named, every stage but ik when a planner is, else the path stage alone."""
+    from pipeline.plan.problem import PLANNERS
+
     if ik is not None and ik not in IK_METHODS:
         raise DualarmError(f"unknown IK method '{ik}' (methods: {', '.join(IK_METHODS)})")
+    if planner is not None and planner not in PLANNERS:
+        raise DualarmError(f"unknown planner '{planner}' (planners: {', '.join(PLANNERS)})")
+    if ik is not None and planner is not None:
+        raise DualarmError("give either --ik METHOD or --planner PLANNER: both make the joint path")
     if not stages:
-        return ALL_STAGES if ik else ("path",)
+        return tuple(s for s in ALL_STAGES if s != "plan") if ik else tuple(s for s in ALL_STAGES if s != "ik") if planner else ("path",)
     for stage in stages:
         if stage not in ALL_STAGES:
             raise DualarmError(f"unknown stage '{stage}' (stages: {', '.join(ALL_STAGES)})")
-        if stage in NEEDS and NEEDS[stage] not in stages:
-            raise DualarmError(f"stage '{stage}' needs stage '{NEEDS[stage]}' (stages: {', '.join(ALL_STAGES)})")
+        if stage in NEEDS and not any(need in stages for need in NEEDS[stage]):
+            raise DualarmError(f"stage '{stage}' needs stage '{' or '.join(NEEDS[stage])}' (stages: {', '.join(ALL_STAGES)})")
+    if "ik" in stages and "plan" in stages:
+        raise DualarmError("stages 'ik' and 'plan' both make the joint path: choose one")
     if "ik" in stages and ik is None:
         raise DualarmError(f"stage 'ik' needs --ik METHOD (methods: {', '.join(IK_METHODS)})")
+    if "plan" in stages and planner is None:
+        raise DualarmError(f"stage 'plan' needs --planner PLANNER (planners: {', '.join(PLANNERS)})")
     return tuple(s for s in ALL_STAGES if s in stages)
 
 
@@ -132,6 +147,13 @@ def _back_half_settings(task: Task, timing: str | None, gui: bool):
     }, execution
 
 
+def _planning_problem(task: Task, settings: "PlanningSettings | None"):
+    """The task's planning problem (imports PyBullet, and OMPL only when it plans with it)."""
+    from pipeline.plan.problem import PlanningProblem, PlanningSettings
+
+    return PlanningProblem(task, settings or PlanningSettings())
+
+
 def run_task(
     task_file: str | Path,
     *,
@@ -145,6 +167,9 @@ def run_task(
     repetitions: int | None = None,
     timing: str | None = None,
     gui: bool = False,
+    planner: str | None = None,
+    planning: "PlanningSettings | None" = None,
+    planned: "PlanResult | None" = None,
     command: Sequence[str] | None = None,
     progress: Callable[[str], None] = lambda stage: None,
 ) -> Path:
@@ -153,15 +178,22 @@ def run_task(
     The task and the options are validated before anything is written: a malformed task leaves no
     run behind. A stage that fails leaves a run marked ``failed`` and re-raises. ``repetitions``
     overrides the task file's, ``timing`` its ``retime.timing``; ``gui`` shows the execution in a
-    PyBullet window. ``progress`` is told each stage's name as it starts, and ``record`` when the
-    files are being closed.
+    PyBullet window. A task with Workspace Target Areas and no ``ik`` is planned, by ``planner``
+    (default MCIKRRT) with ``planning`` settings from ``seed``; ``planned`` is a plan already
+    made for it (``dualarm plan`` records its first successful trial so). ``progress`` is told each
+    stage's name as it starts, and ``record`` when the files are being closed.
     """
     task = load_task(task_file, repetitions)
-    chosen = resolve_stages(stages, ik)
+    if ik is None and planner is None and task.spec.wta and not (stages and "ik" in stages):
+        planner = "mcikrrt"
+    chosen = resolve_stages(stages, ik, planner)
     if timing is not None and timing not in TIMINGS:
         raise DualarmError(f"unknown timing '{timing}' (timings: {', '.join(TIMINGS)})")
     ik_settings, solve_ik = _ik_settings(task, ik, scheme, qp_backend, lvi_tolerance) if "ik" in chosen else ({}, None)
     back_half, execution = _back_half_settings(task, timing, gui) if "retime" in chosen else ({}, None)
+    problem = _planning_problem(task, planning) if "plan" in chosen else None  # refuses a start in collision before writing
+    if problem is not None:
+        back_half = {"plan": {"planner": planner, **asdict(problem.settings)}, **back_half}
     np.random.seed(seed)
     run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, chosen, seed, command or sys.argv, ik_settings, back_half))
     attachments = {task.file.name: task.text, task.robot.urdf.path.name: task.robot.urdf.path.read_text()}
@@ -172,6 +204,7 @@ def run_task(
     try:
         progress("path")
         recorder.robot_state("path", 0.0, task.initial_q)
+        recorder.environment(task.spec.environment)
         reference = build_reference(task)
         recorder.reference(reference)
         metrics.update(path_metrics(reference))
@@ -183,6 +216,12 @@ def run_task(
             recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names), angles)
             metrics.update(ik_metrics(joint_path, task))
             metrics.update(consistency_metrics(joint_path, reference, angles))
+        if problem is not None:
+            from pipeline.plan.stage import plan_stage
+
+            progress("plan")
+            joint_path, stage_metrics = plan_stage(task, recorder, problem, planner, seed, planned)
+            metrics.update(stage_metrics)
         if "retime" in chosen:  # smooth and execute need it (NEEDS): their imports are made here
             from pipeline.stages import execute_stage, retime_stage, smooth_stage
 
@@ -207,6 +246,9 @@ def run_task(
         recorder.close(run.manifest)
         run.finish(None)
         raise
+    finally:
+        if problem is not None:
+            problem.close()
     run.conclude(None)
     recorder.close(run.manifest)
     return run.finish(metrics)

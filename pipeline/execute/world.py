@@ -90,7 +90,7 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
         client = pb.connect(pb.GUI if gui else pb.DIRECT)
         if client < 0:
             raise StageError("execute: PyBullet could not open its window")
-        flags = pb.URDF_USE_SELF_COLLISION if self_collision else 0
+        flags = pb.URDF_USE_INERTIA_FROM_FILE | (pb.URDF_USE_SELF_COLLISION if self_collision else 0)
         body = pb.loadURDF(str(urdf), useFixedBase=True, flags=flags, physicsClientId=client)
     joint_index: dict[str, int] = {}
     link_index: dict[str, int] = {pb.getBodyInfo(body, physicsClientId=client)[0].decode(): -1}

@@ -11,8 +11,8 @@ One check teleports the joints (``resetJointStatesMultiDof``), runs
 reads the contact points with a negative distance.
 
 Pairs not checked: a link and its parent link (PyBullet's own rule for self-collision), and two
-links joined only through links without collision geometry that overlap at the zero configuration
-(the pelvis and the torso through the waist's yaw and pitch links; the forearm and the palm through
+links joined only through links without collision geometry that are within :data:`TOUCHING_M` of each other at the zero
+configuration, margin aside (the pelvis and the torso through the waist's yaw and pitch links; the forearm and the palm through
 the wrist links), which touch by construction. Unlike the execute stage, which skips every pair
 joined through links without geometry, the upper arms are checked against the torso: they keep
 45 mm from it at rest, and an arm swung across the chest does hit it.
@@ -35,6 +35,10 @@ import numpy as np
 from pipeline.errors import StageError
 from pipeline.execute.world import PyBulletRobot, add_environment, load_pybullet_robot, pb
 from pipeline.model.robot import Robot
+
+#: Two links joined through links without geometry and closer than this at the zero
+#: configuration (before the margin) touch by construction and are not checked [m].
+TOUCHING_M = 1e-3
 
 
 def inflated_urdf(text: str, margin_m: float) -> str:
@@ -118,7 +122,7 @@ class CollisionChecker:
             raise StageError(f"collision checking: the robot has no joint {missing[0]}")
         self._index = [sim.joint_index[n] for n in self.joint_names]
         sim.set_positions(list(fixed), list(fixed.values()))
-        self.unchecked_pairs = self._filter_pairs(sim)
+        self.unchecked_pairs = self._filter_pairs(sim, self.margin_m)
         self._objects = add_environment(sim, environment)
         self._link_name = {i: n for n, i in sim.link_index.items()}
         bodies = {name: body for body, name in self._objects.items()}
@@ -134,7 +138,7 @@ class CollisionChecker:
                 raise StageError(f"collision checking: allowed contact ({a}, {b}): '{other}' is neither a robot link nor an object of the task")
 
     @staticmethod
-    def _filter_pairs(sim: PyBulletRobot) -> frozenset[tuple[str, str]]:
+    def _filter_pairs(sim: PyBulletRobot, margin_m: float) -> frozenset[tuple[str, str]]:
         """Disable the pairs that are not checked (module docstring); returns them by name."""
         body, client = sim.body, sim.client
         parent = {i: pb.getJointInfo(body, i, physicsClientId=client)[16] for i in range(pb.getNumJoints(body, physicsClientId=client))}
@@ -150,8 +154,8 @@ class CollisionChecker:
                 up, through_bare = parent.get(up), True
             if up is None or up == -1:
                 continue
-            overlaps = bool(pb.getClosestPoints(body, body, 0.0, link, up, physicsClientId=client))
-            if through_bare and not overlaps:
+            touching = bool(pb.getClosestPoints(body, body, 2 * margin_m + TOUCHING_M, link, up, physicsClientId=client))
+            if through_bare and not touching:
                 continue
             pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
             skipped.add(tuple(sorted((name[link], name[up]))))

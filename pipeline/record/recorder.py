@@ -20,12 +20,12 @@ import foxglove
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
-from foxglove.channels import FrameTransformsChannel, PosesInFrameChannel
-from foxglove.messages import FrameTransform, FrameTransforms, Pose, PosesInFrame, Quaternion, Timestamp, Vector3
+from foxglove.channels import FrameTransformsChannel, PosesInFrameChannel, SceneUpdateChannel
+from foxglove.messages import Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, Pose, PosesInFrame, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3
 
 from pipeline.ik.joint_path import JointPath
 from pipeline.model.kinematics import joint_transforms
-from pipeline.model.poses import quaternion_xyzw
+from pipeline.model.poses import pose_matrix, quaternion_xyzw
 from pipeline.model.robot import Robot
 from pipeline.paths.reference import CartesianReference
 from pipeline.record import schemas
@@ -155,15 +155,15 @@ class Recorder:
         )
         self._rerun_motion(stage, np.array([t]), {n: np.array([v]) for n, v in q.items()})
 
-    def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray]) -> None:
-        """The IK stage's product: ``/ik/limits`` once (the robot's position limits and
+    def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+        """The IK (or plan) stage's product, under ``stage``'s topics: ``/ik/limits`` once (the robot's position limits and
         ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` (with each hand's
         ``arm_angles`` [rad], (N,) per hand) and (TV-GDD) ``/ik/bounds`` per sample, the robot on
         ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's
         position, velocity and bounds and the arm angles as time series."""
-        family = STAGE_TOPICS["ik"]
+        family = STAGE_TOPICS[stage]
         names = path.joint_names
-        self._limits("ik", names, {"velocity": velocity_limits})
+        self._limits(stage, names, {"velocity": velocity_limits})
         sample = self._json(f"{family}/sample", schemas.IK_SAMPLE)
         bounds = self._json(f"{family}/bounds", schemas.JOINT_BOUNDS) if path.extras else None
         for k in range(len(path)):
@@ -184,14 +184,14 @@ class Recorder:
             )
             if bounds is not None:
                 bounds.log({"t": t, "rep": rep, **{key: dict(zip(names, v[k].tolist())) for key, v in path.extras.items()}}, log_time=_ns(t))
-        self._animation("ik", path.t, names, path.q, path.fixed)
-        self._series("ik/position", path.t, dict(zip(names, path.q.T)))
-        self._series("ik/velocity", path.t, dict(zip(names, path.qd.T)))
+        self._animation(stage, path.t, names, path.q, path.fixed)
+        self._series(f"{stage}/position", path.t, dict(zip(names, path.q.T)))
+        self._series(f"{stage}/velocity", path.t, dict(zip(names, path.qd.T)))
         for key, v in path.extras.items():
-            self._series(f"ik/{key}", path.t, dict(zip(names, v.T)))
-        self._series("ik/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T)))
-        self._series("ik/solve_time_s", path.t, {"all": path.solve_time_s})
-        self._series("ik/arm_angle_rad", path.t, arm_angles)
+            self._series(f"{stage}/{key}", path.t, dict(zip(names, v.T)))
+        self._series(f"{stage}/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T)))
+        self._series(f"{stage}/solve_time_s", path.t, {"all": path.solve_time_s})
+        self._series(f"{stage}/arm_angle_rad", path.t, arm_angles)
 
     def _animation(self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> None:
         """The robot of ``stage`` on ``/tf`` and in Rerun, every :data:`ANIMATION_PERIOD_S` and at
@@ -294,6 +294,34 @@ class Recorder:
         self._series("execute/hand_error_m", log.t, hand_error_m)
         self._series("execute/tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
         self._series("execute/contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
+
+    def environment(self, objects) -> None:
+        """A task's fixed objects (:class:`~pipeline.tasks.schema.EnvironmentObject`, poses in the
+        robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate) and in
+        Rerun under ``/world/environment/<name>``."""
+        entities = []
+        for obj in objects:
+            T = pose_matrix(obj.pose.position, obj.pose.rpy)
+            x, y, z, w = quaternion_xyzw(T[:3, :3]).tolist()
+            pose = Pose(position=Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3]), orientation=Quaternion(x=x, y=y, z=z, w=w))
+            color = Color(r=0.55, g=0.45, b=0.35, a=0.8)
+            path = f"world/environment/{obj.name}"
+            if obj.shape == "box":
+                size = obj.size_m
+                primitive = {"cubes": [CubePrimitive(pose=pose, size=Vector3(x=size[0], y=size[1], z=size[2]), color=color)]}
+                archetype = rr.Boxes3D(half_sizes=[[s / 2 for s in size]], centers=[T[:3, 3]], quaternions=[[x, y, z, w]], fill_mode="solid")
+            elif obj.shape == "cylinder":
+                d = 2 * obj.radius_m
+                primitive = {"cylinders": [CylinderPrimitive(pose=pose, size=Vector3(x=d, y=d, z=obj.height_m), bottom_scale=1.0, top_scale=1.0, color=color)]}
+                archetype = rr.Cylinders3D(lengths=[obj.height_m], radii=[obj.radius_m], centers=[T[:3, 3]], quaternions=[[x, y, z, w]], fill_mode="solid")
+            else:
+                d = 2 * obj.radius_m
+                primitive = {"spheres": [SpherePrimitive(pose=pose, size=Vector3(x=d, y=d, z=d), color=color)]}
+                archetype = rr.Ellipsoids3D(half_sizes=[[obj.radius_m] * 3], centers=[T[:3, 3]], fill_mode="solid")
+            entities.append(SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, **primitive))
+            self._rr.log(path, archetype, static=True)
+        if entities:
+            SceneUpdateChannel(f"{STAGE_TOPICS['path']}/environment", context=self._context).log(SceneUpdate(entities=entities), log_time=0)
 
     def reference(self, ref: CartesianReference) -> None:
         """The path stage's product: one ``/task/reference/<hand>`` message per sample, the whole

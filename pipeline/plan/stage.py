@@ -1,0 +1,79 @@
+"""The plan stage: a task with Workspace Target Areas -> a collision-free joint path.
+
+The plan's waypoints are joined by straight joint-space segments, each collision-checked at the
+checker's resolution; the stage's :class:`~pipeline.ik.joint_path.JointPath` holds those checked
+configurations in order (waypoints included), so the retime stage's spline through them stays
+within the resolution of the checked segments. Its sample times are nominal (one
+``control_period_s`` apart; the retime stage gives the real timing), its ``hand_error_m`` is each
+hand's distance to its nearest WTA in position, eq (26)'s translation rows [m], and it has no
+per-sample solve time (the planning time is ``plan.planning_time_s``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.errors import StageError
+from pipeline.ik.joint_path import JointPath
+from pipeline.plan.mcikrrt import PlanResult
+from pipeline.plan.problem import PlanningProblem
+from pipeline.plan.wta import displacement
+from pipeline.record.recorder import Recorder
+from pipeline.tasks import Task
+
+
+def plan_metrics(result: PlanResult) -> dict[str, float]:
+    """``plan.*`` metrics of one query."""
+    return {
+        "plan.success": float(result.success),
+        "plan.planning_time_s": result.planning_time_s,
+        "plan.nodes": float(result.nodes),
+        "plan.goals": float(result.goals),
+        "plan.collision_checks": float(result.collision_checks),
+        "plan.path_length_rad": result.path_length_rad,
+        "plan.raw_path_length_rad": result.raw_path_length_rad,
+        "plan.waypoints": float(len(result.path)),
+    }
+
+
+def planned_joint_path(problem: PlanningProblem, result: PlanResult, method: str) -> JointPath:
+    """``method``'s plan: the checked configurations along the plan's segments as a joint path (module docstring)."""
+    checker, task = problem.checker, problem.task
+    rows = [result.path[0]]
+    for a, b in zip(result.path[:-1], result.path[1:]):
+        steps = max(1, int(np.ceil(np.abs(b - a).max() / checker.resolution_rad)))
+        rows += list(a + np.arange(1, steps + 1)[:, None] / steps * (b - a))
+    q = np.array(rows)
+    N = len(q)
+    poses = task.hand_poses(problem.joint_names, q, problem.fixed)
+    hands = tuple(problem.areas)
+    error = np.stack([np.min([np.linalg.norm(displacement(a.carried_vector(poses[h]), a.bounds)[:, :3], axis=1) for a in problem.areas[h]], axis=0) for h in hands], axis=1)
+    return JointPath(
+        method=method,
+        joint_names=problem.joint_names,
+        t=np.arange(N) * task.spec.control_period_s,
+        rep=np.zeros(N, dtype=int),
+        q=q,
+        qd=np.zeros_like(q),
+        status=np.zeros(N, dtype=int),
+        solve_time_s=np.zeros(N),
+        hand_error_m=error,
+        hands=hands,
+        fixed=problem.fixed,
+    )
+
+
+def plan_stage(task: Task, recorder: Recorder, problem: PlanningProblem, planner: str, seed: int, result: PlanResult | None = None) -> tuple[JointPath, dict[str, float]]:
+    """Plan (or take the already planned ``result``) and record the planned joint path on
+    ``/plan`` (the IK stage's topics and schema: limits, samples, the animated robot).
+
+    Raises:
+        StageError: the planner found no path (the message says why, naming the WTA no IK
+            sample reached when no goal was found).
+    """
+    result = result or problem.solve(planner, seed)
+    if not result.success:
+        raise StageError(f"plan ({planner}): {result.reason}")
+    path = planned_joint_path(problem, result, planner)
+    recorder.joint_path(path, task.velocity_limits(path.joint_names), {}, stage="plan")
+    return path, {**plan_metrics(result), "plan.wta_position_distance_max_m": float(path.hand_error_m[-1].max())}
