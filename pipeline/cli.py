@@ -64,6 +64,8 @@ def run(
     reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
     timing: Annotated[Optional[str], typer.Option(help="Retime: optimal (TOPP-RA) or task (the task's own timing, checked against the limits); default: the task file's retime.timing.")] = None,
     gui: Annotated[bool, typer.Option("--gui", help="Show the execution in a PyBullet window (needs a display).")] = False,
+    planner: Annotated[Optional[str], typer.Option(help="Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no --ik: mcikrrt).")] = None,
+    timeout: Annotated[Optional[float], typer.Option(help="Planning timeout [s] (default 5).")] = None,
 ) -> None:
     """Run a task through the pipeline and record it; prints the run directory as the last line."""
     from pipeline.run import run_task
@@ -72,10 +74,53 @@ def run(
     with err.status(f"running {task} ...") as status:
         directory = run_task(
             task, stages=chosen, ik=ik, scheme=scheme, qp_backend=qp_backend, lvi_tolerance=lvi_tolerance, out_dir=out_dir, seed=seed,
-            repetitions=reps, timing=timing, gui=gui, command=["dualarm", *sys.argv[1:]],
+            repetitions=reps, timing=timing, gui=gui, planner=planner, planning=_planning_settings(timeout), command=["dualarm", *sys.argv[1:]],
             progress=lambda stage: status.update(f"running {task}: {stage} ..."),
         )
     out.print(str(directory), markup=False, soft_wrap=True)
+
+
+def _planning_settings(timeout: Optional[float]):
+    """The planning settings, with ``timeout`` [s] when given."""
+    from dataclasses import replace
+
+    from pipeline.plan.problem import PlanningSettings
+
+    settings = PlanningSettings()
+    return settings if timeout is None else replace(settings, planner=replace(settings.planner, timeout_s=timeout))
+
+
+@app.command()
+@user_errors
+def plan(
+    task: Annotated[Path, typer.Argument(help="Task file (TOML) with [[wta]] tables, e.g. tasks/bowl_grasp.toml.")],
+    planner: Annotated[str, typer.Option(help="mcikrrt (Li & Liang) or ompl-rrtconnect (OMPL's RRTConnect, same checker and goals).")] = "mcikrrt",
+    trials: Annotated[int, typer.Option(min=1, help="Planning trials; trial i uses seed SEED + i.")] = 100,
+    seed: Annotated[int, typer.Option(help="Seed of the first trial.")] = 0,
+    timeout: Annotated[Optional[float], typer.Option(help="Planning timeout per trial [s] (default 5).")] = None,
+    out_dir: Annotated[Optional[Path], typer.Option("--out", help="Directory for plan_trials.csv and plan_summary.json (default plans/<task>-<planner>).")] = None,
+    recordings: Annotated[Path, typer.Option(help="Directory that receives the recorded run of the first successful plan.")] = Path("recordings"),
+) -> None:
+    """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed,
+    smoothed, executed and recorded as a run; exits 1 when no trial succeeded."""
+    from pipeline.plan.problem import PLANNERS
+    from pipeline.plan.trials import run_trials
+
+    if planner not in PLANNERS:
+        raise DualarmError(f"unknown planner '{planner}' (planners: {', '.join(PLANNERS)})")
+    directory = out_dir or Path("plans") / f"{task.stem}-{planner}"
+    with err.status(f"planning {task} ...") as status:
+        result = run_trials(
+            task, planner, trials, seed, directory, _planning_settings(timeout), recordings, ["dualarm", *sys.argv[1:]],
+            progress=lambda done, total: status.update(f"planning {task}: trial {done}/{total}" + (" (recording the first plan)" if done == total else "")),
+        )
+    s = result.summary
+    out.print(f"{planner} on {task}: {s['success_rate'] * 100:.0f} % of {s['trials']} trials; planning time median {s['planning_time_median_s'] * 1e3:.1f} ms, p95 {s['planning_time_p95_s'] * 1e3:.1f} ms (paper: {s['paper_planning_time_mean_s'] * 1e3:.2f} ms mean); {s['collision_check_time_mean_s'] * 1e6:.1f} µs per collision check", markup=False, soft_wrap=True)
+    out.print(str(result.directory / "plan_summary.json"), markup=False, soft_wrap=True)
+    if result.run is None:
+        err.print(f"error: no trial found a path: {'; '.join(s['failures'])}", markup=False, soft_wrap=True)
+        raise typer.Exit(1)
+    out.print(str(result.run), markup=False, soft_wrap=True)
 
 
 @app.command()
@@ -294,6 +339,30 @@ def bench_pipeline_command() -> None:
     for r in timings:
         table.add_row(r.task, r.ik, *(f"{r.seconds.get(p, 0.0) / r.total_s:.1%}" for p in PARTS), f"{r.total_s:.2f}", f"{r.motion_s:.2f}", f"{r.total_s / r.motion_s:.2f}x" if r.motion_s else "-")
     out.print(table)
+
+
+@bench_app.command("plan")
+@user_errors
+def bench_plan_command(
+    task: Annotated[Path, typer.Option(help="Task with [[wta]] tables.")] = Path("tasks/bowl_grasp.toml"),
+    trials: Annotated[int, typer.Option(min=1, help="Trials per planner (interleaved).")] = 30,
+    seed: Annotated[int, typer.Option(help="Seed of the first trial.")] = 0,
+) -> None:
+    """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals: planning times
+    and their ratio, collision checks and the time of one check."""
+    from pipeline.bench.plan import bench_plan
+    from pipeline.plan.trials import PAPER_PLANNING_TIME_S
+
+    with err.status("benchmarking ...") as status:
+        rows = bench_plan(task, trials, seed, progress=lambda text: status.update(f"benchmarking {text} ..."))
+    table = Table(title=f"planning {task} ({trials} trials each, interleaved)", title_justify="left")
+    for column in ("planner", "success", "median ms", "p95 ms", "mean ms", "checks (median)", "µs / check", "path rad (median)", "paper mean / ours"):
+        table.add_column(column, justify="left" if column == "planner" else "right")
+    for r in rows:
+        table.add_row(r.planner, f"{r.success_rate:.0%}", f"{r.median_s * 1e3:.1f}", f"{r.p95_s * 1e3:.1f}", f"{r.mean_s * 1e3:.1f}", f"{r.checks_median:.0f}", f"{r.check_time_s * 1e6:.1f}", f"{r.path_length_median_rad:.2f}", f"{PAPER_PLANNING_TIME_S / r.mean_s:.0f}x")
+    out.print(table)
+    mcikrrt, ompl = rows[0], rows[1]
+    out.print(f"median planning time, ompl-rrtconnect / mcikrrt: {ompl.median_s / mcikrrt.median_s:.2f}x", markup=False)
 
 
 @robot_app.command("check")

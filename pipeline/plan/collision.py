@@ -166,7 +166,7 @@ class CollisionChecker:
         """PyBullet's contact points of the robot at ``q`` [rad] (timed and counted as a check)."""
         started = time.perf_counter()
         sim = self._sim
-        pb.resetJointStatesMultiDof(sim.body, self._index, [[float(v)] for v in q], physicsClientId=sim.client)
+        pb.resetJointStatesMultiDof(sim.body, self._index, np.asarray(q, dtype=float).reshape(-1, 1).tolist(), physicsClientId=sim.client)
         pb.performCollisionDetection(physicsClientId=sim.client)
         points = pb.getContactPoints(bodyA=sim.body, physicsClientId=sim.client)
         self.checks += 1

@@ -82,7 +82,7 @@ class PlanningProblem:
         if contacts:
             worst = contacts[0]
             self.close()
-            raise StageError(f"{task.file}: the start configuration is in collision: {worst.a} with {worst.b} ({worst.depth_m * 1e3:.1f} mm inside the {settings.margin_m * 1e3:g} mm margin)")
+            raise StageError(f"{task.file}: the start configuration is in collision: {worst.a} with {worst.b} ({worst.depth_m * 1e3:.1f} mm deep, the {settings.margin_m * 1e3:g} mm safety margin included)")
 
     def goal_sampler(self, seed: int) -> WtaGoalSampler:
         """A goal sampler whose WTA samples are drawn from ``seed``'s own stream."""

@@ -319,6 +319,30 @@ def _check_reach(task: Task) -> None:
                 raise UnreachablePoseError(f"{task.where(f'waypoints.{name}')}: {reach.explain(T)}")
 
 
+def _check_environment(task: Task) -> None:
+    """Refuse a fixed object that overlaps a link of the robot's base (a link no joint moves),
+    by PyBullet's closest points (imported only for tasks with objects)."""
+    if not task.spec.environment:
+        return
+    from pipeline.execute.world import add_environment, load_pybullet_robot, pb
+
+    with load_pybullet_robot(task.robot.urdf.path) as sim:
+        client = sim.client
+        moved = {-1: False}
+        for i in range(pb.getNumJoints(sim.body, physicsClientId=client)):
+            info = pb.getJointInfo(sim.body, i, physicsClientId=client)
+            moved[i] = moved[info[16]] or info[2] != pb.JOINT_FIXED
+        base = [i for i in sim.collision_links() if not moved[i]]
+        name = {i: n for n, i in sim.link_index.items()}
+        for body, obj in add_environment(sim, task.spec.environment).items():
+            for link in base:
+                points = pb.getClosestPoints(sim.body, body, 0.0, linkIndexA=link, physicsClientId=client)
+                if points:
+                    index = [o.name for o in task.spec.environment].index(obj)
+                    depth = -min(p[8] for p in points)
+                    raise TaskFileError(f"{task.where(f'environment[{index}]')}: '{obj}' overlaps the robot's base link '{name[link]}' ({depth * 1e3:.1f} mm deep); move it away from the robot")
+
+
 def load_task(path: str | Path, repetitions: int | None = None) -> Task:
     """Read, validate and resolve a task file; ``repetitions`` overrides the file's.
 
@@ -341,4 +365,5 @@ def load_task(path: str | Path, repetitions: int | None = None) -> Task:
     task = Task(spec=spec, file=file, text=text, robot=robot, initial_q=MappingProxyType(initial))
     _check_structure(task)
     _check_reach(task)
+    _check_environment(task)
     return task
