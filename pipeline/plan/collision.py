@@ -154,7 +154,8 @@ class CollisionChecker:
                 up, through_bare = parent.get(up), True
             if up is None or up == -1:
                 continue
-            touching = bool(pb.getClosestPoints(body, body, 2 * margin_m + TOUCHING_M, link, up, physicsClientId=client))
+            points = pb.getClosestPoints(body, body, 1.0, link, up, physicsClientId=client)  # inflated shapes:
+            touching = bool(points) and min(p[8] for p in points) + 2 * margin_m < TOUCHING_M  # distance before the margin
             if through_bare and not touching:
                 continue
             pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)

@@ -17,8 +17,8 @@ Several WTAs of one hand are sampled "by weight", eqs (30)-(31), with weights Z_
 the sum of the area's six widths (eq 31) times the task file's ``weight``, normalised to sum 1. Eq
 (30) as printed sums the weighted samples of all areas into one pose; for two areas apart (the
 two sides of a bowl) that average lies in neither, so, as in Berenson's TSR sampling, one area is
-drawn with probability Z_i and sampled by eq (27). An area whose widths are all zero (a single
-pose) gets weight 1 when every area of the hand is such a pose.
+drawn with probability Z_i and sampled by eq (27). When every area of the hand is a single pose
+(all widths zero), the areas are drawn in proportion to their ``weight`` alone.
 """
 
 from __future__ import annotations
@@ -114,7 +114,7 @@ class Wta:
 
 def sampling_weights(areas: Sequence[Wta]) -> np.ndarray:
     """Eq (31): each area's weight Z_i, the sum of its six widths times its ``weight``,
-    normalised to sum 1 (equal weights when every area is a single pose)."""
+    normalised to sum 1 (in proportion to ``weight`` alone when every area is a single pose)."""
     widths = np.array([a.weight * float(np.sum(a.bounds[:, 1] - a.bounds[:, 0])) for a in areas])
     if widths.sum() <= 0:
         widths = np.array([a.weight for a in areas])

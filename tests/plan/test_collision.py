@@ -1,0 +1,446 @@
+"""The planners' collision checker (pipeline.plan.collision) against independent queries:
+PyBullet's getClosestPoints on the UN-inflated robot, analytic capsule distances from the URDF,
+and the URDF text itself."""
+
+from __future__ import annotations
+
+import itertools
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from pipeline.errors import StageError
+from pipeline.execute.world import add_environment, load_pybullet_robot, pb
+from pipeline.plan.collision import TOUCHING_M, CollisionChecker, bisection_order, inflated_urdf
+from pipeline.tasks import load_task
+from tests.conftest import TASKS
+
+#: Configurations whose nearest distance is this close to a threshold are boundary cases [m].
+BOUNDARY_M = 1e-4
+
+
+@pytest.fixture(scope="module")
+def task():
+    return load_task(TASKS / "bowl_grasp.toml")
+
+
+@pytest.fixture(scope="module")
+def names(task):
+    names = task.robot.joint_names
+    assert len(names) == 17
+    return names
+
+
+@pytest.fixture(scope="module")
+def reference(task):
+    """The un-inflated robot (no self-collision flag needed: getClosestPoints ignores filters)
+    and the task's objects in their own client; yields (sim, body id -> object name)."""
+    sim = load_pybullet_robot(task.robot.urdf.path)
+    objects = add_environment(sim, task.spec.environment)
+    yield sim, objects
+    sim.close()
+
+
+def make_checker(task, names, margin_m, **kwargs) -> CollisionChecker:
+    return CollisionChecker(task.robot, names, {}, task.spec.environment, task.spec.expected_contacts, margin_m=margin_m, **kwargs)
+
+
+def urdf_collisions(task) -> dict[str, tuple[np.ndarray, str, dict[str, float]]]:
+    """Read from the URDF text: link -> (4x4 collision origin in the link frame, shape tag,
+    attributes as floats)."""
+    out = {}
+    for link in ET.parse(task.robot.urdf.path).getroot().iter("link"):
+        collisions = link.findall("collision")
+        if not collisions:
+            continue
+        (collision,) = collisions
+        origin = collision.find("origin")
+        T = np.eye(4)
+        if origin is not None:
+            T[:3, :3] = Rotation.from_euler("xyz", [float(v) for v in origin.get("rpy", "0 0 0").split()]).as_matrix()
+            T[:3, 3] = [float(v) for v in origin.get("xyz", "0 0 0").split()]
+        (shape,) = list(collision.find("geometry"))
+        out[link.get("name")] = (T, shape.tag, {k: float(v) for k, v in shape.attrib.items()})
+    return out
+
+
+def link_frame(sim, link: str) -> np.ndarray:
+    """The URDF link frame in the world, from getLinkState's worldLinkFrame (indices 4, 5)."""
+    state = pb.getLinkState(sim.body, sim.link_index[link], computeForwardKinematics=True, physicsClientId=sim.client)
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat(state[5]).as_matrix()
+    T[:3, 3] = state[4]
+    return T
+
+
+def nearest(sim, body_b: int, link_a: int, link_b: int, within: float) -> float | None:
+    """PyBullet's nearest distance between two links (or a link and a body's base), None if
+    farther than ``within`` [m]."""
+    points = pb.getClosestPoints(sim.body, body_b, within, link_a, link_b, physicsClientId=sim.client)
+    return min(p[8] for p in points) if points else None
+
+
+def reference_contacts(sim, objects, names, q, margin_m, unchecked, allowed):
+    """Independent answer on the un-inflated robot at ``q``: {pair: threshold - distance} for the
+    checked pairs closer than their threshold (margin to objects, twice the margin between
+    links), pairs keyed (link, object) or sorted (link, link); and whether any checked pair is
+    within BOUNDARY_M of its threshold."""
+    sim.set_positions(names, q)
+    solid = sorted(sim.collision_links())
+    link = {i: n for n, i in sim.link_index.items()}
+    found, boundary = {}, False
+    for body, obj in objects.items():
+        for a in solid:
+            if (link[a], obj) in allowed:
+                continue
+            d = nearest(sim, body, a, -1, margin_m + 0.01)
+            if d is not None:
+                boundary |= abs(d - margin_m) < BOUNDARY_M
+                if d < margin_m:
+                    found[(link[a], obj)] = margin_m - d
+    for a, b in itertools.combinations(solid, 2):
+        pair = tuple(sorted((link[a], link[b])))
+        if pair in unchecked:
+            continue
+        d = nearest(sim, sim.body, a, b, 2 * margin_m + 0.01)
+        if d is not None:
+            boundary |= abs(d - 2 * margin_m) < BOUNDARY_M
+            if d < 2 * margin_m:
+                found[pair] = 2 * margin_m - d
+    return found, boundary
+
+
+def as_found(sim, contacts) -> dict[tuple[str, str], float]:
+    """The checker's contacts keyed like :func:`reference_contacts`."""
+    out = {}
+    for c in contacts:
+        assert c.a in sim.link_index, c  # the first name is always a robot link
+        key = tuple(sorted((c.a, c.b))) if c.b in sim.link_index else (c.a, c.b)
+        assert key not in out, c  # one contact per pair
+        out[key] = c.depth_m
+    return out
+
+
+def allowed_pairs(task) -> set[tuple[str, str]]:
+    return {tuple(p) for p in task.spec.expected_contacts}
+
+
+# --- the checker against getClosestPoints on the un-inflated robot -------------------------------
+
+
+@pytest.mark.parametrize("margin_m", [0.0, 0.01])
+def test_checker_agrees_with_closest_points_on_the_uninflated_robot(task, names, reference, margin_m):
+    sim, objects = reference
+    # the reference considers every link with geometry, as the URDF has them
+    assert {n for n, i in sim.link_index.items() if i in sim.collision_links()} == set(urdf_collisions(task))
+    lower, upper = task.robot.lower_upper(names)
+    rng = np.random.default_rng(2024)
+    allowed = allowed_pairs(task)
+    n, boundary, colliding, kinds = 300, 0, 0, set()
+    with make_checker(task, names, margin_m) as checker:
+        for k in range(n):
+            q = lower + rng.random(len(names)) * (upper - lower)
+            expected, near = reference_contacts(sim, objects, names, q, margin_m, checker.unchecked_pairs, allowed)
+            free = checker.free(q)
+            contacts = checker.contacts(q)
+            got = as_found(sim, contacts)
+            if near:
+                boundary += 1
+                continue
+            assert free == (not expected), (k, expected)
+            assert set(got) == set(expected), (k, set(got) ^ set(expected))
+            for pair, depth in expected.items():
+                assert got[pair] == pytest.approx(depth, abs=1e-6), (k, pair)
+            assert [c.depth_m for c in contacts] == sorted((c.depth_m for c in contacts), reverse=True)
+            colliding += not free
+            kinds |= {"self" if pair[1] in sim.link_index else "object" for pair in expected}
+        assert checker.checks == 2 * n
+    assert boundary <= 3
+    # not vacuous: both outcomes, and both kinds of contact, are common
+    assert 0.2 * n <= colliding <= 0.8 * n
+    assert kinds == {"self", "object"}
+
+
+@pytest.mark.parametrize("margin_m", [0.0, 0.01, 0.02])
+def test_unchecked_pairs_are_parents_and_touching_neighbours(task, names, reference, margin_m):
+    """The unchecked pairs, rebuilt from the URDF tree and the un-inflated distances at the zero
+    configuration: a link and its nearest ancestor with geometry when that is its direct parent,
+    or when they are joined through bare links and are within TOUCHING_M of each other."""
+    sim, _ = reference
+    root = ET.parse(task.robot.urdf.path).getroot()
+    parent = {j.find("child").get("link"): j.find("parent").get("link") for j in root.iter("joint")}
+    solid = set(urdf_collisions(task))
+    sim.set_positions(names, np.zeros(len(names)))
+    expected = set()
+    for link in solid:
+        up, through_bare = parent.get(link), False
+        while up is not None and up not in solid:
+            up, through_bare = parent.get(up), True
+        if up is None:
+            continue
+        if through_bare and nearest(sim, sim.body, sim.link_index[link], sim.link_index[up], TOUCHING_M) is None:
+            continue
+        expected.add(tuple(sorted((link, up))))
+    assert ("left_upper_arm", "torso") not in expected and ("pelvis", "torso") in expected
+    with make_checker(task, names, margin_m) as checker:
+        assert checker.unchecked_pairs == expected
+
+
+# --- the distances the checker relies on are the real geometry -----------------------------------
+
+
+def segment_distance(p1, q1, p2, q2) -> float:
+    """Distance between segments p1-q1 and p2-q2 (Ericson, Real-Time Collision Detection 5.1.9)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e, f = d1 @ d1, d2 @ d2, d2 @ r
+    eps = 1e-15
+    if a <= eps and e <= eps:
+        return float(np.linalg.norm(r))
+    if a <= eps:
+        s, t = 0.0, float(np.clip(f / e, 0, 1))
+    else:
+        c = d1 @ r
+        if e <= eps:
+            s, t = float(np.clip(-c / a, 0, 1)), 0.0
+        else:
+            b = d1 @ d2
+            denom = a * e - b * b
+            s = float(np.clip((b * f - c * e) / denom, 0, 1)) if denom > eps else 0.0
+            t = (b * s + f) / e
+            if t < 0:
+                s, t = float(np.clip(-c / a, 0, 1)), 0.0
+            elif t > 1:
+                s, t = float(np.clip((b - c) / a, 0, 1)), 1.0
+    return float(np.linalg.norm(p1 + s * d1 - (p2 + t * d2)))
+
+
+def test_segment_distance_against_brute_force():
+    """The analytic helper itself, against a dense grid over both segments' parameters."""
+    rng = np.random.default_rng(5)
+    grid = np.linspace(0, 1, 401)
+    for _ in range(20):
+        p1, q1, p2, q2 = rng.normal(size=(4, 3))
+        A = p1 + grid[:, None] * (q1 - p1)
+        B = p2 + grid[:, None] * (q2 - p2)
+        brute = np.linalg.norm(A[:, None] - B[None], axis=-1).min()
+        exact = segment_distance(p1, q1, p2, q2)
+        assert exact <= brute + 1e-12 and brute - exact <= 0.01
+    # parallel and crossing cases by hand
+    z = np.zeros(3)
+    assert segment_distance(z, np.array([1.0, 0, 0]), np.array([0.5, 1, 0]), np.array([2.0, 1, 0])) == pytest.approx(1.0)
+    assert segment_distance(z, np.array([1.0, 0, 0]), np.array([0.5, -1, 0.2]), np.array([0.5, 1, 0.2])) == pytest.approx(0.2)
+
+
+def capsule_axis(sim, shapes, link):
+    """World end points of ``link``'s capsule axis (both at the centre for a sphere) and its radius."""
+    origin, tag, attrs = shapes[link]
+    T = link_frame(sim, link) @ origin
+    half = attrs["length"] / 2 if tag == "capsule" else 0.0
+    ends = [(T @ np.array([0.0, 0.0, z, 1.0]))[:3] for z in (-half, half)]
+    return ends[0], ends[1], attrs["radius"]
+
+
+def test_closest_points_equal_analytic_capsule_distances(task, names, reference):
+    sim, _ = reference
+    shapes = urdf_collisions(task)
+    assert {tag for _, tag, _ in shapes.values()} == {"capsule", "sphere"}
+    pairs = [("left_forearm", "right_forearm"), ("left_upper_arm", "right_palm"), ("torso", "left_forearm"), ("pelvis", "right_forearm"), ("head", "left_palm"), ("left_palm", "right_palm")]
+    lower, upper = task.robot.lower_upper(names)
+    rng = np.random.default_rng(7)
+    distances = []
+    for _ in range(25):
+        sim.set_positions(names, lower + rng.random(len(names)) * (upper - lower))
+        for a, b in pairs:
+            p1, q1, r1 = capsule_axis(sim, shapes, a)
+            p2, q2, r2 = capsule_axis(sim, shapes, b)
+            analytic = segment_distance(p1, q1, p2, q2) - r1 - r2
+            measured = nearest(sim, sim.body, sim.link_index[a], sim.link_index[b], 10.0)
+            assert measured == pytest.approx(analytic, abs=1e-4), (a, b)
+            distances.append(analytic)
+    assert min(distances) < 0 < max(distances)  # overlapping pairs as well as separate ones
+
+
+# --- the bowl grasp's scene ----------------------------------------------------------------------
+
+
+def test_start_configuration_is_free(task, names, reference):
+    sim, objects = reference
+    q = np.array([task.initial_q[n] for n in names])
+    with make_checker(task, names, 0.01) as checker:
+        assert checker.free(q) and checker.contacts(q) == []
+        expected, near = reference_contacts(sim, objects, names, q, 0.01, checker.unchecked_pairs, allowed_pairs(task))
+    assert expected == {} and not near
+
+
+def test_left_hand_into_the_table_is_named(task, names, reference):
+    """Random configurations until the checker names the left palm or forearm against the
+    table; that pair is really closer than the margin, by the reported depth, and the nearest
+    point on the table lies on the table's box (0.50 x 1.00 x 0.04 m at (0.55, 0, 0.88))."""
+    sim, objects = reference
+    margin = 0.01
+    table = {name: body for body, name in objects.items()}["table"]
+    lower, upper = task.robot.lower_upper(names)
+    rng = np.random.default_rng(11)
+    with make_checker(task, names, margin) as checker:
+        for _ in range(2000):
+            q = lower + rng.random(len(names)) * (upper - lower)
+            hits = [c for c in checker.contacts(q) if c.b == "table" and c.a in ("left_palm", "left_forearm")]
+            if hits:
+                break
+        else:
+            pytest.fail("no configuration puts the left hand into the table")
+        assert not checker.free(q)
+    sim.set_positions(names, q)
+    for hit in hits:
+        points = pb.getClosestPoints(sim.body, table, margin, sim.link_index[hit.a], -1, physicsClientId=sim.client)
+        assert points
+        closest = min(points, key=lambda p: p[8])
+        assert closest[8] < margin
+        assert hit.depth_m == pytest.approx(margin - closest[8], abs=1e-6)
+        on_table = np.abs(np.asarray(closest[6]) - [0.55, 0.0, 0.88])
+        assert np.all(on_table <= np.array([0.25, 0.5, 0.02]) + 1e-6)
+
+
+def test_expected_contacts_are_not_checked(task, names, reference):
+    """A palm inside the bowl (the grasp's expected contact) is free; the same pose against a
+    checker without allowed contacts is not."""
+    sim, objects = reference
+    bowl = {name: body for body, name in objects.items()}["bowl"]
+    lower, upper = task.robot.lower_upper(names)
+    rng = np.random.default_rng(13)
+    with make_checker(task, names, 0.01) as checker, CollisionChecker(task.robot, names, {}, task.spec.environment, (), margin_m=0.01) as strict:
+        found = 0
+        for _ in range(3000):
+            q = lower + rng.random(len(names)) * (upper - lower)
+            sim.set_positions(names, q)
+            d = nearest(sim, bowl, sim.link_index["left_palm"], -1, 0.01)
+            if d is None or d > 0.01 - BOUNDARY_M:
+                continue
+            found += 1
+            assert ("left_palm", "bowl") in {(c.a, c.b) for c in strict.contacts(q)}
+            assert ("left_palm", "bowl") not in {(c.a, c.b) for c in checker.contacts(q)}
+        assert found >= 1
+
+
+# --- inflated_urdf -------------------------------------------------------------------------------
+
+
+def shapes_of(text: str, element: str) -> list[tuple[str, dict[str, str]]]:
+    root = ET.fromstring(text)
+    return [(s.tag, dict(s.attrib)) for e in root.iter(element) for s in e.find("geometry")]
+
+
+@pytest.mark.parametrize("margin_m", [0.0, 0.01, 0.035])
+def test_inflated_urdf_grows_the_humanoids_collision_shapes(task, margin_m):
+    text = task.robot.urdf.path.read_text()
+    out = inflated_urdf(text, margin_m)
+    before, after = shapes_of(text, "collision"), shapes_of(out, "collision")
+    assert len(before) == len(after) == 9
+    for (tag, a), (tag2, b) in zip(before, after):
+        assert tag == tag2
+        assert float(b["radius"]) == pytest.approx(float(a["radius"]) + margin_m, abs=1e-12)
+        if tag == "capsule":  # the radius already lengthens the capsule at both ends
+            assert float(b["length"]) == pytest.approx(float(a["length"]), abs=1e-12)
+    assert shapes_of(out, "visual") == shapes_of(text, "visual")  # visuals are untouched
+
+
+SYNTHETIC = """<robot name="r">
+  <link name="a">
+    <visual><geometry><box size="0.1 0.2 0.3"/></geometry></visual>
+    <collision><geometry><box size="0.1 0.2 0.3"/></geometry></collision>
+    <collision><geometry><cylinder radius="0.05" length="0.4"/></geometry></collision>
+  </link>
+  <link name="b">
+    <collision><origin xyz="0 0 0.1"/><geometry><sphere radius="0.02"/></geometry></collision>
+    <collision><geometry><capsule radius="0.03" length="0.2"/></geometry></collision>
+  </link>
+</robot>"""
+
+
+def test_inflated_urdf_every_primitive_by_hand():
+    out = shapes_of(inflated_urdf(SYNTHETIC, 0.01), "collision")
+    box, cylinder, sphere, capsule = (b for _, b in out)
+    assert np.allclose([float(s) for s in box["size"].split()], [0.12, 0.22, 0.32])
+    assert float(cylinder["radius"]) == pytest.approx(0.06) and float(cylinder["length"]) == pytest.approx(0.42)
+    assert float(sphere["radius"]) == pytest.approx(0.03)
+    assert float(capsule["radius"]) == pytest.approx(0.04) and float(capsule["length"]) == pytest.approx(0.2)
+    assert shapes_of(inflated_urdf(SYNTHETIC, 0.01), "visual") == [("box", {"size": "0.1 0.2 0.3"})]
+    root = ET.fromstring(inflated_urdf(SYNTHETIC, 0.01))
+    assert root.find("link[@name='b']/collision/origin").get("xyz") == "0 0 0.1"
+
+
+def test_inflated_urdf_refuses_meshes():
+    mesh = SYNTHETIC.replace('<sphere radius="0.02"/>', '<mesh filename="m.stl"/>')
+    with pytest.raises(StageError, match="mesh"):
+        inflated_urdf(mesh, 0.01)
+
+
+# --- segments ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", list(range(0, 40)) + [64, 100, 257])
+def test_bisection_order_is_a_permutation(n):
+    order = bisection_order(n)
+    assert sorted(order.tolist()) == list(range(1, max(n, 1)))
+    if n >= 2:
+        assert order[0] == n // 2  # the middle first
+
+
+def test_segment_configurations_are_spaced_by_the_resolution(task, names):
+    resolution = 0.05
+    lower, upper = task.robot.lower_upper(names)
+    rng = np.random.default_rng(17)
+    with make_checker(task, names, 0.01, resolution_rad=resolution) as checker:
+        cases = [(lower + rng.random(17) * (upper - lower), lower + rng.random(17) * (upper - lower)) for _ in range(10)]
+        a = np.zeros(17)
+        cases += [(a, a + 0.3), (a, a + 0.049), (a, a.copy()), (a, np.r_[0.2, np.zeros(16)])]
+        for a, b in cases:
+            Q = checker.segment_configurations(a, b)
+            assert Q.ndim == 2 and Q.shape[1] == 17
+            span = np.abs(b - a).max()
+            if span == 0:
+                assert len(Q) == 0
+                continue
+            j = int(np.argmax(np.abs(b - a)))
+            t = (Q[:, j] - a[j]) / (b[j] - a[j])  # interpolation parameter of each
+            assert np.allclose(Q, a + t[:, None] * (b - a), atol=1e-12)  # on the straight segment
+            assert np.all((t > 1e-12) & (t < 1 - 1e-12))  # end points excluded
+            if len(Q):
+                assert abs(t[0] - 0.5) <= 0.5 / (len(Q) + 1) + 1e-12  # the middle first
+            chain = np.vstack([a, Q[np.argsort(t)], b])
+            steps = np.abs(np.diff(chain, axis=0))
+            assert steps.max() <= resolution + 1e-12  # every joint, both ends included
+            # and no more configurations than needed: one step fewer would be too long
+            if len(steps) > 1:
+                assert span / (len(steps) - 1) > resolution - 1e-9
+
+
+def test_checks_count_every_configuration(task, names, reference):
+    sim, objects = reference
+    q0 = np.array([task.initial_q[n] for n in names])
+    q1 = q0.copy()
+    q1[names.index("left_elbow")] = -0.3
+    q1[names.index("right_elbow")] = -0.3
+    with make_checker(task, names, 0.01, resolution_rad=0.02) as checker:
+        for q in checker.segment_configurations(q0, q1):  # the segment is free, independently
+            assert reference_contacts(sim, objects, names, q, 0.01, checker.unchecked_pairs, allowed_pairs(task))[0] == {}
+        assert checker.checks == 0
+        checker.free(q0)
+        checker.free(q1)
+        checker.contacts(q0)
+        assert checker.checks == 3
+        k = len(checker.segment_configurations(q0, q1))
+        assert k == 14  # 0.3 rad in steps of at most 0.02 rad: 15 steps, 14 inner points
+        assert checker.segment_free(q0, q1)
+        assert checker.checks == 3 + k
+
+
+def test_checker_rejects_bad_settings(task, names):
+    with pytest.raises(StageError, match="margin"):
+        make_checker(task, names, -0.01)
+    with pytest.raises(StageError, match="resolution"):
+        make_checker(task, names, 0.01, resolution_rad=0.0)
+    with pytest.raises(StageError, match="no joint"):
+        CollisionChecker(task.robot, ("no_such_joint",), {}, task.spec.environment)
