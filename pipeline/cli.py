@@ -357,7 +357,7 @@ def bench_plan_command(
         rows = bench_plan(task, trials, seed, progress=lambda text: status.update(f"benchmarking {text} ..."))
     table = Table(title=f"planning {task} ({trials} trials each, interleaved)", title_justify="left")
     for column in ("planner", "success", "median ms", "p95 ms", "mean ms", "checks (median)", "µs / check", "path rad (median)", "paper mean / ours"):
-        table.add_column(column, justify="left" if column == "planner" else "right")
+        table.add_column(column, justify="left" if column == "planner" else "right", no_wrap=column == "planner")
     for r in rows:
         table.add_row(r.planner, f"{r.success_rate:.0%}", f"{r.median_s * 1e3:.1f}", f"{r.p95_s * 1e3:.1f}", f"{r.mean_s * 1e3:.1f}", f"{r.checks_median:.0f}", f"{r.check_time_s * 1e6:.1f}", f"{r.path_length_median_rad:.2f}", f"{PAPER_PLANNING_TIME_S / r.mean_s:.0f}x")
     out.print(table)
