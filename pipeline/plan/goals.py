@@ -102,8 +102,9 @@ class WtaGoalSampler:
         return [float(np.linalg.norm(dx[6 * k : 6 * k + 3])) for k in range(len(targets))]
 
     def explain(self) -> str:
-        """Why no goal was found: the WTAs no sample reached, else the collisions."""
-        unreached = [f"WTA '{name}' ({stats.drawn} samples, nearest {stats.nearest_m:.3g} m)" for name, stats in self.stats.items() if stats.reached == 0]
+        """Why no goal was found: the WTAs no sample reached, the farthest first, else the collisions."""
+        worst_first = sorted(self.stats.items(), key=lambda item: -item[1].nearest_m)  # a far area also drags the other hand off over the shared waist
+        unreached = [f"WTA '{name}' ({stats.drawn} samples, nearest {stats.nearest_m:.3g} m)" for name, stats in worst_first if stats.reached == 0]
         if unreached:
             return "no IK sample reached " + "; ".join(unreached)
         if self.collided:

@@ -9,8 +9,7 @@ task's fixed objects and allows its expected contacts.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -113,15 +112,16 @@ class PlanningProblem:
             while len(sampler.goals) < settings.ompl_goals and time.perf_counter() - started < settings.planner.timeout_s:
                 sampler()
             goal_time = time.perf_counter() - started
-            if not sampler.goals:
-                return PlanResult(False, np.empty((0, len(self.start))), 0.0, goal_time, 0, 0, self.checker.checks - checks, "")
-            result = ompl_rrtconnect(self.start, self.lower, self.upper, self.checker, sampler.goals, settings.resolution_rad, seed, settings.planner, goal_time)
-            result = PlanResult(result.success, result.path, result.raw_path_length_rad, result.planning_time_s, result.nodes, result.goals, self.checker.checks - checks, result.reason)
+            if sampler.goals:  # the goals' collision checks count too
+                result = ompl_rrtconnect(self.start, self.lower, self.upper, self.checker, sampler.goals, settings.resolution_rad, seed, settings.planner, goal_time)
+                result = replace(result, collision_checks=self.checker.checks - checks)
+            else:
+                result = PlanResult(False, np.empty((0, len(self.start))), 0.0, goal_time, 0, 0, self.checker.checks - checks)
         else:
             raise StageError(f"unknown planner '{planner}' (planners: {', '.join(PLANNERS)})")
         if not result.success and not sampler.goals:
             reason = f"no goal configuration within the timeout of {settings.planner.timeout_s:g} s: {sampler.explain()}"
-            result = PlanResult(False, result.path, 0.0, result.planning_time_s, result.nodes, 0, result.collision_checks, reason)
+            result = replace(result, reason=reason)
         return result
 
     def close(self) -> None:
@@ -134,7 +134,3 @@ class PlanningProblem:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-
-def configuration(problem: PlanningProblem, q: np.ndarray) -> Mapping[str, float]:
-    """Every robot joint [rad] at planned configuration ``q``."""
-    return {**problem.fixed, **dict(zip(problem.joint_names, np.asarray(q, dtype=float).tolist()))}

@@ -13,7 +13,8 @@ from typer.testing import CliRunner
 from pipeline.cli import app
 from pipeline.errors import StageError
 from pipeline.plan.collision import CollisionChecker
-from pipeline.plan.problem import PlanningProblem
+from pipeline.plan.mcikrrt import PlannerSettings
+from pipeline.plan.problem import PlanningProblem, PlanningSettings
 from pipeline.record.readback import read_run
 from pipeline.tasks import load_task
 from tests.conftest import TASKS
@@ -128,3 +129,14 @@ def test_obstacle_overlapping_the_base_is_refused_at_load(tmp_path):
 def test_unknown_planner_is_one_line():
     result = runner.invoke(app, ["plan", str(BOWL), "--planner", "prm"])
     assert result.exit_code == 2 and "unknown planner 'prm'" in result.output
+
+
+def test_ompl_without_goals_names_the_wta(tmp_path):
+    text = BOWL.read_text().replace('name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 0.0, 0.93] }', 'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 1.50, 0.93] }')
+    (tmp_path / "far.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
+    settings = PlanningSettings(planner=PlannerSettings(timeout_s=0.3))
+    with PlanningProblem(load_task(tmp_path / "far.toml"), settings) as problem:
+        result = problem.solve("ompl-rrtconnect", 0)
+    assert not result.success and result.goals == 0
+    # the far area is named first (the right hand, dragged over the shared waist, may miss too)
+    assert re.search(r"no IK sample reached WTA 'bowl_left' \(\d+ samples, nearest 0\.[0-9]+ m\)", result.reason), result.reason
