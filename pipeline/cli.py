@@ -74,7 +74,7 @@ def run(
     with err.status(f"running {task} ...") as status:
         directory = run_task(
             task, stages=chosen, ik=ik, scheme=scheme, qp_backend=qp_backend, lvi_tolerance=lvi_tolerance, out_dir=out_dir, seed=seed,
-            repetitions=reps, timing=timing, gui=gui, planner=planner, planning=_planning_settings(timeout), command=["dualarm", *sys.argv[1:]],
+            repetitions=reps, timing=timing, gui=gui, planner=planner, planning=None if timeout is None else _planning_settings(timeout), command=["dualarm", *sys.argv[1:]],
             progress=lambda stage: status.update(f"running {task}: {stage} ..."),
         )
     out.print(str(directory), markup=False, soft_wrap=True)
@@ -103,7 +103,7 @@ def plan(
 ) -> None:
     """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed,
     smoothed, executed and recorded as a run; exits 1 when no trial succeeded."""
-    from pipeline.plan.problem import PLANNERS
+    from pipeline.plan import PLANNERS
     from pipeline.plan.trials import run_trials
 
     if planner not in PLANNERS:

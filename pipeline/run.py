@@ -58,7 +58,7 @@ def path_metrics(ref: CartesianReference) -> dict[str, float]:
 def resolve_stages(stages: Sequence[str] | None, ik: str | None = None, planner: str | None = None) -> tuple[str, ...]:
     """Validate a stage list, in pipeline order. Without one: every stage but plan when an IK
     method is named, every stage but ik when a planner is, else the path stage alone."""
-    from pipeline.plan.problem import PLANNERS
+    from pipeline.plan import PLANNERS
 
     if ik is not None and ik not in IK_METHODS:
         raise DualarmError(f"unknown IK method '{ik}' (methods: {', '.join(IK_METHODS)})")

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.plan.problem import PLANNERS, PlanningProblem, PlanningSettings
+from pipeline.plan import PLANNERS
+from pipeline.plan.problem import PlanningProblem, PlanningSettings
 from pipeline.tasks import load_task
 
 

@@ -99,15 +99,8 @@ class ExecutionLog:
 
 def _disable_touching_by_construction(sim) -> None:
     """No collision check between links joined only through links without collision geometry."""
-    body, client = sim.body, sim.client
-    parent = {i: pb.getJointInfo(body, i, physicsClientId=client)[16] for i in range(pb.getNumJoints(body, physicsClientId=client))}
-    solid = sim.collision_links()
-    for link in solid:
-        up = parent.get(link, None)
-        while up is not None and up not in solid:
-            up = parent.get(up) if up != -1 else None
-        if up is not None:
-            pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
+    for link, (up, _) in sim.solid_parents().items():
+        pb.setCollisionFilterPair(sim.body, sim.body, link, up, enableCollision=0, physicsClientId=sim.client)
 
 
 def execute(

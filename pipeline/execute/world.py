@@ -66,6 +66,20 @@ class PyBulletRobot:
         """Indices of the robot's links that have collision geometry."""
         return {i for i in self.link_index.values() if pb.getCollisionShapeData(self.body, i, physicsClientId=self.client)}
 
+    def solid_parents(self) -> dict[int, tuple[int, bool]]:
+        """For each link with collision geometry below another such link: that nearest ancestor
+        with geometry, and whether the way up passes through links without geometry."""
+        parent = {i: pb.getJointInfo(self.body, i, physicsClientId=self.client)[16] for i in range(pb.getNumJoints(self.body, physicsClientId=self.client))}
+        solid = self.collision_links()
+        out = {}
+        for link in solid:
+            up, through_bare = parent.get(link), False
+            while up is not None and up != -1 and up not in solid:
+                up, through_bare = parent.get(up), True
+            if up is not None and up in solid:
+                out[link] = (up, through_bare)
+        return out
+
     def close(self) -> None:
         """Disconnect the client."""
         if pb.isConnected(physicsClientId=self.client):

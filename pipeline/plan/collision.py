@@ -121,8 +121,8 @@ class CollisionChecker:
         if missing:
             raise StageError(f"collision checking: the robot has no joint {missing[0]}")
         self._index = [sim.joint_index[n] for n in self.joint_names]
-        sim.set_positions(list(fixed), list(fixed.values()))
         self.unchecked_pairs = self._filter_pairs(sim, self.margin_m)
+        sim.set_positions(list(fixed), list(fixed.values()))
         self._objects = add_environment(sim, environment)
         self._link_name = {i: n for n, i in sim.link_index.items()}
         bodies = {name: body for body, name in self._objects.items()}
@@ -139,28 +139,18 @@ class CollisionChecker:
 
     @staticmethod
     def _filter_pairs(sim: PyBulletRobot, margin_m: float) -> frozenset[tuple[str, str]]:
-        """Disable the pairs that are not checked (module docstring); returns them by name."""
+        """Disable the pairs that are not checked (module docstring); returns them by name. The
+        robot must be at the zero configuration (as loaded)."""
         body, client = sim.body, sim.client
-        parent = {i: pb.getJointInfo(body, i, physicsClientId=client)[16] for i in range(pb.getNumJoints(body, physicsClientId=client))}
-        solid = sim.collision_links()
         name = {i: n for n, i in sim.link_index.items()}
-        zero = {joint: 0.0 for joint in sim.joint_index}
-        saved = {joint: pb.getJointState(body, i, physicsClientId=client)[0] for joint, i in sim.joint_index.items()}
-        sim.set_positions(list(zero), list(zero.values()))
         skipped = set()
-        for link in solid:
-            up, through_bare = parent.get(link), False
-            while up is not None and up != -1 and up not in solid:
-                up, through_bare = parent.get(up), True
-            if up is None or up == -1:
-                continue
+        for link, (up, through_bare) in sim.solid_parents().items():
             points = pb.getClosestPoints(body, body, 1.0, link, up, physicsClientId=client)  # inflated shapes:
             touching = bool(points) and min(p[8] for p in points) + 2 * margin_m < TOUCHING_M  # distance before the margin
             if through_bare and not touching:
                 continue
             pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
             skipped.add(tuple(sorted((name[link], name[up]))))
-        sim.set_positions(list(saved), list(saved.values()))
         return frozenset(skipped)
 
     def _contact_points(self, q: np.ndarray) -> list:
@@ -188,12 +178,17 @@ class CollisionChecker:
         """No checked pair is closer than the margin at ``q`` [rad]."""
         return all(point[8] >= 0.0 for point in self._contact_points(q))
 
+    def segment_steps(self, a: np.ndarray, b: np.ndarray) -> int:
+        """Into how many equal steps the segment from ``a`` to ``b`` [rad] is cut so that no joint
+        moves more than :attr:`resolution_rad` in one (at least 1)."""
+        return max(1, int(np.ceil(np.abs(b - a).max() / self.resolution_rad)))
+
     def segment_configurations(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """The configurations checked strictly between ``a`` and ``b`` [rad], evenly spaced at
         most :attr:`resolution_rad` apart in every joint, in bisection order (the midpoint, then
         the quarter points, ...) so that a blocked segment is found blocked early; (k, n), k may be 0."""
-        steps = int(np.ceil(np.abs(b - a).max() / self.resolution_rad))
-        return a + bisection_order(steps)[:, None] / max(steps, 1) * (b - a)
+        steps = self.segment_steps(a, b)
+        return a + bisection_order(steps)[:, None] / steps * (b - a)
 
     def segment_free(self, a: np.ndarray, b: np.ndarray) -> bool:
         """The straight joint-space segment from ``a`` to ``b`` is free at :attr:`resolution_rad`

@@ -16,14 +16,12 @@ import numpy as np
 from pipeline.errors import StageError
 from pipeline.model.kinematics import ChainKinematics
 from pipeline.model.poses import invert
+from pipeline.plan import PLANNERS
 from pipeline.plan.collision import CollisionChecker
 from pipeline.plan.goals import WtaGoalSampler
 from pipeline.plan.mcikrrt import PlannerSettings, PlanResult, mcikrrt
 from pipeline.plan.wta import Wta
 from pipeline.tasks import Task
-
-#: The planners ``dualarm plan --planner`` knows.
-PLANNERS = ("mcikrrt", "ompl-rrtconnect")
 
 
 @dataclass(frozen=True)

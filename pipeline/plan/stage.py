@@ -41,7 +41,7 @@ def planned_joint_path(problem: PlanningProblem, result: PlanResult, method: str
     checker, task = problem.checker, problem.task
     rows = [result.path[0]]
     for a, b in zip(result.path[:-1], result.path[1:]):
-        steps = max(1, int(np.ceil(np.abs(b - a).max() / checker.resolution_rad)))
+        steps = checker.segment_steps(a, b)
         rows += list(a + np.arange(1, steps + 1)[:, None] / steps * (b - a))
     q = np.array(rows)
     N = len(q)

@@ -334,11 +334,10 @@ def _check_environment(task: Task) -> None:
             moved[i] = moved[info[16]] or info[2] != pb.JOINT_FIXED
         base = [i for i in sim.collision_links() if not moved[i]]
         name = {i: n for n, i in sim.link_index.items()}
-        for body, obj in add_environment(sim, task.spec.environment).items():
+        for index, (body, obj) in enumerate(add_environment(sim, task.spec.environment).items()):  # in the file's order
             for link in base:
                 points = pb.getClosestPoints(sim.body, body, 0.0, linkIndexA=link, physicsClientId=client)
                 if points:
-                    index = [o.name for o in task.spec.environment].index(obj)
                     depth = -min(p[8] for p in points)
                     raise TaskFileError(f"{task.where(f'environment[{index}]')}: '{obj}' overlaps the robot's base link '{name[link]}' ({depth * 1e3:.1f} mm deep); move it away from the robot")
 
