@@ -2,12 +2,14 @@
 
 :func:`read_run` turns one run directory into a :class:`RunData` holding one DataFrame per MCAP
 topic, with columns ``t`` (motion time [s]), ``rep`` (repetition), ``stage`` and one column per
-message field (nested fields joined with dots: ``position.x``). :func:`read_runs` concatenates
-many runs per topic with ``run`` and ``task`` columns added.
+message field (nested fields joined with dots: ``position.x``). A topic is decoded when it is
+first used, so reading a run for its metrics or one topic does not decode its ``/tf``.
+:func:`read_runs` concatenates many runs per topic with ``run`` and ``task`` columns added.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
@@ -17,7 +19,6 @@ from types import MappingProxyType
 
 import pandas as pd
 from google.protobuf.json_format import MessageToDict
-from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 
@@ -28,21 +29,35 @@ from pipeline.record.run_dir import MANIFEST, METRICS
 _STAGE_OF_FAMILY = {family: stage for stage, family in STAGE_TOPICS.items()}
 
 
-class _JsonDecoderFactory(McapDecoderFactory):
-    """Decodes MCAP messages with ``json`` encoding into Python objects."""
-
-    def decoder_for(self, message_encoding, schema):  # noqa: D102 - mcap interface
-        if message_encoding == "json":
-            return lambda data: json.loads(data)
-        return None
-
-
 def stage_of(topic: str) -> str:
     """The pipeline stage a topic belongs to (``/task/...`` -> ``path``; ``/tf`` -> ``robot``)."""
     family = "/" + topic.strip("/").split("/")[0]
     if family in _STAGE_OF_FAMILY:
         return _STAGE_OF_FAMILY[family]
     return {"/tf": "robot", "/robot_description": "robot", "/metrics": "metrics"}.get(family, family.strip("/"))
+
+
+#: Columns of ``/tf``: one row per transform (the per-transform timestamp equals ``t``).
+_TF_COLUMNS = ("parent_frame_id", "child_frame_id", "translation.x", "translation.y", "translation.z", "rotation.x", "rotation.y", "rotation.z", "rotation.w")
+
+
+def _json_frame(times: list[float], payloads: list[bytes]) -> pd.DataFrame:
+    """JSON messages -> a DataFrame (nested fields joined with dots); a message's own ``t`` wins
+    over its log time."""
+    df = pd.json_normalize(json.loads(b"[" + b",".join(payloads) + b"]"), sep=".")
+    if "t" not in df:
+        df.insert(0, "t", times)
+    return df
+
+
+def _frame_transforms(times: list[float], messages: list) -> pd.DataFrame:
+    """``foxglove.FrameTransforms`` -> a row per transform."""
+    rows = [
+        (t, tr.parent_frame_id, tr.child_frame_id, tr.translation.x, tr.translation.y, tr.translation.z, tr.rotation.x, tr.rotation.y, tr.rotation.z, tr.rotation.w)
+        for t, message in zip(times, messages)
+        for tr in message.transforms
+    ]
+    return pd.DataFrame(rows, columns=("t", *_TF_COLUMNS))
 
 
 def _flatten(data: Mapping, prefix: str = "") -> dict:
@@ -56,17 +71,91 @@ def _flatten(data: Mapping, prefix: str = "") -> dict:
     return out
 
 
-def _rows(schema_name: str, message, log_time_s: float) -> list[dict]:
-    """Flat rows of one decoded message; a Foxglove message holding a list of transforms or poses
-    gives one row per item."""
-    if isinstance(message, dict):
-        return [{"t": log_time_s, **_flatten(message)}]
-    data = MessageToDict(message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True)
-    if schema_name in ("foxglove.FrameTransforms", "foxglove.PosesInFrame"):
-        items = data.pop("transforms", None) or data.pop("poses", None) or []
-        data.pop("timestamp", None)
-        return [{"t": log_time_s, **_flatten(data), **_flatten(item)} for item in items]
-    return [{"t": log_time_s, **_flatten(data)}]
+def _protobuf_frame(schema_name: str, times: list[float], messages: list) -> pd.DataFrame:
+    """Other protobuf messages -> flat rows; a message holding a list of poses or entities gives a
+    row per item."""
+    rows = []
+    for t, message in zip(times, messages):
+        data = MessageToDict(message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True)
+        items = data.pop("poses", None) if schema_name == "foxglove.PosesInFrame" else None
+        if items is None:
+            rows.append({"t": t, **_flatten(data)})
+        else:
+            data.pop("timestamp", None)
+            rows.extend({"t": t, **_flatten(data), **_flatten(item)} for item in items)
+    return pd.DataFrame(rows)
+
+
+class McapTopics(Mapping[str, pd.DataFrame]):
+    """The topics of one MCAP file, each decoded into a DataFrame on first access and kept.
+
+    Columns: ``t`` (motion time [s]), ``rep`` (repetition, 0 where a message has none), ``stage``,
+    then one column per message field (nested fields joined with dots: ``position.x``). Rows are in
+    log-time order (messages of equal time in the order written).
+
+    Raises:
+        RecordingError: the file is missing, unfinished or not MCAP (at construction), or a
+            topic's data cannot be decoded (at access).
+    """
+
+    def __init__(self, path: Path) -> None:
+        self._path = path
+        try:
+            with path.open("rb") as stream:
+                summary = make_reader(stream).get_summary()
+        except FileNotFoundError:
+            raise RecordingError(f"{path}: missing (not a complete run directory)") from None
+        except Exception as exc:  # any failure to read the summary (struct, McapError...) is corruption
+            raise RecordingError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from None
+        if summary is None or summary.statistics is None:
+            raise RecordingError(f"{path}: not a readable MCAP recording (no summary: its writer never finished)")
+        counts = summary.statistics.channel_message_counts
+        self._topics = tuple(dict.fromkeys(c.topic for i, c in sorted(summary.channels.items()) if counts.get(i, 0) > 0))
+        self._frames: dict[str, pd.DataFrame] = {}
+
+    def __getitem__(self, topic: str) -> pd.DataFrame:
+        if topic not in self._topics:
+            raise KeyError(topic)
+        if topic not in self._frames:
+            self._frames[topic] = self._read(topic)
+        return self._frames[topic]
+
+    def __iter__(self):
+        return iter(self._topics)
+
+    def __len__(self) -> int:
+        return len(self._topics)
+
+    def message_counts(self) -> dict[str, int]:
+        """Topic -> number of MCAP messages, from the file's summary (nothing decoded)."""
+        with self._path.open("rb") as stream:
+            summary = make_reader(stream).get_summary()
+        counts: dict[str, int] = defaultdict(int)
+        for i, channel in summary.channels.items():
+            counts[channel.topic] += summary.statistics.channel_message_counts.get(i, 0)
+        return {topic: counts[topic] for topic in self._topics}
+
+    def _read(self, topic: str) -> pd.DataFrame:
+        times: list[float] = []
+        payloads: list[bytes] = []
+        try:
+            with self._path.open("rb") as stream:
+                for schema, channel, message in make_reader(stream).iter_messages(topics=[topic], log_time_order=True):
+                    times.append(message.log_time / 1e9)
+                    payloads.append(message.data)
+            if channel.message_encoding == "json":
+                df = _json_frame(times, payloads)
+            else:
+                decode = ProtobufDecoderFactory().decoder_for(channel.message_encoding, schema)
+                messages = [decode(data) for data in payloads]
+                df = (_frame_transforms if schema.name == "foxglove.FrameTransforms" else functools.partial(_protobuf_frame, schema.name))(times, messages)
+        except Exception as exc:  # any failure to decode (struct, McapError, protobuf, JSON...) is corruption
+            raise RecordingError(f"{self._path}: topic {topic} is not readable ({type(exc).__name__}: {exc})") from None
+        if "rep" not in df:
+            df["rep"] = 0
+        df["stage"] = stage_of(topic)
+        first = ["t", "rep", "stage"]
+        return df[first + [c for c in df.columns if c not in first]]
 
 
 @dataclass(frozen=True)
@@ -77,7 +166,8 @@ class RunData:
         directory: the run directory.
         manifest: manifest.json.
         metrics: metrics.json (empty for a failed run).
-        topics: topic -> DataFrame (columns ``t``, ``rep``, ``stage``, fields).
+        topics: topic -> DataFrame (columns ``t``, ``rep``, ``stage``, fields), each topic decoded
+            from run.mcap on first access.
     """
 
     directory: Path
@@ -110,27 +200,9 @@ def _read_json(path: Path) -> dict:
         raise RecordingError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
 
 
-def read_mcap(path: Path) -> dict[str, pd.DataFrame]:
-    """Every topic of an MCAP file as a DataFrame (columns ``t``, ``rep``, ``stage``, fields)."""
-    rows: dict[str, list[dict]] = defaultdict(list)
-    try:
-        with path.open("rb") as stream:
-            reader = make_reader(stream, decoder_factories=[_JsonDecoderFactory(), ProtobufDecoderFactory()])
-            for schema, channel, message, decoded in reader.iter_decoded_messages(log_time_order=True):
-                rows[channel.topic].extend(_rows(schema.name if schema else "", decoded, message.log_time / 1e9))
-    except FileNotFoundError:
-        raise RecordingError(f"{path}: missing (not a complete run directory)") from None
-    except Exception as exc:  # any failure to decode (struct, McapError, protobuf, JSON...) is corruption
-        raise RecordingError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from None
-    frames = {}
-    for topic, topic_rows in rows.items():
-        df = pd.DataFrame(topic_rows)
-        if "rep" not in df:
-            df["rep"] = 0
-        df["stage"] = stage_of(topic)
-        first = ["t", "rep", "stage"]
-        frames[topic] = df[first + [c for c in df.columns if c not in first]]
-    return frames
+def read_mcap(path: Path) -> McapTopics:
+    """The topics of an MCAP file, each decoded on first access (see :class:`McapTopics`)."""
+    return McapTopics(path)
 
 
 def read_run(directory: str | Path) -> RunData:
@@ -145,14 +217,17 @@ def read_run(directory: str | Path) -> RunData:
     manifest = _read_json(directory / MANIFEST)
     metrics = _read_json(directory / METRICS) if (directory / METRICS).exists() else {}
     topics = read_mcap(directory / "run.mcap")
-    return RunData(directory=directory, manifest=MappingProxyType(manifest), metrics=MappingProxyType(metrics), topics=MappingProxyType(topics))
+    return RunData(directory=directory, manifest=MappingProxyType(manifest), metrics=MappingProxyType(metrics), topics=topics)
 
 
-def read_runs(directories: Iterable[str | Path]) -> dict[str, pd.DataFrame]:
-    """Many runs, concatenated per topic, with ``run`` (run id) and ``task`` columns added."""
+def read_runs(directories: Iterable[str | Path], topics: Iterable[str] | None = None) -> dict[str, pd.DataFrame]:
+    """Many runs, concatenated per topic (only ``topics`` when given), with ``run`` (run id) and
+    ``task`` columns added."""
+    wanted = None if topics is None else set(topics)
     per_topic: dict[str, list[pd.DataFrame]] = defaultdict(list)
     for directory in directories:
         run = read_run(directory)
-        for topic, df in run.topics.items():
-            per_topic[topic].append(df.assign(run=run.run_id, task=run.manifest.get("task")))
+        for topic in run.topics:
+            if wanted is None or topic in wanted:
+                per_topic[topic].append(run[topic].assign(run=run.run_id, task=run.manifest.get("task")))
     return {topic: pd.concat(frames, ignore_index=True) for topic, frames in per_topic.items()}
