@@ -153,15 +153,62 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
 @app.command()
 @user_errors
 def report(
-    run_dir: Annotated[Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>).")],
-    out_dir: Annotated[Optional[Path], typer.Option("--out", help="Report directory (default reports/<task>/<run-id>).")] = None,
+    run_dirs: Annotated[list[Path], typer.Argument(help="One or more run directories (recordings/<task>/<run-id>), from this machine or copied from another.")],
+    out_dir: Annotated[Optional[Path], typer.Option("--out", help="Report directory (default reports/<task>/<run-id> for one run, reports/<task or runs>/<first run-id>+<n-1> for several).")] = None,
 ) -> None:
-    """Write a markdown summary and the figures a run's recording allows; prints the report directory."""
-    from pipeline.report.run_report import write_report
+    """Write a markdown summary and the figures each run's recording allows; for several runs also
+    runs.csv and runs.md (a row per run, every metric), figures setting them side by side and
+    report.md linking it all. Prints the report directory."""
+    from pipeline.report.run_report import write_report, write_runs_report
 
-    with err.status(f"reporting {run_dir} ..."):
-        directory = write_report(run_dir, out_dir)
+    with err.status(f"reporting {len(run_dirs)} run{'s' if len(run_dirs) > 1 else ''} ..."):
+        directory = write_report(run_dirs[0], out_dir) if len(run_dirs) == 1 else write_runs_report(run_dirs, out_dir)
     out.print(str(directory), markup=False, soft_wrap=True)
+
+
+@app.command()
+@user_errors
+def compare(
+    run_a: Annotated[Path, typer.Argument(help="A run directory.")],
+    run_b: Annotated[Path, typer.Argument(help="Another run directory.")],
+    tol: Annotated[float, typer.Option(min=0.0, help="Largest absolute difference accepted, in each field's own unit (0: identical).")] = 0.0,
+    csv: Annotated[Optional[Path], typer.Option(help="Also write the whole table (a row per topic and field) to this CSV file.")] = None,
+) -> None:
+    """Per topic and field, the largest difference between two runs, aligned on repetition and
+    time; exits 0 when every field is within --tol and 1 otherwise, naming where they differ first.
+    Wall-clock measurements (solve, planning, collision-check times) are listed, never judged."""
+    from pipeline.report.compare import compare_runs
+
+    with err.status(f"comparing {run_a} and {run_b} ..."):
+        result = compare_runs(run_a, run_b, tol)
+    table = Table(title=f"A = {run_a}\nB = {run_b}", title_justify="left")
+    for column in ("topic", "rows A", "rows B", "aligned", "largest |A - B|", "in field", "at t [s]", "rep", f"within {tol:g}"):
+        table.add_column(column, justify="left" if column in ("topic", "in field") else "right", no_wrap=column == "topic")
+    judged = result.table[~result.table["wall_clock"]]
+    for topic, rows in judged.groupby("topic", sort=False):
+        worst = rows.loc[rows["max_difference"].idxmax()]
+        where = ("", "", "") if worst["max_difference"] == 0 else (str(worst["field"]), "" if _missing(worst["t"]) else f"{worst['t']:.3f}", "" if _missing(worst["rep"]) else str(int(worst["rep"])))
+        table.add_row(topic, str(worst["rows_a"]), str(worst["rows_b"]), str(worst["aligned"]), f"{worst['max_difference']:.3g}", *where, "yes" if worst["max_difference"] <= tol else "NO")
+    out.print(table)
+    clock = result.table[result.table["wall_clock"]]
+    if len(clock):
+        out.print(f"not judged (wall clock): {', '.join(f'{r.topic} {r.field}' for r in clock.itertuples())}", markup=False, soft_wrap=True)
+    if csv is not None:
+        result.table.to_csv(csv, index=False)
+    if result.within:
+        out.print(f"identical within {tol:g} in every judged field", markup=False)
+        return
+    beyond = result.beyond
+    first = beyond.iloc[0]
+    where = f"at t = {first['first_beyond_t']:.4f} s, rep {int(first['first_beyond_rep'])}" if not _missing(first["first_beyond_t"]) else "(whole topic or field)"
+    out.print(f"differ first: {first['topic']} {first['field']} {where}" + (f" ({first['note']})" if first["note"] else f" (largest |A - B| = {first['max_difference']:.3g})"), markup=False, soft_wrap=True)
+    out.print(f"{len(beyond)} fields beyond {tol:g}, earliest first: " + ", ".join(f"{r.topic} {r.field}" for r in beyond.head(12).itertuples()) + (" ..." if len(beyond) > 12 else ""), markup=False, soft_wrap=True)
+    raise typer.Exit(1)
+
+
+def _missing(value) -> bool:
+    """Whether a table cell is missing (NaN or None)."""
+    return value is None or (isinstance(value, float) and np.isnan(value))
 
 
 @app.command()

@@ -160,3 +160,39 @@ def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str],
     for ax in axes[-1]:
         ax.set_xlabel("t in repetition [s]", fontsize=8)
     return _finish_per_repetition(fig, axes, title, path)
+
+
+def runs_over_time(series: dict[str, tuple[np.ndarray, np.ndarray]], ylabel: str, title: str, path: Path) -> Path:
+    """One line per run: label -> (t [s], values), on a log scale (values below 1e-12 drawn at 1e-12)."""
+    fig, ax = plt.subplots(figsize=(8, 3.4))
+    for label, (t, values) in series.items():
+        ax.semilogy(t, np.maximum(values, 1e-12), label=label, lw=1)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def limit_ratios(ratios: pd.DataFrame, title: str, path: Path) -> Path:
+    """Grouped bars: each run (rows of ``ratios``) against each ratio (columns, e.g. "smooth
+    jerk"); the limit is drawn at 1."""
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(ratios.columns) * max(1, len(ratios)) ** 0.5), 3.6))
+    width = 0.8 / max(1, len(ratios))
+    x = np.arange(len(ratios.columns))
+    for i, (label, row) in enumerate(ratios.iterrows()):
+        ax.bar(x + (i - (len(ratios) - 1) / 2) * width, row.to_numpy(dtype=float), width, label=label)
+    ax.axhline(1.0, color="tab:red", lw=1, ls="--")
+    ax.set_xticks(x, [c.replace(" ", "\n") for c in ratios.columns], fontsize=8)
+    ax.set_ylabel("largest value / limit")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7)
+    ax.grid(True, axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
