@@ -7,6 +7,7 @@ on stderr and exit with code 2; no traceback.
 from __future__ import annotations
 
 import functools
+import os
 import sys
 from pathlib import Path
 from typing import Annotated, Callable, Optional
@@ -121,6 +122,49 @@ def plan(
         err.print(f"error: no trial found a path: {'; '.join(s['failures'])}", markup=False, soft_wrap=True)
         raise typer.Exit(1)
     out.print(str(result.run), markup=False, soft_wrap=True)
+
+
+@app.command()
+@user_errors
+def reproduce(
+    out_dir: Annotated[Path, typer.Option("--out", help="Directory that receives every run, table and figure, and report.md (emptied first if it holds an earlier reproduction).")] = Path("reports/reproduction"),
+    only: Annotated[Optional[str], typer.Option(help="Comma-separated parts to run (default: all): ball-game-tvgdd, ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp.")] = None,
+    jobs: Annotated[int, typer.Option(min=1, help="Parts run at once, each in its own process (default: 2, or 1 on a 1-core machine).")] = min(2, os.cpu_count() or 1),
+) -> None:
+    """Run every experiment of the three papers, record it, and write DIR/report.md: each paper
+    claim against ours (read back from the recordings), the figures, the runs and the time of each
+    part. Exits 1 if a part failed (the report says which and why)."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from pipeline.reproduce.experiments import BY_NAME
+    from pipeline.reproduce.report import write_reproduction_report
+    from pipeline.reproduce.runner import parts_named, prepare, run_parts
+
+    names = parts_named([n.strip() for n in only.split(",") if n.strip()] if only is not None else None)
+    prepare(out_dir)
+    columns = (TextColumn("{task.fields[part]:<16}"), BarColumn(), TextColumn("{task.percentage:>3.0f} %"), TimeElapsedColumn(), TextColumn("{task.fields[text]}"))
+    with Progress(*columns, console=err) as bar:
+        tasks = {name: bar.add_task(BY_NAME[name].title, total=1.0, part=name, text="waiting", start=False) for name in names}
+
+        def on_progress(name: str, fraction: float, text: str) -> None:
+            bar.start_task(tasks[name])
+            bar.update(tasks[name], completed=fraction, text=text)
+            if fraction >= 1.0:
+                bar.stop_task(tasks[name])
+
+        results = run_parts(out_dir, names, jobs, on_progress)
+        report_task = bar.add_task("report", total=1.0, part="report", text="reading the recordings back")
+        report_path = write_reproduction_report(out_dir)
+        bar.update(report_task, completed=1.0, text="done")
+    table = Table(title=f"time of each part ({jobs} at a time)", title_justify="left")
+    for column in ("part", "status", "seconds"):
+        table.add_column(column, justify="right" if column == "seconds" else "left")
+    for r in results:
+        table.add_row(r.name, r.status if not r.error else f"failed: {r.error}", f"{r.seconds:.1f}")
+    out.print(table)
+    out.print(str(report_path), markup=False, soft_wrap=True)
+    if any(r.status != "complete" for r in results):
+        raise typer.Exit(1)
 
 
 @app.command()
@@ -298,10 +342,7 @@ def ik_srs(
     of each candidate's forward kinematics (the analogue of the paper's Table I)."""
     import json
 
-    from pipeline.ik.mc_inverse import REASONS, VALID, McInverse
-    from pipeline.model.check import pose_errors
-    from pipeline.model.kinematics import ChainKinematics
-    from pipeline.model.poses import pose_matrix
+    from pipeline.ik.mc_inverse import candidate_table
 
     robot = _robot(robot_dir, urdf, base, tip)
     if urdf is not None:
@@ -312,23 +353,16 @@ def ik_srs(
         chain = robot.hand_chain(arm)
     if not np.linalg.norm(vertical) > 0:
         raise DualarmError("--vertical must not be zero")
-    solver = McInverse.of(chain, tuple(np.asarray(vertical) / np.linalg.norm(vertical)))
-    target = pose_matrix(pose[:3], pose[3:])
-    solution = solver.solve(target, arm_angle)
-    reached = ChainKinematics.of(chain).poses(solution.q)
-    position_error, orientation_error = pose_errors(reached, np.repeat(target[None], len(reached), axis=0))
-    candidates = [
-        {"q": q.tolist(), "valid": bool(r == VALID), "reason": REASONS[int(r)], "position_error_m": float(p), "orientation_error_rad": float(o)}
-        for q, r, p, o in zip(solution.q, solution.reason, position_error, orientation_error)
-    ]
+    data = candidate_table(chain, pose, arm_angle, vertical)
+    candidates = data["candidates"]
     if as_json:
-        typer.echo(json.dumps({"chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)}, "pose": list(pose), "arm_angle": arm_angle, "candidates": candidates}, indent=2))
+        typer.echo(json.dumps(data, indent=2))
         return
     table = Table(title=f"MC-Inverse, {chain.base} -> {chain.tip}, psi = {arm_angle:g} rad", title_justify="left")
-    for column in ("#", *[f"θ{i}" for i in range(1, 8)], "validity", "pos. err [m]", "rot. err [rad]"):
+    for column in ("#", *[f"θ{i}" for i in range(1, 8)], "validity", "pos. err [m]", "rot. err [rad]", "ψ of q [rad]"):
         table.add_column(column, justify="left" if column == "validity" else "right", no_wrap=True)
     for i, c in enumerate(candidates):
-        table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}")
+        table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}", f"{c['arm_angle_rad']:.4f}")
     out.print(table)
     out.print(f"joints: {', '.join(chain.joint_names)}; {sum(c['valid'] for c in candidates)} of 8 valid", markup=False)
 

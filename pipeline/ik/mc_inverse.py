@@ -167,3 +167,35 @@ class McSolution:
     def valid(self) -> np.ndarray:
         """Mask of valid candidates, (8,)."""
         return self.reason == VALID
+
+
+def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict:
+    """The paper's Table I for one hand pose: the 8 candidates at arm angle ``psi`` [rad].
+
+    Args:
+        chain: an S-R-S arm chain.
+        pose: hand pose in the chain base frame, X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z).
+        psi: the arm angle of eq (1) [rad].
+        vertical: the reference vertical vector V of eq (1), in the chain base frame.
+
+    Returns:
+        A JSON-ready dict: ``chain`` (base, tip, joints), ``pose``, ``arm_angle`` and
+        ``candidates``, each with ``q`` [rad], ``valid``, ``reason``, the position and orientation
+        errors of its forward kinematics against the pose [m, rad] and the arm angle of eq (1)
+        recomputed from its joints (``arm_angle_rad``).
+    """
+    from pipeline.model.check import pose_errors
+    from pipeline.model.kinematics import ChainKinematics
+    from pipeline.model.poses import pose_matrix
+
+    unit = tuple(np.asarray(vertical, dtype=float) / np.linalg.norm(vertical))
+    target = pose_matrix(pose[:3], pose[3:])
+    solution = McInverse.of(chain, unit).solve(target, psi)
+    reached = ChainKinematics.of(chain).poses(solution.q)
+    position_error, orientation_error = pose_errors(reached, np.repeat(target[None], len(reached), axis=0))
+    angles = SrsKinematics.of(chain, unit).arm_angles(solution.q)
+    candidates = [
+        {"q": q.tolist(), "valid": bool(r == VALID), "reason": REASONS[int(r)], "position_error_m": float(p), "orientation_error_rad": float(o), "arm_angle_rad": float(a)}
+        for q, r, p, o, a in zip(solution.q, solution.reason, position_error, orientation_error, angles)
+    ]
+    return {"chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)}, "pose": list(pose), "arm_angle": psi, "candidates": candidates}

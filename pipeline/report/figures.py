@@ -196,3 +196,21 @@ def limit_ratios(ratios: pd.DataFrame, title: str, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def histogram(values: np.ndarray, xlabel: str, title: str, path: Path, marks: dict[str, float] | None = None) -> Path:
+    """A histogram of ``values``, with labelled vertical lines at ``marks`` (label -> x)."""
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    ax.hist(values, bins=30, color="tab:blue", alpha=0.8)
+    for i, (label, x) in enumerate((marks or {}).items()):
+        ax.axvline(x, color=plt.get_cmap("tab10").colors[(i + 1) % 10], ls="--", lw=1.2, label=label)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("count")
+    ax.set_title(title, fontsize=10)
+    if marks:
+        ax.legend(fontsize=8)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,129 @@
+"""``report.md`` of a reproduction: each paper claim against ours, the figures, the runs and the
+time of each part, written from the reproduction directory's files alone (so it can be rewritten
+from a directory copied from another machine)."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.errors import RecordingError
+from pipeline.record.readback import read_run
+from pipeline.report import figures
+from pipeline.report.run_report import write_report
+from pipeline.reproduce.claims import PAPER_TABLE_I, Claim, all_claims
+from pipeline.reproduce.experiments import BY_NAME, PARTS
+from pipeline.reproduce.runner import PARTS_FILE
+
+#: The papers, in the order of the report.
+PAPERS = {
+    "TV-GDD": "Zhang, Kong, Niu — *A Time-Varying-Constrained Motion Generation Scheme for Humanoid Robot Arms* (ball game, section 4)",
+    "MC-Inverse": "Zou, Min, Xu — *MC-Inverse: An Analytical Method for Consistent Motion of Anthropomorphic Dual-arm Robot* (section V)",
+    "Li & Liang": "Li, Liang — *Study on Humanoid Robot's Dual-arm Collision Avoidance Motion Planning Algorithm* (section 5)",
+}
+VERDICT = {True: "agrees", False: "**differs**", None: "—"}
+
+
+def command_of(name: str, out: Path, parts: Mapping[str, Mapping]) -> str:
+    """The command that reproduces part ``name`` alone (Table I's with the analogue's pose)."""
+    command = BY_NAME[name].command
+    if name == "table-i" and parts.get(name, {}).get("status") == "complete":
+        data = json.loads((out / parts[name]["outputs"]["table"]).read_text())
+        command = command.format(pose=" ".join(f"{v:g}" for v in data["pose"]), psi=f"{data['arm_angle']:g}")
+    return command
+
+
+def _claims_table(claims: list[Claim], out: Path, parts: Mapping[str, Mapping]) -> list[str]:
+    lines = ["| where | claim | paper | ours | ours against the paper | verdict | reproduce alone |", "|---|---|---|---|---|---|---|"]
+    cells = [(c.where, c.claim, c.theirs, c.ours, c.comparison, VERDICT[c.agrees], f"`{command_of(c.part, out, parts)}`") for c in claims]
+    return lines + ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in cells]
+
+
+def _table_i(out: Path, parts: Mapping[str, Mapping]) -> list[str]:
+    data = json.loads((out / parts["table-i"]["outputs"]["table"]).read_text())
+    lines = [
+        "## Table I, ours and the paper's", "",
+        f"HR2's arm base frame and link lengths are not this robot's, so the paper's pose cannot be reused. The analogue puts this robot's left arm at the paper's solution 1 joints (its axes run z, y, z, y, z, y, z like HR2's) and asks MC-Inverse for the hand pose found there, {data['pose']} (m, rad, in `{data['chain']['base']}`), at that configuration's arm angle ψ = {data['arm_angle']:g} rad (the paper's 2.2 rad is in HR2's convention).", "",
+        "| # | θ1 | θ2 | θ3 | θ4 | θ5 | θ6 | θ7 | ours | ψ(q) [rad] | FK error [m] |", "|---|" + "---:|" * 7 + "---|---:|---:|",
+    ]
+    lines += [f"| {i + 1} | " + " | ".join(f"{v:.5f}" for v in c["q"]) + f" | {c['reason']} | {c['arm_angle_rad']:.5f} | {c['position_error_m']:.1e} |" for i, c in enumerate(data["candidates"])]
+    lines += [f"| paper {j + 1} | " + " | ".join(f"{v:.5f}" for v in column) + " | valid | | |" for j, column in enumerate(PAPER_TABLE_I)]
+    return lines + [""]
+
+
+def _figures(out: Path, parts: Mapping[str, Mapping]) -> list[tuple[str, str]]:
+    """(caption, path relative to ``out``) of the report's figures, made or found for the
+    completed parts."""
+    made = []
+    done = {n for n, p in parts.items() if p["status"] == "complete"}
+    for name, caption in (("ball-game-pinv", "pinv (TV-GDD Figs 3-4)"), ("ball-game-tvgdd", "TV-GDD (Figs 5-6, 8; eq (19) profiles as Fig. 2)")):
+        if name in done:
+            directory = write_report(out / parts[name]["outputs"]["runs"][0], out / "figures" / name)
+            for png, what in (("joints_vs_bounds.png", "joint positions against θ_new±"), ("velocities_vs_bounds.png", "joint velocities against ζ_new±"), ("hand_errors.png", "hand position errors"), ("bound_profiles.png", "bound profiles of eq (19)")):
+                if (directory / png).exists() and not (name == "ball-game-pinv" and png in ("hand_errors.png", "bound_profiles.png")):
+                    made.append((f"Ball game, {caption}: {what}", str((directory / png).relative_to(out))))
+    for name, task in (("triangle", "triangle"), ("circle", "circle"), ("carry-box", "carry_box")):
+        if name in done:
+            directory = out / Path(parts[name]["outputs"]["table"]).parent
+            made += [(f"{task}: {png.stem.replace('_', ' ')} per repetition and method", str(png.relative_to(out))) for png in sorted(directory.glob("*.png"))]
+    if "bowl-grasp" in done:
+        trials = pd.read_csv(out / parts["bowl-grasp"]["outputs"]["table"])
+        times = trials.loc[trials["success"], "planning_time_s"].to_numpy() * 1e3
+        if len(times):
+            path = figures.histogram(times, "planning time [ms]", f"MCIKRRT on the bowl grasp: {len(times)} successful trials", out / "figures" / "planning_times.png", {f"ours, mean {times.mean():.0f} ms": float(times.mean())})
+            made.append(("Bowl grasp: MCIKRRT planning times (the paper's mean, 4210.88 ms, is off this scale)", str(path.relative_to(out))))
+    return made
+
+
+def write_reproduction_report(out: str | Path) -> Path:
+    """Write ``out/report.md`` from ``out/parts.json`` and the recordings it lists; returns it.
+
+    Raises:
+        RecordingError: ``out`` holds no reproduction, or a recording it lists is unreadable.
+    """
+    out = Path(out)
+    try:
+        index = json.loads((out / PARTS_FILE).read_text())
+    except (FileNotFoundError, json.JSONDecodeError) as exc:
+        raise RecordingError(f"{out / PARTS_FILE}: not a reproduction's index ({exc})") from None
+    parts = {p["name"]: p for p in index["parts"]}
+    (out / "figures").mkdir(exist_ok=True)
+    claims = all_claims(out, parts)
+    judged = [c for c in claims if c.agrees is not None]
+    lines = [
+        "# dualarm: the three papers reproduced", "",
+        f"{sum(c.agrees for c in judged)} of {len(judged)} claims agree. Every figure under \"ours\" is read back from the recordings in this directory; the papers' figures are quoted from their text. "
+        f"The parts ran {index['jobs']} at a time on a {index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s, so computing times were measured with another part running (`dualarm bench` measures speed alone).", "",
+    ]
+    missing = [p for p in PARTS if p.name not in parts or parts[p.name]["status"] != "complete"]
+    for paper, title in PAPERS.items():
+        mine = [c for c in claims if c.paper == paper]
+        lines += [f"## {paper}", "", title, ""]
+        lines += _claims_table(mine, out, parts) if mine else []
+        absent = [p for p in missing if p.paper == paper]
+        lines += ["", *[f"- {p.title} (`{p.name}`): not available: {parts[p.name]['error'] if p.name in parts else 'not run (see --only)'}" for p in absent], ""]
+    if parts.get("table-i", {}).get("status") == "complete":
+        lines += _table_i(out, parts)
+    lines += ["## Figures", ""] + [f"{caption}:\n\n![{Path(path).stem}]({path})\n" for caption, path in _figures(out, parts)]
+    lines += ["## Runs", "", "| part | run | status | stages |", "|---|---|---|---|"]
+    for p in index["parts"]:
+        for run in p["outputs"].get("runs", []):
+            try:
+                manifest = read_run(out / run).manifest
+            except RecordingError as exc:
+                lines.append(f"| {p['name']} | {run} | unreadable: {exc} | |")
+                continue
+            lines.append(f"| {p['name']} | [{run}]({run}) | {manifest.get('status')} | {', '.join(manifest.get('stages', []))} |")
+    lines += ["", "## Time of each part", "", "| part | what | status | time [s] |", "|---|---|---|---:|"]
+    lines += [f"| {p['name']} | {BY_NAME[p['name']].title} | {p['status']} | {p['seconds']:.1f} |" for p in index["parts"]]
+    lines += [f"| all | {index['jobs']} at a time | | {index['wall_time_s']:.1f} |", ""]
+    path = out / "report.md"
+    partial = out / ".report.md.partial"
+    partial.write_text("\n".join(lines))
+    os.replace(partial, path)
+    return path
+
