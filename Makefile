@@ -1,4 +1,4 @@
-# Quick start:  make run   (install, then run the main job)
+# Quick start:  make run   (install, then run the main job: dualarm reproduce -> reports/reproduction/report.md)
 #               make test  (install, then run the test suite)
 PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
@@ -15,10 +15,10 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 run: install
-	$(BIN)/dualarm run tasks/triangle.toml --ik mc-inverse
+	$(BIN)/dualarm reproduce
 
 test: install
 	$(BIN)/python -m pytest
 
 clean:
-	rm -rf $(VENV) recordings/*/ .pytest_cache
+	rm -rf $(VENV) recordings/*/ reports/*/ .pytest_cache
