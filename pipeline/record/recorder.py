@@ -112,7 +112,7 @@ class Recorder:
         links = [("world", root, np.broadcast_to(np.eye(4), (len(t), 4, 4)))] + joint_transforms(self.robot.urdf.joints, q)
         frames = [(parent if parent == "world" else f"{stage}/{parent}", f"{stage}/{child}", T[:, :3, 3].tolist(), quaternion_xyzw(T[:, :3, :3]).tolist()) for parent, child, T in links]
         for k, time in enumerate(t.tolist()):
-            stamp = Timestamp.from_epoch_secs(time)
+            stamp = Timestamp(sec=_ns(time) // 10**9, nsec=_ns(time) % 10**9)  # the log time, to the nanosecond
             self._tf_channel.log(
                 FrameTransforms(
                     transforms=[

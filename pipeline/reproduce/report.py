@@ -33,7 +33,7 @@ def command_of(name: str, out: Path, parts: Mapping[str, Mapping]) -> str:
     command = BY_NAME[name].command
     if name == "table-i" and parts.get(name, {}).get("status") == "complete":
         data = json.loads((out / parts[name]["outputs"]["table"]).read_text())
-        command = command.format(pose=" ".join(f"{v:g}" for v in data["pose"]), psi=f"{data['arm_angle']:g}")
+        command = command.format(pose=" ".join(str(v) for v in data["pose"]), psi=str(data["arm_angle"]))
     return command
 
 
@@ -97,7 +97,8 @@ def write_reproduction_report(out: str | Path) -> Path:
     lines = [
         "# dualarm: the three papers reproduced", "",
         f"{sum(c.agrees for c in judged)} of {len(judged)} claims agree. Every figure under \"ours\" is read back from the recordings in this directory; the papers' figures are quoted from their text. "
-        f"The parts ran {index['jobs']} at a time on a {index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s, so computing times were measured with another part running (`dualarm bench` measures speed alone).", "",
+        f"The parts ran {index['jobs']} at a time on a {index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s"
+        + (", so computing times were measured with another part running (`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)." if index["jobs"] > 1 else "."), "",
     ]
     missing = [p for p in PARTS if p.name not in parts or parts[p.name]["status"] != "complete"]
     for paper, title in PAPERS.items():
