@@ -223,6 +223,8 @@ def compare(
     Wall-clock measurements (solve, planning, collision-check times) are listed, never judged."""
     from pipeline.report.compare import compare_runs
 
+    if csv is not None and csv.is_dir():
+        raise DualarmError(f"--csv {csv}: is a directory; give a file name")
     with err.status(f"comparing {run_a} and {run_b} ..."):
         result = compare_runs(run_a, run_b, tol)
     table = Table(title=f"A = {run_a}\nB = {run_b}", title_justify="left")
@@ -230,7 +232,7 @@ def compare(
         table.add_column(column, justify="left" if column in ("topic", "in field") else "right", no_wrap=column == "topic")
     judged = result.table[~result.table["wall_clock"]]
     for topic, rows in judged.groupby("topic", sort=False):
-        worst = rows.loc[rows["max_difference"].idxmax()]
+        worst = rows.loc[rows["max_difference"].fillna(-np.inf).idxmax()]
         where = ("", "", "") if worst["max_difference"] == 0 else (str(worst["field"]), "" if _missing(worst["t"]) else f"{worst['t']:.3f}", "" if _missing(worst["rep"]) else str(int(worst["rep"])))
         table.add_row(topic, str(worst["rows_a"]), str(worst["rows_b"]), str(worst["aligned"]), f"{worst['max_difference']:.3g}", *where, "yes" if worst["max_difference"] <= tol else "NO")
     out.print(table)
@@ -238,6 +240,7 @@ def compare(
     if len(clock):
         out.print(f"not judged (wall clock): {', '.join(f'{r.topic} {r.field}' for r in clock.itertuples())}", markup=False, soft_wrap=True)
     if csv is not None:
+        csv.parent.mkdir(parents=True, exist_ok=True)
         result.table.to_csv(csv, index=False)
     if result.within:
         out.print(f"identical within {tol:g} in every judged field", markup=False)

@@ -37,7 +37,7 @@ class Comparison:
         a, b: the run directories.
         tolerance: the largest absolute difference accepted (in each field's own unit).
         table: a row per topic and field (:data:`COLUMNS`): ``max_difference`` (inf where rows,
-            fields or text differ), where it is (``t`` [s], ``rep``), where the difference first
+            fields or text differ; NaN where no rows aligned, which the ``(rows)`` row flags), where it is (``t`` [s], ``rep``), where the difference first
             exceeds ``tolerance`` (``first_beyond_t``, ``first_beyond_rep``; NaN when it does
             not), the rows of each run and how many were aligned, and whether the field is a
             wall-clock measurement (never judged).
@@ -88,7 +88,7 @@ def _field(topic: str, field: str, both: pd.DataFrame, tolerance: float, counts:
         diff = np.where(unequal, np.inf, 0.0)
         note = f"text differs in {unequal.sum()} rows, first {a[unequal].iloc[0]!r} vs {b[unequal].iloc[0]!r}" if unequal.any() else ""
     if len(diff) == 0:
-        return _row(topic, field, *counts, max_difference=0.0)
+        return _row(topic, field, *counts, max_difference=np.nan, note="no rows aligned")
     worst = int(np.argmax(diff))
     beyond = np.flatnonzero(diff > tolerance)
     first = beyond[0] if len(beyond) else None

@@ -112,18 +112,29 @@ RUN_COLUMNS = ("label", "run", "task", "method", "status", "stages", "repetition
 def runs_table(runs: Sequence[RunData]) -> pd.DataFrame:
     """A row per run: :data:`RUN_COLUMNS`, then every metric of any of the runs (NaN where a run
     has none). Labels are made unique with the run id where two runs share one."""
-    labels = [run_label(r) for r in runs]
+    base = [run_label(r) for r in runs]
+    labels = _unique([b if base.count(b) == 1 else f"{b} {r.run_id}" for b, r in zip(base, runs)])
     rows = []
     for run, label in zip(runs, labels):
-        unique = label if labels.count(label) == 1 else f"{label} {run.run_id}"
         rows.append({
-            "label": unique, "run": run.run_id, "task": run.manifest.get("task"), "method": label.split(" ", 1)[1], "status": run.status,
+            "label": label, "run": run.run_id, "task": run.manifest.get("task"), "method": str(label).split(" ")[1], "status": run.status,
             "stages": ",".join(run.manifest.get("stages", [])), "repetitions": (run.manifest.get("settings") or {}).get("path", {}).get("repetitions"),
             "directory": str(run.directory), **run.metrics,
         })
     table = pd.DataFrame(rows)
     metrics = sorted(c for c in table.columns if c not in RUN_COLUMNS)
     return table.reindex(columns=[*RUN_COLUMNS, *metrics])
+
+
+def _unique(names: Sequence[str]) -> list[str]:
+    """``names`` with " (2)", " (3)", ... added to repeats (the same run given twice, or a run and
+    its copy from another machine)."""
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f"{name} ({seen[name]})")
+    return out
 
 
 def _cell(value) -> str:
@@ -203,7 +214,8 @@ def write_runs_report(run_dirs: Sequence[str | Path], out_dir: str | Path | None
     tasks = sorted(set(table["task"].astype(str)))
     out = Path(out_dir) if out_dir is not None else Path("reports") / (tasks[0] if len(tasks) == 1 else "runs") / f"{runs[0].run_id}+{len(runs) - 1}"
     out.mkdir(parents=True, exist_ok=True)
-    summaries = [write_report(run, out / f"{run.manifest.get('task')}-{run.run_id}") for run in runs]
+    names = _unique([f"{run.manifest.get('task')}-{run.run_id}" for run in runs])
+    summaries = [write_report(run, out / _slug(name)) for run, name in zip(runs, names)]
     table.to_csv(out / "runs.csv", index=False)
     lines = [f"# {len(runs)} runs", "", "| run | task | method | status | stages | reps | summary |", "|---|---|---|---|---|---:|---|"]
     lines += [f"| {r.run} | {r.task} | {r.method} | {r.status} | {r.stages} | {_cell(r.repetitions)} | [{s.name}]({s.name}/summary.md) |" for r, s in zip(table.itertuples(), summaries)]
