@@ -24,8 +24,10 @@ from pipeline.reproduce.experiments import BY_NAME, PARTS
 
 #: The index of a reproduction directory.
 PARTS_FILE = "parts.json"
+#: Written first into a reproduction directory, so that an interrupted one is still recognised.
+MARKER = ".dualarm-reproduction"
 #: Files that mark a directory as a reproduction's.
-MARKERS = (PARTS_FILE, "report.md")
+MARKERS = (MARKER, PARTS_FILE, "report.md")
 
 #: ``(part, fraction done, text)``.
 OnProgress = Callable[[str, float, str], None]
@@ -74,9 +76,10 @@ def prepare(out: Path) -> None:
         raise DualarmError(f"{out}: exists and is not a directory")
     if out.is_dir() and any(out.iterdir()):
         if not any((out / m).exists() for m in MARKERS):
-            raise DualarmError(f"{out}: not empty and not a reproduction (no {' or '.join(MARKERS)}); give another --out")
+            raise DualarmError(f"{out}: not empty and not a reproduction (no {' or '.join(MARKERS[1:])}); give another --out")
         shutil.rmtree(out)
     out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).write_text("written by dualarm reproduce; this directory is emptied when it runs again\n")
 
 
 def _run_part(name: str, out: Path, report: Callable[[float, str], None]) -> PartResult:

@@ -726,3 +726,16 @@ def test_plan_claims_count_successes_and_average_their_times():
     none = pd.DataFrame({"success": [False, False, False], "planning_time_s": [5.0, 5.0, 5.0]})
     (only,) = plan_claims(none, None)
     assert only.ours == "0 of 3 trials" and only.agrees is False
+
+
+def test_an_interrupted_reproduction_is_recognised_and_emptied(tmp_path):
+    """A reproduction stopped before parts.json and report.md (Ctrl-C) is still recognised as one
+    by the marker written first, so the next run empties it instead of refusing it."""
+    from pipeline.reproduce.runner import MARKER, prepare
+
+    out = tmp_path / "repro"
+    prepare(out)
+    (out / "runs" / "triangle").mkdir(parents=True)
+    (out / "runs" / "triangle" / "partial.mcap").write_bytes(b"half")
+    prepare(out)
+    assert [p.name for p in out.iterdir()] == [MARKER]
