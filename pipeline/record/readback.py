@@ -9,7 +9,6 @@ first used, so reading a run for its metrics or one topic does not decode its ``
 
 from __future__ import annotations
 
-import functools
 import json
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
@@ -126,15 +125,6 @@ class McapTopics(Mapping[str, pd.DataFrame]):
     def __len__(self) -> int:
         return len(self._topics)
 
-    def message_counts(self) -> dict[str, int]:
-        """Topic -> number of MCAP messages, from the file's summary (nothing decoded)."""
-        with self._path.open("rb") as stream:
-            summary = make_reader(stream).get_summary()
-        counts: dict[str, int] = defaultdict(int)
-        for i, channel in summary.channels.items():
-            counts[channel.topic] += summary.statistics.channel_message_counts.get(i, 0)
-        return {topic: counts[topic] for topic in self._topics}
-
     def _read(self, topic: str) -> pd.DataFrame:
         times: list[float] = []
         payloads: list[bytes] = []
@@ -148,7 +138,10 @@ class McapTopics(Mapping[str, pd.DataFrame]):
             else:
                 decode = ProtobufDecoderFactory().decoder_for(channel.message_encoding, schema)
                 messages = [decode(data) for data in payloads]
-                df = (_frame_transforms if schema.name == "foxglove.FrameTransforms" else functools.partial(_protobuf_frame, schema.name))(times, messages)
+                if schema.name == "foxglove.FrameTransforms":
+                    df = _frame_transforms(times, messages)
+                else:
+                    df = _protobuf_frame(schema.name, times, messages)
         except Exception as exc:  # any failure to decode (struct, McapError, protobuf, JSON...) is corruption
             raise RecordingError(f"{self._path}: topic {topic} is not readable ({type(exc).__name__}: {exc})") from None
         if "rep" not in df:
