@@ -190,10 +190,11 @@ def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical:
 
     unit = tuple(np.asarray(vertical, dtype=float) / np.linalg.norm(vertical))
     target = pose_matrix(pose[:3], pose[3:])
-    solution = McInverse.of(chain, unit).solve(target, psi)
+    solver = McInverse.of(chain, unit)
+    solution = solver.solve(target, psi)
     reached = ChainKinematics.of(chain).poses(solution.q)
     position_error, orientation_error = pose_errors(reached, np.repeat(target[None], len(reached), axis=0))
-    angles = SrsKinematics.of(chain, unit).arm_angles(solution.q)
+    angles = solver.kinematics.arm_angles(solution.q)
     candidates = [
         {"q": q.tolist(), "valid": bool(r == VALID), "reason": REASONS[int(r)], "position_error_m": float(p), "orientation_error_rad": float(o), "arm_angle_rad": float(a)}
         for q, r, p, o, a in zip(solution.q, solution.reason, position_error, orientation_error, angles)

@@ -12,7 +12,6 @@ renamed).
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -21,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.plan.problem import PlanningProblem, PlanningSettings
+from pipeline.record.run_dir import write_whole
 from pipeline.tasks import load_task
 
 #: Li & Liang's average planning time for their bowl grasp [s].
@@ -42,12 +42,6 @@ class TrialsResult:
     summary: dict
     directory: Path
     run: Path | None
-
-
-def _write(path: Path, text: str) -> None:
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(text)
-    os.replace(partial, path)
 
 
 def run_trials(
@@ -120,7 +114,6 @@ def run_trials(
         run = run_task(task_file, planner=planner, planning=settings, planned=result, seed=trial_seed, out_dir=recordings, command=command)
         summary["run"] = str(run)
         summary["run_seed"] = trial_seed
-    out_dir.mkdir(parents=True, exist_ok=True)
-    _write(out_dir / "plan_trials.csv", table.to_csv(index=False))
-    _write(out_dir / "plan_summary.json", json.dumps(summary, indent=2) + "\n")
+    write_whole(out_dir / "plan_trials.csv", table.to_csv(index=False))
+    write_whole(out_dir / "plan_summary.json", json.dumps(summary, indent=2) + "\n")
     return TrialsResult(table, summary, out_dir, Path(summary["run"]) if summary["run"] else None)

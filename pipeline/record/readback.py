@@ -193,11 +193,6 @@ def _read_json(path: Path) -> dict:
         raise RecordingError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
 
 
-def read_mcap(path: Path) -> McapTopics:
-    """The topics of an MCAP file, each decoded on first access (see :class:`McapTopics`)."""
-    return McapTopics(path)
-
-
 def read_run(directory: str | Path) -> RunData:
     """Read one run directory.
 
@@ -209,7 +204,7 @@ def read_run(directory: str | Path) -> RunData:
         raise RecordingError(f"{directory}: no such run directory")
     manifest = _read_json(directory / MANIFEST)
     metrics = _read_json(directory / METRICS) if (directory / METRICS).exists() else {}
-    topics = read_mcap(directory / "run.mcap")
+    topics = McapTopics(directory / "run.mcap")
     return RunData(directory=directory, manifest=MappingProxyType(manifest), metrics=MappingProxyType(metrics), topics=topics)
 
 

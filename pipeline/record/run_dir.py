@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import platform
 import secrets
 import shutil
@@ -41,6 +42,16 @@ def package_versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             out[name] = "not installed"
     return out
+
+
+def write_whole(path: Path, text: str) -> Path:
+    """Write ``text`` beside ``path``, then rename it into place: a file that exists is complete.
+    Creates ``path``'s directory; returns ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f".{path.name}.partial")
+    partial.write_text(text)
+    os.replace(partial, path)
+    return path
 
 
 def new_run_id() -> str:

@@ -9,7 +9,6 @@ fails is a row with its error, not the end of the comparison.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ import pandas as pd
 
 from pipeline.errors import DualarmError
 from pipeline.record.readback import RunData, read_run
+from pipeline.record.run_dir import write_whole
 from pipeline.report import figures
 
 #: Columns of consistency.csv after ``method``: DESIGN.md's ``ik.*`` metric names without the prefix.
@@ -99,23 +99,14 @@ def run_consistency(
         samples[method] = run["/ik/sample"]
     table = pd.DataFrame(rows, columns=["method", "status", "error", "run", *COLUMNS])
     written = _figures(task, samples, out_dir)
-    csv = _write(out_dir / "consistency.csv", table[["method", *COLUMNS, "status", "error", "run"]].to_csv(index=False))
-    markdown = _write(out_dir / "consistency.md", _markdown(task, table, written, repetitions))
+    csv = write_whole(out_dir / "consistency.csv", table[["method", *COLUMNS, "status", "error", "run"]].to_csv(index=False))
+    markdown = write_whole(out_dir / "consistency.md", _markdown(task, table, written, repetitions))
     return Consistency(table=table, csv=csv, markdown=markdown, figures=written)
 
 
 def _row(method: str, run: RunData) -> dict[str, object]:
     metrics = {k.removeprefix("ik."): v for k, v in run.metrics.items() if k.startswith("ik.")}
     return {"method": method, "status": run.status, "error": "", "run": str(run.directory), **{c: metrics.get(c, np.nan) for c in COLUMNS}}
-
-
-def _write(path: Path, text: str) -> Path:
-    """Write, then rename: a file that exists is complete."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(f".{path.name}.partial")
-    partial.write_text(text)
-    os.replace(partial, path)
-    return path
 
 
 def _figures(task, samples: dict[str, pd.DataFrame], out_dir: Path) -> tuple[Path, ...]:

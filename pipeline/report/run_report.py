@@ -163,10 +163,14 @@ RATIOS = (
 )
 
 
+def hand_errors(sample: pd.DataFrame) -> pd.DataFrame:
+    """The ``hand_error_m.<hand>`` columns [m] of an ``/ik/sample`` or ``/execute/sample``."""
+    return sample[[c for c in sample.columns if c.startswith("hand_error_m.")]]
+
+
 def _hand_error(sample: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-    """(t, the larger of the hands' position errors) of an ``/ik/sample`` or ``/execute/sample``."""
-    columns = [c for c in sample.columns if c.startswith("hand_error_m.")]
-    return sample["t"].to_numpy(), sample[columns].to_numpy().max(axis=1)
+    """(t [s], the larger of the hands' position errors [m]) of a sample topic."""
+    return sample["t"].to_numpy(), hand_errors(sample).to_numpy().max(axis=1)
 
 
 def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path) -> list[tuple[str, Path]]:

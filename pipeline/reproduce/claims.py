@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.record.readback import RunData, read_run
-from pipeline.report.run_report import excursions, limit_excursions
+from pipeline.report.run_report import excursions, hand_errors, limit_excursions
 from pipeline.plan.trials import PAPER_PLANNING_TIME_S
 from pipeline.reproduce.experiments import TABLE_I_SOLUTION_1
 
@@ -63,10 +63,6 @@ def _largest(table: pd.DataFrame, unit: str) -> tuple[float, str]:
     return float(row["max_outside"]), f"{row['max_outside']:.3g} {unit} ({row['joint']}, first at {row['t_first_out']:.2f} s)"
 
 
-def _hand_errors(sample: pd.DataFrame) -> pd.DataFrame:
-    return sample[[c for c in sample.columns if c.startswith("hand_error_m.")]]
-
-
 def _unexpected_contact_steps(run: RunData) -> int:
     executed = run["/execute/sample"]
     return int(((executed["self_contacts"] + executed["environment_contacts"]) > 0).sum())
@@ -101,7 +97,7 @@ def tvgdd_claims(tvgdd: RunData) -> list[Claim]:
     if closed:
         latest = max(closed.values())
         claims.append(Claim("TV-GDD", "Fig. 5", "the gesture joints' bounds (its joints 6, 7, 13, 14) close after about 5 s", "≈ 5 s", f"{latest:.2f} s, 99 % closed ({', '.join(closed)})", f"{latest - 5.0:+.2f} s", abs(latest - 5.0) <= 1.0, "ball-game-tvgdd"))
-    errors = _hand_errors(sample)
+    errors = hand_errors(sample)
     for name, theirs, ours_value in (
         ("largest hand position error (MAE)", 2.1832e-5, float(errors.to_numpy().max())),
         ("mean hand position error (AAE) of each hand, below", 6.2e-6, float(errors.mean().max())),
@@ -112,7 +108,7 @@ def tvgdd_claims(tvgdd: RunData) -> list[Claim]:
     for name, theirs, ours_value in (("T_ave, computing time per control step", 1e-3, float(solve.mean())), ("T_sum, computing time of the whole task", 1.12, float(solve.sum()))):
         claims.append(Claim("TV-GDD", "section 4", name, _g(theirs, "s", 5), _g(ours_value, "s"), f"paper / ours = {theirs / ours_value:.0f}x", ours_value <= theirs, "ball-game-tvgdd"))
     executed = tvgdd["/execute/sample"]
-    tracking = float(_hand_errors(executed).to_numpy().max())
+    tracking = float(hand_errors(executed).to_numpy().max())
     contacts = _unexpected_contact_steps(tvgdd)
     claims.append(Claim("TV-GDD", "Fig. 7", "the motion runs on the robot and keeps the hand gesture", "done on the physical robot", f"executed in PyBullet: tracking error {tracking * 1e6:.2f} µm, {contacts} steps with unexpected contacts", "", contacts == 0 and tracking < 1e-3, "ball-game-tvgdd"))
     return claims

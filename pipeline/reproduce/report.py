@@ -5,7 +5,6 @@ from a directory copied from another machine)."""
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -13,6 +12,7 @@ import pandas as pd
 
 from pipeline.errors import RecordingError
 from pipeline.record.readback import read_run
+from pipeline.record.run_dir import write_whole
 from pipeline.report import figures
 from pipeline.report.run_report import write_report
 from pipeline.reproduce.claims import PAPER_TABLE_I, Claim, all_claims
@@ -122,9 +122,5 @@ def write_reproduction_report(out: str | Path) -> Path:
     lines += ["", "## Time of each part", "", "| part | what | status | time [s] |", "|---|---|---|---:|"]
     lines += [f"| {p['name']} | {BY_NAME[p['name']].title} | {p['status']} | {p['seconds']:.1f} |" for p in index["parts"]]
     lines += [f"| all | {index['jobs']} at a time | | {index['wall_time_s']:.1f} |", ""]
-    path = out / "report.md"
-    partial = out / ".report.md.partial"
-    partial.write_text("\n".join(lines))
-    os.replace(partial, path)
-    return path
+    return write_whole(out / "report.md", "\n".join(lines))
 

@@ -20,6 +20,7 @@ from pathlib import Path
 from queue import Empty
 
 from pipeline.errors import DualarmError
+from pipeline.record.run_dir import write_whole
 from pipeline.reproduce.experiments import BY_NAME, PARTS
 
 #: The index of a reproduction directory.
@@ -127,7 +128,5 @@ def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgres
                     on_progress(name, 1.0, results[name].status)
     ordered = [results[n] for n in names]
     index = {"jobs": jobs, "cpu_count": os.cpu_count(), "wall_time_s": time.perf_counter() - started, "parts": [asdict(r) for r in ordered]}
-    partial = out / f".{PARTS_FILE}.partial"
-    partial.write_text(json.dumps(index, indent=2) + "\n")
-    os.replace(partial, out / PARTS_FILE)
+    write_whole(out / PARTS_FILE, json.dumps(index, indent=2) + "\n")
     return ordered
