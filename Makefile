@@ -4,14 +4,14 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: install run test clean
+.PHONY: install run test lint typecheck clean
 
 install: $(VENV)/.installed
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $@
 
 run: install
@@ -20,5 +20,16 @@ run: install
 test: install
 	$(BIN)/python -m pytest
 
+# ruff (lint and format) and mypy; CI runs this before the tests, pre-commit on every commit.
+lint: install typecheck
+	$(BIN)/ruff check pipeline tests examples robots tasks
+	$(BIN)/ruff format --check pipeline tests examples robots tasks
+
+# mypy cannot follow the editable install's import hook: build/typecheck/dualarm links to pipeline/.
+typecheck: install
+	mkdir -p build/typecheck
+	ln -sfn ../../pipeline build/typecheck/dualarm
+	$(BIN)/mypy
+
 clean:
-	rm -rf $(VENV) recordings/*/ reports/*/ .pytest_cache
+	rm -rf $(VENV) build recordings/*/ reports/*/ .pytest_cache .mypy_cache .ruff_cache

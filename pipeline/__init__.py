@@ -1,13 +1,35 @@
 """dualarm: humanoid dual-arm motion papers as runnable, recorded, repeatable experiments.
 
-The import package is ``pipeline``; its sub-packages follow the data flow
-task -> reference -> joint path -> timed trajectory -> smoothed trajectory -> executed log:
+``import dualarm`` gives a small API (everything in ``__all__``; modules load on first use, so the
+import itself is quick):
 
-- :mod:`pipeline.model`   robot description, CasADi kinematics, S-R-S geometry
-- :mod:`pipeline.tasks`   task files (TOML) and their validation
-- :mod:`pipeline.paths`   the path stage: task -> :class:`~pipeline.paths.CartesianReference`
-- :mod:`pipeline.record`  MCAP / Rerun recording, run directories, reading runs back to pandas
-- :mod:`pipeline.execute` PyBullet world (used by ``robot check`` and, later, execution)
+Robots and tasks
+    :func:`load_robot` (a directory or a shipped robot's name), :class:`Robot`, :func:`hand_pose`,
+    :func:`to_arm_frame`; :func:`load_task` (a task file or a shipped task's name),
+    :func:`task_from_dict` (the same keys from a dict or keyword arguments), :class:`Task`.
+References
+    :func:`build_reference` (a task's hand motions), :meth:`CartesianReference.from_poses` (your own).
+IK, each ``solve_*(robot, reference, q0, settings) -> JointPath``
+    :func:`solve_tvgdd` (:class:`TvgddSettings`), :func:`solve_pinv`, :func:`solve_mc_inverse`
+    (:class:`ArmAngle`), :func:`solve_trac_ik`, :func:`solve_pybullet`, :func:`solve_dls_svd`,
+    :func:`solve_ikfast_style`; one pose: :func:`mc_inverse` -> :class:`McSolution` (``.nearest``).
+    Every method and planner is in the registry :data:`METHODS`.
+Planning, timing, execution
+    :func:`plan_task`, :func:`retime_path`, :func:`smooth_trajectory`, :func:`execute_trajectory`.
+The pipeline
+    :func:`run_task` (in memory, products and metrics in a :class:`RunResult`), :func:`record_run`
+    (MCAP + Rerun files), sinks :class:`Sink`, :class:`NullSink`, :class:`MetricsSink`,
+    :class:`Recorder`; reading runs back into pandas: :func:`read_run`, :func:`read_runs`.
+Contracts between stages
+    :class:`CartesianReference`, :class:`JointPath`, :class:`JointTrajectory`, :class:`ExecutionLog`.
+Errors
+    :class:`DualarmError` and its subclasses; :class:`InvalidArgumentError` is also a ``ValueError``.
+
+The code lives in the repository's ``pipeline/`` folder; its sub-packages follow the data flow
+(``model``, ``tasks``, ``paths``, ``ik``, ``plan``, ``retime``, ``smooth``, ``execute``,
+``record``, ``report``), with the stages in :mod:`dualarm.stages` and the driver in :mod:`dualarm.run`.
 """
 
-__version__ = "0.1.0"
+import lazy_loader
+
+__getattr__, __dir__, __all__ = lazy_loader.attach_stub(__name__, __file__)

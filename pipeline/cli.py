@@ -17,7 +17,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from pipeline.errors import DualarmError, NotSRSError
+from dualarm.errors import DualarmError, NotSRSError
 
 app = typer.Typer(
     name="dualarm",
@@ -54,7 +54,7 @@ def user_errors(func: Callable) -> Callable:
 @app.command()
 @user_errors
 def run(
-    task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
+    task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml, or a shipped task's name (triangle).")],
     stages: Annotated[Optional[str], typer.Option(help="Comma-separated stages to run: path, ik, retime, smooth, execute (default: all of them when --ik is given, else path).")] = None,
     ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd, pinv, mc-inverse, trac-ik, pybullet, dls-svd or ikfast-style.")] = None,
     scheme: Annotated[str, typer.Option(help="TV-GDD scheme: mvn (minimum velocity norm), rmp (repetitive motion) or mke (minimum kinetic energy).")] = "mvn",
@@ -68,27 +68,51 @@ def run(
     planner: Annotated[Optional[str], typer.Option(help="Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no --ik: mcikrrt).")] = None,
     timeout: Annotated[Optional[float], typer.Option(help="Planning timeout [s] (default 5).")] = None,
 ) -> None:
-    """Run a task through the pipeline and record it; prints the run directory as the last line."""
-    from pipeline.run import run_task
+    """Run a task through the pipeline and record it; prints the run directory as the last line.
+    TASK is a task file, or the name of a shipped task (ball_game, bowl_grasp, carry_box, circle,
+    triangle) when no such file exists."""
+    from dualarm.run import record_run
+    from dualarm.settings import with_overrides
+    from dualarm.tasks import load_task
 
+    from dualarm.run import TIMINGS
+
+    if ik is not None:
+        _method(ik, "ik", "--ik")
+    if planner is not None:
+        _method(planner, "planner", "--planner")
+    if ik is not None and planner is not None:
+        raise DualarmError("give either --ik METHOD or --planner PLANNER: both make the joint path")
+    if timing is not None and timing not in TIMINGS:
+        raise DualarmError(f"unknown timing '{timing}' (timings: {', '.join(TIMINGS)})")
+    loaded = load_task(task, reps)
     chosen = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+    method = ik or planner
+    settings = None
+    if ik == "tvgdd":
+        settings = _method(ik).settings_for(loaded, scheme=scheme, backend=qp_backend, lvi_tolerance=lvi_tolerance)
+    elif planner is not None or (ik is None and loaded.spec.wta and not (chosen and "ik" in chosen)):
+        settings = _method(planner or "mcikrrt").settings_for(loaded).with_timeout(timeout)
+    retime = with_overrides(loaded.spec.retime, {"timing": timing}) if timing is not None else None
     with err.status(f"running {task} ...") as status:
-        directory = run_task(
-            task, stages=chosen, ik=ik, scheme=scheme, qp_backend=qp_backend, lvi_tolerance=lvi_tolerance, out_dir=out_dir, seed=seed,
-            repetitions=reps, timing=timing, gui=gui, planner=planner, planning=None if timeout is None else _planning_settings(timeout), command=["dualarm", *sys.argv[1:]],
-            progress=lambda stage: status.update(f"running {task}: {stage} ..."),
+        result = record_run(
+            loaded, method, settings=settings, stages=chosen, retime=retime, execution=_execution(gui), seed=seed, out_dir=out_dir,
+            command=["dualarm", *sys.argv[1:]], progress=lambda stage: status.update(f"running {task}: {stage} ..."),
         )
-    out.print(str(directory), markup=False, soft_wrap=True)
+    out.print(str(result.directory), markup=False, soft_wrap=True)
 
 
-def _planning_settings(timeout: Optional[float]):
-    """The planning settings, with ``timeout`` [s] when given."""
-    from dataclasses import replace
+def _method(name: str, kind=None, option: str = "method"):
+    """The registered method ``name`` (of ``kind``; a DualarmError naming ``option`` and listing the methods otherwise)."""
+    from dualarm.methods import method
 
-    from pipeline.plan.problem import PlanningSettings
+    return method(name, kind, option)
 
-    settings = PlanningSettings()
-    return settings if timeout is None else replace(settings, planner=replace(settings.planner, timeout_s=timeout))
+
+def _execution(gui: bool):
+    from dualarm.execute.simulate import ExecutionSettings
+
+    return ExecutionSettings(gui=gui)
 
 
 @app.command()
@@ -104,15 +128,14 @@ def plan(
 ) -> None:
     """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed,
     smoothed, executed and recorded as a run; exits 1 when no trial succeeded."""
-    from pipeline.plan import PLANNERS
-    from pipeline.plan.trials import run_trials
+    from dualarm.plan.problem import PlanningSettings
+    from dualarm.plan.trials import run_trials
 
-    if planner not in PLANNERS:
-        raise DualarmError(f"unknown planner '{planner}' (planners: {', '.join(PLANNERS)})")
+    _method(planner, "planner", "--planner")  # an unknown planner is named before anything runs
     directory = out_dir or Path("plans") / f"{task.stem}-{planner}"
     with err.status(f"planning {task} ...") as status:
         result = run_trials(
-            task, planner, trials, seed, directory, _planning_settings(timeout), recordings, ["dualarm", *sys.argv[1:]],
+            task, planner, trials, seed, directory, PlanningSettings().with_timeout(timeout), recordings, ["dualarm", *sys.argv[1:]],
             progress=lambda done, total: status.update(f"planning {task}: trial {done}/{total}" + (" (recording the first plan)" if done == total else "")),
         )
     s = result.summary
@@ -136,9 +159,9 @@ def reproduce(
     part. Exits 1 if a part failed (the report says which and why)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from pipeline.reproduce.experiments import BY_NAME
-    from pipeline.reproduce.report import write_reproduction_report
-    from pipeline.reproduce.runner import parts_named, prepare, run_parts
+    from dualarm.reproduce.experiments import BY_NAME
+    from dualarm.reproduce.report import write_reproduction_report
+    from dualarm.reproduce.runner import parts_named, prepare, run_parts
 
     names = parts_named([n.strip() for n in only.split(",") if n.strip()] if only is not None else None)
     prepare(out_dir)
@@ -171,7 +194,7 @@ def reproduce(
 @user_errors
 def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>).")]) -> None:
     """Print a run's status, topics (message counts and time range) and metrics."""
-    from pipeline.record.readback import read_run
+    from dualarm.record.readback import read_run
 
     data = read_run(run_dir)
     m = data.manifest
@@ -203,7 +226,7 @@ def report(
     """Write a markdown summary and the figures each run's recording allows; for several runs also
     runs.csv and runs.md (a row per run, every metric), figures setting them side by side and
     report.md linking it all. Prints the report directory."""
-    from pipeline.report.run_report import write_report, write_runs_report
+    from dualarm.report.run_report import write_report, write_runs_report
 
     with err.status(f"reporting {len(run_dirs)} run{'s' if len(run_dirs) > 1 else ''} ..."):
         directory = write_report(run_dirs[0], out_dir) if len(run_dirs) == 1 else write_runs_report(run_dirs, out_dir)
@@ -221,7 +244,7 @@ def compare(
     """Per topic and field, the largest difference between two runs, aligned on repetition and
     time; exits 0 when every field is within --tol and 1 otherwise, naming where they differ first.
     Wall-clock measurements (solve, planning, collision-check times) are listed, never judged."""
-    from pipeline.report.compare import compare_runs
+    from dualarm.report.compare import compare_runs
 
     if csv is not None and csv.is_dir():
         raise DualarmError(f"--csv {csv}: is a directory; give a file name")
@@ -269,7 +292,7 @@ def consistency(
 ) -> None:
     """Run each IK method on a repeated task as a recorded run and compare repetition by
     repetition: consistency.csv, consistency.md and figures; prints the table and the directory."""
-    from pipeline.report.consistency import DEFAULT_METHODS, run_consistency
+    from dualarm.report.consistency import DEFAULT_METHODS, run_consistency
 
     chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else list(DEFAULT_METHODS)
     directory = out_dir or Path("consistency") / task.stem
@@ -298,7 +321,7 @@ def bench_tvgdd_command(
     """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the
     whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s (optionally other
     conic plugins for the casadi backend)."""
-    from pipeline.bench.tvgdd import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
+    from dualarm.bench.tvgdd import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
 
     with err.status("benchmarking ...") as status:
         rows = bench_tvgdd(task, repeats, tuple(p.strip() for p in plugins.split(",") if p.strip()), progress=lambda text: status.update(text))
@@ -317,7 +340,7 @@ def bench_tvgdd_command(
 
 def _robot(robot_dir: Optional[Path], urdf: Optional[Path], base: Optional[str], tip: Optional[str]):
     """The robot of ``ROBOT_DIR`` or of ``--urdf PATH --base LINK --tip LINK`` (one chain named ``chain``)."""
-    from pipeline.model.robot import load_robot, robot_from_urdf
+    from dualarm.model.robot import load_robot, robot_from_urdf
 
     if (robot_dir is None) == (urdf is None):
         raise DualarmError("give either ROBOT_DIR or --urdf PATH --base LINK --tip LINK")
@@ -345,7 +368,7 @@ def ik_srs(
     of each candidate's forward kinematics (the analogue of the paper's Table I)."""
     import json
 
-    from pipeline.ik.mc_inverse import candidate_table
+    from dualarm.ik.mc_inverse import candidate_table
 
     robot = _robot(robot_dir, urdf, base, tip)
     if urdf is not None:
@@ -382,8 +405,8 @@ def bench_ik_command(
     and PyBullet IK time and success rate, on the same random reachable poses, with ratios."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from pipeline.bench.ik import MC_BATCHED, TARGET_BATCHED_S, TARGET_DLS_SUCCESS, bench_ik, ratios
-    from pipeline.model.robot import load_robot
+    from dualarm.bench.ik import MC_BATCHED, TARGET_BATCHED_S, TARGET_DLS_SUCCESS, bench_ik, ratios
+    from dualarm.model.robot import load_robot
 
     model = load_robot(robot_dir)
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True) as bar:
@@ -413,7 +436,7 @@ def bench_ik_command(
 def bench_pipeline_command() -> None:
     """Each stage's share of a whole recorded run, on the triangle and the circle (MC-Inverse) and
     the ball game (TV-GDD)."""
-    from pipeline.bench.pipeline import PARTS, bench_pipeline
+    from dualarm.bench.pipeline import PARTS, bench_pipeline
 
     with err.status("benchmarking ...") as status:
         timings = bench_pipeline(progress=lambda text: status.update(f"benchmarking {text} ..."))
@@ -434,8 +457,8 @@ def bench_plan_command(
 ) -> None:
     """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals: planning times
     and their ratio, collision checks and the time of one check."""
-    from pipeline.bench.plan import bench_plan
-    from pipeline.plan.trials import PAPER_PLANNING_TIME_S
+    from dualarm.bench.plan import bench_plan
+    from dualarm.plan.trials import PAPER_PLANNING_TIME_S
 
     with err.status("benchmarking ...") as status:
         rows = bench_plan(task, trials, seed, progress=lambda text: status.update(f"benchmarking {text} ..."))
@@ -461,8 +484,8 @@ def robot_check(
 ) -> None:
     """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics,
     PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
-    from pipeline.model.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain
-    from pipeline.model.srs import srs_geometry
+    from dualarm.model.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain
+    from dualarm.model.srs import srs_geometry
 
     robot = _robot(robot_dir, urdf, base, tip)
     out.print(f"robot {robot.name}: {robot.urdf.path}  ({len(robot.joint_names)} movable joints)", markup=False)

@@ -1,69 +1,90 @@
-"""``dualarm run``: a task through the pipeline's stages into one recorded run.
+"""Running a task through the pipeline: in memory (:func:`run_task`) or recorded (:func:`record_run`).
 
 Data flows one way, task -> reference -> joint path -> timed trajectory -> smoothed trajectory ->
-executed log; each stage is a function from one contract to the next, and the recorder sees each
-product once. With an IK method every stage runs by default; ``stages`` picks a subset, each with
-the stage it needs.
+executed log; each stage (:mod:`dualarm.stages`) is a function from one contract to the next, and
+the sink sees each product once. With an IK method every stage but plan runs by default, with a
+planner every stage but ik; ``stages`` picks a subset, each with the stage it needs.
+
+    >>> import dualarm
+    >>> result = dualarm.run_task("triangle", "mc-inverse", stages=("path", "ik"))  # doctest: +SKIP
+    >>> result.metrics["ik.rep_joint_deviation_max_rad"]  # doctest: +SKIP
 """
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from pipeline import __version__
-from pipeline.errors import DualarmError
-from pipeline.ik.metrics import arm_angles, consistency_metrics, ik_metrics
-from pipeline.ik.pointwise import POINTWISE_METHODS
-from pipeline.ik.tvgdd import LVI_TOLERANCE
-from pipeline.paths import CartesianReference, build_reference
-from pipeline.record.recorder import Recorder
-from pipeline.record.run_dir import RunDirectory, package_versions, sha256_file
-from pipeline.tasks import Task, load_task
+from dualarm.version import __version__
+from dualarm.errors import DualarmError
+from dualarm.ik.joint_path import JointPath
+from dualarm.methods import IK_METHODS, PLANNERS
+from dualarm.methods import method as registered
+from dualarm.paths import CartesianReference
+from dualarm.record.run_dir import RunDirectory, package_versions, sha256_file
+from dualarm.record.sink import NullSink, Sink
+from dualarm.retime.trajectory import JointTrajectory
+from dualarm.stages import ExecuteStage, IkStage, PathStage, PlanStage, RetimeStage, SmoothStage, Stage
+from dualarm.tasks import Task, load_task
+from dualarm.tasks.schema import Retime
 
 if TYPE_CHECKING:
-    from pipeline.plan.mcikrrt import PlanResult
-    from pipeline.plan.problem import PlanningSettings
+    from dualarm.execute.simulate import ExecutionLog, ExecutionSettings
 
 #: Every stage of the pipeline, in order (a run makes its joint path by ik or by plan).
 ALL_STAGES = ("path", "ik", "plan", "retime", "smooth", "execute")
 #: The stages one of which each stage needs (execute plays the smoothed trajectory when smooth
 #: runs, else the retimed one).
 NEEDS = {"ik": ("path",), "plan": ("path",), "retime": ("ik", "plan"), "smooth": ("retime",), "execute": ("retime",)}
-#: Timings of the retime stage (the task file's ``retime.timing`` unless given).
+#: Timings of the retime stage (a task's ``retime.timing``).
 TIMINGS = ("optimal", "task")
-#: IK methods of the ``ik`` stage.
-IK_METHODS = ("tvgdd", "pinv", "mc-inverse", *POINTWISE_METHODS)
 
 
-def path_metrics(ref: CartesianReference) -> dict[str, float]:
-    """``path.*`` metrics of a reference: samples, duration [s], repetitions, the longest hand path
-    [m] and the highest hand speed [m/s]."""
-    lengths = [float(np.linalg.norm(np.diff(h.position, axis=0), axis=1).sum()) for h in ref.hands.values()]
-    speeds = [float(np.linalg.norm(h.linear_velocity, axis=1).max()) for h in ref.hands.values()]
-    return {
-        "path.samples": float(len(ref)),
-        "path.duration_s": ref.duration_s,
-        "path.repetitions": float(ref.rep.max() + 1),
-        "path.length_max_m": max(lengths),
-        "path.speed_max_m_s": max(speeds),
-    }
+@dataclass(frozen=True)
+class RunResult:
+    """What a run made: each stage's product (None for a stage that did not run) and the metrics.
+
+    Attributes:
+        task: the task.
+        reference: the path stage's Cartesian reference.
+        joint_path: the IK or plan stage's joint path.
+        retimed: the retime stage's trajectory.
+        smoothed: the smooth stage's trajectory.
+        execution: the execute stage's log.
+        metrics: ``<stage>.<name>`` -> value (units in the names).
+        stage_seconds: each stage's wall time [s] (with ``record``, the closing of the files, for a recorded run).
+        directory: the run directory of a recorded run (:func:`record_run`), else None.
+    """
+
+    task: Task
+    reference: CartesianReference | None = None
+    joint_path: JointPath | None = None
+    retimed: JointTrajectory | None = None
+    smoothed: JointTrajectory | None = None
+    execution: "ExecutionLog | None" = None
+    metrics: dict[str, float] = field(default_factory=dict)
+    stage_seconds: dict[str, float] = field(default_factory=dict)
+    directory: Path | None = None
+
+
+#: Which RunResult field each stage's product fills.
+_PRODUCT = {"path": "reference", "ik": "joint_path", "plan": "joint_path", "retime": "retimed", "smooth": "smoothed", "execute": "execution"}
 
 
 def resolve_stages(stages: Sequence[str] | None, ik: str | None = None, planner: str | None = None) -> tuple[str, ...]:
     """Validate a stage list, in pipeline order. Without one: every stage but plan when an IK
-    method is named, every stage but ik when a planner is, else the path stage alone."""
-    from pipeline.plan import PLANNERS
+    method is named, every stage but ik when a planner is, else the path stage alone.
 
-    if ik is not None and ik not in IK_METHODS:
-        raise DualarmError(f"unknown IK method '{ik}' (methods: {', '.join(IK_METHODS)})")
-    if planner is not None and planner not in PLANNERS:
-        raise DualarmError(f"unknown planner '{planner}' (planners: {', '.join(PLANNERS)})")
+    Raises:
+        DualarmError: an unknown stage or method, or a stage without one it needs.
+    """
+    if ik is not None:
+        registered(ik, "ik")
+    if planner is not None:
+        registered(planner, "planner")
     if ik is not None and planner is not None:
         raise DualarmError("give either --ik METHOD or --planner PLANNER: both make the joint path")
     if not stages:
@@ -82,173 +103,181 @@ def resolve_stages(stages: Sequence[str] | None, ik: str | None = None, planner:
     return tuple(s for s in ALL_STAGES if s in stages)
 
 
-def _manifest(task: Task, stages: tuple[str, ...], seed: int, command: Sequence[str], ik_settings: dict, back_half: dict) -> dict[str, object]:
+def _as_task(task: Task | str | Path) -> Task:
+    return task if isinstance(task, Task) else load_task(task)
+
+
+def build_stages(
+    task: Task,
+    method: str | None = None,
+    *,
+    settings: Any = None,
+    stages: Sequence[str] | None = None,
+    retime: Retime | None = None,
+    execution: "ExecutionSettings | None" = None,
+    seed: int = 0,
+) -> tuple[Stage, ...]:
+    """The stages of a run of ``task``, validated before anything runs.
+
+    Args:
+        task: the task.
+        method: an IK method or a planner of :data:`dualarm.methods.METHODS`; a task with Workspace
+            Target Areas and no method (and no ``ik`` stage asked for) is planned with ``mcikrrt``.
+        settings: the method's settings (default: from the task, see :meth:`Method.settings_for`).
+        stages: the stages to run (default: see :func:`resolve_stages`).
+        retime: the retime stage's settings (default the task's ``[retime]`` table).
+        execution: the simulation's settings (default :class:`~dualarm.execute.simulate.ExecutionSettings`).
+        seed: the planner's seed.
+
+    Raises:
+        DualarmError: an unknown stage or method, settings of the wrong class, a planning start in collision.
+    """
+    kind = registered(method).kind if method is not None else None
+    if method is None and task.spec.wta and not (stages and "ik" in stages):
+        method, kind = "mcikrrt", "planner"
+    chosen = resolve_stages(stages, method if kind == "ik" else None, method if kind == "planner" else None)
+    m = registered(method) if method is not None else None
+    if m is not None:
+        settings = m.settings_for(task) if settings is None else settings
+        if not isinstance(settings, m.settings_type):
+            raise DualarmError(f"{m.name} takes {m.settings_type.__name__} settings, not {type(settings).__name__}")
+    built: list[Stage] = [PathStage(task)]
+    if "ik" in chosen and m is not None:
+        built.append(IkStage(task, m, settings))
+    if "retime" in chosen:  # the back half's imports (toppra, ruckig, pybullet) wait until it runs
+        built.append(RetimeStage(task, retime or task.spec.retime))
+    if "smooth" in chosen:
+        built.append(SmoothStage(task))
+    if "execute" in chosen:
+        from dualarm.execute.simulate import ExecutionSettings
+
+        built.append(ExecuteStage(task, execution or ExecutionSettings()))
+    if "plan" in chosen and m is not None:  # last: it opens a PyBullet client, refusing a start in collision
+        from dualarm.plan.problem import PlanningProblem
+
+        built.insert(1, PlanStage(PlanningProblem(task, settings), m.name, seed))
+    return tuple(built)
+
+
+def run_stages(task: Task, stages: Sequence[Stage], sink: Sink | None = None) -> RunResult:
+    """Run ``stages`` in order on ``task``, handing every product to ``sink`` (default
+    :class:`~dualarm.record.sink.NullSink`), then the metrics. Stages holding resources (the plan
+    stage's PyBullet client) are closed afterwards, whatever happens."""
+    sink = sink if sink is not None else NullSink()
+    products: dict[str, Any] = {}
+    metrics: dict[str, float] = {}
+    product: Any = task
+    end = 0.0
+    try:
+        for stage in stages:
+            product, stage_metrics = stage(product, sink)
+            products[_PRODUCT[stage.name]] = product
+            metrics.update(stage_metrics)
+            if isinstance(product, (CartesianReference, JointTrajectory)):
+                end = product.duration_s
+        sink.metrics(metrics, end)
+    finally:
+        _close(stages)
+    seconds = sink.stage_seconds if isinstance(sink, NullSink) else {}
+    return RunResult(task=task, metrics=metrics, stage_seconds=seconds, **products)
+
+
+def run_task(
+    task: Task | str | Path,
+    method: str | None = None,
+    *,
+    settings: Any = None,
+    stages: Sequence[str] | None = None,
+    retime: Retime | None = None,
+    execution: "ExecutionSettings | None" = None,
+    seed: int = 0,
+    sink: Sink | None = None,
+) -> RunResult:
+    """Run ``task`` (a :class:`Task`, a task file or a shipped task's name) through the pipeline in
+    memory; with ``sink`` the products go to it too (see :func:`record_run` for files).
+
+    The arguments are those of :func:`build_stages`; the result holds every product and the metrics.
+    """
+    task = _as_task(task)
+    return run_stages(task, build_stages(task, method, settings=settings, stages=stages, retime=retime, execution=execution, seed=seed), sink)
+
+
+def record_run(
+    task: Task | str | Path,
+    method: str | None = None,
+    *,
+    out_dir: str | Path = "recordings",
+    command: Sequence[str] | None = None,
+    progress: Callable[[str], None] | None = None,
+    **options: Any,
+) -> RunResult:
+    """Run ``task`` as :func:`run_task` does (``options``: its keyword arguments) and record it in
+    ``out_dir/<task>/<run-id>/`` (run.mcap, run.rrd, manifest.json, metrics.json); the result's
+    ``directory`` is the run directory. ``command`` is recorded in the manifest (default ``sys.argv``); ``progress`` is told
+    each stage's name as it starts, and ``record`` when the files are being closed.
+
+    The task and the options are validated before anything is written: a malformed task leaves no
+    run behind. A stage that fails leaves a run marked ``failed`` and re-raises.
+    """
+    task = _as_task(task)
+    return record_stages(task, build_stages(task, method, **options), out_dir=out_dir, seed=options.get("seed", 0), command=command, progress=progress)
+
+
+def record_stages(task: Task, stages: Sequence[Stage], *, out_dir: str | Path = "recordings", seed: int = 0, command: Sequence[str] | None = None, progress: Callable[[str], None] | None = None) -> RunResult:
+    """Run ``stages`` on ``task`` into a new recorded run (see :func:`record_run`)."""
+    from dualarm.record.recorder import Recorder
+
+    try:
+        run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, stages, seed, command or sys.argv))
+    except BaseException:
+        _close(stages)
+        raise
+    recorder = Recorder(run.staging, run.run_id, task.robot, _attachments(task), on_begin=progress)
+    try:
+        result = run_stages(task, stages, recorder)
+        recorder.begin("record")
+    except BaseException as exc:
+        run.conclude(str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}")
+        recorder.close(run.manifest)
+        run.finish(None)
+        raise
+    run.conclude(None)
+    recorder.close(run.manifest)
+    return replace(result, directory=run.finish(result.metrics), stage_seconds=recorder.stage_seconds)
+
+
+def _close(stages: Sequence[Stage]) -> None:
+    for stage in stages:
+        close = getattr(stage, "close", None)
+        if close is not None:
+            close()
+
+
+def _attachments(task: Task) -> dict[str, str]:
+    """The task's source, the URDF and robot.toml, by file name."""
+    attachments = {task.source_name: task.text, task.robot.urdf.path.name: task.robot.urdf.path.read_text()}
+    if task.robot.directory is not None:
+        attachments["robot.toml"] = (task.robot.directory / "robot.toml").read_text()
+    return attachments
+
+
+def _manifest(task: Task, stages: Sequence[Stage], seed: int, command: Sequence[str]) -> dict[str, object]:
     robot = task.robot
     robot_files = {robot.urdf.path.name: sha256_file(robot.urdf.path)}
     if robot.directory is not None:
         robot_files["robot.toml"] = sha256_file(robot.directory / "robot.toml")
+    ordered = sorted(stages, key=lambda s: ALL_STAGES.index(s.name))
     return {
         "dualarm_version": __version__,
         "command": list(command),
         "task": task.name,
-        "task_file": str(task.file),
+        "task_file": str(task.file) if task.file is not None else "<dict>",
         "task_sha256": task.sha256,
         "robot": robot.name,
         "robot_dir": str(robot.directory),
         "robot_sha256": robot_files,
         "seed": seed,
-        "stages": list(stages),
-        "settings": {
-            "path": {"control_period_s": task.spec.control_period_s, "time_scaling": "quintic", "repetitions": task.spec.repetitions},
-            **({"ik": ik_settings} if "ik" in stages else {}),
-            **{stage: settings for stage, settings in back_half.items() if stage in stages},
-        },
+        "stages": [s.name for s in ordered],
+        "settings": {s.name: s.settings_record() for s in ordered},
         "packages": package_versions(),
     }
-
-
-def _ik_settings(task: Task, ik: str | None, scheme: str, qp_backend: str, lvi_tolerance: float):
-    """The IK stage's settings (recorded in the manifest) and the function that runs it."""
-    from pipeline.ik.pinv import solve_pinv
-    from pipeline.ik.tvgdd import SCHEMES, settings_for, solve_tvgdd
-
-    if ik == "tvgdd":
-        if scheme not in SCHEMES:
-            raise DualarmError(f"unknown TV-GDD scheme '{scheme}' (schemes: {', '.join(SCHEMES)})")
-        if qp_backend not in ("casadi", "lvi"):
-            raise DualarmError(f"unknown QP backend '{qp_backend}' (backends: casadi, lvi)")
-        if not lvi_tolerance > 0:
-            raise DualarmError(f"the LVI tolerance must be positive, not {lvi_tolerance}")
-        settings = replace(settings_for(task, scheme=scheme), lvi_tolerance=lvi_tolerance)
-        return {"method": ik, "backend": qp_backend, **asdict(settings)}, lambda ref: solve_tvgdd(task, ref, settings, qp_backend)
-    if ik == "mc-inverse":
-        from pipeline.ik.mc_path import solve_mc_inverse
-
-        return {"method": ik, **task.spec.arm_angle.model_dump()}, lambda ref: solve_mc_inverse(task, ref)
-    if ik in POINTWISE_METHODS:
-        from pipeline.ik.pointwise import pointwise_settings, solve_pointwise
-
-        return {"method": ik, **pointwise_settings(ik)}, lambda ref: solve_pointwise(ik, task, ref)
-    gain = settings_for(task).feedback_gain
-    return {"method": ik, "feedback_gain": gain}, lambda ref: solve_pinv(task, ref, gain)
-
-
-def _back_half_settings(task: Task, timing: str | None, gui: bool):
-    """The retime, smooth and execute stages' settings (recorded in the manifest), and the
-    simulation's. Imported only by runs that retime: toppra, ruckig and pybullet load slowly."""
-    from pipeline.execute.simulate import ExecutionSettings
-    from pipeline.stages import CONTROL_PERIOD_S
-
-    execution = ExecutionSettings(gui=gui)
-    return {
-        "retime": {**task.spec.retime.model_dump(), "timing": timing or task.spec.retime.timing, "sample_period_s": CONTROL_PERIOD_S, "parametrizer": "ParametrizeConstAccel"},
-        "smooth": {"method": "ruckig online tracking", "control_period_s": CONTROL_PERIOD_S},
-        "execute": {**asdict(execution), "simulator": "pybullet"},
-    }, execution
-
-
-def _planning_problem(task: Task, settings: "PlanningSettings | None"):
-    """The task's planning problem (imports PyBullet, and OMPL only when it plans with it)."""
-    from pipeline.plan.problem import PlanningProblem, PlanningSettings
-
-    return PlanningProblem(task, settings or PlanningSettings())
-
-
-def run_task(
-    task_file: str | Path,
-    *,
-    stages: Sequence[str] | None = None,
-    ik: str | None = None,
-    scheme: str = "mvn",
-    qp_backend: str = "casadi",
-    lvi_tolerance: float = LVI_TOLERANCE,
-    out_dir: str | Path = "recordings",
-    seed: int = 0,
-    repetitions: int | None = None,
-    timing: str | None = None,
-    gui: bool = False,
-    planner: str | None = None,
-    planning: "PlanningSettings | None" = None,
-    planned: "PlanResult | None" = None,
-    command: Sequence[str] | None = None,
-    progress: Callable[[str], None] = lambda stage: None,
-) -> Path:
-    """Run ``task_file`` through ``stages`` and record it; returns the run directory.
-
-    The task and the options are validated before anything is written: a malformed task leaves no
-    run behind. A stage that fails leaves a run marked ``failed`` and re-raises. ``repetitions``
-    overrides the task file's, ``timing`` its ``retime.timing``; ``gui`` shows the execution in a
-    PyBullet window. A task with Workspace Target Areas and no ``ik`` is planned, by ``planner``
-    (default MCIKRRT) with ``planning`` settings from ``seed``; ``planned`` is a plan already
-    made for it (``dualarm plan`` records its first successful trial so). ``progress`` is told each
-    stage's name as it starts, and ``record`` when the files are being closed.
-    """
-    task = load_task(task_file, repetitions)
-    if ik is None and planner is None and task.spec.wta and not (stages and "ik" in stages):
-        planner = "mcikrrt"
-    chosen = resolve_stages(stages, ik, planner)
-    if timing is not None and timing not in TIMINGS:
-        raise DualarmError(f"unknown timing '{timing}' (timings: {', '.join(TIMINGS)})")
-    ik_settings, solve_ik = _ik_settings(task, ik, scheme, qp_backend, lvi_tolerance) if "ik" in chosen else ({}, None)
-    back_half, execution = _back_half_settings(task, timing, gui) if "retime" in chosen else ({}, None)
-    problem = _planning_problem(task, planning) if "plan" in chosen else None  # refuses a start in collision before writing
-    if problem is not None:
-        back_half = {"plan": {"planner": planner, **asdict(problem.settings)}, **back_half}
-    np.random.seed(seed)
-    run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, chosen, seed, command or sys.argv, ik_settings, back_half))
-    attachments = {task.file.name: task.text, task.robot.urdf.path.name: task.robot.urdf.path.read_text()}
-    if task.robot.directory is not None:
-        attachments["robot.toml"] = (task.robot.directory / "robot.toml").read_text()
-    recorder = Recorder(run.staging, run.run_id, task.robot, attachments)
-    metrics: dict[str, float] = {}
-    try:
-        progress("path")
-        recorder.robot_state("path", 0.0, task.initial_q)
-        recorder.environment(task.spec.environment)
-        reference = build_reference(task)
-        recorder.reference(reference)
-        metrics.update(path_metrics(reference))
-        end = reference.duration_s
-        if solve_ik is not None:
-            progress("ik")
-            joint_path = solve_ik(reference)
-            angles = arm_angles(joint_path, task)
-            recorder.joint_path(joint_path, task.velocity_limits(joint_path.joint_names), angles)
-            metrics.update(ik_metrics(joint_path, task))
-            metrics.update(consistency_metrics(joint_path, reference, angles))
-        if problem is not None:
-            from pipeline.plan.stage import plan_stage
-
-            progress("plan")
-            joint_path, stage_metrics = plan_stage(task, recorder, problem, planner, seed, planned)
-            metrics.update(stage_metrics)
-        if "retime" in chosen:  # smooth and execute need it (NEEDS): their imports are made here
-            from pipeline.stages import execute_stage, retime_stage, smooth_stage
-
-            progress("retime")
-            trajectory, stage_metrics = retime_stage(task, joint_path, recorder, timing)
-            metrics.update(stage_metrics)
-            end = trajectory.duration_s
-        if "smooth" in chosen:
-            progress("smooth")
-            trajectory, stage_metrics = smooth_stage(task, trajectory, recorder)
-            metrics.update(stage_metrics)
-            end = trajectory.duration_s
-        if "execute" in chosen:
-            progress("execute")
-            _, stage_metrics = execute_stage(task, trajectory, recorder, execution)
-            metrics.update(stage_metrics)
-        recorder.metrics(metrics, end)
-        progress("record")
-    except BaseException as exc:
-        message = str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}"
-        run.conclude(message)
-        recorder.close(run.manifest)
-        run.finish(None)
-        raise
-    finally:
-        if problem is not None:
-            problem.close()
-    run.conclude(None)
-    recorder.close(run.manifest)
-    return run.finish(metrics)

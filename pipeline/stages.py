@@ -1,31 +1,54 @@
-"""The back half of the pipeline as stages: joint path -> retimed -> smoothed -> executed.
+"""The pipeline's stages, each of one shape: built from a task and its settings, called on the
+previous stage's product and a sink, returning its own product and its metrics.
 
-Each stage takes the previous stage's product and the task, hands its own product to the
-recorder once, and returns it with its metrics (``<stage>.<name>`` keys, unit as suffix). Limit
-ratios are always taken against the task's full limits (the robot's, or the task's own where it
-tightens them).
+    task -> [path] -> CartesianReference -> [ik | plan] -> JointPath -> [retime] -> JointTrajectory
+         -> [smooth] -> JointTrajectory -> [execute] -> ExecutionLog
+
+``stage(product, sink) -> (product, metrics)``: the stage tells the sink when it begins and hands
+it its product once; metrics are ``<stage>.<name>`` keys with the unit as suffix. Limit ratios
+are always against the task's full limits (the robot's, or the task's own where it sets them).
+Heavy libraries (toppra, ruckig, pybullet) are imported only by the stages that use them.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
-from pipeline.ik.joint_path import JointPath
-from pipeline.record.recorder import Recorder
-from pipeline.retime.topp import limit_ratios as retime_ratios
-from pipeline.retime.topp import retime
-from pipeline.retime.trajectory import JointTrajectory
-from pipeline.smooth.tracking import limit_ratios as smooth_ratios
-from pipeline.smooth.tracking import smooth
-from pipeline.tasks import Task
+from dualarm.ik.joint_path import JointPath
+from dualarm.ik.metrics import arm_angles, consistency_metrics, ik_metrics
+from dualarm.limits import limit_ratios
+from dualarm.methods import Method
+from dualarm.paths import CartesianReference, build_reference
+from dualarm.record.sink import Sink
+from dualarm.retime.trajectory import JointTrajectory
+from dualarm.settings import as_record
+from dualarm.tasks import Task
+from dualarm.tasks.schema import Retime
 
 if TYPE_CHECKING:
-    from pipeline.execute.simulate import ExecutionLog, ExecutionSettings
+    from dualarm.execute.simulate import ExecutionLog, ExecutionSettings
+    from dualarm.plan.mcikrrt import PlanResult
+    from dualarm.plan.problem import PlanningProblem
 
 #: Sample period of the retimed trajectory and control period of the smooth stage [s].
 CONTROL_PERIOD_S = 0.001
+
+
+class Stage(Protocol):
+    """A stage: ``name``, the settings it records, and ``(product, sink) -> (product, metrics)``."""
+
+    name: str
+
+    def settings_record(self) -> dict[str, Any]:
+        """The stage's settings, JSON-ready (a run's manifest records them)."""
+        ...
+
+    def __call__(self, product: Any, sink: Sink) -> tuple[Any, dict[str, float]]:
+        """Run on the previous stage's product (the task, for the path stage)."""
+        ...
 
 
 def hand_positions(task: Task, traj: JointTrajectory, q: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -34,80 +57,201 @@ def hand_positions(task: Task, traj: JointTrajectory, q: np.ndarray | None = Non
     return {hand: T[:, :3, 3] for hand, T in poses.items()}
 
 
-def retime_stage(task: Task, path: JointPath, recorder: Recorder, timing: str | None = None) -> tuple[JointTrajectory, dict[str, float]]:
-    """Time the joint path (``timing``: ``optimal`` or ``task``; default the task file's).
+@dataclass(frozen=True)
+class PathStage:
+    """The task's hand motions sampled at its control period (quintic time scaling)."""
 
-    Time-optimal retiming uses the task's ``retime.velocity_fraction`` and
-    ``retime.acceleration_fraction`` of the limits (headroom for the smooth stage); the task's
-    own timing is checked against the full limits.
-    """
-    settings = task.spec.retime
-    timing = timing or settings.timing
-    names = path.joint_names
-    v, a = task.velocity_limits(names), task.acceleration_limits(names)
-    if timing == "task":
-        result = retime(path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=True)
-    else:
-        result = retime(path, settings.velocity_fraction * v, settings.acceleration_fraction * a, sample_period_s=CONTROL_PERIOD_S)
-    traj = result.trajectory
-    ratios = retime_ratios(traj, v, a)
-    recorder.trajectory(traj, {"velocity": v, "acceleration": a}, hand_positions(task, traj))
-    return traj, {
-        "retime.duration_s": traj.duration_s,
-        "retime.velocity_ratio_max": ratios.velocity_ratio_max,
-        "retime.acceleration_ratio_max": ratios.acceleration_ratio_max,
-        "retime.path_deviation_max_rad": result.path_deviation_max_rad,
-        "retime.stretch": result.stretch,
+    task: Task
+    name: ClassVar[str] = "path"
+
+    def settings_record(self) -> dict[str, Any]:
+        spec = self.task.spec
+        return {"control_period_s": spec.control_period_s, "time_scaling": "quintic", "repetitions": spec.repetitions}
+
+    def __call__(self, task: Task, sink: Sink) -> tuple[CartesianReference, dict[str, float]]:
+        sink.begin(self.name)
+        sink.robot_state("path", 0.0, task.initial_q)
+        sink.environment(task.spec.environment)
+        reference = build_reference(task)
+        sink.reference(reference)
+        return reference, path_metrics(reference)
+
+
+def path_metrics(ref: CartesianReference) -> dict[str, float]:
+    """``path.*`` metrics of a reference: samples, duration [s], repetitions, the longest hand path
+    [m] and the highest hand speed [m/s]."""
+    lengths = [float(np.linalg.norm(np.diff(h.position, axis=0), axis=1).sum()) for h in ref.hands.values()]
+    speeds = [float(np.linalg.norm(h.linear_velocity, axis=1).max()) for h in ref.hands.values()]
+    return {
+        "path.samples": float(len(ref)),
+        "path.duration_s": ref.duration_s,
+        "path.repetitions": float(ref.rep.max() + 1),
+        "path.length_max_m": max(lengths),
+        "path.speed_max_m_s": max(speeds),
     }
 
 
-def smooth_stage(task: Task, retimed: JointTrajectory, recorder: Recorder) -> tuple[JointTrajectory, dict[str, float]]:
+@dataclass(frozen=True)
+class IkStage:
+    """An IK method of the registry along the reference, from the task's initial configuration."""
+
+    task: Task
+    method: Method
+    settings: Any
+    name: ClassVar[str] = "ik"
+
+    def settings_record(self) -> dict[str, Any]:
+        return {"method": self.method.name, **as_record(self.settings)}
+
+    def __call__(self, reference: CartesianReference, sink: Sink) -> tuple[JointPath, dict[str, float]]:
+        sink.begin(self.name)
+        robot = self.task.robot
+        path = self.method.solve(robot, reference, self.task.initial_q, self.settings)
+        angles = arm_angles(path, robot, self.task.spec.arm_angle.vertical)
+        sink.joint_path(path, robot.limit_array("velocity", path.joint_names), angles)
+        return path, {**ik_metrics(path, robot), **consistency_metrics(path, reference, angles)}
+
+
+@dataclass(frozen=True)
+class PlanStage:
+    """A planner of the registry from the task's initial configuration to its WTAs (the reference is
+    not used). ``planned`` is a plan already made for the problem (``dualarm plan`` records its
+    first successful trial so). The problem (and its PyBullet checker) is released by :meth:`close`."""
+
+    problem: "PlanningProblem"
+    planner: str
+    seed: int = 0
+    planned: "PlanResult | None" = None
+    name: ClassVar[str] = "plan"
+
+    def settings_record(self) -> dict[str, Any]:
+        return {"planner": self.planner, **as_record(self.problem.settings)}
+
+    def __call__(self, reference: CartesianReference, sink: Sink) -> tuple[JointPath, dict[str, float]]:
+        from dualarm.plan.stage import plan_metrics, planned_joint_path
+        from dualarm.errors import StageError
+
+        sink.begin(self.name)
+        result = self.planned or self.problem.solve(self.planner, self.seed)
+        if not result.success:
+            raise StageError(f"plan ({self.planner}): {result.reason}", stage="plan")
+        path = planned_joint_path(self.problem, result, self.planner)
+        sink.joint_path(path, self.problem.task.robot.limit_array("velocity", path.joint_names), {}, stage="plan")
+        return path, {**plan_metrics(result), "plan.wta_position_distance_max_m": float(path.hand_error_m[-1].max())}
+
+    def close(self) -> None:
+        """Release the planning problem."""
+        self.problem.close()
+
+
+@dataclass(frozen=True)
+class RetimeStage:
+    """Time the joint path (TOPP-RA, or the task's own timing), sampled every :data:`CONTROL_PERIOD_S`.
+
+    Time-optimal retiming uses ``settings.velocity_fraction`` and ``acceleration_fraction`` of the
+    limits (headroom for the smooth stage); the task's own timing is checked against the full limits.
+    """
+
+    task: Task
+    settings: Retime = field(default_factory=Retime)
+    name: ClassVar[str] = "retime"
+
+    def settings_record(self) -> dict[str, Any]:
+        return {**self.settings.model_dump(), "sample_period_s": CONTROL_PERIOD_S, "parametrizer": "ParametrizeConstAccel"}
+
+    def __call__(self, path: JointPath, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
+        from dualarm.retime import retime_path
+
+        sink.begin(self.name)
+        settings, names = self.settings, path.joint_names
+        v, a = self.task.velocity_limits(names), self.task.acceleration_limits(names)
+        if settings.timing == "task":
+            result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=True)
+        else:
+            result = retime_path(path, settings.velocity_fraction * v, settings.acceleration_fraction * a, sample_period_s=CONTROL_PERIOD_S)
+        traj = result.trajectory
+        ratios = limit_ratios(traj.t, names, {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}, self.name)
+        sink.trajectory(traj, {"velocity": v, "acceleration": a}, hand_positions(self.task, traj))
+        return traj, {
+            "retime.duration_s": traj.duration_s,
+            "retime.velocity_ratio_max": ratios["velocity"].ratio,
+            "retime.acceleration_ratio_max": ratios["acceleration"].ratio,
+            "retime.path_deviation_max_rad": result.path_deviation_max_rad,
+            "retime.stretch": result.stretch,
+        }
+
+
+@dataclass(frozen=True)
+class SmoothStage:
     """Track the retimed trajectory with jerk-limited motion (Ruckig, every :data:`CONTROL_PERIOD_S`).
 
-    Besides the limit ratios, records how far it departs from the retimed trajectory at the same
-    time: per joint [rad] and at the hands [m].
+    Besides the limit ratios, it measures how far it departs from the retimed trajectory at the
+    same time: per joint [rad] and at the hands [m].
     """
-    names = retimed.joint_names
-    v, a, j = task.velocity_limits(names), task.acceleration_limits(names), task.jerk_limits(names)
-    result = smooth(retimed, v, a, j, period_s=CONTROL_PERIOD_S)
-    traj = result.trajectory
-    ratios = smooth_ratios(traj, result.jerk, v, a, j)
-    hands = hand_positions(task, traj)
-    reference = hand_positions(task, traj, retimed.interpolate(traj.t)[0])
-    hand_deviation = max((float(np.linalg.norm(hands[h] - reference[h], axis=1).max()) for h in hands), default=0.0)
-    recorder.trajectory(traj, {"velocity": v, "acceleration": a, "jerk": j}, hands, {"jerk": result.jerk, "deviation_rad": result.deviation_rad})
-    return traj, {
-        "smooth.duration_s": traj.duration_s,
-        **{f"smooth.{key}": value for key, value in ratios.items()},
-        "smooth.path_deviation_max_rad": result.path_deviation_max_rad,
-        "smooth.hand_deviation_max_m": hand_deviation,
-        "smooth.lookahead_max_s": float(result.lookahead_s.max()),
-        "smooth.fallbacks": float(result.fallbacks),
-    }
+
+    task: Task
+    name: ClassVar[str] = "smooth"
+
+    def settings_record(self) -> dict[str, Any]:
+        return {"method": "ruckig online tracking", "control_period_s": CONTROL_PERIOD_S}
+
+    def __call__(self, retimed: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
+        from dualarm.smooth import smooth_trajectory
+
+        sink.begin(self.name)
+        names = retimed.joint_names
+        v, a, j = self.task.velocity_limits(names), self.task.acceleration_limits(names), self.task.jerk_limits(names)
+        result = smooth_trajectory(retimed, v, a, j, period_s=CONTROL_PERIOD_S)
+        traj = result.trajectory
+        ratios = limit_ratios(traj.t, names, {"velocity": traj.qd, "acceleration": traj.qdd, "jerk": result.jerk}, {"velocity": v, "acceleration": a, "jerk": j}, self.name)
+        hands = hand_positions(self.task, traj)
+        reference = hand_positions(self.task, traj, retimed.interpolate(traj.t)[0])
+        hand_deviation = max((float(np.linalg.norm(hands[h] - reference[h], axis=1).max()) for h in hands), default=0.0)
+        sink.trajectory(traj, {"velocity": v, "acceleration": a, "jerk": j}, hands, {"jerk": result.jerk, "deviation_rad": result.deviation_rad})
+        return traj, {
+            "smooth.duration_s": traj.duration_s,
+            **{f"smooth.{kind}_ratio_max": r.ratio for kind, r in ratios.items()},
+            "smooth.path_deviation_max_rad": result.path_deviation_max_rad,
+            "smooth.hand_deviation_max_m": hand_deviation,
+            "smooth.lookahead_max_s": float(result.lookahead_s.max()),
+            "smooth.fallbacks": float(result.fallbacks),
+        }
 
 
-def execute_stage(task: Task, traj: JointTrajectory, recorder: Recorder, settings: "ExecutionSettings") -> tuple["ExecutionLog", dict[str, float]]:
+@dataclass(frozen=True)
+class ExecuteStage:
     """Play the trajectory on the robot in PyBullet, in the task's environment.
 
     The tracking error is the distance between each measured hand position (PyBullet) and the
     forward kinematics (this project's) of the commanded joints at the same time. Collisions are
     counted in physics steps with an unexpected contact.
     """
-    from pipeline.execute.simulate import execute
 
-    expected = {tuple(sorted(pair)) for pair in task.spec.expected_contacts}
-    log = execute(traj, task.robot, task.spec.hands, task.spec.environment, expected, settings)
-    command = task.hand_poses(log.joint_names, log.q_command, log.fixed)
-    errors = {hand: np.linalg.norm(log.hand_poses[hand][:, :3, 3] - command[hand][:, :3, 3], axis=1) for hand in command}
-    recorder.execution(log, errors, expected)
-    all_errors = np.concatenate([np.zeros(0), *errors.values()])
-    if not all_errors.size:  # a trajectory that does not move: no physics step
-        all_errors = np.zeros(1)
-    return log, {
-        "execute.duration_s": float(log.t[-1]) if len(log.t) else 0.0,
-        "execute.tracking_error_max_m": float(all_errors.max()),
-        "execute.tracking_error_rmse_m": float(np.sqrt(np.mean(all_errors**2))),
-        "execute.self_collisions": float((log.self_contacts > 0).sum()),
-        "execute.environment_collisions": float((log.environment_contacts > 0).sum()),
-        "execute.expected_contact_steps": float((log.expected_contacts > 0).sum()),
-    }
+    task: Task
+    settings: "ExecutionSettings"
+    name: ClassVar[str] = "execute"
+
+    def settings_record(self) -> dict[str, Any]:
+        return {**as_record(self.settings), "simulator": "pybullet"}
+
+    def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple["ExecutionLog", dict[str, float]]:
+        from dualarm.execute.simulate import execute_trajectory
+
+        sink.begin(self.name)
+        task = self.task
+        expected = {tuple(sorted(pair)) for pair in task.spec.expected_contacts}
+        log = execute_trajectory(traj, task.robot, task.spec.hands, task.spec.environment, expected, self.settings)
+        command = task.hand_poses(log.joint_names, log.q_command, log.fixed)
+        errors = {hand: np.linalg.norm(log.hand_poses[hand][:, :3, 3] - command[hand][:, :3, 3], axis=1) for hand in command}
+        sink.execution(log, errors, expected)  # type: ignore[arg-type]
+        all_errors = np.concatenate([np.zeros(0), *errors.values()])
+        if not all_errors.size:  # a trajectory that does not move: no physics step
+            all_errors = np.zeros(1)
+        return log, {
+            "execute.duration_s": float(log.t[-1]) if len(log.t) else 0.0,
+            "execute.tracking_error_max_m": float(all_errors.max()),
+            "execute.tracking_error_rmse_m": float(np.sqrt(np.mean(all_errors**2))),
+            "execute.self_collisions": float((log.self_contacts > 0).sum()),
+            "execute.environment_collisions": float((log.environment_contacts > 0).sum()),
+            "execute.expected_contact_steps": float((log.expected_contacts > 0).sum()),
+        }

@@ -1,5 +1,8 @@
 """Shared fixtures: the repository's robot and task directories."""
 
+import subprocess
+import sys
+import sysconfig
 from pathlib import Path
 
 import pytest
@@ -11,7 +14,7 @@ TASKS = REPO / "tasks"
 
 @pytest.fixture(scope="session")
 def humanoid():
-    from pipeline.model.robot import load_robot
+    from dualarm.model.robot import load_robot
 
     return load_robot(HUMANOID)
 
@@ -22,3 +25,20 @@ def kuka_urdf() -> Path:
     import pybullet_data
 
     return Path(pybullet_data.getDataPath()) / "kuka_iiwa" / "model.urdf"
+
+
+@pytest.fixture(scope="session")
+def wheel_env(tmp_path_factory) -> Path:
+    """A fresh virtual environment with dualarm installed from its wheel, built here. Its
+    dependencies are reached through a .pth file pointing at this environment's site-packages (so
+    nothing is downloaded); the checkout itself is not on its path."""
+    root = tmp_path_factory.mktemp("wheel")
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(root / "dist"), str(REPO)], check=True, capture_output=True, timeout=600)
+    (wheel,) = (root / "dist").glob("dualarm-*.whl")
+    venv = root / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=300)
+    python = venv / "bin" / "python"
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", "--no-index", str(wheel)], check=True, capture_output=True, timeout=600)
+    site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], check=True, capture_output=True, text=True).stdout.strip()
+    (Path(site) / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    return venv

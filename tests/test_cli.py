@@ -3,7 +3,7 @@
 import pytest
 from typer.testing import CliRunner
 
-from pipeline.cli import app
+from dualarm.cli import app
 from tests.conftest import HUMANOID, TASKS
 
 runner = CliRunner()
@@ -68,7 +68,7 @@ def test_infeasible_ik_step_prints_one_line_even_from_c(backend, tmp_path):
     text = (TASKS / "ball_game.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     task = tmp_path / "ball_game.toml"
     task.write_text(text.replace("velocity = 6.0", "velocity = 0.01"))
-    command = [sys.executable, "-c", "from pipeline.cli import app; app()", "run", str(task), "--ik", "tvgdd", "--qp-backend", backend, "--out", str(tmp_path / "out")]
+    command = [sys.executable, "-c", "from dualarm.cli import app; app()", "run", str(task), "--ik", "tvgdd", "--qp-backend", backend, "--out", str(tmp_path / "out")]
     result = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert result.returncode == 2
     lines = [line for line in result.stderr.splitlines() if line.strip()]
@@ -83,8 +83,8 @@ def test_ik_srs_json_lists_8_candidates_that_pybullet_confirms(humanoid):
 
     import numpy as np
 
-    from pipeline.execute.world import load_pybullet_robot
-    from pipeline.model.poses import pose_matrix
+    from dualarm.execute.world import load_pybullet_robot
+    from dualarm.model.poses import pose_matrix
 
     pose = [0.147, 0.404, 0.455, 0.937, 0.560, -0.377]
     result = runner.invoke(app, ["ik", "srs", str(HUMANOID), "--arm", "left", "--pose", *map(str, pose), "--arm-angle", "2.2", "--json"])

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from pipeline.cli import app
-from pipeline.execute.world import load_pybullet_robot
-from pipeline.record.readback import read_run
-from pipeline.run import run_task
-from pipeline.tasks import load_task
+from dualarm.cli import app
+from dualarm.execute.world import load_pybullet_robot
+from dualarm.record.readback import read_run
+from dualarm.run import record_run
+from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 
 TRIANGLE = TASKS / "triangle.toml"
@@ -30,7 +30,7 @@ SLACK = 1 + 1e-6
 @pytest.fixture(scope="module")
 def triangle(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs")
-    run = run_task(TRIANGLE, ik="mc-inverse", repetitions=1, out_dir=out)
+    run = record_run(load_task(TRIANGLE, 1), "mc-inverse", out_dir=out).directory
     return load_task(TRIANGLE, 1), run, read_run(run)
 
 
@@ -153,7 +153,7 @@ def test_task_timing_too_fast_for_a_tightened_limit_is_one_line_and_a_failed_run
 
 
 def test_stages_subset_stops_after_retime(tmp_path):
-    run = run_task(TRIANGLE, stages=["path", "ik", "retime"], ik="mc-inverse", repetitions=1, out_dir=tmp_path)
+    run = record_run(load_task(TRIANGLE, 1), "mc-inverse", stages=["path", "ik", "retime"], out_dir=tmp_path).directory
     data = read_run(run)
     assert "/retime/sample" in data.topics and "/smooth/sample" not in data.topics and "/execute/sample" not in data.topics
     assert not any(key.startswith(("smooth.", "execute.")) for key in data.metrics)
@@ -162,7 +162,7 @@ def test_stages_subset_stops_after_retime(tmp_path):
 def test_a_task_without_moves_runs_every_stage_at_rest(tmp_path):
     """bowl_grasp has no moves yet (it is planned, not tracked): one IK sample, a trajectory that
     does not move, and an execution that holds the start without contact."""
-    run = run_task(TASKS / "bowl_grasp.toml", ik="dls-svd", out_dir=tmp_path)
+    run = record_run(TASKS / "bowl_grasp.toml", "dls-svd", out_dir=tmp_path).directory
     data = read_run(run)
     assert data.status == "complete"
     assert data.metrics["retime.duration_s"] == 0 and data.metrics["smooth.velocity_ratio_max"] == 0

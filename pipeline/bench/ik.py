@@ -9,10 +9,10 @@ every pose is reachable, and its arm angle psi is that configuration's (eq 1 of 
 - MC-Inverse batched: :meth:`McInverse.solve_many` over all poses in one call, after one warm-up
   call (the first builds the mapped Function); time per pose, the call's time divided by the
   poses, over :data:`BATCH_REPEATS` calls (mapped calls spread over the machine's cores, see
-  :mod:`pipeline.ik.batched`).
-- DLS-SVD (:class:`~pipeline.ik.dls.DlsSolver`, default settings: 1e-9 m / 1e-9 rad), TRAC-IK
-  (:class:`~pipeline.ik.baselines.TracIkSolver`, defaults) and PyBullet
-  (:class:`~pipeline.ik.baselines.PyBulletIkSolver`, defaults): one call per pose, seeded from the
+  :mod:`dualarm.ik.batched`).
+- DLS-SVD (:class:`~dualarm.ik.dls.DlsSolver`, default settings: 1e-9 m / 1e-9 rad), TRAC-IK
+  (:class:`~dualarm.ik.baselines.TracIkSolver`, defaults) and PyBullet
+  (:class:`~dualarm.ik.baselines.PyBulletIkSolver`, defaults): one call per pose, seeded from the
   original configuration plus N(0, :data:`SEED_NOISE_RAD`) noise clipped to the limits (fixed
   seed, the same seeds for the three); time per call.
 
@@ -33,11 +33,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.model.robot import Robot
-from pipeline.quiet import c_output_silenced
+from dualarm.model.robot import Robot
+from dualarm.quiet import c_output_silenced
 
 if TYPE_CHECKING:
-    from pipeline.ik.mc_inverse import McInverse
+    from dualarm.ik.mc_inverse import McInverse
 
 #: Row names, in the order of :func:`bench_ik`'s rows.
 MC_SINGLE = "MC-Inverse, single"
@@ -110,15 +110,15 @@ def reachable_poses(robot: Robot, arm: str, poses: int, seed: int, mc: McInverse
         arm: hand of the chain, ``left`` or ``right``.
         poses: number of poses.
         seed: seed of the configurations.
-        mc: the arm's :class:`~pipeline.ik.mc_inverse.McInverse` if already built (for psi).
+        mc: the arm's :class:`~dualarm.ik.mc_inverse.McInverse` if already built (for psi).
 
     Returns:
         The configurations Q (N, 7) [rad] drawn uniformly within the limits, their hand poses
         (N, 4, 4) in the chain base frame [m], and their arm angles psi (N,) [rad].
     """
-    from pipeline.ik.mc_inverse import McInverse
-    from pipeline.model.check import random_configurations
-    from pipeline.model.kinematics import ChainKinematics
+    from dualarm.ik.mc_inverse import McInverse
+    from dualarm.model.check import random_configurations
+    from dualarm.model.kinematics import ChainKinematics
 
     chain = robot.hand_chain(arm)
     Q = random_configurations(robot, chain, poses, seed)
@@ -132,7 +132,7 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
     the same random reachable poses of one arm (see the module docstring).
 
     Args:
-        robot: the robot, or its directory (as for :func:`~pipeline.model.robot.load_robot`).
+        robot: the robot, or its directory (as for :func:`~dualarm.model.robot.load_robot`).
         arm: hand whose arm chain is solved, ``left`` or ``right``.
         poses: number of random poses (a few tens for a quick check).
         seed: seed of the configurations; the seeds' noise uses ``seed + 1``.
@@ -147,11 +147,11 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
         RobotModelError: no hand ``arm``.
         NotSRSError: the arm chain is not S-R-S.
     """
-    from pipeline.ik.baselines import PyBulletIkSolver, TracIkSolver
-    from pipeline.ik.batched import THREADS, BatchedCandidates
-    from pipeline.ik.dls import DlsSolver
-    from pipeline.ik.mc_inverse import McInverse
-    from pipeline.model.robot import load_robot
+    from dualarm.ik.baselines import PyBulletIkSolver, TracIkSolver
+    from dualarm.ik.batched import THREADS, BatchedCandidates
+    from dualarm.ik.dls import DlsSolver
+    from dualarm.ik.mc_inverse import McInverse
+    from dualarm.model.robot import load_robot
 
     if isinstance(poses, bool) or not isinstance(poses, int) or poses < 1:
         raise ValueError(f"poses: must be a positive integer, got {poses!r}")
@@ -237,7 +237,7 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
 def _closest(candidates: np.ndarray, reason: np.ndarray, q: np.ndarray) -> float:
     """Largest joint difference [rad] between ``q`` (7,) and the closest valid row of
     ``candidates`` (8, 7); inf when no candidate is valid."""
-    from pipeline.ik.mc_inverse import VALID
+    from dualarm.ik.mc_inverse import VALID
 
     valid = candidates[reason == VALID]
     return float(np.abs(valid - q).max(axis=1).min()) if valid.size else float("inf")

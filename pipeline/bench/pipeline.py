@@ -1,10 +1,10 @@
 """``dualarm bench pipeline``: where the time of a whole run goes, stage by stage.
 
 Each task runs once through every stage, as ``dualarm run TASK --ik METHOD`` does (recording
-included), in this process; the wall-clock time from one stage's start to the next's is that
-stage's, recording of its product included, and ``record`` is the closing of the files (the
-MCAP summary, the Rerun blueprint, the manifest). Shares are of the run's total. Runs go to a
-temporary directory, removed afterwards.
+included), in this process. The recorder, like every sink, notes when each stage begins; the
+wall-clock time from one stage's start to the next's is that stage's, recording of its product
+included, and ``record`` is the closing of the files (the MCAP summary, the Rerun blueprint, the
+manifest). Shares are of the run's total. Runs go to a temporary directory, removed afterwards.
 
 Never used by the test suite: wall-clock numbers depend on the machine.
 """
@@ -12,12 +12,11 @@ Never used by the test suite: wall-clock numbers depend on the machine.
 from __future__ import annotations
 
 import tempfile
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
-from pipeline.run import run_task
+from dualarm.run import record_run
+from dualarm.tasks import load_task
 
 #: (task file, IK method) of the benchmark: the issue's three tasks with their papers' methods.
 DEFAULT_RUNS = (("tasks/triangle.toml", "mc-inverse"), ("tasks/circle.toml", "mc-inverse"), ("tasks/ball_game.toml", "tvgdd"))
@@ -42,20 +41,10 @@ class PipelineTiming:
 
 def bench_pipeline(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Callable[[str], None] = lambda text: None) -> list[PipelineTiming]:
     """Run each (task file, IK method) once through every stage and time its parts."""
-    from pipeline.record.readback import read_run
-
     timings = []
     with tempfile.TemporaryDirectory(prefix="dualarm-bench-") as out:
         for task_file, ik in runs:
-            marks: list[tuple[str, float]] = []
-
-            def mark(stage: str) -> None:
-                marks.append((stage, time.perf_counter()))
-                progress(f"{Path(task_file).stem} ({ik}): {stage}")
-
-            run = run_task(task_file, ik=ik, out_dir=out, progress=mark)
-            marks.append(("end", time.perf_counter()))
-            seconds = {stage: end - start for (stage, start), (_, end) in zip(marks, marks[1:])}
-            metrics = read_run(run).metrics
-            timings.append(PipelineTiming(Path(task_file).stem, ik, seconds, float(metrics.get("execute.duration_s", 0.0))))
+            task = load_task(task_file)
+            run = record_run(task, ik, out_dir=out, progress=lambda stage: progress(f"{task.name} ({ik}): {stage}"))
+            timings.append(PipelineTiming(task.name, ik, run.stage_seconds, float(run.metrics.get("execute.duration_s", 0.0))))
     return timings

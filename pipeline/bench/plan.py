@@ -1,7 +1,7 @@
 """``dualarm bench plan``: MCIKRRT against OMPL's RRTConnect on one planning problem, in one process.
 
 Both planners plan the same trials (seeds ``seed .. seed + trials - 1``) with the same collision
-checker and goal sampler (:class:`~pipeline.plan.problem.PlanningProblem`), interleaved trial by
+checker and goal sampler (:class:`~dualarm.plan.problem.PlanningProblem`), interleaved trial by
 trial so that a slower or busier stretch of the machine falls on both. Besides the planning
 times it reports the collision checks and the mean time of one check, so the ratio can be read
 as checks times cost.
@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.plan import PLANNERS
-from pipeline.plan.problem import PlanningProblem, PlanningSettings
-from pipeline.tasks import load_task
+from dualarm.methods import PLANNERS
+from dualarm.plan.problem import PlanningProblem, PlanningSettings
+from dualarm.tasks import load_task
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.quiet import c_output_silenced
+from dualarm.quiet import c_output_silenced
 
 #: TV-GDD section 4.2: average computing time per sampling interval and total, on the ball game [s].
 PAPER_T_AVE_S = 0.001
@@ -46,24 +46,24 @@ def bench_tvgdd(task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...
     """TV-GDD on a task, in rows: the ``casadi`` backend (DAQP) per step, the paper's LVI solver
     per step, the ``casadi`` backend with each conic plugin in ``plugins`` (e.g. qpoases, osqp,
     proxqp, qrqp) per step, and the DAQP QP as one mapaccum rollout (best of ``repeats``)."""
-    from pipeline.errors import StageError
-    from pipeline.ik.stack import hand_stack, stacked_reference
-    from pipeline.ik.tvgdd import build_problem, joint_bounds, settings_for, solve_tvgdd
-    from pipeline.paths import build_reference
-    from pipeline.tasks import load_task
+    from dualarm.errors import StageError
+    from dualarm.ik.stack import reference_stack, stacked_reference
+    from dualarm.ik.tvgdd import build_problem, joint_bounds, settings_for, solve_tvgdd
+    from dualarm.paths import build_reference
+    from dualarm.tasks import load_task
 
     task = load_task(task_file)
     reference = build_reference(task)
     settings = settings_for(task)
     rows, first = [], None
-    runs = [(f"casadi {settings.qp_plugin}, per step", settings, "casadi"), ("lvi, per step", settings, "lvi")]
-    runs += [(f"casadi {plugin}, per step", replace(settings, qp_plugin=plugin), "casadi") for plugin in plugins]
-    for name, run_settings, backend in runs:
+    runs = [(f"casadi {settings.qp_plugin}, per step", settings), ("lvi, per step", replace(settings, backend="lvi"))]
+    runs += [(f"casadi {plugin}, per step", replace(settings, qp_plugin=plugin)) for plugin in plugins]
+    for name, run_settings in runs:
         if progress:
             progress(f"TV-GDD, {name}")
         try:
             with c_output_silenced():  # qpOASES prints its licence from C
-                path = solve_tvgdd(task, reference, run_settings, backend)
+                path = solve_tvgdd(task.robot, reference, task.initial_q, run_settings)
         except StageError as exc:
             rows.append(BenchRow(name, *[float("nan")] * 3, len(reference), float("nan"), str(exc)))
             continue
@@ -72,8 +72,8 @@ def bench_tvgdd(task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...
         rows.append(BenchRow(name, float(np.median(times)), float(np.percentile(times, 99)), float(times.sum()), len(times), float(np.abs(path.qd - first).max())))
     if progress:
         progress("TV-GDD, casadi backend, whole path in one call")
-    stack = hand_stack(task)
-    problem = build_problem(stack, joint_bounds(task, stack), settings)
+    stack = reference_stack(task.robot, reference, task.initial_q, settings.free_waist)
+    problem = build_problem(stack, joint_bounds(task.robot, stack, settings), settings, reference.period_s)
     R, V = stacked_reference(stack, reference)
     theta0 = stack.initial
     rollout = problem.rollout(len(reference))

@@ -1,7 +1,7 @@
 """The execute stage: a joint trajectory played on the humanoid in PyBullet, measured every step.
 
 The robot is loaded in DIRECT mode with a fixed base and self-collision on, with the task's fixed
-objects (:class:`~pipeline.tasks.schema.EnvironmentObject`) as static bodies. Link pairs that touch
+objects (:class:`~dualarm.tasks.schema.EnvironmentObject`) as static bodies. Link pairs that touch
 by construction are not collision-checked: a pair whose kinematic path passes only through links
 without collision geometry (the pelvis and the torso through the waist's yaw and pitch links, the
 forearm and the palm through the wrist links) always overlaps; the others are checked, as MoveIt
@@ -30,11 +30,11 @@ from types import MappingProxyType
 
 import numpy as np
 
-from pipeline.arrays import frozen
-from pipeline.errors import StageError
-from pipeline.execute.world import add_environment, load_pybullet_robot, pb
-from pipeline.model.robot import Robot
-from pipeline.retime.trajectory import JointTrajectory
+from dualarm.arrays import frozen
+from dualarm.errors import StageError
+from dualarm.execute.world import add_environment, load_pybullet_robot, pb
+from dualarm.model.robot import Robot
+from dualarm.retime.trajectory import JointTrajectory
 
 
 @dataclass(frozen=True)
@@ -103,7 +103,7 @@ def _disable_touching_by_construction(sim) -> None:
         pb.setCollisionFilterPair(sim.body, sim.body, link, up, enableCollision=0, physicsClientId=sim.client)
 
 
-def execute(
+def execute_trajectory(
     trajectory: JointTrajectory,
     robot: Robot,
     hands: Sequence[str],
@@ -117,7 +117,7 @@ def execute(
         trajectory: what the joints are to do (``fixed`` joints are held).
         robot: the robot.
         hands: the hands whose link poses are logged.
-        environment: the task's fixed objects (:class:`~pipeline.tasks.schema.EnvironmentObject`).
+        environment: the task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`).
         expected_contacts: (link, link or object name) pairs, in either order, whose contacts are
             expected and counted apart.
         settings: the simulation's settings.

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import StageError
-from pipeline.model.poses import pose_matrix
-from pipeline.quiet import c_output_silenced
+from dualarm.errors import StageError
+from dualarm.model.poses import pose_matrix
+from dualarm.quiet import c_output_silenced
 
 
 with c_output_silenced():
@@ -117,7 +117,7 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
 
 def add_environment(sim: PyBulletRobot, objects) -> dict[int, str]:
     """Static bodies in ``sim``'s client for a task's fixed objects
-    (:class:`~pipeline.tasks.schema.EnvironmentObject`); body id -> object name."""
+    (:class:`~dualarm.tasks.schema.EnvironmentObject`); body id -> object name."""
     bodies = {}
     for obj in objects:
         if obj.shape == "box":

@@ -1,25 +1,25 @@
 """IK one arm at a time: each hand's targets in its arm's base frame, and the joint path of all arms.
 
 MC-Inverse and the pose-level baselines (TRAC-IK, PyBullet, DLS-SVD, ikfast-style) solve 7-DOF arm
-chains. A free waist is held at its initial value; each hand's Cartesian reference is expressed in
-its arm chain's base frame (the torso) through the root-to-torso forward kinematics at the initial
-configuration. :func:`joint_path` assembles the arms' solutions into the stage's
-:class:`~pipeline.ik.joint_path.JointPath`, measuring each hand's position error with the project's
+chains. A waist is held at its initial value; each hand's Cartesian reference is expressed in
+its arm chain's base frame (the torso) through the reference-frame-to-torso forward kinematics at
+the initial configuration. :func:`joint_path` assembles the arms' solutions into the stage's
+:class:`~dualarm.ik.joint_path.JointPath`, measuring each hand's position error with the project's
 forward kinematics.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.ik.joint_path import JointPath
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.poses import invert
-from pipeline.model.robot import Chain
-from pipeline.tasks import Task
+from dualarm.ik.joint_path import JointPath
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.poses import invert
+from dualarm.model.robot import Chain, Robot
+from dualarm.paths.reference import CartesianReference
 
 
 @dataclass(frozen=True)
@@ -54,21 +54,24 @@ class ArmSolution:
     solve_time_s: np.ndarray
 
 
-def arm_problems(task: Task, reference) -> list[ArmProblem]:
-    """Every hand of ``task`` along ``reference`` as an :class:`ArmProblem`."""
+def arm_problems(robot: Robot, reference: CartesianReference, q0: Mapping[str, float]) -> list[ArmProblem]:
+    """Every hand of ``reference`` as an :class:`ArmProblem`: its targets in its arm chain's base
+    frame, the joints between the reference's frame and the arm held at ``q0`` [rad]."""
+    frame = reference.frame_in(robot)
     problems = []
-    for hand in task.spec.hands:
-        chain = task.robot.hand_chain(hand)
-        to_base = task.robot.chain_between(reference.frame, chain.base)
-        base_pose = ChainKinematics.of(to_base).pose(np.array([task.initial_q[n] for n in to_base.joint_names]))
+    for hand in reference.hands:
+        chain = robot.hand_chain(hand)
+        to_base = robot.chain_between(frame, chain.base)
+        base_pose = ChainKinematics.of(to_base).pose(np.array([q0[n] for n in to_base.joint_names]))
         targets = invert(base_pose)[None] @ reference.hands[hand].poses
-        problems.append(ArmProblem(hand, chain, targets, np.array([task.initial_q[n] for n in chain.joint_names])))
+        problems.append(ArmProblem(hand, chain, targets, np.array([q0[n] for n in chain.joint_names])))
     return problems
 
 
-def joint_path(method: str, task: Task, reference, problems: Sequence[ArmProblem], solutions: Sequence[ArmSolution]) -> JointPath:
+def joint_path(method: str, reference: CartesianReference, problems: Sequence[ArmProblem], solutions: Sequence[ArmSolution], q0: Mapping[str, float]) -> JointPath:
     """The stage output of per-arm solutions: velocities by central differences [rad/s], status
-    failed where any arm failed, solve times summed over the arms, hand errors by the chains' FK."""
+    failed where any arm failed, solve times summed over the arms, hand errors by the chains' FK,
+    every other joint fixed at ``q0`` [rad]."""
     q = np.hstack([s.q for s in solutions])
     names = tuple(n for p in problems for n in p.chain.joint_names)
     errors = [np.linalg.norm(ChainKinematics.of(p.chain).poses(s.q)[:, :3, 3] - p.targets[:, :3, 3], axis=1) for p, s in zip(problems, solutions)]
@@ -84,5 +87,5 @@ def joint_path(method: str, task: Task, reference, problems: Sequence[ArmProblem
         solve_time_s=np.sum([s.solve_time_s for s in solutions], axis=0),
         hand_error_m=np.stack(errors, axis=1),
         hands=tuple(p.hand for p in problems),
-        fixed={n: v for n, v in task.initial_q.items() if n not in names},
+        fixed={n: v for n, v in q0.items() if n not in names},
     )

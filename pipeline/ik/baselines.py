@@ -9,7 +9,7 @@ previous solution, the way a user of the library would run it:
 
 Targets are 4x4 poses of the chain's tip in the chain's base frame [m]. Whatever the library says,
 the errors in a :class:`BaselineResult` are measured with the project's own CasADi forward
-kinematics (:class:`~pipeline.model.kinematics.ChainKinematics`), so baselines and the project's
+kinematics (:class:`~dualarm.model.kinematics.ChainKinematics`), so baselines and the project's
 methods are scored by the same yardstick.
 
 What the libraries needed (measured with pytracik 0.0.3 and pybullet 3.2.7 on the humanoid):
@@ -20,7 +20,7 @@ TRAC-IK
       dummy root link without inertia is prepended when the root has one (the humanoid's
       ``base_link`` has none; the KUKA iiwa's root does). Its C++ code prints straight to stdout
       (that warning, "Couldn't find chain ..."), so construction runs under
-      :func:`~pipeline.quiet.c_output_silenced`.
+      :func:`~dualarm.quiet.c_output_silenced`.
     - pytracik reads the URDF joint limits in single precision (-2.96706 becomes -2.9670600891, a
       little outside the URDF's limit); the robot's double limits are set back with
       ``set_joint_limits``, so solutions stay inside them exactly.
@@ -78,12 +78,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import RobotModelError
-from pipeline.execute.world import PyBulletRobot, load_pybullet_robot
-from pipeline.model.check import pose_errors
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.robot import Chain, Robot
-from pipeline.quiet import c_output_silenced
+from dualarm.errors import RobotModelError
+from dualarm.execute.world import PyBulletRobot, load_pybullet_robot
+from dualarm.model.check import pose_errors
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.robot import Chain, Robot
+from dualarm.quiet import c_output_silenced
 
 with c_output_silenced():
     import pybullet as pb

@@ -66,10 +66,10 @@ from dataclasses import dataclass
 import casadi as cs
 import numpy as np
 
-from pipeline.arrays import frozen
-from pipeline.errors import StageError
-from pipeline.model.kinematics import chain_frames, geometric_jacobian
-from pipeline.model.robot import Robot
+from dualarm.arrays import frozen
+from dualarm.errors import StageError
+from dualarm.model.kinematics import chain_frames, geometric_jacobian
+from dualarm.model.robot import Robot
 
 
 #: Singular values below this fraction of the largest count as zero when there is no damping.

@@ -9,7 +9,7 @@ Anthropomorphic Dual-arm Robot*) compares against exactly this scheme as its bas
 
 The free joint is the third one (index 2, the upper-arm roll), the usual IKFast choice for
 KUKA-iiwa-like arms. With theta_3 fixed the other six joints are solved in closed form, in the
-product-of-exponentials form of :mod:`pipeline.ik.mc_inverse` (k_i the joint axes at the zero
+product-of-exponentials form of :mod:`dualarm.ik.mc_inverse` (k_i the joint axes at the zero
 configuration in the chain base frame, shoulder axes through S):
 
 - elbow theta_4 from |W - S| (MC-Inverse eqs 2-4, law of cosines): two roots, elbow = +-1;
@@ -19,7 +19,7 @@ configuration in the chain base frame, shoulder axes through S):
 - wrist theta_5..7 from the remaining rotation, exactly as MC-Inverse's sub-problem 3: two roots.
 
 That is 2 x 2 x 2 = 8 candidates per (pose, theta_3), with the reason codes of
-:data:`pipeline.ik.mc_inverse.REASONS`. Everything is one CasADi Function
+:data:`dualarm.ik.mc_inverse.REASONS`. Everything is one CasADi Function
 ``(T (4x4), theta3) -> (Q (7x8), reason (1x8))``; :meth:`IkfastStyle.nearest` evaluates it at every
 free value for one pose in one mapped call.
 """
@@ -33,8 +33,8 @@ from functools import cached_property
 import casadi as cs
 import numpy as np
 
-from pipeline.ik.batched import BatchedCandidates
-from pipeline.ik.mc_inverse import (
+from dualarm.ik.batched import BatchedCandidates
+from dualarm.ik.mc_inverse import (
     CANDIDATES,
     OUT_OF_REACH,
     OUTSIDE_LIMITS,
@@ -45,9 +45,9 @@ from pipeline.ik.mc_inverse import (
     McInverse,
     McSolution,
 )
-from pipeline.ik.subproblems import REACH_SLACK, elbow, euler, into_limits, rotate, rotation, subproblem2, zero_axes
-from pipeline.model.robot import Chain
-from pipeline.model.srs import SrsKinematics
+from dualarm.ik.subproblems import REACH_SLACK, elbow, euler, into_limits, rotate, rotation, subproblem2, zero_axes
+from dualarm.model.robot import Chain
+from dualarm.model.srs import SrsKinematics
 
 __all__ = ["FREE_JOINT", "IkfastResult", "IkfastStyle", "CANDIDATES", "REASONS"]
 

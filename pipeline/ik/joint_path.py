@@ -8,7 +8,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from pipeline.arrays import frozen
+from dualarm.arrays import frozen
 
 #: Per-sample solver status codes.
 OK, FAILED = 0, 1

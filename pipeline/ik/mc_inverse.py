@@ -30,17 +30,19 @@ mapped over a whole path in one call.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 
 import casadi as cs
 import numpy as np
 
-from pipeline.errors import NotSRSError
-from pipeline.ik.batched import BatchedCandidates
-from pipeline.ik.subproblems import elbow, euler, into_limits, rotate, rotation, triad, zero_axes
-from pipeline.model.robot import Chain
-from pipeline.model.srs import SrsKinematics
+from dualarm.arrays import finite_array, joint_vector, rigid_transforms
+from dualarm.errors import InvalidArgumentError, NoSolutionFound, NotSRSError
+from dualarm.ik.batched import BatchedCandidates
+from dualarm.ik.subproblems import elbow, euler, into_limits, rotate, rotation, triad, zero_axes
+from dualarm.model.robot import Chain, Robot
+from dualarm.model.srs import SrsKinematics
 
 #: Candidate order: index = 4 * elbow + 2 * shoulder + wrist, each 0 (the first root: theta_4 =
 #: beta - phi_0, or the middle Euler angle with sine >= 0 from its singular position) or 1.
@@ -93,7 +95,7 @@ class McInverse:
         k, tip0 = zero_axes(chain)  # axes and tip rotation at q = 0
         for a, b in ((0, 1), (1, 2), (4, 5), (5, 6)):
             if abs(k[a] @ k[b]) > PERPENDICULAR_COSINE:
-                raise NotSRSError(f"chain '{chain.name}': the axes of {movable[a].name} and {movable[b].name} are not perpendicular, which MC-Inverse needs")
+                raise NotSRSError(f"chain '{chain.name}': the axes of {movable[a].name} and {movable[b].name} are not perpendicular, which MC-Inverse needs", chain=chain.name)
         S, E0, W0 = (np.asarray(x).ravel() for x in kin.points(np.zeros(7)))
         lower = np.array([j.lower for j in movable])
         upper = np.array([j.upper for j in movable])
@@ -134,9 +136,15 @@ class McInverse:
         return cls(kinematics=kin, lower=lower, upper=upper, candidates=candidates)
 
     def solve(self, pose: np.ndarray, psi: float) -> "McSolution":
-        """All 8 candidates for one hand pose (4x4, chain base frame) [m] at arm angle ``psi`` [rad]."""
-        Q, reason = self.candidates(np.asarray(pose, dtype=float), float(psi))
-        return McSolution(q=np.asarray(Q).T.copy(), reason=np.asarray(reason).ravel().astype(int))
+        """All 8 candidates for one hand pose (4x4, chain base frame) [m] at arm angle ``psi`` [rad].
+
+        Raises:
+            InvalidArgumentError: ``pose`` is not a 4x4 rigid transform, or ``psi`` is not finite.
+        """
+        T = rigid_transforms(pose, "pose")
+        psi = float(finite_array(psi, "psi", ()))
+        Q, reason = self.candidates(T, psi)
+        return McSolution(q=np.asarray(Q).T.copy(), reason=np.asarray(reason).ravel().astype(int), joint_names=self.chain.joint_names)
 
     def solve_many(self, poses: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Candidates for N poses (N, 4, 4) [m] at arm angles (N,) [rad], in mapped calls.
@@ -158,15 +166,86 @@ class McSolution:
     Attributes:
         q: joint values [rad], (8, 7), row j the candidate with index j.
         reason: validity code per candidate (see :data:`REASONS`), (8,).
+        joint_names: the arm's joints, the columns of ``q``.
     """
 
     q: np.ndarray
     reason: np.ndarray
+    joint_names: tuple[str, ...] = ()
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """Each candidate's validity in words (``valid``, ``out of reach``, ``singular``, ``outside limits``)."""
+        return tuple(REASONS[int(r)] for r in self.reason)
 
     @property
     def valid(self) -> np.ndarray:
         """Mask of valid candidates, (8,)."""
         return self.reason == VALID
+
+    def nearest(self, seed: np.ndarray | Mapping[str, float]) -> np.ndarray:
+        """The valid candidate nearest ``seed`` (largest joint difference), (7,) [rad]: the branch
+        MC-Inverse keeps along a path when ``seed`` is the initial configuration.
+
+        Args:
+            seed: the arm's joints (7,) [rad], or a configuration joint name -> value holding them.
+
+        Raises:
+            InvalidArgumentError: ``seed`` is not 7 finite numbers (or lacks one of the arm's joints).
+            NoSolutionFound: no candidate is valid (the reasons are in the message).
+        """
+        if isinstance(seed, Mapping):
+            seed = joint_vector(seed, self.joint_names, "seed")
+        index = nearest_candidate(self.q, self.reason, finite_array(seed, "seed", (self.q.shape[1],)))
+        if index is None:
+            raise NoSolutionFound(f"MC-Inverse: no valid candidate ({', '.join(sorted({REASONS[int(r)] for r in self.reason}))})", stage="ik")
+        return self.q[index].copy()
+
+
+def nearest_candidate(q: np.ndarray, reason: np.ndarray, seed: np.ndarray) -> int | None:
+    """Index of the valid candidate of ``q`` (8, 7) [rad] (``reason`` (8,)) nearest ``seed`` (7,)
+    [rad] by the largest joint difference, or None if none is valid."""
+    valid = np.flatnonzero(reason == VALID)
+    if valid.size == 0:
+        return None
+    return int(valid[np.argmin(np.abs(q[valid] - seed).max(axis=1))])
+
+
+@cache
+def _solver(chain: Chain, vertical: tuple[float, float, float]) -> McInverse:
+    return McInverse.of(chain, vertical)
+
+
+def mc_inverse(robot: Robot, hand: str, pose: np.ndarray, psi: float, q: Mapping[str, float] | str | None = None, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> McSolution:
+    """MC-Inverse for one hand pose: the 8 candidates of ``hand``'s S-R-S arm at arm angle ``psi``.
+
+    Args:
+        robot: the robot.
+        hand: ``left`` or ``right``.
+        pose: the hand pose in the robot's base frame (4x4) [m], as task files give poses
+            (:func:`dualarm.to_arm_frame` converts to the arm chain's frame, which
+            :meth:`McInverse.solve` takes).
+        psi: the arm angle of eq (1) [rad].
+        q: the configuration of the joints between the base and the arm (a waist): a home pose's
+            name or joint -> value [rad] (others at 0); default all 0.
+        vertical: V of eq (1), in the arm chain's base frame (normalised here).
+
+    Returns:
+        The candidates, their validity and :meth:`McSolution.nearest`.
+
+    Raises:
+        InvalidArgumentError: a pose that is not a 4x4 rigid transform, a non-finite psi, a zero vertical.
+        NotSRSError: the arm is not S-R-S.
+    """
+    from dualarm.model.kinematics import to_arm_frame
+
+    v = finite_array(vertical, "vertical", (3,))
+    if not np.linalg.norm(v) > 0:
+        raise InvalidArgumentError("vertical", "must not be zero")
+    chain = robot.hand_chain(hand)
+    target = to_arm_frame(robot, hand, pose, q)
+    unit = tuple(float(x) for x in v / np.linalg.norm(v))
+    return _solver(chain, unit).solve(target, psi)
 
 
 def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict:
@@ -184,9 +263,9 @@ def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical:
         errors of its forward kinematics against the pose [m, rad] and the arm angle of eq (1)
         recomputed from its joints (``arm_angle_rad``).
     """
-    from pipeline.model.check import pose_errors
-    from pipeline.model.kinematics import ChainKinematics
-    from pipeline.model.poses import pose_matrix
+    from dualarm.model.check import pose_errors
+    from dualarm.model.kinematics import ChainKinematics
+    from dualarm.model.poses import pose_matrix
 
     unit = tuple(np.asarray(vertical, dtype=float) / np.linalg.norm(vertical))
     target = pose_matrix(pose[:3], pose[3:])

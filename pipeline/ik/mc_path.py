@@ -12,21 +12,29 @@ that branch is invalid, or where a joint moves more than ``max_joint_step_rad`` 
 fails the stage with the sample, the time and the joint named; nothing is silently swapped.
 
 Each arm is solved in its chain base frame (the torso); a free waist is held at its initial
-value, because MC-Inverse solves 7-DOF arms (see :mod:`pipeline.ik.arms`).
+value, because MC-Inverse solves 7-DOF arms (see :mod:`dualarm.ik.arms`). One pose alone:
+:func:`dualarm.ik.mc_inverse.mc_inverse`.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.errors import StageError
-from pipeline.ik.arms import ArmSolution, arm_problems, joint_path
-from pipeline.ik.joint_path import JointPath
-from pipeline.ik.mc_inverse import REASONS, VALID, McInverse
-from pipeline.paths.reference import first_repetition_index, time_in_repetition
-from pipeline.tasks import Task
+from dualarm.errors import NoSolutionFound, StageError
+from dualarm.ik.arms import ArmSolution, arm_problems, joint_path
+from dualarm.ik.joint_path import JointPath
+from dualarm.ik.mc_inverse import REASONS, VALID, McInverse, nearest_candidate
+from dualarm.model.robot import Robot
+from dualarm.paths.reference import CartesianReference, first_repetition_index, time_in_repetition
+from dualarm.settings import with_overrides
+from dualarm.tasks.schema import ArmAngle
+
+if TYPE_CHECKING:
+    from dualarm.tasks import Task
 
 
 #: Offsets of the arm angles the ``auto`` mode searches, around the preferred one [rad] (1 degree).
@@ -39,10 +47,14 @@ START_STRIDE = 2
 START_WEIGHT = 0.1
 
 
-def arm_angles(task: Task, hand: str, reference, solver: McInverse, q0: np.ndarray) -> np.ndarray:
-    """psi per sample (N,) [rad] for ``hand`` by the task's ``[arm_angle]`` table; ``q0`` is the
+def settings_for(task: "Task", **overrides: object) -> ArmAngle:
+    """MC-Inverse's settings for a task: its ``[arm_angle]`` table, with ``overrides``."""
+    return with_overrides(task.spec.arm_angle, overrides)
+
+
+def arm_angles(spec: ArmAngle, hand: str, reference: CartesianReference, solver: McInverse, q0: np.ndarray) -> np.ndarray:
+    """psi per sample (N,) [rad] for ``hand`` by the ``[arm_angle]`` settings ``spec``; ``q0`` is the
     arm's initial configuration [rad] (``auto`` gives its psi, the preferred one; see :func:`_auto`)."""
-    spec = task.spec.arm_angle
     N = len(reference)
     if spec.mode in ("initial", "auto"):
         return np.full(N, float(solver.kinematics.arm_angles(q0)[0]))
@@ -56,20 +68,31 @@ def arm_angles(task: Task, hand: str, reference, solver: McInverse, q0: np.ndarr
     return np.interp(time_in_repetition(reference.t, reference.rep), times, values)
 
 
-def solve_mc_inverse(task: Task, reference) -> JointPath:
-    """Joint path of every hand of ``task`` along ``reference`` by MC-Inverse.
+def solve_mc_inverse(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: ArmAngle = ArmAngle()) -> JointPath:
+    """Joint path of every hand of ``reference`` by MC-Inverse, each arm an S-R-S chain.
+
+    Args:
+        robot: the robot.
+        reference: the hands' poses (position and orientation).
+        q0: the initial configuration (a home pose's name or joint -> value [rad], others at 0):
+            the branch kept is the one nearest it at the first sample, and the joints between the
+            reference's frame and the arms (a waist) hold their values.
+        settings: how the arm angle is chosen (the task file's ``[arm_angle]`` table).
 
     Raises:
+        NotSRSError: an arm is not S-R-S.
         StageError: a sample where the kept branch is invalid (out of reach, singular, outside
-            the limits) or a joint step above ``arm_angle.max_joint_step_rad``.
+            the limits) or a joint step above ``max_joint_step_rad``; the error's ``sample``,
+            ``t_s`` and ``joint`` say where.
     """
-    spec = task.spec.arm_angle
+    spec = settings
+    q0 = robot.configuration(q0, "q0")
     vertical = tuple(np.asarray(spec.vertical) / np.linalg.norm(spec.vertical))
-    problems = arm_problems(task, reference)
+    problems = arm_problems(robot, reference, q0)
     solutions = []
     for arm in problems:
         solver = McInverse.of(arm.chain, vertical)
-        psi = arm_angles(task, arm.hand, reference, solver, arm.q0)
+        psi = arm_angles(spec, arm.hand, reference, solver, arm.q0)
         start = time.perf_counter()
         branch = None
         if spec.mode == "auto":
@@ -78,24 +101,24 @@ def solve_mc_inverse(task: Task, reference) -> JointPath:
         elapsed = time.perf_counter() - start
         q = _kept_branch(arm.hand, arm.chain.joint_names, arm.q0, reference, candidates, reasons, spec.max_joint_step_rad, branch)
         solutions.append(ArmSolution(q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))))
-    return joint_path("mc-inverse", task, reference, problems, solutions)
+    return joint_path("mc-inverse", reference, problems, solutions, q0)
 
 
-def _kept_branch(hand: str, names, q0: np.ndarray, reference, candidates: np.ndarray, reasons: np.ndarray, max_step: float, branch: int | None = None) -> np.ndarray:
+def _kept_branch(hand: str, names, q0: np.ndarray, reference: CartesianReference, candidates: np.ndarray, reasons: np.ndarray, max_step: float, branch: int | None = None) -> np.ndarray:
     """The candidate ``branch`` (by default the one nearest ``q0`` [rad] at sample 0), checked along the path."""
     if branch is None:
-        valid0 = np.flatnonzero(reasons[0] == VALID)
-        if valid0.size == 0:
+        branch = nearest_candidate(candidates[0], reasons[0], q0)
+        if branch is None:
             why = ", ".join(sorted({REASONS[int(r)] for r in reasons[0]}))
-            raise StageError(f"MC-Inverse, {hand} arm: no valid solution at the path start ({why})")
-        branch = valid0[np.argmin(np.abs(candidates[0, valid0] - q0).max(axis=1))]
+            raise NoSolutionFound(f"MC-Inverse, {hand} arm: no valid solution at the path start ({why})", stage="ik", sample=0, t_s=float(reference.t[0]))
     q = candidates[:, branch]
     invalid = np.flatnonzero(reasons[:, branch] != VALID)
     if invalid.size:
         k = invalid[0]
         raise StageError(
             f"MC-Inverse, {hand} arm: sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]}) has no valid "
-            f"solution on the kept branch {branch + 1}: {REASONS[int(reasons[k, branch])]}"
+            f"solution on the kept branch {branch + 1}: {REASONS[int(reasons[k, branch])]}",
+            stage="ik", sample=int(k), t_s=float(reference.t[k]),
         )
     steps = np.abs(np.diff(q, axis=0))
     jumps = np.argwhere(steps > max_step)
@@ -103,7 +126,8 @@ def _kept_branch(hand: str, names, q0: np.ndarray, reference, candidates: np.nda
         k, j = jumps[0]
         raise StageError(
             f"MC-Inverse, {hand} arm: {names[j]} jumps {steps[k, j]:.3f} rad between samples {k} and {k + 1} "
-            f"(t = {reference.t[k + 1]:.3f} s), above arm_angle.max_joint_step_rad = {max_step}"
+            f"(t = {reference.t[k + 1]:.3f} s), above arm_angle.max_joint_step_rad = {max_step}",
+            stage="ik", sample=int(k + 1), t_s=float(reference.t[k + 1]), joint=names[j],
         )
     return q
 
@@ -119,7 +143,7 @@ def _wrap(angle):
     return np.angle(np.exp(1j * np.asarray(angle)))
 
 
-def _auto(solver: McInverse, targets: np.ndarray, reference, preferred: float, q0: np.ndarray, spec, hand: str) -> tuple[np.ndarray, int]:
+def _auto(solver: McInverse, targets: np.ndarray, reference: CartesianReference, preferred: float, q0: np.ndarray, spec: ArmAngle, hand: str) -> tuple[np.ndarray, int]:
     """The arm angle per sample (N,) [rad] and the branch (0-7) for the ``auto`` mode.
 
     A shortest path over the grid of (sample, arm angle) of the first repetition, per branch:

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.ik.joint_path import JointPath
-from pipeline.model.srs import SrsKinematics
-from pipeline.paths.reference import CartesianReference, first_repetition_index
+from dualarm.errors import NotSRSError
+from dualarm.ik.joint_path import JointPath
+from dualarm.model.robot import Robot
+from dualarm.model.srs import SrsKinematics
+from dualarm.paths.reference import CartesianReference, first_repetition_index
 
 #: Slack allowed before a joint position or velocity counts as a violation [rad] / [rad/s].
 VIOLATION_TOLERANCE = 1e-9
@@ -15,18 +17,17 @@ VIOLATION_TOLERANCE = 1e-9
 CLOSED_TOLERANCE_M = 1e-9
 
 
-def ik_metrics(path: JointPath, task) -> dict[str, float]:
+def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
     """Hand position errors (norms over samples and hands), limit violations against the robot's
-    position limits and the task's velocity limits, the largest joint step, solve times, failures.
+    position and velocity limits (a task's overrides applied), the largest joint step, solve
+    times, failures.
 
     A violation is one (sample, joint) pair outside its limit by more than
     :data:`VIOLATION_TOLERANCE`.
     """
-    limits = task.robot.limits
     names = path.joint_names
-    lower = np.array([limits[n].lower for n in names])
-    upper = np.array([limits[n].upper for n in names])
-    vmax = task.velocity_limits(names)
+    lower, upper = robot.lower_upper(names)
+    vmax = robot.limit_array("velocity", names)
     error = path.hand_error_m
     steps = np.abs(np.diff(path.q, axis=0))
     return {
@@ -43,16 +44,20 @@ def ik_metrics(path: JointPath, task) -> dict[str, float]:
     }
 
 
-def arm_angles(path: JointPath, task) -> dict[str, np.ndarray]:
-    """Arm angle psi of eq (1) of MC-Inverse per hand along the path (N,) [rad], with the task's
-    ``arm_angle.vertical``; hands whose arm joints are not all in the path are left out."""
-    vertical = np.asarray(task.spec.arm_angle.vertical, dtype=float)
+def arm_angles(path: JointPath, robot: Robot, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict[str, np.ndarray]:
+    """Arm angle psi of eq (1) of MC-Inverse per hand of the path along it (N,) [rad], with V =
+    ``vertical`` in each arm's base frame; hands whose arm joints are not all in the path, or
+    whose arm is not S-R-S, are left out."""
+    v = np.asarray(vertical, dtype=float)
     angles = {}
-    for hand in task.spec.hands:
-        chain = task.robot.hand_chain(hand)
+    for hand in path.hands:
+        chain = robot.hand_chain(hand)
         if set(chain.joint_names) <= set(path.joint_names):
             columns = [path.joint_names.index(n) for n in chain.joint_names]
-            kinematics = SrsKinematics.of(chain, tuple(vertical / np.linalg.norm(vertical)))
+            try:
+                kinematics = SrsKinematics.of(chain, tuple(v / np.linalg.norm(v)))
+            except NotSRSError:
+                continue
             angles[hand] = kinematics.arm_angles(path.q[:, columns])
     return angles
 

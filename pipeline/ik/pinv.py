@@ -7,43 +7,82 @@ feedback as TV-GDD and no limits at all: the scheme the paper shows leaving its 
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import casadi as cs
 import numpy as np
 
-from pipeline.ik.joint_path import JointPath
-from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference, start_configuration
+from dualarm.errors import InvalidArgumentError
+from dualarm.ik.joint_path import JointPath
+from dualarm.ik.stack import reference_stack, stack_joint_path, stacked_reference, start_configuration
+from dualarm.ik.tvgdd import TvgddSettings, gesture_band, joint_bounds
+from dualarm.model.robot import Robot
+from dualarm.paths.reference import CartesianReference
+from dualarm.settings import with_overrides
+
+if TYPE_CHECKING:
+    from dualarm.tasks import Task
 
 
-def solve_pinv(task, reference, feedback_gain: float, period_s: float | None = None) -> JointPath:
-    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps.
+@dataclass(frozen=True)
+class PinvSettings:
+    """Settings of the pseudoinverse baseline. The Euler step is the reference's period.
 
-    Nothing bounds the joints; for comparison with TV-GDD (the paper's Figs 3-4) the path's extras
-    hold the bands TV-GDD would impose on the same task (:func:`~pipeline.ik.tvgdd.gesture_band`).
+    Attributes:
+        feedback_gain: K [1/s].
+        free_waist: move the joints between the reference's frame and the arms too.
+        bands: the TV-GDD settings whose bands (eqs 19-22) are recorded beside the path, for
+            comparison with TV-GDD on the same task (the paper's Figs 3-4); they bound nothing.
+    """
+
+    feedback_gain: float = 20.0
+    free_waist: bool = False
+    bands: TvgddSettings = TvgddSettings()
+
+    def __post_init__(self) -> None:
+        if isinstance(self.feedback_gain, bool) or not isinstance(self.feedback_gain, (int, float)) or not (np.isfinite(self.feedback_gain) and self.feedback_gain > 0):
+            raise InvalidArgumentError("feedback_gain", f"must be a positive number, not {self.feedback_gain!r}")
+
+
+def settings_for(task: "Task", **overrides: object) -> PinvSettings:
+    """The baseline's settings for a task: TV-GDD's gain and bands from its ``[gesture]`` table."""
+    from dualarm.ik.tvgdd import settings_for as tvgdd_settings
+
+    bands = tvgdd_settings(task)
+    return with_overrides(PinvSettings(feedback_gain=bands.feedback_gain, free_waist=bands.free_waist, bands=bands), overrides)
+
+
+def solve_pinv(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: PinvSettings = PinvSettings()) -> JointPath:
+    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler
+    steps at the reference's period; hand positions only, as TV-GDD.
+
+    Nothing bounds the joints; the path's extras hold the bands TV-GDD would impose
+    (:func:`~dualarm.ik.tvgdd.gesture_band` with ``settings.bands``).
 
     Args:
-        task: the task (initial configuration, moved onto the path start if it is off it).
-        reference: the CartesianReference.
-        feedback_gain: K [1/s].
-        period_s: Euler step [s] (default: the reference's period).
+        robot: the robot.
+        reference: the hands' reference.
+        q0: the initial configuration (as :func:`~dualarm.ik.tvgdd.solve_tvgdd`).
+        settings: the gain and the bands to record.
     """
-    from pipeline.ik.tvgdd import gesture_band, joint_bounds, settings_for
-
-    stack = hand_stack(task)
-    tau = period_s or reference.period_s
+    stack = reference_stack(robot, reference, q0, settings.free_waist)
+    tau = reference.period_s
     r, rdot = cs.SX.sym("r", stack.m), cs.SX.sym("rdot", stack.m)
     J = stack.jacobian
-    rhs = rdot + feedback_gain * (r - stack.position)
+    rhs = rdot + settings.feedback_gain * (r - stack.position)
     velocity = J.T @ cs.solve(J @ J.T, rhs)  # J^+ rhs for a full-row-rank J, eqs (2)-(3) with w = 0
     step = cs.Function("pinv_step", [stack.theta, r, rdot], [velocity], ["theta", "r", "rdot"], ["thetadot"])
     R, V = stacked_reference(stack, reference)
     N, n = len(reference), stack.n
     q, qd, solve_time = np.empty((N, n)), np.empty((N, n)), np.empty(N)
-    theta = start_configuration(stack, reference, *task.robot.lower_upper(stack.joint_names))
+    theta = start_configuration(stack, reference, *robot.lower_upper(stack.joint_names))
     for k in range(N):
         q[k] = theta
         start = time.perf_counter()
         qd[k] = np.asarray(step(theta, R[k], V[k])).ravel()
         solve_time[k] = time.perf_counter() - start
         theta = theta + tau * qd[k]
-    return stack_joint_path("pinv", stack, reference, q, qd, solve_time, gesture_band(joint_bounds(task, stack), settings_for(task), reference.t, q))
+    bands = gesture_band(joint_bounds(robot, stack, settings.bands), settings.bands, tau, reference.t, q)
+    return stack_joint_path("pinv", stack, reference, q, qd, solve_time, bands)

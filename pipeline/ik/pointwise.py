@@ -5,12 +5,12 @@ paper ran its baselines (section V): every sample is solved on its own, starting
 previous sample's answer (the first from the task's initial configuration), and nothing ties a
 repetition to the one before it except that seed. Methods:
 
-- ``trac-ik``: TRAC-IK through ``pytracik`` (:class:`~pipeline.ik.baselines.TracIkSolver`);
-- ``pybullet``: ``pybullet.calculateInverseKinematics`` (:class:`~pipeline.ik.baselines.PyBulletIkSolver`);
+- ``trac-ik``: TRAC-IK through ``pytracik`` (:class:`~dualarm.ik.baselines.TracIkSolver`);
+- ``pybullet``: ``pybullet.calculateInverseKinematics`` (:class:`~dualarm.ik.baselines.PyBulletIkSolver`);
 - ``dls-svd``: Li-Liang's damped least squares through the SVD, eqs (12)-(20)
-  (:class:`~pipeline.ik.dls.DlsSolver`);
+  (:class:`~dualarm.ik.dls.DlsSolver`);
 - ``ikfast-style``: the third joint discretised, the other six in closed form, the candidate
-  nearest the previous solution (:class:`~pipeline.ik.ikfast_style.IkfastStyle`).
+  nearest the previous solution (:class:`~dualarm.ik.ikfast_style.IkfastStyle`).
 
 A sample the solver fails is marked failed in the joint path's status and holds the last
 successful joints; the next sample is seeded from them. The stage does not stop: the paper
@@ -21,15 +21,20 @@ consistency report counts the repetitions with a failure.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from pipeline.errors import StageError
-from pipeline.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
-from pipeline.ik.joint_path import JointPath
-from pipeline.tasks import Task
+from dualarm.errors import InvalidArgumentError
+from dualarm.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
+from dualarm.ik.dls import DlsSettings
+from dualarm.ik.joint_path import JointPath
+from dualarm.model.robot import Robot
+from dualarm.paths.reference import CartesianReference
+from dualarm.settings import as_record
 
 #: The methods of this module.
 POINTWISE_METHODS = ("trac-ik", "pybullet", "dls-svd", "ikfast-style")
@@ -38,79 +43,133 @@ POINTWISE_METHODS = ("trac-ik", "pybullet", "dls-svd", "ikfast-style")
 ArmSolver = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, bool]]
 
 
-def pointwise_settings(method: str) -> dict[str, object]:
-    """The settings a method runs with (recorded in the run's manifest)."""
-    from pipeline.ik.dls import DlsSettings
+@dataclass(frozen=True)
+class TracIkSettings:
+    """TRAC-IK's settings (its own defaults).
 
-    if method == "trac-ik":
-        return {"timeout_s": 0.005, "epsilon": 1e-5, "solve_type": "Speed"}  # TRAC-IK's own defaults
-    if method == "pybullet":
-        return {"max_iterations": 100, "residual_threshold_m": 1e-12, "joint_damping": 1e-6, "position_tolerance_m": 1e-9, "orientation_tolerance_rad": 1e-6}
-    if method == "dls-svd":
-        from dataclasses import asdict
+    Attributes:
+        timeout_s: wall-clock budget per solve [s]; TRAC-IK's threads race within it, so its
+            answers are not repeatable run to run.
+        epsilon: tolerance on each twist error component [m], [rad].
+        solve_type: ``Speed``, ``Distance``, ``Manip1`` or ``Manip2``.
+    """
 
-        return asdict(DlsSettings())
-    if method == "ikfast-style":
-        from pipeline.ik.ikfast_style import DEFAULT_RESOLUTION_RAD, FREE_JOINT
+    timeout_s: float = 0.005
+    epsilon: float = 1e-5
+    solve_type: str = "Speed"
 
-        return {"free_joint_index": FREE_JOINT, "resolution_rad": DEFAULT_RESOLUTION_RAD}
-    raise StageError(f"unknown pose-level IK method '{method}' (methods: {', '.join(POINTWISE_METHODS)})")
+
+@dataclass(frozen=True)
+class PyBulletIkSettings:
+    """``pybullet.calculateInverseKinematics``'s settings (see :class:`~dualarm.ik.baselines.PyBulletIkSolver`).
+
+    Attributes:
+        max_iterations: ``maxNumIterations``.
+        residual_threshold_m: ``residualThreshold`` [m].
+        joint_damping: damping of every chain joint.
+        position_tolerance_m: largest position error of a solve counted as success [m].
+        orientation_tolerance_rad: largest orientation error counted as success [rad].
+    """
+
+    max_iterations: int = 100
+    residual_threshold_m: float = 1e-12
+    joint_damping: float = 1e-6
+    position_tolerance_m: float = 1e-9
+    orientation_tolerance_rad: float = 1e-6
+
+
+@dataclass(frozen=True)
+class IkfastStyleSettings:
+    """The ikfast-style solver's settings: theta_3 is discretised, the other six in closed form.
+
+    Attributes:
+        resolution_rad: the grid step of theta_3 [rad].
+    """
+
+    resolution_rad: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.resolution_rad) and self.resolution_rad > 0):
+            raise InvalidArgumentError("resolution_rad", f"must be a positive number, not {self.resolution_rad!r}")
+
+
+#: The settings class of each method.
+SETTINGS: Mapping[str, type] = {"trac-ik": TracIkSettings, "pybullet": PyBulletIkSettings, "dls-svd": DlsSettings, "ikfast-style": IkfastStyleSettings}
 
 
 @contextmanager
-def _arm_solver(method: str, task: Task, arm: ArmProblem) -> Iterator[ArmSolver]:
-    """The method's solver for one arm, with the settings of :func:`pointwise_settings`."""
-    settings = pointwise_settings(method)
+def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str, float], settings: Any) -> Iterator[ArmSolver]:
+    """The method's solver for one arm."""
     base, tip = arm.chain.base, arm.chain.tip
     if method == "trac-ik":
-        from pipeline.ik.baselines import TracIkSolver
+        from dualarm.ik.baselines import TracIkSolver
 
-        solver = TracIkSolver.of(task.robot, base, tip, **settings)
+        solver = TracIkSolver.of(robot, base, tip, **as_record(settings))
         yield lambda target, seed: _pair(solver.solve(target, seed))
     elif method == "pybullet":
-        from pipeline.ik.baselines import PyBulletIkSolver
+        from dualarm.ik.baselines import PyBulletIkSolver
 
-        locked = {n: v for n, v in task.initial_q.items() if n not in arm.chain.joint_names}
-        with PyBulletIkSolver.of(task.robot, base, tip, locked=locked, **settings) as solver:
-            yield lambda target, seed: _pair(solver.solve(target, seed))
+        with PyBulletIkSolver.of(robot, base, tip, locked=locked, **as_record(settings)) as pb_solver:
+            yield lambda target, seed: _pair(pb_solver.solve(target, seed))
     elif method == "dls-svd":
-        from pipeline.ik.dls import DlsSolver
+        from dualarm.ik.dls import DlsSolver
 
-        solver = DlsSolver.of(task.robot, base, [tip])
+        dls = DlsSolver.of(robot, base, [tip], settings)
 
-        def solve(target, seed):
-            result = solver.solve([target], seed)
+        def solve(target: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, bool]:
+            result = dls.solve([target], seed)
             return result.q, result.converged
 
         yield solve
     else:
-        from pipeline.ik.ikfast_style import IkfastStyle
+        from dualarm.ik.ikfast_style import IkfastStyle
 
-        solver = IkfastStyle.of(arm.chain)
+        ikfast = IkfastStyle.of(arm.chain, settings.resolution_rad)
 
-        def solve(target, seed):
-            result = solver.nearest(target, seed)
+        def solve_ikfast(target: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, bool]:
+            result = ikfast.nearest(target, seed)
             return result.q, result.ok
 
-        yield solve
+        yield solve_ikfast
 
 
-def _pair(result) -> tuple[np.ndarray, bool]:
+def _pair(result: Any) -> tuple[np.ndarray, bool]:
     return result.q, result.ok
 
 
-def solve_pointwise(method: str, task: Task, reference, progress: Callable[[int, int], None] | None = None) -> JointPath:
-    """Joint path of every hand of ``task`` along ``reference`` by ``method``, one sample at a
-    time, each seeded with the arm's last successful solution; ``progress(done, total)`` is
-    called as samples are solved."""
-    pointwise_settings(method)  # unknown methods fail before any solver is built
-    problems = arm_problems(task, reference)
+def solve_pointwise(
+    method: str,
+    robot: Robot,
+    reference: CartesianReference,
+    q0: Mapping[str, float] | str | None = None,
+    settings: Any = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> JointPath:
+    """Joint path of every hand of ``reference`` by ``method`` (:data:`POINTWISE_METHODS`), one
+    sample at a time, each seeded with the arm's last successful solution (the first with ``q0``).
+
+    Args:
+        method: ``trac-ik``, ``pybullet``, ``dls-svd`` or ``ikfast-style``.
+        robot: the robot.
+        reference: the hands' poses.
+        q0: the initial configuration (a home pose's name or joint -> value [rad], others at 0).
+        settings: the method's settings (:data:`SETTINGS`; default its defaults).
+        progress: called with (samples done, total) as samples are solved.
+    """
+    if method not in SETTINGS:
+        raise InvalidArgumentError("method", f"unknown pose-level IK method '{method}' (methods: {', '.join(POINTWISE_METHODS)})")
+    settings = SETTINGS[method]() if settings is None else settings
+    if not isinstance(settings, SETTINGS[method]):
+        raise InvalidArgumentError("settings", f"{method} takes {SETTINGS[method].__name__}, not {type(settings).__name__}")
+    q0 = robot.configuration(q0, "q0")
+    problems = arm_problems(robot, reference, q0)
     N = len(reference)
     solutions = []
     for a, arm in enumerate(problems):
         q, ok, times = np.empty((N, arm.chain.dof)), np.zeros(N, bool), np.zeros(N)
         seed = arm.q0
-        with _arm_solver(method, task, arm) as solve:
+        locked = {n: v for n, v in q0.items() if n not in arm.chain.joint_names}
+        with _arm_solver(method, robot, arm, locked, settings) as solve:
             for k in range(N):
                 start = time.perf_counter()
                 answer, ok[k] = solve(arm.targets[k], seed)
@@ -119,4 +178,20 @@ def solve_pointwise(method: str, task: Task, reference, progress: Callable[[int,
                 if progress is not None and k % 50 == 0:
                     progress(a * N + k, len(problems) * N)
         solutions.append(ArmSolution(q=q, ok=ok, solve_time_s=times))
-    return joint_path(method, task, reference, problems, solutions)
+    return joint_path(method, reference, problems, solutions, q0)
+
+
+def _solver_of(method: str) -> Callable[..., JointPath]:
+    def solve(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: Any = None) -> JointPath:
+        return solve_pointwise(method, robot, reference, q0, settings)
+
+    solve.__name__ = f"solve_{method.replace('-', '_')}"
+    solve.__doc__ = f"{method} along a path: :func:`solve_pointwise` with ``method='{method}'`` (settings: {SETTINGS[method].__name__})."
+    return solve
+
+
+#: Each method's solve function ``(robot, reference, q0=None, settings=None) -> JointPath``.
+solve_trac_ik = _solver_of("trac-ik")
+solve_pybullet = _solver_of("pybullet")
+solve_dls_svd = _solver_of("dls-svd")
+solve_ikfast_style = _solver_of("ikfast-style")

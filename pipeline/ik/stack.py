@@ -8,17 +8,18 @@ the Jacobian is block diagonal, as in TV-GDD eq (13).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 
 import casadi as cs
 import numpy as np
 
-from pipeline.arrays import frozen
-from pipeline.errors import StageError
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.tasks import Task
+from dualarm.arrays import frozen
+from dualarm.errors import StageError
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.robot import Robot
+from dualarm.paths.reference import CartesianReference
 
 
 @dataclass(frozen=True)
@@ -56,37 +57,38 @@ class HandStack:
         return 3 * len(self.hands)
 
 
-def active_joints(task: Task) -> tuple[str, ...]:
-    """The task's active joints: the waist if free, then each driven hand's arm, in URDF order."""
-    robot = task.robot
+def active_joints(robot: Robot, hands: Sequence[str], frame: str, free_waist: bool) -> tuple[str, ...]:
+    """The active joints: the joints from ``frame`` to each hand's tip that belong to its arm
+    chain, plus the others on the way (the waist) when ``free_waist``, in URDF order."""
     names: list[str] = []
-    for hand in task.spec.hands:
-        chain = task.hand_chain_from_root(hand)
+    for hand in hands:
         arm = set(robot.hand_chain(hand).joint_names)
-        for name in chain.joint_names:
-            if name not in names and (name in arm or task.spec.waist == "free"):
+        for name in robot.chain_between(frame, robot.hand_chain(hand).tip).joint_names:
+            if name not in names and (name in arm or free_waist):
                 names.append(name)
     return tuple(names)
 
 
-def hand_stack(task: Task) -> HandStack:
-    """Build the stacked position kinematics of ``task``'s hands."""
-    names = active_joints(task)
-    fixed = {n: v for n, v in task.initial_q.items() if n not in names}
+def hand_stack(robot: Robot, hands: Sequence[str], q0: Mapping[str, float], *, frame: str | None = None, free_waist: bool = False) -> HandStack:
+    """The stacked position kinematics of ``hands`` in ``frame`` (default the robot's root link),
+    the joints that are not active at their values in ``q0`` [rad]."""
+    frame = frame or robot.urdf.root
+    names = active_joints(robot, hands, frame, free_waist)
+    fixed = {n: v for n, v in q0.items() if n not in names}
     theta = cs.SX.sym("theta", len(names))
     index = {n: i for i, n in enumerate(names)}
     rows = []
-    for hand in task.spec.hands:
-        chain = task.hand_chain_from_root(hand)
+    for hand in hands:
+        chain = robot.chain_between(frame, robot.hand_chain(hand).tip)
         q = cs.vertcat(*[theta[index[n]] if n in index else fixed[n] for n in chain.joint_names])
         rows.append(ChainKinematics.of(chain).fk(q)[:3, 3])
     position = cs.vertcat(*rows)
     jacobian = cs.jacobian(position, theta)
     return HandStack(
         joint_names=names,
-        hands=tuple(task.spec.hands),
+        hands=tuple(hands),
         fixed=MappingProxyType(fixed),
-        initial=frozen([task.initial_q[n] for n in names], (len(names),), "initial"),
+        initial=frozen([q0[n] for n in names], (len(names),), "initial"),
         theta=theta,
         position=position,
         jacobian=jacobian,
@@ -94,7 +96,12 @@ def hand_stack(task: Task) -> HandStack:
     )
 
 
-def stacked_reference(stack: HandStack, reference) -> tuple[np.ndarray, np.ndarray]:
+def reference_stack(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None, free_waist: bool) -> HandStack:
+    """The stack of the reference's hands in its frame, ``q0`` resolved by :meth:`Robot.configuration`."""
+    return hand_stack(robot, tuple(reference.hands), robot.configuration(q0, "q0"), frame=reference.frame_in(robot), free_waist=free_waist)
+
+
+def stacked_reference(stack: HandStack, reference: CartesianReference) -> tuple[np.ndarray, np.ndarray]:
     """Stacked hand positions (N, 3 h) [m] and velocities (N, 3 h) [m/s] of a CartesianReference."""
     position = np.hstack([reference.hands[h].position for h in stack.hands])
     velocity = np.hstack([reference.hands[h].linear_velocity for h in stack.hands])
@@ -105,7 +112,7 @@ def stacked_reference(stack: HandStack, reference) -> tuple[np.ndarray, np.ndarr
 START_TOLERANCE_M = 1e-9
 
 
-def start_configuration(stack: HandStack, reference, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+def start_configuration(stack: HandStack, reference: CartesianReference, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Where a velocity-level method starts [rad], (n,): the task's initial values if they put the
     hands on the reference's first sample (within :data:`START_TOLERANCE_M`), otherwise the
     configuration nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares
@@ -123,13 +130,13 @@ def start_configuration(stack: HandStack, reference, lower: np.ndarray, upper: n
     theta = np.asarray(solver(x0=stack.initial, lbx=lower, ubx=upper, lbg=0, ubg=0)["x"]).ravel()
     gap = np.abs(np.asarray(stack.positions(theta)).ravel() - r0).max()
     if not solver.stats()["success"] or gap > START_TOLERANCE_M:
-        raise StageError(f"no configuration within the joint limits puts the hands on the path start (IPOPT: {solver.stats()['return_status']}, gap {gap:.3g} m)")
+        raise StageError(f"no configuration within the joint limits puts the hands on the path start (IPOPT: {solver.stats()['return_status']}, gap {gap:.3g} m)", stage="ik", sample=0, t_s=0.0)
     return frozen(theta, (stack.n,), "start")
 
 
-def stack_joint_path(method: str, stack: HandStack, reference, q: np.ndarray, qd: np.ndarray, solve_time_s: np.ndarray, extras=None):
+def stack_joint_path(method: str, stack: HandStack, reference: CartesianReference, q: np.ndarray, qd: np.ndarray, solve_time_s: np.ndarray, extras=None):
     """The JointPath of a velocity-level method on ``stack``: hand errors |r - f(q)| from q (N, n)."""
-    from pipeline.ik.joint_path import JointPath
+    from dualarm.ik.joint_path import JointPath
 
     R, _ = stacked_reference(stack, reference)
     N = len(reference)

@@ -1,7 +1,7 @@
 """Closed-form pieces of S-R-S inverse kinematics, as CasADi expressions of constant unit axes.
 
 Rotations are products of exponentials exp([k] angle) about axes k given at the zero
-configuration (see :mod:`pipeline.ik.mc_inverse`). Paden-Kahan sub-problem 1 turns one vector onto
+configuration (see :mod:`dualarm.ik.mc_inverse`). Paden-Kahan sub-problem 1 turns one vector onto
 another about one axis, :func:`elbow` is MC-Inverse's sub-problem 1, :func:`subproblem2` one vector onto another by two rotations about
 intersecting axes; :func:`euler` solves three consecutive perpendicular axes (MC-Inverse
 sub-problems 2 and 3, eqs 9-10 for ZYZ axes); :func:`into_limits` moves an angle by 2 pi into
@@ -15,8 +15,8 @@ import math
 import casadi as cs
 import numpy as np
 
-from pipeline.model.kinematics import chain_frames
-from pipeline.model.robot import Chain
+from dualarm.model.kinematics import chain_frames
+from dualarm.model.robot import Chain
 
 
 #: Relative slack on the law-of-cosines argument before a wrist centre counts as out of reach.

@@ -19,16 +19,27 @@ CasADi Function per step, and the paper's own LVI projection-equation solver (eq
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import casadi as cs
 import numpy as np
 
-from pipeline.errors import StageError
-from pipeline.ik.gesture import position_bounds, velocity_bounds
-from pipeline.ik.stack import HandStack
+from dualarm.errors import InvalidArgumentError, StageError
+from dualarm.ik.gesture import position_bounds, velocity_bounds
+from dualarm.ik.joint_path import JointPath
+from dualarm.ik.stack import HandStack, reference_stack, stack_joint_path, stacked_reference, start_configuration
+from dualarm.model.robot import Robot
+from dualarm.paths.reference import CartesianReference
+from dualarm.settings import with_overrides
+
+if TYPE_CHECKING:
+    from dualarm.tasks import Task
 
 SCHEMES = ("mvn", "rmp", "mke")
+#: The QP solvers: a CasADi conic in the step's CasADi Function, or the paper's LVI (eqs 26-27).
+BACKENDS = ("casadi", "lvi")
 
 #: Largest breach of (24)-(25) [m/s or rad/s] a conic solution may have before its step counts as infeasible.
 FEASIBILITY_TOLERANCE = 1e-6
@@ -42,11 +53,11 @@ LVI_MAX_ITERATIONS = 200_000
 
 @dataclass(frozen=True)
 class TvgddSettings:
-    """Settings of the TV-GDD IK stage.
+    """Settings of TV-GDD. The Euler step tau is the reference's period (there is no other).
 
     Attributes:
         scheme: ``mvn``, ``rmp`` or ``mke``.
-        period_s: Euler step tau [s].
+        backend: ``casadi`` (the conic in one CasADi Function per step) or ``lvi`` (eqs 26-27).
         feedback_gain: K of eq (16) [1/s].
         nu: bound scaling nu of eq (21) [1/s].
         t_sp_s: T_SP of eq (19) [s].
@@ -55,20 +66,39 @@ class TvgddSettings:
         bound_feedforward: add the bounds' own rate over the coming step to eq (21), so that a
             joint pressed against a closing bound moves with it instead of lagging (a departure
             from the paper, off by default).
+        goal_lower, goal_upper: theta_goal-, theta_goal+ of eq (19) per joint [rad]; a joint
+            without one keeps its position limit.
+        free_waist: solve the joints between the reference's frame and the arms (a waist) too
+            (Li-Liang's 17-DOF model); otherwise they hold their ``q0`` values.
         qp_plugin: CasADi conic plugin of the ``casadi`` backend.
         lvi_tolerance: the ``lvi`` backend's stop on ||epsilon(u)||_2 (the paper's 1e-5).
     """
 
     scheme: str = "mvn"
-    period_s: float = 0.01
+    backend: str = "casadi"
     feedback_gain: float = 20.0
     nu: float = 2.0
     t_sp_s: float = 0.75
     c_tuning: float = 1.0
     rmp_lambda: float = 10.0
     bound_feedforward: bool = False
+    goal_lower: Mapping[str, float] = field(default_factory=dict)
+    goal_upper: Mapping[str, float] = field(default_factory=dict)
+    free_waist: bool = False
     qp_plugin: str = "daqp"
     lvi_tolerance: float = LVI_TOLERANCE
+
+    def __post_init__(self) -> None:
+        if self.scheme not in SCHEMES:
+            raise InvalidArgumentError("scheme", f"unknown TV-GDD scheme '{self.scheme}' (schemes: {', '.join(SCHEMES)})")
+        if self.backend not in BACKENDS:
+            raise InvalidArgumentError("backend", f"unknown QP backend '{self.backend}' (backends: {', '.join(BACKENDS)})")
+        for name in ("feedback_gain", "nu", "t_sp_s", "c_tuning", "rmp_lambda", "lvi_tolerance"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (np.isfinite(value) and value > 0):
+                raise InvalidArgumentError(name, f"must be a positive number, not {value!r}")
+        for name in ("goal_lower", "goal_upper"):
+            object.__setattr__(self, name, dict(getattr(self, name)))  # a copy: the caller's dict may change
 
 
 @dataclass(frozen=True)
@@ -107,6 +137,7 @@ class TvgddProblem:
     Attributes:
         stack: the stacked hands.
         settings: the settings it was built with.
+        period_s: the Euler step tau [s].
         data: Function ``(theta, t, r, rdot, theta0) -> (M, b, J, rhs, zeta_lo, zeta_hi, lower_t, upper_t)``.
         step: Function ``(theta, t, r, rdot, theta0) -> (thetadot, violation)``: data and the conic
             solve in one graph; ``violation`` is the solution's largest breach of (24) or (25),
@@ -117,6 +148,7 @@ class TvgddProblem:
 
     stack: HandStack
     settings: TvgddSettings
+    period_s: float
     data: cs.Function
     step: cs.Function
     packed_step: cs.Function
@@ -151,29 +183,28 @@ class TvgddProblem:
         n, m = self.stack.n, self.stack.m
         theta, u, theta0 = cs.MX.sym("theta", n), cs.MX.sym("u", 1 + 2 * m), cs.MX.sym("theta0", n)
         velocity, _ = self.step(theta, u[0], u[1 : 1 + m], u[1 + m :], theta0)
-        one = cs.Function("tvgdd_euler", [theta, u, theta0], [theta + self.settings.period_s * velocity, velocity])
+        one = cs.Function("tvgdd_euler", [theta, u, theta0], [theta + self.period_s * velocity, velocity])
         return one.mapaccum("tvgdd_rollout", samples, [0], [0])
 
 
-def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings):
+def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings, period_s: float):
     """theta_new-+(t) of eq (19) and zeta_new-+(t) of eqs (21)-(22), with the bounds' rate over
-    the step [t, t + tau] as feedforward when ``settings.bound_feedforward``."""
+    the step [t, t + tau] (tau = ``period_s``) as feedforward when ``settings.bound_feedforward``."""
     def at(time):
         return position_bounds(time, bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
 
     lower_t, upper_t = at(t)
     rates = (0.0, 0.0)
     if settings.bound_feedforward:
-        lower_next, upper_next = at(t + settings.period_s)
-        rates = ((lower_next - lower_t) / settings.period_s, (upper_next - upper_t) / settings.period_s)
+        lower_next, upper_next = at(t + period_s)
+        rates = ((lower_next - lower_t) / period_s, (upper_next - upper_t) / period_s)
     zeta_lo, zeta_hi = velocity_bounds(theta, lower_t, upper_t, -bounds.velocity, bounds.velocity, settings.nu, *rates)
     return lower_t, upper_t, zeta_lo, zeta_hi
 
 
-def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings, urdf_xml: str = "", all_joints: tuple[str, ...] = ()) -> TvgddProblem:
-    """Formulate the TV-GDD QP for ``stack`` (``urdf_xml`` and ``all_joints`` are needed for MKE)."""
-    if settings.scheme not in SCHEMES:
-        raise StageError(f"unknown TV-GDD scheme '{settings.scheme}' (schemes: {', '.join(SCHEMES)})")
+def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings, period_s: float, urdf_xml: str = "", all_joints: tuple[str, ...] = ()) -> TvgddProblem:
+    """Formulate the TV-GDD QP for ``stack`` with Euler step ``period_s`` [s] (``urdf_xml`` and
+    ``all_joints`` are needed for MKE)."""
     n, m = stack.n, stack.m
     theta = stack.theta
     t = cs.SX.sym("t")
@@ -187,7 +218,7 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
     b = settings.rmp_lambda * (theta - theta0) if settings.scheme == "rmp" else cs.SX.zeros(n)
     J = stack.jacobian
     rhs = rdot + settings.feedback_gain * (r - stack.position)  # eq (16)/(24)
-    lower_t, upper_t, zeta_lo, zeta_hi = _bands(theta, t, bounds, settings)
+    lower_t, upper_t, zeta_lo, zeta_hi = _bands(theta, t, bounds, settings, period_s)
     inputs, names = [theta, t, r, rdot, theta0], ["theta", "t", "r", "rdot", "theta0"]
     data = cs.Function(
         "tvgdd_qp_data",
@@ -211,7 +242,7 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
     packed = cs.MX.sym("inputs", 2 * n + 1 + 2 * m)
     pieces = cs.vertsplit(packed, [0, n, n + 1, n + 1 + m, n + 1 + 2 * m, 2 * n + 1 + 2 * m])
     packed_step = cs.Function("tvgdd_packed_step", [packed], step(*pieces), ["inputs"], ["thetadot", "violation"])
-    return TvgddProblem(stack=stack, settings=settings, data=data, step=step, packed_step=packed_step)
+    return TvgddProblem(stack=stack, settings=settings, period_s=period_s, data=data, step=step, packed_step=packed_step)
 
 
 def _plugin_options(plugin: str) -> dict:
@@ -271,37 +302,37 @@ def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: f
     raise StageError(f"LVI solver did not reach ||eps|| <= {tol} in {max_iter} iterations")
 
 
-def joint_bounds(task, stack: HandStack) -> JointBounds:
-    """Physical limits (the task's velocity limit where it sets one) and gesture goals of the
-    stack's joints; a joint without a goal keeps its limits as goals."""
+def joint_bounds(robot: Robot, stack: HandStack, settings: TvgddSettings) -> JointBounds:
+    """Physical limits and gesture goals of the stack's joints; a joint without a goal keeps its
+    limits as goals.
+
+    Raises:
+        InvalidArgumentError: a goal for a joint the stack does not move.
+    """
     names = stack.joint_names
-    lower, upper = task.robot.lower_upper(names)
-    gesture = task.spec.gesture
-    goal_lower = gesture.goal_lower if gesture else {}
-    goal_upper = gesture.goal_upper if gesture else {}
+    for key in ("goal_lower", "goal_upper"):
+        for name in getattr(settings, key):
+            if name not in names:
+                raise InvalidArgumentError(f"{key}.{name}", f"not a joint TV-GDD moves here ({', '.join(names)})")
+    lower, upper = robot.lower_upper(names)
     return JointBounds(
         lower=lower,
         upper=upper,
-        goal_lower=np.array([goal_lower.get(n, lo) for n, lo in zip(names, lower)]),
-        goal_upper=np.array([goal_upper.get(n, hi) for n, hi in zip(names, upper)]),
-        velocity=task.velocity_limits(names),
+        goal_lower=np.array([settings.goal_lower.get(n, lo) for n, lo in zip(names, lower)]),
+        goal_upper=np.array([settings.goal_upper.get(n, hi) for n, hi in zip(names, upper)]),
+        velocity=robot.limit_array("velocity", names),
     )
 
 
-def settings_for(task, *, scheme: str = "mvn", period_s: float | None = None, qp_plugin: str = "daqp") -> TvgddSettings:
-    """TV-GDD settings from a task's ``[gesture]`` table (defaults where it has none)."""
+def settings_for(task: "Task", **overrides: object) -> TvgddSettings:
+    """TV-GDD settings from a task's ``[gesture]`` table and ``waist`` (defaults where it has
+    none), with ``overrides`` (fields of :class:`TvgddSettings`) on top."""
     g = task.spec.gesture
     base = TvgddSettings()
-    return TvgddSettings(
-        scheme=scheme,
-        period_s=period_s or task.spec.control_period_s,
-        feedback_gain=g.feedback_gain if g else base.feedback_gain,
-        nu=g.nu if g else base.nu,
-        t_sp_s=g.t_sp_s if g else base.t_sp_s,
-        c_tuning=g.c_tuning if g else base.c_tuning,
-        bound_feedforward=g.bound_feedforward if g else base.bound_feedforward,
-        qp_plugin=qp_plugin,
-    )
+    values: dict[str, object] = {"free_waist": task.spec.waist == "free"}
+    if g is not None:
+        values.update(feedback_gain=g.feedback_gain, nu=g.nu, t_sp_s=g.t_sp_s, c_tuning=g.c_tuning, bound_feedforward=g.bound_feedforward, goal_lower=g.goal_lower, goal_upper=g.goal_upper)
+    return with_overrides(base, {**values, **overrides})
 
 
 def _infeasible(problem: TvgddProblem, args, k: int, t: float) -> StageError:
@@ -314,18 +345,20 @@ def _infeasible(problem: TvgddProblem, args, k: int, t: float) -> StageError:
     else:
         at_bound = [names[i] for i in np.flatnonzero(np.isclose(lo, hi, atol=1e-9))]
         why = "no joint velocity within the bounds meets the hand-velocity equality (24)" + (f"; pinned joints: {', '.join(at_bound)}" if at_bound else "")
-    return StageError(f"TV-GDD step {k} (t = {t:.3f} s) is infeasible: {why}")
+    return StageError(f"TV-GDD step {k} (t = {t:.3f} s) is infeasible: {why}", stage="ik", sample=k, t_s=t)
 
 
-def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi"):
-    """Run TV-GDD along ``reference``: one QP per sample, Euler integration.
+def solve_tvgdd(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: TvgddSettings = TvgddSettings()) -> JointPath:
+    """Run TV-GDD along ``reference``: one QP per sample, Euler integration at the reference's period.
+
+    TV-GDD solves for the hands' positions only (the paper's eq 24); their orientation follows.
 
     Args:
-        task: the task (initial configuration, moved onto the path start if it is off it;
-            limits; gesture goals).
-        reference: the CartesianReference to follow.
-        settings: scheme, gains and the QP plugin.
-        backend: ``casadi`` (the conic in one CasADi Function per step) or ``lvi`` (eqs 26-27).
+        robot: the robot (its position and velocity limits bound the joints).
+        reference: the hands' reference; its period is the Euler step.
+        q0: the initial configuration: a home pose's name or joint -> value [rad] (others at 0);
+            moved onto the path start if it is off it.
+        settings: scheme, gains, gesture goals, the QP backend.
 
     Returns:
         A JointPath whose extras hold ``theta_lower``/``theta_upper`` (eq 19) and
@@ -334,13 +367,9 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
     Raises:
         StageError: an infeasible step (names the step, the time and the collapsed joints).
     """
-    from pipeline.ik.stack import hand_stack, stack_joint_path, stacked_reference, start_configuration
-
-    if backend not in ("casadi", "lvi"):
-        raise StageError(f"unknown QP backend '{backend}' (backends: casadi, lvi)")
-    stack = hand_stack(task)
-    bounds = joint_bounds(task, stack)
-    problem = build_problem(stack, bounds, settings, task.robot.urdf.kinematic_xml, task.robot.joint_names)
+    stack = reference_stack(robot, reference, q0, settings.free_waist)
+    bounds = joint_bounds(robot, stack, settings)
+    problem = build_problem(stack, bounds, settings, reference.period_s, robot.urdf.kinematic_xml, robot.joint_names)
     R, V = stacked_reference(stack, reference)
     N, n = len(reference), stack.n
     theta0 = start_configuration(stack, reference, bounds.lower, bounds.upper)
@@ -352,7 +381,7 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
         q[k] = theta
         args = (theta, float(reference.t[k]), R[k], V[k], theta0)
         start = time.perf_counter()
-        if backend == "casadi":
+        if settings.backend == "casadi":
             velocity, violation = step(problem.pack(*args))
         else:
             M, b, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(*args))
@@ -367,12 +396,12 @@ def solve_tvgdd(task, reference, settings: TvgddSettings, backend: str = "casadi
         if violation > FEASIBILITY_TOLERANCE:
             raise _infeasible(problem, args, k, float(reference.t[k]))
         qd[k] = velocity
-        theta = theta + settings.period_s * velocity  # Euler
-    return stack_joint_path("tvgdd", stack, reference, q, qd, solve_time, gesture_band(bounds, settings, reference.t, q))
+        theta = theta + reference.period_s * velocity  # Euler
+    return stack_joint_path("tvgdd", stack, reference, q, qd, solve_time, gesture_band(bounds, settings, reference.period_s, reference.t, q))
 
 
-def gesture_band(bounds: JointBounds, settings: TvgddSettings, t: np.ndarray, q: np.ndarray) -> dict[str, np.ndarray]:
+def gesture_band(bounds: JointBounds, settings: TvgddSettings, period_s: float, t: np.ndarray, q: np.ndarray) -> dict[str, np.ndarray]:
     """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path: t (N,) [s],
     q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``, ``zeta_upper`` [rad/s], each (N, n)."""
-    lower_t, upper_t, zeta_lo, zeta_hi = _bands(q, t[:, None], bounds, settings)
+    lower_t, upper_t, zeta_lo, zeta_hi = _bands(q, t[:, None], bounds, settings, period_s)
     return {"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi}

@@ -17,9 +17,9 @@ import casadi as cs
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.execute.world import load_pybullet_robot
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.robot import Chain, Robot
+from dualarm.execute.world import load_pybullet_robot
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.robot import Chain, Robot
 
 FK_TOLERANCE = 1e-9
 """Largest accepted FK difference against the double-precision reference [m] and [rad]."""

@@ -8,17 +8,18 @@ configurations at once.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 
 import casadi as cs
-from collections.abc import Mapping
-
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.model.robot import Chain
-from pipeline.model.urdf import JointSpec
+from dualarm.arrays import rigid_transforms
+from dualarm.model.poses import invert
+from dualarm.model.robot import Chain, Robot
+from dualarm.model.urdf import JointSpec
 
 
 def origin_matrix(joint: JointSpec) -> np.ndarray:
@@ -105,7 +106,11 @@ class ChainKinematics:
 
     @classmethod
     def of(cls, chain: Chain) -> "ChainKinematics":
-        """Build the Functions for ``chain``."""
+        """The Functions for ``chain`` (built once per chain and kept)."""
+        return _chain_kinematics(chain)
+
+    @classmethod
+    def _build(cls, chain: Chain) -> "ChainKinematics":
         frames = chain_frames(chain)
         fk = cs.Function(f"fk_{chain.tip}", [frames.q], [frames.tip], ["q"], ["T"])
         jac = cs.Function(f"jac_{chain.tip}", [frames.q], [geometric_jacobian(frames, chain)], ["q"], ["J"])
@@ -132,6 +137,44 @@ class ChainKinematics:
         n = self.chain.dof
         flat = np.asarray(self.jacobian.map(Q.shape[0])(Q.T))  # (6, N*n)
         return flat.reshape(6, Q.shape[0], n).transpose(1, 0, 2)
+
+
+@cache
+def _chain_kinematics(chain: Chain) -> ChainKinematics:
+    return ChainKinematics._build(chain)
+
+
+def _values(robot: Robot, chain: Chain, q: "Mapping[str, float] | str | None") -> np.ndarray:
+    configuration = robot.configuration(q)
+    return np.array([configuration[n] for n in chain.joint_names])
+
+
+def hand_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
+    """The pose of ``hand``'s frame in the robot's base frame (its root link) [m], 4x4, at
+    configuration ``q``: a home pose's name, a mapping joint -> value [rad] (others at 0), or None
+    (all at 0). Task poses are given in this frame."""
+    chain = robot.chain_between(robot.urdf.root, robot.hand_chain(hand).tip)
+    return ChainKinematics.of(chain).pose(_values(robot, chain, q))
+
+
+def arm_base_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
+    """The pose of the base frame of ``hand``'s arm chain (the torso, for the humanoid) in the
+    robot's base frame [m], 4x4, with the joints between them (a waist) at ``q`` (as :func:`hand_pose`)."""
+    chain = robot.chain_between(robot.urdf.root, robot.hand_chain(hand).base)
+    return ChainKinematics.of(chain).pose(_values(robot, chain, q)) if chain.dof else np.asarray(ChainKinematics.of(chain).pose(np.zeros(0)))
+
+
+def to_arm_frame(robot: Robot, hand: str, pose: np.ndarray, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
+    """A hand pose (4x4, or (N, 4, 4)) [m] given in the robot's base frame, expressed in the base
+    frame of ``hand``'s arm chain, the frame analytic arm solvers work in (``dualarm ik srs`` takes
+    poses in it); the waist at ``q`` (as :func:`hand_pose`).
+
+    Raises:
+        InvalidArgumentError: ``pose`` is not a rigid transform.
+    """
+    many = np.ndim(pose) == 3
+    T = rigid_transforms(pose, "pose", many=many)
+    return invert(arm_base_pose(robot, hand, q)) @ T
 
 
 def motion_matrix(joint: JointSpec, q: float | np.ndarray) -> np.ndarray:

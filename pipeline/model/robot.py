@@ -5,13 +5,15 @@ from __future__ import annotations
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from dataclasses import replace
 from pathlib import Path
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
-from pipeline.errors import RobotModelError
-from pipeline.model.urdf import JointSpec, UrdfModel, load_urdf
+from dualarm.errors import InvalidArgumentError, RobotModelError
+from dualarm.model.urdf import JointSpec, UrdfModel, load_urdf
 
 
 @dataclass(frozen=True)
@@ -127,6 +129,66 @@ class Robot:
             np.array([self.limits[n].upper for n in joint_names]),
         )
 
+    def limit_array(self, kind: str, joint_names: tuple[str, ...]) -> np.ndarray:
+        """The ``kind`` limits (``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3],
+        ``effort`` [N m]) of ``joint_names``, (n,)."""
+        return np.array([getattr(self.limits[n], kind) for n in joint_names], dtype=float)
+
+    def with_limits(self, **overrides: float | Mapping[str, float] | None) -> "Robot":
+        """The same robot with some limits replaced: ``kind=value`` for every joint, or
+        ``kind={joint: value}`` for some (kinds ``velocity``, ``acceleration``, ``jerk``; None
+        keeps the robot's). A task's ``[limits]`` table is applied so.
+
+        Raises:
+            InvalidArgumentError: an unknown kind or joint.
+        """
+        limits = dict(self.limits)
+        for kind, value in overrides.items():
+            if kind not in ("velocity", "acceleration", "jerk"):
+                raise InvalidArgumentError(kind, "not a limit that can be overridden (velocity, acceleration, jerk)")
+            if value is None:
+                continue
+            table = value if isinstance(value, Mapping) else dict.fromkeys(limits, value)
+            for name, v in table.items():
+                if name not in limits:
+                    raise InvalidArgumentError(f"{kind}.{name}", f"no such joint in robot '{self.name}'")
+                limits[name] = replace(limits[name], **{kind: float(v)})
+        return replace(self, limits=MappingProxyType(limits))
+
+    def configuration(self, q: "Mapping[str, float] | str | None" = None, name: str = "q") -> Mapping[str, float]:
+        """Every movable joint's value [rad]: a home pose's name, or a mapping joint -> value
+        (joints not named at 0), or None (all at 0).
+
+        Raises:
+            InvalidArgumentError: an unknown home or joint, a value that is not finite or is
+                outside the joint's position limits.
+        """
+        if q is None:
+            return MappingProxyType(dict.fromkeys(self.joint_names, 0.0))
+        if isinstance(q, str):
+            if q not in self.homes:
+                raise InvalidArgumentError(name, f"robot '{self.name}' has no home pose '{q}' (homes: {', '.join(self.homes) or 'none'})")
+            return self.homes[q]
+        if not isinstance(q, Mapping):
+            raise InvalidArgumentError(name, f"expected a home pose's name or a mapping joint name -> value, got {type(q).__name__}")
+        values = dict.fromkeys(self.joint_names, 0.0)
+        for joint, value in q.items():
+            if joint not in self.limits:
+                raise InvalidArgumentError(f"{name}.{joint}", f"no such joint in robot '{self.name}'")
+            value = _number(value, f"{name}.{joint}")
+            lim = self.limits[joint]
+            if not lim.lower <= value <= lim.upper:
+                raise InvalidArgumentError(f"{name}.{joint}", f"{value} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]")
+            values[joint] = value
+        return MappingProxyType(values)
+
+
+def _number(value: Any, name: str) -> float:
+    """``value`` as a finite float; InvalidArgumentError naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) or not np.isfinite(value):
+        raise InvalidArgumentError(name, f"expected a finite number, got {value!r}")
+    return float(value)
+
 
 def _limits_from_urdf(urdf: UrdfModel, acceleration: Mapping[str, float], jerk: Mapping[str, float]) -> dict[str, JointLimits]:
     return {
@@ -185,12 +247,15 @@ def _joint_values(data: object, where: str, joints: tuple[str, ...]) -> dict[str
 
 
 def load_robot(directory: str | Path) -> Robot:
-    """Load ``directory/robot.toml`` and the URDF it names.
+    """Load ``directory/robot.toml`` and the URDF it names; a bare name that is no directory here
+    (``humanoid``) is a shipped robot (see :mod:`dualarm.data`).
 
     Raises:
         RobotModelError: naming ``robot.toml:key`` for anything missing or malformed.
     """
-    directory = Path(directory)
+    from dualarm.data import find_robot
+
+    directory = find_robot(directory)
     toml_path = directory / "robot.toml"
     if not toml_path.is_file():
         raise RobotModelError(f"{directory}: no robot.toml (a robot directory holds robot.toml and its URDF)")

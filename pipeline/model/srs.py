@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import casadi as cs
 import numpy as np
 
-from pipeline.errors import NotSRSError
-from pipeline.model.kinematics import chain_frames
-from pipeline.model.robot import Chain
+from dualarm.errors import NotSRSError
+from dualarm.model.kinematics import chain_frames
+from dualarm.model.robot import Chain
 
 #: Largest distance between axes that "intersect" [m].
 INTERSECTION_TOLERANCE_M = 1e-9

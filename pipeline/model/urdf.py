@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from urdf_parser_py.urdf import URDF
 
-from pipeline.errors import RobotModelError
+from dualarm.errors import RobotModelError
 
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
 

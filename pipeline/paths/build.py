@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import UnreachablePoseError, TaskFileError
-from pipeline.model.poses import invert, pose_matrix
-from pipeline.paths.reference import CartesianReference, HandReference
-from pipeline.tasks.load import Task, arm_reach
-from pipeline.tasks.schema import HandMove
+from dualarm.errors import UnreachablePoseError, TaskFileError
+from dualarm.model.poses import invert, pose_matrix
+from dualarm.paths.reference import CartesianReference, HandReference
+from dualarm.tasks.load import Task, arm_reach
+from dualarm.tasks.schema import HandMove
 
 #: Largest gap between a repeated path's end and its start [m] and [rad].
 CLOSURE_TOLERANCE = 1e-9

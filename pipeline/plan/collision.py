@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import StageError
-from pipeline.execute.world import PyBulletRobot, add_environment, load_pybullet_robot, pb
-from pipeline.model.robot import Robot
+from dualarm.errors import StageError
+from dualarm.execute.world import PyBulletRobot, add_environment, load_pybullet_robot, pb
+from dualarm.model.robot import Robot
 
 #: Two links joined through links without geometry and closer than this at the zero
 #: configuration (before the margin) touch by construction and are not checked [m].

@@ -1,7 +1,7 @@
 """Goal configurations from Workspace Target Areas: HR_IK of MCIKRRT's line 03.
 
 Each sample draws one WTA per hand by weight and a pose in it (eqs 27-31, :mod:`.wta`), then
-solves both hands at once with DLS-SVD (eqs 12-20, :class:`~pipeline.ik.dls.DlsSolver`) over the
+solves both hands at once with DLS-SVD (eqs 12-20, :class:`~dualarm.ik.dls.DlsSolver`) over the
 planned joints: with the waist free, the 17-DOF model, both hands' rows stacked over the shared
 waist. The solve is seeded with the start configuration. A solution counts as a goal when it
 converged to the tolerances and is collision-free.
@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.ik.dls import DlsSettings, DlsSolver
-from pipeline.plan.collision import CollisionChecker
-from pipeline.plan.wta import Wta, sample_hand_pose
+from dualarm.ik.dls import DlsSettings, DlsSolver
+from dualarm.plan.collision import CollisionChecker
+from dualarm.plan.wta import Wta, sample_hand_pose
 
 #: The goal IK's tolerances: hand position [m] and rotation angle [rad].
 GOAL_TOLERANCE = (1e-6, 1e-6)

@@ -44,8 +44,8 @@ from typing import Protocol
 
 import numpy as np
 
-from pipeline.arrays import frozen
-from pipeline.errors import StageError
+from dualarm.arrays import frozen
+from dualarm.errors import StageError
 
 
 class Checker(Protocol):

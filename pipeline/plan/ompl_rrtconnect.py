@@ -22,9 +22,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pipeline.errors import StageError
-from pipeline.plan.mcikrrt import Checker, PlannerSettings, PlanResult, path_length
-from pipeline.quiet import c_output_silenced
+from dualarm.errors import StageError
+from dualarm.plan.mcikrrt import Checker, PlannerSettings, PlanResult, path_length
+from dualarm.quiet import c_output_silenced
 
 with c_output_silenced():
     from ompl import base as ob

@@ -13,15 +13,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pipeline.errors import StageError
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.poses import invert
-from pipeline.plan import PLANNERS
-from pipeline.plan.collision import CollisionChecker
-from pipeline.plan.goals import WtaGoalSampler
-from pipeline.plan.mcikrrt import PlannerSettings, PlanResult, mcikrrt
-from pipeline.plan.wta import Wta
-from pipeline.tasks import Task
+from dualarm.errors import StageError
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.poses import invert
+from dualarm.methods import PLANNERS
+from dualarm.plan.collision import CollisionChecker
+from dualarm.plan.goals import WtaGoalSampler
+from dualarm.plan.mcikrrt import PlannerSettings, PlanResult, mcikrrt
+from dualarm.plan.wta import Wta
+from dualarm.tasks import Task
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,10 @@ class PlanningSettings:
     margin_m: float = 0.01
     resolution_rad: float = 0.02
     ompl_goals: int = 4
+
+    def with_timeout(self, timeout_s: float | None) -> "PlanningSettings":
+        """The same settings with the planner's timeout [s] (unchanged for None)."""
+        return self if timeout_s is None else replace(self, planner=replace(self.planner, timeout_s=timeout_s))
 
 
 class PlanningProblem:
@@ -103,7 +107,7 @@ class PlanningProblem:
         if planner == "mcikrrt":
             result = mcikrrt(self.start, self.lower, self.upper, self.checker, sampler, np.random.default_rng([seed, 1]), settings.planner)
         elif planner == "ompl-rrtconnect":
-            from pipeline.plan.ompl_rrtconnect import ompl_rrtconnect  # imports OMPL only when used
+            from dualarm.plan.ompl_rrtconnect import ompl_rrtconnect  # imports OMPL only when used
 
             started = time.perf_counter()
             checks = self.checker.checks
@@ -132,3 +136,14 @@ class PlanningProblem:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+
+
+def plan_task(task: Task, planner: str, settings: PlanningSettings = PlanningSettings(), seed: int = 0) -> PlanResult:
+    """One planning query of ``task`` (its WTAs, scene and initial configuration) with ``planner``
+    (``mcikrrt`` or ``ompl-rrtconnect``) from ``seed``.
+
+    Raises:
+        StageError: the task has no WTA, its start is in collision, or the planner is unknown.
+    """
+    with PlanningProblem(task, settings) as problem:
+        return problem.solve(planner, seed)

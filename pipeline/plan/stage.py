@@ -1,7 +1,8 @@
-"""The plan stage: a task with Workspace Target Areas -> a collision-free joint path.
+"""The plan stage's product and metrics (the stage itself is :class:`dualarm.stages.PlanStage`): a
+task with Workspace Target Areas -> a collision-free joint path.
 
 The plan's waypoints are joined by straight joint-space segments, each collision-checked at the
-checker's resolution; the stage's :class:`~pipeline.ik.joint_path.JointPath` holds those checked
+checker's resolution; the stage's :class:`~dualarm.ik.joint_path.JointPath` holds those checked
 configurations in order (waypoints included), so the retime stage's spline through them stays
 within the resolution of the checked segments. Its sample times are nominal (one
 ``control_period_s`` apart; the retime stage gives the real timing), its ``hand_error_m`` is each
@@ -13,13 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.errors import StageError
-from pipeline.ik.joint_path import JointPath
-from pipeline.plan.mcikrrt import PlanResult
-from pipeline.plan.problem import PlanningProblem
-from pipeline.plan.wta import displacement
-from pipeline.record.recorder import Recorder
-from pipeline.tasks import Task
+from dualarm.ik.joint_path import JointPath
+from dualarm.plan.mcikrrt import PlanResult
+from dualarm.plan.problem import PlanningProblem
+from dualarm.plan.wta import displacement
 
 
 def plan_metrics(result: PlanResult) -> dict[str, float]:
@@ -61,19 +59,3 @@ def planned_joint_path(problem: PlanningProblem, result: PlanResult, method: str
         hands=hands,
         fixed=problem.fixed,
     )
-
-
-def plan_stage(task: Task, recorder: Recorder, problem: PlanningProblem, planner: str, seed: int, result: PlanResult | None = None) -> tuple[JointPath, dict[str, float]]:
-    """Plan (or take the already planned ``result``) and record the planned joint path on
-    ``/plan`` (the IK stage's topics and schema: limits, samples, the animated robot).
-
-    Raises:
-        StageError: the planner found no path (the message says why, naming the WTA no IK
-            sample reached when no goal was found).
-    """
-    result = result or problem.solve(planner, seed)
-    if not result.success:
-        raise StageError(f"plan ({planner}): {result.reason}")
-    path = planned_joint_path(problem, result, planner)
-    recorder.joint_path(path, task.velocity_limits(path.joint_names), {}, stage="plan")
-    return path, {**plan_metrics(result), "plan.wta_position_distance_max_m": float(path.hand_error_m[-1].max())}

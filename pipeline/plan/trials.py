@@ -13,15 +13,16 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from pipeline.plan.problem import PlanningProblem, PlanningSettings
-from pipeline.record.run_dir import write_whole
-from pipeline.tasks import load_task
+from dualarm.plan.problem import PlanningProblem, PlanningSettings
+from dualarm.record.run_dir import write_whole
+from dualarm.settings import as_record
+from dualarm.tasks import load_task
 
 #: Li & Liang's average planning time for their bowl grasp [s].
 PAPER_PLANNING_TIME_S = 4.21088
@@ -59,7 +60,8 @@ def run_trials(
     record the first successful plan through retime, smooth and execute under ``recordings``.
     ``progress`` is told the trials done and the total after each trial.
     """
-    from pipeline.run import run_task
+    from dualarm.run import build_stages, record_stages
+    from dualarm.stages import PlanStage
 
     task = load_task(task_file)
     rows, first = [], None
@@ -105,13 +107,15 @@ def run_trials(
         "collision_check_time_mean_s": check_time_s,
         "path_length_median_rad": float(ok.path_length_rad.median()) if len(ok) else None,
         "paper_planning_time_mean_s": PAPER_PLANNING_TIME_S,
-        "settings": asdict(settings),
+        "settings": as_record(settings),
         "failures": sorted(set(table.reason[~table.success])),
         "run": None,
     }
     if first is not None:
         trial_seed, result = first
-        run = run_task(task_file, planner=planner, planning=settings, planned=result, seed=trial_seed, out_dir=recordings, command=command)
+        stages = build_stages(task, planner, settings=settings, seed=trial_seed)
+        stages = tuple(replace(s, planned=result) if isinstance(s, PlanStage) else s for s in stages)
+        run = record_stages(task, stages, out_dir=recordings, seed=trial_seed, command=command).directory
         summary["run"] = str(run)
         summary["run_seed"] = trial_seed
     write_whole(out_dir / "plan_trials.csv", table.to_csv(index=False))

@@ -4,7 +4,7 @@ Motion Planning Algorithm*, eqs (21)-(31).
 A WTA is a reference frame ^w T_WTA in the world (here: the robot base frame), the hand's offset
 ^WTA T_e in it, and a 6x2 bound matrix ^WTA B_e on the displacement of the WTA frame as the hand
 would carry it: x, y, z [m] and roll, pitch, yaw [rad] (extrinsic x-y-z, R = Rz Ry Rx, the
-convention of :func:`pipeline.model.poses.pose_matrix`). The same construction is Berenson's Task
+convention of :func:`dualarm.model.poses.pose_matrix`). The same construction is Berenson's Task
 Space Region (the paper's ref. [10]), which also fixes the two garbled equations:
 
 - eq (23) as printed, T_g = T_WTA [^w T_WTA(Theta)]^-1, is read as the object frame the hand
@@ -28,9 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.arrays import frozen
-from pipeline.model.poses import invert, pose_matrix
-from pipeline.tasks.schema import WorkspaceTargetArea
+from dualarm.arrays import frozen
+from dualarm.model.poses import invert, pose_matrix
+from dualarm.tasks.schema import WorkspaceTargetArea
 
 
 def pose_vector(T: np.ndarray) -> np.ndarray:

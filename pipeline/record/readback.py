@@ -21,9 +21,9 @@ from google.protobuf.json_format import MessageToDict
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 
-from pipeline.errors import RecordingError
-from pipeline.record.recorder import STAGE_TOPICS
-from pipeline.record.run_dir import MANIFEST, METRICS
+from dualarm.errors import RecordingError
+from dualarm.record.recorder import STAGE_TOPICS
+from dualarm.record.run_dir import MANIFEST, METRICS
 
 _STAGE_OF_FAMILY = {family: stage for stage, family in STAGE_TOPICS.items()}
 

@@ -12,7 +12,7 @@ Rerun: the URDF per stage under ``/<stage>/<robot>``, reference paths and traces
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,16 +23,17 @@ import rerun.blueprint as rrb
 from foxglove.channels import FrameTransformsChannel, PosesInFrameChannel, SceneUpdateChannel
 from foxglove.messages import Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, Pose, PosesInFrame, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3
 
-from pipeline.ik.joint_path import JointPath
-from pipeline.model.kinematics import joint_transforms
-from pipeline.model.poses import pose_matrix, quaternion_xyzw
-from pipeline.model.robot import Robot
-from pipeline.paths.reference import CartesianReference
-from pipeline.record import schemas
-from pipeline.retime.trajectory import JointTrajectory
+from dualarm.ik.joint_path import JointPath
+from dualarm.model.kinematics import joint_transforms
+from dualarm.model.poses import pose_matrix, quaternion_xyzw
+from dualarm.model.robot import Robot
+from dualarm.paths.reference import CartesianReference
+from dualarm.record import schemas
+from dualarm.record.sink import NullSink
+from dualarm.retime.trajectory import JointTrajectory
 
 if TYPE_CHECKING:  # pybullet is imported only by runs that execute
-    from pipeline.execute.simulate import ExecutionLog
+    from dualarm.execute.simulate import ExecutionLog
 
 #: MCAP topic family of each stage.
 STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "execute": "/execute"}
@@ -55,17 +56,19 @@ def _quat(q) -> dict[str, float]:
     return {"x": float(q[0]), "y": float(q[1]), "z": float(q[2]), "w": float(q[3])}
 
 
-class Recorder:
-    """Writes one run's ``run.mcap`` and ``run.rrd`` into ``directory``.
+class Recorder(NullSink):
+    """The sink that writes one run's ``run.mcap`` and ``run.rrd`` into ``directory``.
 
     Args:
         directory: the (temporary) run directory.
         run_id: the run's id (also the Rerun recording id).
         robot: the robot, for /tf and the URDF.
         attachments: file name -> text, stored in the MCAP (task file, robot.toml, URDF).
+        on_begin: called with each stage's name as it begins.
     """
 
-    def __init__(self, directory: Path, run_id: str, robot: Robot, attachments: Mapping[str, str]) -> None:
+    def __init__(self, directory: Path, run_id: str, robot: Robot, attachments: Mapping[str, str], on_begin: Callable[[str], None] | None = None) -> None:
+        super().__init__(on_begin)
         self.directory = directory
         self.robot = robot
         self._context = foxglove.Context()
@@ -296,7 +299,7 @@ class Recorder:
         self._series("execute/contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
 
     def environment(self, objects) -> None:
-        """A task's fixed objects (:class:`~pipeline.tasks.schema.EnvironmentObject`, poses in the
+        """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the
         robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate) and in
         Rerun under ``/world/environment/<name>``."""
         entities = []
@@ -328,6 +331,7 @@ class Recorder:
         path once on ``/task/reference_path/<hand>`` (Foxglove PosesInFrame), and in Rerun the
         path as a 3D line strip and the position components as time series."""
         family = STAGE_TOPICS["path"]
+        frame = ref.frame_in(self.robot)
         for hand, hr in ref.hands.items():
             channel = self._json(f"{family}/reference/{hand}", schemas.HAND_REFERENCE)
             quats = quaternion_xyzw(hr.rotation)
@@ -338,7 +342,7 @@ class Recorder:
                         "t": float(ref.t[k]),
                         "rep": int(ref.rep[k]),
                         "segment": int(ref.segment[k]),
-                        "frame_id": ref.frame,
+                        "frame_id": frame,
                         "position": _vec(hr.position[k]),
                         "orientation": _quat(quats[k]),
                         "linear_velocity": _vec(hr.linear_velocity[k]),
@@ -349,7 +353,7 @@ class Recorder:
             PosesInFrameChannel(f"{family}/reference_path/{hand}", context=self._context).log(
                 PosesInFrame(
                     timestamp=Timestamp.from_epoch_secs(0.0),
-                    frame_id=ref.frame,
+                    frame_id=frame,
                     poses=[
                         Pose(position=Vector3(**_vec(p)), orientation=Quaternion(**_quat(q)))
                         for p, q in zip(hr.position[::stride], quats[::stride])
@@ -387,3 +391,4 @@ class Recorder:
         )
         self._rr.flush()
         self._rr.disconnect()
+        self.finish()

@@ -21,7 +21,7 @@ from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
 
-from pipeline.errors import RecordingError
+from dualarm.errors import RecordingError
 
 MANIFEST = "manifest.json"
 METRICS = "metrics.json"

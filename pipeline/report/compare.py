@@ -1,6 +1,6 @@
 """``dualarm compare RUN_A RUN_B``: where two runs differ, topic by topic and field by field.
 
-Both runs are read back into pandas (:mod:`pipeline.record.readback`) and each topic's rows are
+Both runs are read back into pandas (:mod:`dualarm.record.readback`) and each topic's rows are
 aligned on repetition and motion time (to the nanosecond of the MCAP log time), and, where a topic
 holds several rows at one instant (``/tf``: one per link), on their order within it. For every
 field the largest absolute difference over the aligned rows is reported, with where it happens
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.record.readback import RunData, read_run
+from dualarm.record.readback import RunData, read_run
 
 #: Fields that are wall-clock measurements: listed, never judged.
 WALL_CLOCK = re.compile(r"(solve|planning|check)_time")

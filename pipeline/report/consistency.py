@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import DualarmError
-from pipeline.record.readback import RunData, read_run
-from pipeline.record.run_dir import write_whole
-from pipeline.report import figures
+from dualarm.errors import DualarmError
+from dualarm.record.readback import RunData, read_run
+from dualarm.record.run_dir import write_whole
+from dualarm.report import figures
 
 #: Columns of consistency.csv after ``method``: DESIGN.md's ``ik.*`` metric names without the prefix.
 COLUMNS = (
@@ -75,8 +75,9 @@ def run_consistency(
     Raises:
         DualarmError: an unknown method or a malformed task, before anything runs.
     """
-    from pipeline.run import IK_METHODS, run_task
-    from pipeline.tasks import load_task
+    from dualarm.methods import IK_METHODS
+    from dualarm.run import record_run
+    from dualarm.tasks import load_task
 
     unknown = [m for m in methods if m not in IK_METHODS]
     if unknown or not methods:
@@ -90,7 +91,8 @@ def run_consistency(
             progress(f"{task.name}: {method} ...")
         before = set((runs_dir / task.name).glob("*")) if (runs_dir / task.name).exists() else set()
         try:
-            run = read_run(run_task(task_file, stages=CONSISTENCY_STAGES, ik=method, out_dir=runs_dir, seed=seed, repetitions=repetitions, command=["dualarm", "consistency", str(task_file), "--methods", method]))
+            recorded = record_run(task, method, stages=CONSISTENCY_STAGES, out_dir=runs_dir, seed=seed, command=["dualarm", "consistency", str(task_file), "--methods", method])
+            run = read_run(recorded.directory)
         except DualarmError as exc:
             failed = sorted(set((runs_dir / task.name).glob("*")) - before)
             rows.append({"method": method, "status": "failed", "error": str(exc), "run": str(failed[-1]) if failed else ""})

@@ -11,8 +11,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from pipeline.ik.gesture import position_bounds  # noqa: E402
-from pipeline.paths.reference import time_in_repetition  # noqa: E402
+from dualarm.ik.gesture import position_bounds  # noqa: E402
+from dualarm.paths.reference import time_in_repetition  # noqa: E402
 
 
 def _joints(df: pd.DataFrame, prefix: str) -> list[str]:

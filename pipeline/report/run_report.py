@@ -1,7 +1,7 @@
 """``dualarm report RUN_DIR...``: a markdown summary of each run and the figures its topics allow;
 for several runs also tables across them (CSV and markdown) and figures that set them side by side.
 
-Everything comes from the pandas read-back of the recordings (:mod:`pipeline.record.readback`), so
+Everything comes from the pandas read-back of the recordings (:mod:`dualarm.record.readback`), so
 runs copied from another machine report the same.
 """
 
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.record.readback import RunData, read_run
-from pipeline.report import figures
+from dualarm.record.readback import RunData, read_run
+from dualarm.report import figures
 
 
 def _outside(sample: pd.DataFrame, kind: str, lower_of, upper_of) -> pd.DataFrame:

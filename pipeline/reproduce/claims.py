@@ -1,7 +1,7 @@
 """The papers' claims, each set against ours as read back from a reproduction's recordings.
 
 Every "ours" figure here is computed from files the reproduction wrote: run directories through
-:func:`pipeline.record.readback.read_run` (their topics and ``metrics.json``), ``table_i.json``
+:func:`dualarm.record.readback.read_run` (their topics and ``metrics.json``), ``table_i.json``
 and ``plan_trials.csv``. The papers' figures are constants quoted from their text.
 """
 
@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.record.readback import RunData, read_run
-from pipeline.report.run_report import excursions, hand_errors, limit_excursions
-from pipeline.plan.trials import PAPER_PLANNING_TIME_S
-from pipeline.reproduce.experiments import TABLE_I_SOLUTION_1
+from dualarm.record.readback import RunData, read_run
+from dualarm.report.run_report import excursions, hand_errors, limit_excursions
+from dualarm.plan.trials import PAPER_PLANNING_TIME_S
+from dualarm.reproduce.experiments import TABLE_I_SOLUTION_1
 
 #: Numbers below this are taken as zero (rounding of the recorded doubles) [rad, rad/s, m].
 ZERO = 1e-9
@@ -38,7 +38,7 @@ class Claim:
         ours: ours, with the unit.
         comparison: ours against theirs (a ratio, a difference), or what decides the verdict.
         agrees: whether ours bears the claim out (None where there is nothing to judge).
-        part: the reproduction part that measured it (:data:`pipeline.reproduce.experiments.PARTS`).
+        part: the reproduction part that measured it (:data:`dualarm.reproduce.experiments.PARTS`).
     """
 
     paper: str
@@ -155,7 +155,7 @@ def table_i_claims(table: Mapping) -> list[Claim]:
                 unmatched.append(f"solution {j + 1} θ{i + 1}")
     claims.append(Claim(
         "MC-Inverse", "Table I", "the joint values of the 4 solutions", "28 values", f"{equal} of 28 equal to 5 decimals; {len(signed)} equal but for the sign ({', '.join(signed)}); {len(unmatched)} others",
-        "the sign differences break the table's own ZYZ pattern (θ1 + π, θ7 + π between paired solutions), see ../shared/seeds/README.md", not unmatched, "table-i",
+        "the sign differences break the table's own ZYZ pattern (θ1 + π, θ7 + π between paired solutions), see docs/papers.md", not unmatched, "table-i",
     ))
     return claims
 

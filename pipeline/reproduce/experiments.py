@@ -13,10 +13,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-#: The repository's task files.
-TASKS = Path(__file__).resolve().parents[2] / "tasks"
+from dualarm.data import robots_dir, tasks_dir
+
+#: The shipped task files (package data, see :mod:`dualarm.data`).
+TASKS = tasks_dir()
 #: The robot every task uses.
-ROBOT = Path(__file__).resolve().parents[2] / "robots" / "humanoid"
+ROBOT = robots_dir() / "humanoid"
 
 Progress = Callable[[float, str], None]
 
@@ -35,12 +37,12 @@ def _relative(path: Path, out: Path) -> str:
 
 
 def _run(task: str, ik: str, stages: tuple[str, ...] | None, out: Path, progress: Progress) -> dict[str, object]:
-    from pipeline.run import resolve_stages, run_task
+    from dualarm.run import record_run, resolve_stages
 
     chosen = resolve_stages(stages, ik)
     command = ["dualarm", "run", f"tasks/{task}.toml", "--ik", ik, *(["--stages", ",".join(stages)] if stages else [])]
-    run = run_task(TASKS / f"{task}.toml", stages=chosen, ik=ik, out_dir=out / "runs", command=command, progress=lambda stage: progress(chosen.index(stage) / len(chosen) if stage in chosen else 0.95, stage))
-    return {"runs": [_relative(run, out)]}
+    run = record_run(TASKS / f"{task}.toml", ik, stages=chosen, out_dir=out / "runs", command=command, progress=lambda stage: progress(chosen.index(stage) / len(chosen) if stage in chosen else 0.95, stage))
+    return {"runs": [_relative(run.directory, out)]}
 
 
 def ball_game_tvgdd(out: Path, progress: Progress) -> dict[str, object]:
@@ -60,9 +62,9 @@ def table_i_pose() -> tuple[list[float], float]:
     import numpy as np
     from scipy.spatial.transform import Rotation
 
-    from pipeline.model.kinematics import ChainKinematics
-    from pipeline.model.robot import load_robot
-    from pipeline.model.srs import SrsKinematics
+    from dualarm.model.kinematics import ChainKinematics
+    from dualarm.model.robot import load_robot
+    from dualarm.model.srs import SrsKinematics
 
     chain = load_robot(ROBOT).hand_chain("left")
     q = np.array([TABLE_I_SOLUTION_1])
@@ -74,8 +76,8 @@ def table_i_pose() -> tuple[list[float], float]:
 def table_i(out: Path, progress: Progress) -> dict[str, object]:
     """MC-Inverse Table I: the 8 candidates of one pose at one arm angle, as ``table_i.json`` (the
     JSON of ``dualarm ik srs --json``)."""
-    from pipeline.ik.mc_inverse import candidate_table
-    from pipeline.model.robot import load_robot
+    from dualarm.ik.mc_inverse import candidate_table
+    from dualarm.model.robot import load_robot
 
     pose, psi = table_i_pose()
     data = candidate_table(load_robot(ROBOT).hand_chain("left"), pose, psi)
@@ -85,7 +87,7 @@ def table_i(out: Path, progress: Progress) -> dict[str, object]:
 
 
 def _consistency(task: str, methods: tuple[str, ...], out: Path, progress: Progress) -> dict[str, object]:
-    from pipeline.report.consistency import run_consistency
+    from dualarm.report.consistency import run_consistency
 
     done = []
 
@@ -99,14 +101,14 @@ def _consistency(task: str, methods: tuple[str, ...], out: Path, progress: Progr
 
 def triangle_consistency(out: Path, progress: Progress) -> dict[str, object]:
     """Every IK method drawing the triangle 5 times (MC-Inverse V.B, Figs 9-10)."""
-    from pipeline.report.consistency import DEFAULT_METHODS
+    from dualarm.report.consistency import DEFAULT_METHODS
 
     return _consistency("triangle", DEFAULT_METHODS, out, progress)
 
 
 def circle_consistency(out: Path, progress: Progress) -> dict[str, object]:
     """Every IK method drawing the circle 5 times (MC-Inverse V.C, Figs 12-13)."""
-    from pipeline.report.consistency import DEFAULT_METHODS
+    from dualarm.report.consistency import DEFAULT_METHODS
 
     return _consistency("circle", DEFAULT_METHODS, out, progress)
 
@@ -122,7 +124,7 @@ def carry_box(out: Path, progress: Progress) -> dict[str, object]:
 def bowl_grasp(out: Path, progress: Progress) -> dict[str, object]:
     """MCIKRRT planning the bowl grasp :data:`PLAN_TRIALS` times; the first plan retimed,
     smoothed, executed and recorded (Li & Liang, section 5)."""
-    from pipeline.plan.trials import run_trials
+    from dualarm.plan.trials import run_trials
 
     result = run_trials(
         TASKS / "bowl_grasp.toml", "mcikrrt", PLAN_TRIALS, 0, out / "plan" / "bowl_grasp-mcikrrt", recordings=out / "runs",

@@ -10,14 +10,14 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.errors import RecordingError
-from pipeline.record.readback import read_run
-from pipeline.record.run_dir import write_whole
-from pipeline.report import figures
-from pipeline.report.run_report import write_report
-from pipeline.reproduce.claims import PAPER_TABLE_I, Claim, all_claims
-from pipeline.reproduce.experiments import BY_NAME, PARTS
-from pipeline.reproduce.runner import PARTS_FILE
+from dualarm.errors import RecordingError
+from dualarm.record.readback import read_run
+from dualarm.record.run_dir import write_whole
+from dualarm.report import figures
+from dualarm.report.run_report import write_report
+from dualarm.reproduce.claims import PAPER_TABLE_I, Claim, all_claims
+from dualarm.reproduce.experiments import BY_NAME, PARTS
+from dualarm.reproduce.runner import PARTS_FILE
 
 #: The papers, in the order of the report.
 PAPERS = {

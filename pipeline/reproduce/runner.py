@@ -1,8 +1,8 @@
 """Running the parts of a reproduction, ``jobs`` at a time, into one output directory.
 
-The directory gets each part's files (see :mod:`pipeline.reproduce.experiments`) and
+The directory gets each part's files (see :mod:`dualarm.reproduce.experiments`) and
 ``parts.json``: every part's status, error, time and outputs. The report is written from those
-files afterwards (:mod:`pipeline.reproduce.report`). A directory that already holds a reproduction
+files afterwards (:mod:`dualarm.reproduce.report`). A directory that already holds a reproduction
 is emptied first; any other non-empty directory is refused.
 """
 
@@ -19,9 +19,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from queue import Empty
 
-from pipeline.errors import DualarmError
-from pipeline.record.run_dir import write_whole
-from pipeline.reproduce.experiments import BY_NAME, PARTS
+from dualarm.errors import DualarmError
+from dualarm.record.run_dir import write_whole
+from dualarm.reproduce.experiments import BY_NAME, PARTS
 
 #: The index of a reproduction directory.
 PARTS_FILE = "parts.json"

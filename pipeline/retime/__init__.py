@@ -1,1 +1,16 @@
-"""The retime stage: a joint path -> a timed joint trajectory within velocity and acceleration limits (TOPP-RA)."""
+"""The retime stage: a joint path -> a timed joint trajectory within velocity and acceleration limits (TOPP-RA).
+
+Modules:
+
+- :mod:`dualarm.retime.retiming`: :func:`retime_path`, :class:`Retimed`, :func:`~dualarm.retime.retiming.plan`
+  and the checks of the limits and the path.
+- :mod:`dualarm.retime.topp`: the time-optimal timing by TOPP-RA (chord-length path, gridpoints, refinement).
+- :mod:`dualarm.retime.timing`: :class:`~dualarm.retime.timing.Timing`, the continuous trajectory before
+  sampling, its sampling, and the task's own timing (``keep_timing``).
+- :mod:`dualarm.retime.trajectory`: :class:`JointTrajectory`, the sampled trajectory.
+"""
+
+from dualarm.retime.retiming import Retimed, retime_path
+from dualarm.retime.trajectory import JointTrajectory
+
+__all__ = ["JointTrajectory", "Retimed", "retime_path"]

@@ -1,27 +1,29 @@
 """Loading and validating a task file against its robot.
 
 Errors name the file and key at fault (``tasks/triangle.toml:moves[2].left.to: ...``) and are
-raised as :class:`~pipeline.errors.TaskFileError`; the CLI prints them as one line.
+raised as :class:`~dualarm.errors.TaskFileError`; the CLI prints them as one line.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
 
-from pipeline.errors import RobotModelError, TaskFileError, UnreachablePoseError
-from pipeline.model.kinematics import ChainKinematics, origin_matrix
-from pipeline.model.poses import pose_matrix
-from pipeline.model.robot import Robot, load_robot
-from pipeline.model.srs import SrsGeometry, srs_geometry
-from pipeline.tasks.schema import TaskSpec
+from dualarm.errors import RobotModelError, TaskFileError, UnreachablePoseError
+from dualarm.model.kinematics import ChainKinematics, hand_pose, origin_matrix
+from dualarm.model.poses import pose_matrix
+from dualarm.model.robot import Chain, Robot, load_robot
+from dualarm.model.srs import SrsGeometry, srs_geometry
+from dualarm.tasks.schema import TaskSpec
 
 #: Margin kept from the fully stretched or fully folded arm when checking reach [m].
 REACH_MARGIN_M = 1e-3
@@ -34,15 +36,15 @@ class Task:
     """A validated task.
 
     Attributes:
-        spec: the parsed file.
-        file: where it was read from.
-        text: the file's exact text (recorded as an attachment).
-        robot: the robot it names.
+        spec: the parsed file (or dict).
+        file: where it was read from; None for a task made from a dict.
+        text: the source's exact text (TOML for a file, JSON for a dict; recorded as an attachment).
+        robot: the robot it names, with the task's ``[limits]`` applied.
         initial_q: the initial configuration, every movable joint of the robot [rad].
     """
 
     spec: TaskSpec
-    file: Path
+    file: Path | None
     text: str
     robot: Robot
     initial_q: Mapping[str, float]
@@ -54,55 +56,44 @@ class Task:
 
     @property
     def sha256(self) -> str:
-        """SHA-256 of the file's text."""
+        """SHA-256 of the source's text."""
         return hashlib.sha256(self.text.encode()).hexdigest()
 
-    def where(self, key: str) -> str:
-        """``file:key`` for error messages."""
-        return f"{self.file}:{key}"
+    @property
+    def source_name(self) -> str:
+        """The file name of the task's source (``<name>.json`` for a task made from a dict)."""
+        return self.file.name if self.file is not None else f"{self.name}.json"
 
-    def hand_chain_from_root(self, hand: str):
+    def where(self, key: str) -> str:
+        """``file:key`` for error messages (``<dict>:key`` for a task made from a dict)."""
+        return f"{self.file if self.file is not None else '<dict>'}:{key}"
+
+    def hand_chain_from_root(self, hand: str) -> Chain:
         """The chain from the robot's root link to ``hand``'s tip (waist included)."""
         return self.robot.chain_between(self.robot.urdf.root, self.robot.hand_chain(hand).tip)
 
     def initial_hand_pose(self, hand: str) -> np.ndarray:
         """The pose of ``hand`` at the initial configuration, in the robot base frame (4x4) [m]."""
-        chain = self.hand_chain_from_root(hand)
-        q = [self.initial_q[n] for n in chain.joint_names]
-        return ChainKinematics.of(chain).pose(np.array(q))
+        return hand_pose(self.robot, hand, self.initial_q)
 
     def velocity_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
         """Velocity limits of ``joint_names`` [rad/s]: the task's ``limits.velocity`` where it sets
         one, the robot's otherwise."""
-        return self._limits("velocity", joint_names)
+        return self.robot.limit_array("velocity", joint_names)
 
     def acceleration_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
         """Acceleration limits of ``joint_names`` [rad/s^2]: the task's ``limits.acceleration``
         where it sets one, the robot's otherwise."""
-        return self._limits("acceleration", joint_names)
+        return self.robot.limit_array("acceleration", joint_names)
 
     def jerk_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
         """The robot's jerk limits of ``joint_names`` [rad/s^3]."""
-        return np.array([self.robot.limits[n].jerk for n in joint_names])
-
-    def _limits(self, kind: str, joint_names: tuple[str, ...]) -> np.ndarray:
-        override = getattr(self.spec.limits, kind)
-        robot = [getattr(self.robot.limits[n], kind) for n in joint_names]
-        if isinstance(override, dict):
-            return np.array([override.get(n, r) for n, r in zip(joint_names, robot)])
-        return np.array([override or r for r in robot])
+        return self.robot.limit_array("jerk", joint_names)
 
     def hand_poses(self, joint_names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> dict[str, np.ndarray]:
         """Each driven hand's pose (N, 4, 4) [m] at configurations ``q`` (N, n) [rad] of
         ``joint_names``, the other joints at ``fixed`` or else at their initial values."""
-        q = np.asarray(q, dtype=float).reshape(-1, len(joint_names))
-        columns = {n: q[:, i] for i, n in enumerate(joint_names)}
-        poses = {}
-        for hand in self.spec.hands:
-            chain = self.hand_chain_from_root(hand)
-            Q = np.stack([columns[n] if n in columns else np.full(len(q), fixed.get(n, self.initial_q[n])) for n in chain.joint_names], axis=1)
-            poses[hand] = ChainKinematics.of(chain).poses(Q)
-        return poses
+        return hand_poses(self.robot, self.spec.hands, joint_names, q, {**self.initial_q, **fixed})
 
     def waypoint_pose(self, name: str) -> np.ndarray:
         """The 4x4 pose of waypoint ``name`` [m]."""
@@ -113,6 +104,19 @@ class Task:
         """The start pose of a driven hand (``initial`` or a waypoint) [m]."""
         start = getattr(self.spec.start, hand)
         return self.initial_hand_pose(hand) if start == "initial" else self.waypoint_pose(start)
+
+
+def hand_poses(robot: Robot, hands: Sequence[str], joint_names: Sequence[str], q: np.ndarray, others: Mapping[str, float]) -> dict[str, np.ndarray]:
+    """Each of ``hands``' pose (N, 4, 4) [m] in the robot base frame at configurations ``q`` (N, n)
+    [rad] of ``joint_names``, every other joint at its value in ``others`` [rad]."""
+    q = np.asarray(q, dtype=float).reshape(-1, len(joint_names))
+    columns = {n: q[:, i] for i, n in enumerate(joint_names)}
+    poses = {}
+    for hand in hands:
+        chain = robot.chain_between(robot.urdf.root, robot.hand_chain(hand).tip)
+        Q = np.stack([columns[n] if n in columns else np.full(len(q), others[n]) for n in chain.joint_names], axis=1)
+        poses[hand] = ChainKinematics.of(chain).poses(Q)
+    return poses
 
 
 def _key_path(error: dict, data: object) -> str:
@@ -131,7 +135,7 @@ def _key_path(error: dict, data: object) -> str:
     return out or "(top level)"
 
 
-def _validation_message(file: Path, exc: ValidationError, data: object) -> str:
+def _validation_message(file: object, exc: ValidationError, data: object) -> str:
     errors = [(_key_path(e, data), e) for e in exc.errors()]
     key, first = max(errors, key=lambda ke: ke[0].count(".") + ke[0].count("["))  # the most specific
     alternatives = [e["msg"] for k, e in errors if k == key]
@@ -147,7 +151,7 @@ def _validation_message(file: Path, exc: ValidationError, data: object) -> str:
     return f"{file}:{key}: {message}" + (f" (and {others} more problems)" if others else "")
 
 
-def _parse(file: Path) -> tuple[str, TaskSpec]:
+def _read(file: Path) -> tuple[str, dict]:
     try:
         text = file.read_text()
     except FileNotFoundError:
@@ -155,13 +159,16 @@ def _parse(file: Path) -> tuple[str, TaskSpec]:
     except (IsADirectoryError, UnicodeDecodeError) as exc:
         raise TaskFileError(f"{file}: cannot read a task file ({exc.__class__.__name__})") from None
     try:
-        data = tomllib.loads(text)
+        return text, tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise TaskFileError(f"{file}: not valid TOML: {exc}") from None
+
+
+def _validate(where: str, data: object) -> TaskSpec:
     try:
-        return text, TaskSpec.model_validate(data)
+        return TaskSpec.model_validate(data)
     except ValidationError as exc:
-        raise TaskFileError(_validation_message(file, exc, data)) from None
+        raise TaskFileError(_validation_message(where, exc, data)) from None
 
 
 def _check_joint_names(location: str, names, robot: Robot) -> None:
@@ -171,8 +178,8 @@ def _check_joint_names(location: str, names, robot: Robot) -> None:
             raise TaskFileError(f"{location}.{name}: no such joint in robot '{robot.name}'")
 
 
-def _initial_configuration(file: Path, spec: TaskSpec, robot: Robot) -> dict[str, float]:
-    where = f"{file}:initial"
+def _initial_configuration(source: str, spec: TaskSpec, robot: Robot) -> dict[str, float]:
+    where = f"{source}:initial"
     if isinstance(spec.initial, str):
         if spec.initial not in robot.homes:
             raise TaskFileError(f"{where}: robot '{robot.name}' has no home pose '{spec.initial}' (homes: {', '.join(robot.homes)})")
@@ -216,10 +223,6 @@ def _check_structure(task: Task) -> None:
                 raise TaskFileError(f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{hand_move.to}' (waypoints: {', '.join(spec.waypoints) or 'none'})")
     if total > MAX_SAMPLES:
         raise TaskFileError(f"{where('control_period_s')}: {spec.control_period_s} s makes {total:.3g} samples (at most {MAX_SAMPLES:,}); use a longer period")
-    for key in ("velocity", "acceleration"):
-        value = getattr(spec.limits, key)
-        if isinstance(value, dict):
-            _check_joint_names(where(f"limits.{key}"), value, robot)
     if spec.gesture is not None:
         _check_joint_names(where("gesture.goal_lower"), spec.gesture.goal_lower, robot)
         _check_joint_names(where("gesture.goal_upper"), spec.gesture.goal_upper, robot)
@@ -324,7 +327,7 @@ def _check_environment(task: Task) -> None:
     by PyBullet's closest points (imported only for tasks with objects)."""
     if not task.spec.environment:
         return
-    from pipeline.execute.world import add_environment, load_pybullet_robot, pb
+    from dualarm.execute.world import add_environment, load_pybullet_robot, pb
 
     with load_pybullet_robot(task.robot.urdf.path) as sim:
         client = sim.client
@@ -345,22 +348,65 @@ def _check_environment(task: Task) -> None:
 def load_task(path: str | Path, repetitions: int | None = None) -> Task:
     """Read, validate and resolve a task file; ``repetitions`` overrides the file's.
 
+    A ``path`` that does not exist but is a bare name (``triangle``) is a shipped task, and the
+    file's ``robot`` a directory relative to it or a shipped robot's name (see :mod:`dualarm.data`).
+
     Raises:
         TaskFileError: with ``file:key`` and the cause, for any malformed or impossible content,
             or a ``repetitions`` override below 1.
     """
-    file = Path(path)
-    text, spec = _parse(file)
+    from dualarm.data import find_task
+
+    file = find_task(path)
+    text, data = _read(file)
+    return _resolve(_validate(str(file), data), file, text, file.parent, None, repetitions)
+
+
+def task_from_dict(data: Mapping[str, Any] | None = None, /, *, robot: Robot | str | Path | None = None, base_dir: str | Path = ".", **keys: Any) -> Task:
+    """A task from a plain dict and/or keyword arguments, with the keys and checks of a task file
+    (see ``tasks/README.md``): ``task_from_dict(name="circle", control_period_s=0.01, ...)``.
+
+    Args:
+        data: the task's keys, as a TOML file would give them (optional).
+        robot: a :class:`~dualarm.model.robot.Robot`, or a robot directory or shipped robot's name;
+            default the ``robot`` key.
+        base_dir: the directory a relative ``robot`` key is resolved against.
+        **keys: more keys (they win over ``data``'s).
+
+    Raises:
+        TaskFileError: ``<dict>:key`` and the cause, as for a file.
+    """
+    merged = {**(data or {}), **keys}
+    given = robot if isinstance(robot, Robot) else None
+    if given is not None:
+        merged["robot"] = given.name
+    elif robot is not None:
+        merged["robot"] = str(robot)
+    text = json.dumps(merged, indent=2, sort_keys=True, default=str)
+    return _resolve(_validate("<dict>", merged), None, text, Path(base_dir), given, None)
+
+
+def _resolve(spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Robot | None, repetitions: int | None) -> Task:
+    """The validated task: the robot loaded (unless given) with the task's limits, the initial
+    configuration resolved, and every check run."""
+    source = str(file) if file is not None else "<dict>"
     if repetitions is not None:
         if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
-            raise TaskFileError(f"{file}:repetitions: the override must be a positive integer, not {repetitions!r}")
+            raise TaskFileError(f"{source}:repetitions: the override must be a positive integer, not {repetitions!r}")
         spec = spec.model_copy(update={"repetitions": repetitions})
-    robot_dir = (file.parent / spec.robot).resolve()
-    try:
-        robot = load_robot(robot_dir)
-    except RobotModelError as exc:
-        raise TaskFileError(f"{file}:robot: {exc}") from None
-    initial = _initial_configuration(file, spec, robot)
+    if robot is None:
+        from dualarm.data import find_robot
+
+        try:
+            robot = load_robot(find_robot(spec.robot, base).resolve())
+        except RobotModelError as exc:
+            raise TaskFileError(f"{source}:robot: {exc}") from None
+    for kind in ("velocity", "acceleration"):
+        value = getattr(spec.limits, kind)
+        if isinstance(value, dict):
+            _check_joint_names(f"{source}:limits.{kind}", value, robot)
+    robot = robot.with_limits(velocity=spec.limits.velocity, acceleration=spec.limits.acceleration)
+    initial = _initial_configuration(source, spec, robot)
     task = Task(spec=spec, file=file, text=text, robot=robot, initial_q=MappingProxyType(initial))
     _check_structure(task)
     _check_reach(task)

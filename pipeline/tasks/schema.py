@@ -261,8 +261,8 @@ class TaskSpec(_Model):
     """A whole task file."""
 
     name: Annotated[str, Field(pattern=r"^[A-Za-z0-9_\-]+$")]
-    title: str
-    source: str
+    title: str = ""
+    source: str = ""
     robot: str
     notes: str = ""
     control_period_s: PositiveFloat

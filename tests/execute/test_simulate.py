@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-from pipeline.errors import StageError
-from pipeline.execute.simulate import ExecutionSettings, execute
-from pipeline.ik.mc_path import solve_mc_inverse
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.paths import build_reference
-from pipeline.retime.trajectory import JointTrajectory
-from pipeline.tasks import load_task
-from pipeline.tasks.schema import EnvironmentObject
+from dualarm.errors import StageError
+from dualarm.execute.simulate import ExecutionSettings, execute_trajectory
+from dualarm.ik.mc_path import settings_for, solve_mc_inverse
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.paths import build_reference
+from dualarm.retime.trajectory import JointTrajectory
+from dualarm.tasks import load_task
+from dualarm.tasks.schema import EnvironmentObject
 from tests.conftest import TASKS
 
 
@@ -19,7 +19,7 @@ from tests.conftest import TASKS
 def triangle():
     """Two seconds of MC-Inverse's triangle joints as a clamped cubic spline at 1 ms."""
     task = load_task(TASKS / "triangle.toml", repetitions=1)
-    path = solve_mc_inverse(task, build_reference(task))
+    path = solve_mc_inverse(task.robot, build_reference(task), task.initial_q, settings_for(task))
     spline = CubicSpline(path.t, path.q, bc_type="clamped")
     t = np.arange(0, 2.0 + 1e-9, 0.001)
     return task, JointTrajectory("smooth", path.joint_names, t, spline(t), spline(t, 1), spline(t, 2), np.zeros(len(t), int), path.fixed)
@@ -29,7 +29,7 @@ def test_the_hand_tracks_within_2_mm_by_independent_fk(triangle):
     """PyBullet's measured hand frame against the project's FK of the commanded joints at the
     same time: within 2 mm (the issue's target); no contact on the way."""
     task, trajectory = triangle
-    log = execute(trajectory, task.robot, ("left",))
+    log = execute_trajectory(trajectory, task.robot, ("left",))
     chain = task.hand_chain_from_root("left")
     columns = {n: i for i, n in enumerate(trajectory.joint_names)}
     Q = np.array([[log.q_command[k, columns[n]] if n in columns else trajectory.fixed[n] for n in chain.joint_names] for k in range(len(log.t))])
@@ -47,12 +47,12 @@ def test_a_box_in_the_way_is_a_named_environment_contact(triangle):
     q = {**trajectory.fixed, **dict(zip(trajectory.joint_names, trajectory.q[k]))}
     hand = ChainKinematics.of(chain).pose(np.array([q[n] for n in chain.joint_names]))
     box = EnvironmentObject(name="obstacle", shape="box", pose={"position": tuple(hand[:3, 3]), "rpy": (0.0, 0.0, 0.0)}, size_m=(0.05, 0.05, 0.05))
-    log = execute(trajectory, task.robot, ("left",), environment=(box,))
+    log = execute_trajectory(trajectory, task.robot, ("left",), environment=(box,))
     assert log.environment_contacts.sum() > 0 and log.expected_contacts.sum() == 0
     touched = [pair for pair in log.contact_pairs if "obstacle" in pair]
     assert touched and all(log.contact_pairs[pair] > 0 for pair in touched)
     # named as expected (in the other order), the same contacts are counted apart
-    expected = execute(trajectory, task.robot, ("left",), environment=(box,), expected_contacts=[pair[::-1] for pair in touched])
+    expected = execute_trajectory(trajectory, task.robot, ("left",), environment=(box,), expected_contacts=[pair[::-1] for pair in touched])
     assert expected.environment_contacts.sum() == 0
     assert expected.expected_contacts.sum() == log.environment_contacts.sum()
 
@@ -62,10 +62,10 @@ def test_gui_without_a_display_is_one_clear_error(triangle, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     with pytest.raises(StageError, match="needs a display"):
-        execute(trajectory, task.robot, ("left",), settings=ExecutionSettings(gui=True))
+        execute_trajectory(trajectory, task.robot, ("left",), settings=ExecutionSettings(gui=True))
 
 
 def test_a_bad_step_is_refused(triangle):
     task, trajectory = triangle
     with pytest.raises(StageError, match="physics step must be positive"):
-        execute(trajectory, task.robot, ("left",), settings=ExecutionSettings(step_s=0.0))
+        execute_trajectory(trajectory, task.robot, ("left",), settings=ExecutionSettings(step_s=0.0))

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import RobotModelError, StageError
-from pipeline.execute.world import load_pybullet_robot
-from pipeline.ik.dls import DlsSettings, DlsSolver
-from pipeline.model.check import JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, finite_difference_jacobians, pose_errors
-from pipeline.model.kinematics import ChainKinematics
+from dualarm.errors import RobotModelError, StageError
+from dualarm.execute.world import load_pybullet_robot
+from dualarm.ik.dls import DlsSettings, DlsSolver
+from dualarm.model.check import JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, finite_difference_jacobians, pose_errors
+from dualarm.model.kinematics import ChainKinematics
 
 #: The three chain sets of the issue: one arm, waist + arm, both arms on the shared waist.
 CHAIN_SETS = {

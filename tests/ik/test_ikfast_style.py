@@ -4,11 +4,11 @@ kinematics (adam-robotics), reachability per free value, nearest-solution select
 import numpy as np
 import pytest
 
-from pipeline.ik.ikfast_style import IkfastStyle
-from pipeline.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID
-from pipeline.model.check import adam_poses, pose_errors, random_configurations
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.robot import robot_from_urdf
+from dualarm.ik.ikfast_style import IkfastStyle
+from dualarm.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID
+from dualarm.model.check import adam_poses, pose_errors, random_configurations
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.robot import robot_from_urdf
 
 #: Largest joint difference [rad] between IK(FK(q)) and q. The KUKA URDF writes pi/2 as
 #: 1.57079632679, so its axes meet and are perpendicular only to ~5e-12; near a wrist singularity

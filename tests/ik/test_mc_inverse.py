@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from pipeline.errors import NotSRSError
-from pipeline.execute.world import load_pybullet_robot
-from pipeline.ik.ikfast_style import IkfastStyle
-from pipeline.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID, McInverse
-from pipeline.model.check import pose_errors
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.robot import Chain, robot_from_urdf
-from pipeline.model.urdf import JointSpec
+from dualarm.errors import NotSRSError
+from dualarm.execute.world import load_pybullet_robot
+from dualarm.ik.ikfast_style import IkfastStyle
+from dualarm.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID, McInverse
+from dualarm.model.check import pose_errors
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.robot import Chain, robot_from_urdf
+from dualarm.model.urdf import JointSpec
 
 
 def _roundtrip(mc: McInverse, samples: int, seed: int):

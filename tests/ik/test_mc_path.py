@@ -5,14 +5,14 @@ import re
 import numpy as np
 import pytest
 
-from pipeline.errors import StageError
-from pipeline.ik.mc_inverse import McInverse
-from pipeline.ik.mc_path import solve_mc_inverse
-from pipeline.model.check import adam_poses, pose_errors
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.poses import invert
-from pipeline.paths import build_reference
-from pipeline.tasks import load_task
+from dualarm.errors import StageError
+from dualarm.ik.mc_inverse import McInverse
+from dualarm.ik.mc_path import settings_for, solve_mc_inverse
+from dualarm.model.check import adam_poses, pose_errors
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.poses import invert
+from dualarm.paths import build_reference
+from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 
 
@@ -20,7 +20,7 @@ from tests.conftest import HUMANOID, TASKS
 def carry_box():
     task = load_task(TASKS / "carry_box.toml")
     ref = build_reference(task)
-    return task, ref, solve_mc_inverse(task, ref)
+    return task, ref, solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
 
 
 def test_master_slave_relative_pose_is_constant(carry_box):
@@ -53,7 +53,7 @@ def test_a_joint_jump_fails_naming_the_sample(tmp_path):
     path.write_text(text + '\n[arm_angle]\nmax_joint_step_rad = 1e-6\n')
     task = load_task(path)
     with pytest.raises(StageError, match=r"MC-Inverse, left arm: left_\w+ jumps [\d.]+ rad between samples 0 and 1 \(t = 0\.010 s\)"):
-        solve_mc_inverse(task, build_reference(task))
+        solve_mc_inverse(task.robot, build_reference(task), task.initial_q, settings_for(task))
 
 
 def test_a_scheduled_arm_angle_repeats_with_the_repetitions(tmp_path):
@@ -64,7 +64,7 @@ def test_a_scheduled_arm_angle_repeats_with_the_repetitions(tmp_path):
     path.write_text(text + '\n[arm_angle]\nmode = "schedule"\nschedule = { left = [[0.0, 0.0], [2.0, 0.1], [4.0, 0.0]], right = [[0.0, 0.0], [2.0, -0.1], [4.0, 0.0]] }\n')
     task = load_task(path)
     ref = build_reference(task)
-    joints = solve_mc_inverse(task, ref)
+    joints = solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
     first = joints.q[ref.rep == 0][1:]
     assert np.abs(first[199] - joints.q[ref.rep == 0][0]).max() > 1e-3  # the schedule does move the arm
     for r in range(1, 5):
@@ -79,7 +79,7 @@ def test_auto_arm_angle_completes_the_papers_repeated_paths(name):
     same in every repetition, and repetitions give identical joints."""
     task = load_task(TASKS / f"{name}.toml")
     ref = build_reference(task)
-    path = solve_mc_inverse(task, ref)
+    path = solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
     chain = task.robot.hand_chain("left")
     q = np.array([[path.configuration(k)[n] for n in chain.joint_names] for k in range(len(path))])
     lower, upper = task.robot.lower_upper(chain.joint_names)
@@ -104,6 +104,6 @@ def test_auto_fails_naming_the_sample_when_the_range_is_too_narrow(tmp_path):
     task = load_task(path)
     ref = build_reference(task)
     with pytest.raises(StageError, match=r"^MC-Inverse, left arm: no arm angle in arm_angle.range_rad .* beyond sample \d+ \(t = [\d.]+ s\)$") as failure:
-        solve_mc_inverse(task, ref)
+        solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
     k, t = re.search(r"sample (\d+) \(t = ([\d.]+) s\)", str(failure.value)).groups()
     assert 0 < int(k) < len(ref) and float(t) == pytest.approx(ref.t[int(k)], abs=1e-3)

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from pipeline.ik.joint_path import JointPath
-from pipeline.ik.mc_inverse import McInverse
-from pipeline.ik.mc_path import solve_mc_inverse
-from pipeline.ik.metrics import arm_angles, consistency_metrics
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.paths import build_reference
-from pipeline.tasks import load_task
+from dualarm.ik.joint_path import JointPath
+from dualarm.ik.mc_inverse import McInverse
+from dualarm.ik.mc_path import settings_for, solve_mc_inverse
+from dualarm.ik.metrics import arm_angles, consistency_metrics
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.paths import build_reference
+from dualarm.tasks import load_task
 from tests.conftest import TASKS
 
 
@@ -17,7 +17,7 @@ from tests.conftest import TASKS
 def carry():
     task = load_task(TASKS / "carry_box.toml", repetitions=3)
     ref = build_reference(task)
-    return task, ref, solve_mc_inverse(task, ref)
+    return task, ref, solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
 
 
 def _with(path: JointPath, q: np.ndarray, status: np.ndarray | None = None) -> JointPath:
@@ -29,7 +29,7 @@ def test_planted_deviations_are_measured(carry):
     """Repetition 2 moved at one sample by 0.3 rad in one joint, and repetition 1 failing at one
     sample: the joint deviation is 0.3, the closure is untouched, one repetition failed."""
     task, ref, path = carry
-    base = consistency_metrics(path, ref, arm_angles(path, task))
+    base = consistency_metrics(path, ref, arm_angles(path, task.robot, task.spec.arm_angle.vertical))
     assert base["ik.rep_joint_deviation_max_rad"] <= 1e-9 and base["ik.failed_reps"] == 0
     q = path.q.copy()
     k = np.flatnonzero(ref.rep == 2)[100]
@@ -37,7 +37,7 @@ def test_planted_deviations_are_measured(carry):
     status = path.status.copy()
     status[np.flatnonzero(ref.rep == 1)[50]] = 1
     changed = _with(path, q, status)
-    m = consistency_metrics(changed, ref, arm_angles(changed, task))
+    m = consistency_metrics(changed, ref, arm_angles(changed, task.robot, task.spec.arm_angle.vertical))
     assert m["ik.rep_joint_deviation_max_rad"] == pytest.approx(0.3, abs=1e-9)
     assert m["ik.failed_reps"] == 1
     assert m["ik.closure_error_max_rad"] == pytest.approx(base["ik.closure_error_max_rad"], abs=1e-12)
@@ -60,12 +60,12 @@ def test_arm_angle_deviation_is_the_self_motion_planted(carry):
     q = path.q.copy()
     q[np.ix_(rep1, columns)] = candidates[:, branch]
     changed = _with(path, q)
-    m = consistency_metrics(changed, ref, arm_angles(changed, task))
+    m = consistency_metrics(changed, ref, arm_angles(changed, task.robot, task.spec.arm_angle.vertical))
     assert m["ik.rep_arm_angle_deviation_max_rad"] == pytest.approx(0.2, abs=1e-9)
 
 
 def test_single_repetition_has_no_consistency_metrics():
     task = load_task(TASKS / "carry_box.toml", repetitions=1)
     ref = build_reference(task)
-    path = solve_mc_inverse(task, ref)
-    assert consistency_metrics(path, ref, arm_angles(path, task)) == {}
+    path = solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
+    assert consistency_metrics(path, ref, arm_angles(path, task.robot, task.spec.arm_angle.vertical)) == {}

@@ -4,10 +4,10 @@ scored by independent forward kinematics."""
 import numpy as np
 import pytest
 
-from pipeline.ik.pointwise import POINTWISE_METHODS, solve_pointwise
-from pipeline.model.check import pybullet_poses
-from pipeline.paths import build_reference
-from pipeline.tasks import load_task
+from dualarm.ik.pointwise import POINTWISE_METHODS, solve_pointwise
+from dualarm.model.check import pybullet_poses
+from dualarm.paths import build_reference
+from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 
 #: Position accuracy each method promises on a sample it reports as solved [m] (TRAC-IK runs with
@@ -31,7 +31,7 @@ def test_each_method_follows_the_path_checked_by_pybullet(short_circle, method):
     floor plus the method's promise); failed samples hold the last solved joints; and, seeded
     with the previous solution, no joint jumps on the smooth path (max step well below pi)."""
     task, ref = short_circle
-    path = solve_pointwise(method, task, ref)
+    path = solve_pointwise(method, task.robot, ref, task.initial_q)
     chain = task.hand_chain_from_root("left")
     q = np.array([[path.configuration(k)[n] for n in chain.joint_names] for k in range(len(path))])
     reached = pybullet_poses(task.robot, chain, q)

@@ -7,14 +7,15 @@ import re
 import numpy as np
 import pytest
 
-from pipeline.errors import StageError
-from pipeline.execute.world import load_pybullet_robot
-from pipeline.ik.metrics import ik_metrics
-from pipeline.ik.pinv import solve_pinv
-from pipeline.ik.tvgdd import settings_for, solve_tvgdd
-from pipeline.paths import build_reference
-from pipeline.run import run_task
-from pipeline.tasks import load_task
+from dualarm.errors import StageError
+from dualarm.execute.world import load_pybullet_robot
+from dualarm.ik.metrics import ik_metrics
+from dualarm.ik.pinv import settings_for as pinv_settings_for
+from dualarm.ik.pinv import solve_pinv
+from dualarm.ik.tvgdd import settings_for, solve_tvgdd
+from dualarm.paths import build_reference
+from dualarm.run import record_run
+from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 
 # Zhang, Kong, Niu, section 4.2: MAE, AAE, RMSE of the hand positions
@@ -30,7 +31,7 @@ def ball_game():
 @pytest.fixture(scope="module")
 def tvgdd_path(ball_game):
     task, ref = ball_game
-    return solve_tvgdd(task, ref, settings_for(task))
+    return solve_tvgdd(task.robot, ref, task.initial_q, settings_for(task))
 
 
 def _variant(tmp_path, text: str):
@@ -41,7 +42,7 @@ def _variant(tmp_path, text: str):
 
 def test_ball_game_meets_the_paper_figures(ball_game, tvgdd_path):
     task, _ = ball_game
-    m = ik_metrics(tvgdd_path, task)
+    m = ik_metrics(tvgdd_path, task.robot)
     assert m["ik.position_error_max_m"] <= PAPER_MAE_M
     assert m["ik.position_error_mean_m"] < PAPER_AAE_M
     assert m["ik.position_error_rmse_m"] < PAPER_RMSE_M
@@ -68,9 +69,9 @@ def test_gesture_joints_stay_inside_the_closing_bounds_only_with_the_feedforward
         return np.maximum(path.extras["theta_lower"] - path.q, path.q - path.extras["theta_upper"]).max()
 
     assert task.spec.gesture.bound_feedforward
-    published = solve_tvgdd(task, ref, dataclasses.replace(settings_for(task), bound_feedforward=False))
+    published = solve_tvgdd(task.robot, ref, task.initial_q, dataclasses.replace(settings_for(task), bound_feedforward=False))
     assert outside(tvgdd_path) <= 1e-9 < 1e-3 < outside(published)
-    assert ik_metrics(published, task)["ik.position_error_max_m"] <= PAPER_MAE_M
+    assert ik_metrics(published, task.robot)["ik.position_error_max_m"] <= PAPER_MAE_M
 
 
 def test_recorded_hand_errors_match_pybullet(ball_game, tvgdd_path):
@@ -93,14 +94,16 @@ def test_pinv_leaves_the_gesture_bounds_far_more_than_tvgdd(ball_game, tvgdd_pat
     """The paper's contrast (Figs 3 and 5): without bounds the minimum-norm rate lets the wrists
     wander out of the band TV-GDD closes on them."""
     task, ref = ball_game
-    pinv = solve_pinv(task, ref, task.spec.gesture.feedback_gain)
+    pinv_settings = pinv_settings_for(task)
+    assert pinv_settings.feedback_gain == task.spec.gesture.feedback_gain
+    pinv = solve_pinv(task.robot, ref, task.initial_q, pinv_settings)
     lo, hi = tvgdd_path.extras["theta_lower"], tvgdd_path.extras["theta_upper"]
 
     def outside(q):
         return np.maximum(lo - q, q - hi).max()
 
     assert outside(tvgdd_path.q) <= 1e-9 < 0.05 < outside(pinv.q)
-    assert ik_metrics(pinv, task)["ik.position_error_max_m"] < 1e-4  # it does track the hands
+    assert ik_metrics(pinv, task.robot)["ik.position_error_max_m"] < 1e-4  # it does track the hands
 
 
 def test_rmp_returns_to_the_start_on_a_closed_path_and_mvn_does_not(tmp_path):
@@ -112,7 +115,7 @@ def test_rmp_returns_to_the_start_on_a_closed_path_and_mvn_does_not(tmp_path):
     assert np.allclose(ref.hands["left"].position[-1], ref.hands["left"].position[0], atol=1e-12)
     closure = {}
     for scheme in ("mvn", "rmp"):
-        path = solve_tvgdd(task, ref, dataclasses.replace(settings_for(task, scheme=scheme), feedback_gain=50.0))
+        path = solve_tvgdd(task.robot, ref, task.initial_q, dataclasses.replace(settings_for(task, scheme=scheme), feedback_gain=50.0))
         closure[scheme] = np.abs(path.q[-1] - path.q[0]).max()
     assert closure["rmp"] <= 1e-5 < 1e-4 < closure["mvn"]
 
@@ -125,7 +128,7 @@ def test_infeasible_step_fails_the_run_naming_step_time_and_joint(tmp_path):
     text = head + "[gesture.goal_lower]" + goals.replace("left_wrist_roll = -1.0323", "left_wrist_roll = 2.2677")
     task_file = _variant(tmp_path, text)
     with pytest.raises(StageError, match=r"TV-GDD step \d+ \(t = [\d.]+ s\) is infeasible: .*left_wrist_roll"):
-        run_task(task_file, ik="tvgdd", out_dir=tmp_path / "out")
+        record_run(task_file, "tvgdd", out_dir=tmp_path / "out")
     (run,) = (tmp_path / "out" / "ball_game").iterdir()
     manifest = json.loads((run / "manifest.json").read_text())
     assert manifest["status"] == "failed" and "left_wrist_roll" in manifest["error"]
@@ -133,12 +136,13 @@ def test_infeasible_step_fails_the_run_naming_step_time_and_joint(tmp_path):
 
 def test_rollout_in_one_call_equals_the_step_loop(ball_game, tvgdd_path):
     """The mapaccum rollout (used by the benchmark) integrates exactly what the per-step loop does."""
-    from pipeline.ik.stack import hand_stack, stacked_reference
-    from pipeline.ik.tvgdd import build_problem, joint_bounds
+    from dualarm.ik.stack import hand_stack, stacked_reference
+    from dualarm.ik.tvgdd import build_problem, joint_bounds
 
     task, ref = ball_game
-    stack = hand_stack(task)
-    problem = build_problem(stack, joint_bounds(task, stack), settings_for(task))
+    settings = settings_for(task)
+    stack = hand_stack(task.robot, task.spec.hands, task.initial_q, free_waist=settings.free_waist)
+    problem = build_problem(stack, joint_bounds(task.robot, stack, settings), settings, ref.period_s)
     R, V = stacked_reference(stack, ref)
     theta0 = tvgdd_path.q[0]
     theta, velocity = problem.rollout(len(ref))(theta0, np.vstack([ref.t, R.T, V.T]), theta0)
@@ -149,11 +153,11 @@ def test_rollout_in_one_call_equals_the_step_loop(ball_game, tvgdd_path):
 def test_one_hand_off_the_path_start_begins_on_it():
     """triangle: one hand (7 DOF), whose initial configuration is 0.16 m off the path start. The
     IK starts from the nearest configuration that puts the hand there (checked with PyBullet)."""
-    from pipeline.ik.stack import hand_stack, start_configuration
+    from dualarm.ik.stack import hand_stack, start_configuration
 
     task = load_task(TASKS / "triangle.toml")
     ref = build_reference(task)
-    stack = hand_stack(task)
+    stack = hand_stack(task.robot, task.spec.hands, task.initial_q)
     lower, upper = task.robot.lower_upper(stack.joint_names)
     start = start_configuration(stack, ref, lower, upper)
     assert stack.n == 7 and np.all(start >= lower) and np.all(start <= upper)
@@ -163,16 +167,16 @@ def test_one_hand_off_the_path_start_begins_on_it():
         assert np.linalg.norm(sim.link_pose("left_hand")[:3, 3] - ref.hands["left"].position[0]) < 1e-6
         sim.set_positions(list(task.initial_q), list(task.initial_q.values()))
         assert np.linalg.norm(sim.link_pose("left_hand")[:3, 3] - ref.hands["left"].position[0]) > 0.1
-    path = solve_tvgdd(task, ref, settings_for(task))
+    path = solve_tvgdd(task.robot, ref, task.initial_q, settings_for(task))
     np.testing.assert_allclose(path.q[0], start, atol=1e-12)
-    assert ik_metrics(path, task)["ik.joint_limit_violations"] == 0
+    assert ik_metrics(path, task.robot)["ik.joint_limit_violations"] == 0
 
 
 def test_tvgdd_with_the_waist_free_solves_17_joints(tmp_path):
     """The ball game with the waist free: 17 active joints, a shared waist in both hands' Jacobians."""
     task = load_task(_variant(tmp_path, (TASKS / "ball_game.toml").read_text().replace('waist = "locked"', 'waist = "free"')))
-    path = solve_tvgdd(task, build_reference(task), settings_for(task))
+    path = solve_tvgdd(task.robot, build_reference(task), task.initial_q, settings_for(task))
     assert len(path.joint_names) == 17 and sum(n.startswith("waist") for n in path.joint_names) == 3
     assert np.abs(path.qd[:, [n.startswith("waist") for n in path.joint_names]]).max() > 1e-3  # the waist does move
-    m = ik_metrics(path, task)
+    m = ik_metrics(path, task.robot)
     assert m["ik.position_error_max_m"] <= PAPER_MAE_M and m["ik.joint_limit_violations"] == 0

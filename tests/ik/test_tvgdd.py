@@ -4,20 +4,20 @@ import numpy as np
 import pytest
 import quadprog
 
-from pipeline.ik.stack import hand_stack, stacked_reference
-from pipeline.ik.tvgdd import TvgddSettings, build_problem, joint_bounds, lvi_solve
-from pipeline.model.check import PYBULLET_TOLERANCE
-from pipeline.execute.world import load_pybullet_robot
-from pipeline.paths import build_reference
-from pipeline.tasks import load_task
+from dualarm.ik.stack import hand_stack, stacked_reference
+from dualarm.ik.tvgdd import TvgddSettings, build_problem, joint_bounds, lvi_solve, settings_for
+from dualarm.model.check import PYBULLET_TOLERANCE
+from dualarm.execute.world import load_pybullet_robot
+from dualarm.paths import build_reference
+from dualarm.tasks import load_task
 from tests.conftest import TASKS
 
 
 @pytest.fixture(scope="module")
 def ball_game():
     task = load_task(TASKS / "ball_game.toml")
-    stack = hand_stack(task)
-    return task, stack, joint_bounds(task, stack), build_reference(task)
+    stack = hand_stack(task.robot, task.spec.hands, task.initial_q)
+    return task, stack, joint_bounds(task.robot, stack, settings_for(task)), build_reference(task)
 
 
 def quadprog_solve(M, b, J, rhs, lo, hi):
@@ -43,7 +43,7 @@ def test_casadi_step_solves_the_qp_along_the_ball_game(ball_game, scheme):
     """On QP instances taken along the ball game (all 1801 for MVN), the conic solution equals quadprog's."""
     task, stack, bounds, ref = ball_game
     settings = TvgddSettings(scheme=scheme, feedback_gain=task.spec.gesture.feedback_gain)
-    problem = build_problem(stack, bounds, settings, task.robot.urdf.kinematic_xml, task.robot.joint_names)
+    problem = build_problem(stack, bounds, settings, ref.period_s, task.robot.urdf.kinematic_xml, task.robot.joint_names)
     R, V = stacked_reference(stack, ref)
     theta = theta0 = stack.initial
     worst, stride = 0.0, 1 if scheme == "mvn" else 3
@@ -55,7 +55,7 @@ def test_casadi_step_solves_the_qp_along_the_ball_game(ball_game, scheme):
         worst = max(worst, np.abs(qd - expected).max())
         assert np.abs(J @ qd - rhs.ravel()).max() < 1e-9
         assert np.all(qd >= lo.ravel() - 1e-9) and np.all(qd <= hi.ravel() + 1e-9)
-        theta = theta + stride * settings.period_s * qd
+        theta = theta + stride * problem.period_s * qd
     assert worst < 1e-8
 
 
@@ -64,7 +64,7 @@ def instances(ball_game):
     """Every QP instance along the ball game (MVN, the casadi path): the step arguments, the QP
     data (M, b, J, rhs, lo, hi) batched over steps, and quadprog's solutions."""
     task, stack, bounds, ref = ball_game
-    problem = build_problem(stack, bounds, TvgddSettings(feedback_gain=task.spec.gesture.feedback_gain))
+    problem = build_problem(stack, bounds, TvgddSettings(feedback_gain=task.spec.gesture.feedback_gain), ref.period_s)
     R, V = stacked_reference(stack, ref)
     theta = theta0 = stack.initial
     steps, data, expected = [], [], []
@@ -74,7 +74,7 @@ def instances(ball_game):
         steps.append(args)
         data.append(qp)
         expected.append(quadprog_solve(*qp))
-        theta = theta + problem.settings.period_s * expected[-1]
+        theta = theta + problem.period_s * expected[-1]
     return problem, steps, [np.array(column) for column in zip(*data)], np.array(expected)
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pipeline.model.check import (
+from dualarm.model.check import (
     FK_TOLERANCE,
     JACOBIAN_TOLERANCE,
     PYBULLET_TOLERANCE,
@@ -14,8 +14,8 @@ from pipeline.model.check import (
     pybullet_poses,
     random_configurations,
 )
-from pipeline.model.kinematics import ChainKinematics
-from pipeline.model.robot import robot_from_urdf
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.robot import robot_from_urdf
 
 
 @pytest.mark.parametrize("chain_name", ["left_arm", "right_arm", "waist"])

@@ -4,9 +4,9 @@ import shutil
 
 import pytest
 
-from pipeline.errors import RobotModelError
-from pipeline.execute.world import load_pybullet_robot, pb
-from pipeline.model.robot import load_robot
+from dualarm.errors import RobotModelError
+from dualarm.execute.world import load_pybullet_robot, pb
+from dualarm.model.robot import load_robot
 from tests.conftest import HUMANOID
 
 

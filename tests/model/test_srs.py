@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import NotSRSError
-from pipeline.execute.world import load_pybullet_robot
-from pipeline.model.check import PYBULLET_TOLERANCE, random_configurations
-from pipeline.model.robot import Chain, robot_from_urdf
-from pipeline.model.srs import SrsKinematics, arm_angle, srs_geometry
-from pipeline.model.urdf import JointSpec
+from dualarm.errors import NotSRSError
+from dualarm.execute.world import load_pybullet_robot
+from dualarm.model.check import PYBULLET_TOLERANCE, random_configurations
+from dualarm.model.robot import Chain, robot_from_urdf
+from dualarm.model.srs import SrsKinematics, arm_angle, srs_geometry
+from dualarm.model.urdf import JointSpec
 
 
 @pytest.mark.parametrize("side", ["left", "right"])

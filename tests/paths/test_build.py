@@ -1,4 +1,4 @@
-"""Tests of pipeline.paths.build_reference against closed-form geometry, finite differences and the
+"""Tests of dualarm.paths.build_reference against closed-form geometry, finite differences and the
 task files' own numbers."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import TaskFileError, UnreachablePoseError
-from pipeline.paths import build_reference
-from pipeline.tasks import load_task
+from dualarm.errors import TaskFileError, UnreachablePoseError
+from dualarm.paths import build_reference
+from dualarm.tasks import load_task
 
 REPO = Path(__file__).resolve().parents[2]
 TASKS = REPO / "tasks"

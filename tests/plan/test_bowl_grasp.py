@@ -10,13 +10,13 @@ import pytest
 from mcap.reader import make_reader
 from typer.testing import CliRunner
 
-from pipeline.cli import app
-from pipeline.errors import StageError
-from pipeline.plan.collision import CollisionChecker
-from pipeline.plan.mcikrrt import PlannerSettings
-from pipeline.plan.problem import PlanningProblem, PlanningSettings
-from pipeline.record.readback import read_run
-from pipeline.tasks import load_task
+from dualarm.cli import app
+from dualarm.errors import StageError
+from dualarm.plan.collision import CollisionChecker
+from dualarm.plan.mcikrrt import PlannerSettings
+from dualarm.plan.problem import PlanningProblem, PlanningSettings
+from dualarm.record.readback import read_run
+from dualarm.tasks import load_task
 from tests.conftest import TASKS
 
 BOWL = TASKS / "bowl_grasp.toml"

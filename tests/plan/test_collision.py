@@ -1,4 +1,4 @@
-"""The planners' collision checker (pipeline.plan.collision) against independent queries:
+"""The planners' collision checker (dualarm.plan.collision) against independent queries:
 PyBullet's getClosestPoints on the UN-inflated robot, analytic capsule distances from the URDF,
 and the URDF text itself."""
 
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import StageError
-from pipeline.execute.world import add_environment, load_pybullet_robot, pb
-from pipeline.plan.collision import TOUCHING_M, CollisionChecker, bisection_order, inflated_urdf
-from pipeline.tasks import load_task
+from dualarm.errors import StageError
+from dualarm.execute.world import add_environment, load_pybullet_robot, pb
+from dualarm.plan.collision import TOUCHING_M, CollisionChecker, bisection_order, inflated_urdf
+from dualarm.tasks import load_task
 from tests.conftest import TASKS
 
 #: Configurations whose nearest distance is this close to a threshold are boundary cases [m].

@@ -4,8 +4,8 @@ gap, the start on one side and a goal region (sampled like a WTA) on the other."
 import numpy as np
 import pytest
 
-from pipeline.errors import StageError
-from pipeline.plan.mcikrrt import PlannerSettings, mcikrrt, path_length, shortcut
+from dualarm.errors import StageError
+from dualarm.plan.mcikrrt import PlannerSettings, mcikrrt, path_length, shortcut
 
 WALL = (0.45, 0.55)  # x band of the wall
 GAP = (0.49, 0.51)  # the only opening, in y

@@ -1,4 +1,4 @@
-"""Workspace Target Areas (pipeline.plan.wta, Li & Liang eqs 21-31) against hand-computed
+"""Workspace Target Areas (dualarm.plan.wta, Li & Liang eqs 21-31) against hand-computed
 values and scipy's own rotations."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.model.poses import pose_matrix
-from pipeline.plan.wta import Wta, displacement, pose_vector, sample_hand_pose, sampling_weights
-from pipeline.tasks import load_task
+from dualarm.model.poses import pose_matrix
+from dualarm.plan.wta import Wta, displacement, pose_vector, sample_hand_pose, sampling_weights
+from dualarm.tasks import load_task
 from tests.conftest import TASKS
 
 PI = np.pi

@@ -1,4 +1,4 @@
-"""The recordings other tools open, checked with those tools' own readers, not pipeline.record.readback.
+"""The recordings other tools open, checked with those tools' own readers, not dualarm.record.readback.
 
 ``run.mcap``: the ``mcap`` readers (sequential and indexed), ``jsonschema`` and ``protobuf`` decode
 every message against the schema the file itself carries; ``/tf``, ``/robot_description``, the
@@ -32,7 +32,8 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from scipy.spatial.transform import Rotation
 
-from pipeline.run import run_task
+from dualarm.run import record_run
+from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 
 URDF = HUMANOID / "humanoid.urdf"
@@ -45,18 +46,22 @@ FOOTER_SIZE = 1 + 8 + 8 + 8 + 4
 @dataclass(frozen=True)
 class RunSpec:
     task: Path
+    method: str
     options: dict
     stages: tuple[str, ...]
+    repetitions: int | None = None
 
 
 #: The runs checked: the whole IK pipeline on one triangle, and a planned run with a scene.
 RUNS = {
     "triangle": RunSpec(
         TASKS / "triangle.toml",
-        {"stages": ("path", "ik", "retime", "smooth", "execute"), "ik": "mc-inverse", "repetitions": 1},
+        "mc-inverse",
+        {"stages": ("path", "ik", "retime", "smooth", "execute")},
         ("path", "ik", "retime", "smooth", "execute"),
+        repetitions=1,
     ),
-    "bowl_grasp": RunSpec(TASKS / "bowl_grasp.toml", {"planner": "mcikrrt"}, ("path", "plan", "retime", "smooth", "execute")),
+    "bowl_grasp": RunSpec(TASKS / "bowl_grasp.toml", "mcikrrt", {}, ("path", "plan", "retime", "smooth", "execute")),
 }
 
 
@@ -68,7 +73,7 @@ def out_dir(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module", params=sorted(RUNS))
 def run(request, out_dir) -> tuple[RunSpec, Path]:
     spec = RUNS[request.param]
-    return spec, run_task(spec.task, out_dir=out_dir, **spec.options)
+    return spec, record_run(load_task(spec.task, spec.repetitions), spec.method, out_dir=out_dir, **spec.options).directory
 
 
 # -- the URDF, read here with xml.etree -----------------------------------------------------------

@@ -14,11 +14,11 @@ from mcap.reader import make_reader
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
-from pipeline.cli import app
-from pipeline.errors import TaskFileError, UnreachablePoseError
-from pipeline.execute.world import load_pybullet_robot
-from pipeline.record.readback import read_run, read_runs
-from pipeline.run import run_task
+from dualarm.cli import app
+from dualarm.errors import TaskFileError, UnreachablePoseError
+from dualarm.execute.world import load_pybullet_robot
+from dualarm.record.readback import read_run, read_runs
+from dualarm.run import record_run
 from tests.conftest import HUMANOID, TASKS
 
 TRIANGLE = TASKS / "triangle.toml"
@@ -31,7 +31,7 @@ def out_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def triangle_run(out_dir) -> Path:
-    return run_task(TRIANGLE, stages=["path"], out_dir=out_dir, seed=0, command=["dualarm", "run", str(TRIANGLE)])
+    return record_run(TRIANGLE, stages=["path"], out_dir=out_dir, seed=0, command=["dualarm", "run", str(TRIANGLE)]).directory
 
 
 def _messages(run: Path) -> dict[str, list[bytes]]:
@@ -153,7 +153,7 @@ def test_rerun_file_verifies_with_the_rerun_cli(triangle_run):
 
 
 def test_same_command_gives_identical_messages(triangle_run, out_dir):
-    again = run_task(TRIANGLE, stages=["path"], out_dir=out_dir, seed=0)
+    again = record_run(TRIANGLE, stages=["path"], out_dir=out_dir, seed=0).directory
     assert again != triangle_run
     assert _messages(again) == _messages(triangle_run)
 
@@ -178,7 +178,7 @@ def test_failed_stage_leaves_a_failed_run(tmp_path):
     text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, 0.09, 1.05]", "arc_center = [0.31, -0.40, 1.05]")
     task = _task_copy(tmp_path, text)
     with pytest.raises(UnreachablePoseError, match=r"moves\[0\]"):
-        run_task(task, out_dir=tmp_path / "out")
+        record_run(task, out_dir=tmp_path / "out")
     (run,) = (tmp_path / "out" / "circle").iterdir()
     manifest = json.loads((run / "manifest.json").read_text())
     assert manifest["status"] == "failed" and "moves[0]" in manifest["error"]
@@ -189,7 +189,7 @@ def test_failed_stage_leaves_a_failed_run(tmp_path):
 def test_malformed_task_writes_nothing(tmp_path):
     task = _task_copy(tmp_path, TRIANGLE.read_text().replace("control_period_s = 0.01", "control_period_s = -1"))
     with pytest.raises(TaskFileError, match="control_period_s"):
-        run_task(task, out_dir=tmp_path / "out")
+        record_run(task, out_dir=tmp_path / "out")
     assert not (tmp_path / "out").exists()
 
 
@@ -220,7 +220,7 @@ def test_cli_inspect_refuses_a_corrupt_recording(triangle_run, tmp_path, damage)
 
 
 def test_ik_run_records_joints_bounds_and_robot(tmp_path, humanoid):
-    run = run_task(TASKS / "ball_game.toml", stages=("path", "ik"), ik="tvgdd", out_dir=tmp_path)
+    run = record_run(TASKS / "ball_game.toml", "tvgdd", stages=("path", "ik"), out_dir=tmp_path).directory
     data = read_run(run)
     sample, bounds = data["/ik/sample"], data["/ik/bounds"]
     assert len(sample) == len(bounds) == data.metrics["path.samples"]

@@ -12,15 +12,16 @@ import pytest
 from mcap.reader import make_reader
 from typer.testing import CliRunner
 
-from pipeline.cli import app
-from pipeline.errors import RecordingError
-from pipeline.ik.pinv import solve_pinv
-from pipeline.ik.tvgdd import settings_for, solve_tvgdd
-from pipeline.paths import build_reference
-from pipeline.record.readback import RunData, read_run
-from pipeline.report.compare import COLUMNS, compare_runs
-from pipeline.run import run_task
-from pipeline.tasks import load_task
+from dualarm.cli import app
+from dualarm.errors import RecordingError
+from dualarm.ik.pinv import settings_for as pinv_settings_for
+from dualarm.ik.pinv import solve_pinv
+from dualarm.ik.tvgdd import settings_for, solve_tvgdd
+from dualarm.paths import build_reference
+from dualarm.record.readback import RunData, read_run
+from dualarm.report.compare import COLUMNS, compare_runs
+from dualarm.run import record_run
+from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 
 runner = CliRunner()
@@ -41,19 +42,19 @@ def runs_dir(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def triangle_reruns(runs_dir) -> tuple[Path, Path]:
     """The same command twice: MC-Inverse on the triangle, path and IK, 2 repetitions."""
-    return tuple(run_task(TRIANGLE, stages=("path", "ik"), ik="mc-inverse", out_dir=runs_dir / "rerun", repetitions=2) for _ in range(2))
+    return tuple(record_run(load_task(TRIANGLE, 2), "mc-inverse", stages=("path", "ik"), out_dir=runs_dir / "rerun").directory for _ in range(2))
 
 
 @pytest.fixture(scope="module")
 def full_reruns(runs_dir) -> tuple[Path, Path]:
     """The same command twice through every stage (pinv, 1 repetition: the cheapest full run)."""
-    return tuple(run_task(TRIANGLE, ik="pinv", out_dir=runs_dir / "full", repetitions=1) for _ in range(2))
+    return tuple(record_run(load_task(TRIANGLE, 1), "pinv", out_dir=runs_dir / "full").directory for _ in range(2))
 
 
 @pytest.fixture(scope="module")
 def ball_game_methods(runs_dir) -> tuple[Path, Path]:
     """TV-GDD and pinv on the ball game, path and IK."""
-    return tuple(run_task(BALL_GAME, stages=("path", "ik"), ik=ik, out_dir=runs_dir / "methods") for ik in ("tvgdd", "pinv"))
+    return tuple(record_run(BALL_GAME, ik, stages=("path", "ik"), out_dir=runs_dir / "methods").directory for ik in ("tvgdd", "pinv"))
 
 
 @pytest.fixture(scope="module")
@@ -69,13 +70,13 @@ def gain_task(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def gain_pair(ball_game_methods, gain_task, runs_dir) -> tuple[Path, Path]:
     """pinv on the ball game at K = 50 and at K = 45: the same topics, fields, rows and text; only numbers differ."""
-    return ball_game_methods[1], run_task(gain_task, stages=("path", "ik"), ik="pinv", out_dir=runs_dir / "gain")
+    return ball_game_methods[1], record_run(gain_task, "pinv", stages=("path", "ik"), out_dir=runs_dir / "gain").directory
 
 
 @pytest.fixture(scope="module")
 def repetitions_pair(runs_dir) -> tuple[Path, Path]:
     """pinv on the triangle with 2 repetitions (A) and with 1 (B)."""
-    return tuple(run_task(TRIANGLE, stages=("path", "ik"), ik="pinv", out_dir=runs_dir / "reps", repetitions=n) for n in (2, 1))
+    return tuple(record_run(load_task(TRIANGLE, n), "pinv", stages=("path", "ik"), out_dir=runs_dir / "reps").directory for n in (2, 1))
 
 
 # --- independent computations --------------------------------------------------------------------
@@ -187,7 +188,9 @@ def ball_game_solutions():
     task = load_task(BALL_GAME)
     reference = build_reference(task)
     settings = settings_for(task)
-    return reference, solve_tvgdd(task, reference, settings), solve_pinv(task, reference, settings.feedback_gain)
+    pinv_settings = pinv_settings_for(task)
+    assert pinv_settings.feedback_gain == settings.feedback_gain
+    return reference, solve_tvgdd(task.robot, reference, task.initial_q, settings), solve_pinv(task.robot, reference, task.initial_q, pinv_settings)
 
 
 def test_different_methods_differ_by_what_the_solvers_computed(ball_game_methods, ball_game_solutions):

@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from pipeline.cli import app
-from pipeline.report.consistency import COLUMNS
+from dualarm.cli import app
+from dualarm.report.consistency import COLUMNS
 from tests.conftest import HUMANOID, TASKS
 
 runner = CliRunner()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.report.consistency import run_consistency
+from dualarm.report.consistency import run_consistency
 from tests.conftest import TASKS
 
 README = Path(__file__).resolve().parents[2] / "reports" / "README.md"

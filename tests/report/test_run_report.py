@@ -6,19 +6,18 @@ import numpy as np
 import pandas as pd
 from typer.testing import CliRunner
 
-from pipeline.cli import app
-from pipeline.ik.pinv import solve_pinv
-from pipeline.ik.tvgdd import settings_for
-from pipeline.paths import build_reference
-from pipeline.record.readback import read_run
-from pipeline.report.run_report import excursions, write_report
-from pipeline.run import run_task
-from pipeline.tasks import load_task
+from dualarm.cli import app
+from dualarm.ik.pinv import settings_for, solve_pinv
+from dualarm.paths import build_reference
+from dualarm.record.readback import read_run
+from dualarm.report.run_report import excursions, write_report
+from dualarm.run import record_run
+from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 
 
 def test_report_of_a_pinv_run(tmp_path):
-    run = run_task(TASKS / "ball_game.toml", stages=("path", "ik"), ik="pinv", out_dir=tmp_path / "runs")
+    run = record_run(TASKS / "ball_game.toml", "pinv", stages=("path", "ik"), out_dir=tmp_path / "runs").directory
     result = CliRunner().invoke(app, ["report", str(run), "--out", str(tmp_path / "report")])
     assert result.exit_code == 0, result.output
     out = Path(result.stdout.strip().splitlines()[-1])
@@ -28,7 +27,7 @@ def test_report_of_a_pinv_run(tmp_path):
 
     # the excursion table read back from the recording equals one computed from the solver's arrays
     task = load_task(TASKS / "ball_game.toml")
-    path = solve_pinv(task, build_reference(task), settings_for(task).feedback_gain)
+    path = solve_pinv(task.robot, build_reference(task), task.initial_q, settings_for(task))
     lo, hi = path.extras["theta_lower"], path.extras["theta_upper"]
     outside = np.maximum(lo - path.q, path.q - hi).max(axis=0)
     expected = {n: v for n, v in zip(path.joint_names, outside) if v > 1e-9}
@@ -46,11 +45,11 @@ def test_report_lists_joints_leaving_their_physical_limits(tmp_path):
     assert "velocity = 0.05" in text
     task_file = tmp_path / "ball_game.toml"
     task_file.write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"'))
-    run = run_task(task_file, stages=("path", "ik"), ik="pinv", out_dir=tmp_path / "runs")
+    run = record_run(task_file, "pinv", stages=("path", "ik"), out_dir=tmp_path / "runs").directory
     out = write_report(run, tmp_path / "report")
 
     task = load_task(task_file)
-    path = solve_pinv(task, build_reference(task), settings_for(task).feedback_gain)
+    path = solve_pinv(task.robot, build_reference(task), task.initial_q, settings_for(task))
     fastest = np.abs(path.qd).max(axis=0) - 0.05
     expected = {n: v for n, v in zip(path.joint_names, fastest) if v > 1e-9}
     assert expected, "the limit should be exceeded"

@@ -14,9 +14,10 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from pipeline.cli import app
-from pipeline.report.run_report import RUN_COLUMNS
-from pipeline.run import run_task
+from dualarm.cli import app
+from dualarm.report.run_report import RUN_COLUMNS
+from dualarm.run import record_run
+from dualarm.tasks import load_task
 from tests.conftest import TASKS
 
 runner = CliRunner()
@@ -39,16 +40,16 @@ def runs_dir(tmp_path_factory) -> Path:
 def ik_runs(runs_dir) -> list[Path]:
     """IK-only runs: MC-Inverse and pinv on the triangle (2 repetitions), TV-GDD on the ball game (1)."""
     return [
-        run_task(TRIANGLE, stages=("path", "ik"), ik="mc-inverse", out_dir=runs_dir, repetitions=2),
-        run_task(TRIANGLE, stages=("path", "ik"), ik="pinv", out_dir=runs_dir, repetitions=2),
-        run_task(BALL_GAME, stages=("path", "ik"), ik="tvgdd", out_dir=runs_dir),
+        record_run(load_task(TRIANGLE, 2), "mc-inverse", stages=("path", "ik"), out_dir=runs_dir).directory,
+        record_run(load_task(TRIANGLE, 2), "pinv", stages=("path", "ik"), out_dir=runs_dir).directory,
+        record_run(BALL_GAME, "tvgdd", stages=("path", "ik"), out_dir=runs_dir).directory,
     ]
 
 
 @pytest.fixture(scope="module")
 def full_run(runs_dir) -> Path:
     """The one run through every stage: pinv on the triangle, 1 repetition."""
-    return run_task(TRIANGLE, ik="pinv", out_dir=runs_dir, repetitions=1)
+    return record_run(load_task(TRIANGLE, 1), "pinv", out_dir=runs_dir).directory
 
 
 def _report(run_dirs: list[Path], out: Path) -> Path:

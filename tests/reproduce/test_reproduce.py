@@ -2,7 +2,7 @@
 
 Every "ours" figure of the report is recomputed here from the recordings with numpy, from the
 solvers' own arrays, or from PyBullet (independent forward kinematics); every "paper" figure is
-checked against the papers' text (``../shared/seeds``), copied here by hand. One reproduction of the
+checked against the papers' text (see docs/papers.md), copied here by hand. One reproduction of the
 cheap parts (Table I, the ball game with pinv and TV-GDD, two at a time in a process pool) is
 shared by most tests.
 """
@@ -23,9 +23,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
-from pipeline.cli import app
-from pipeline.errors import DualarmError
-from pipeline.record.readback import read_run
+from dualarm.cli import app
+from dualarm.errors import DualarmError
+from dualarm.record.readback import read_run
 from tests.conftest import HUMANOID, REPO, TASKS
 
 runner = CliRunner()
@@ -294,7 +294,7 @@ def test_tvgdd_hand_error_and_time_claims_from_the_recording(repro):
 
 def test_tvgdd_recorded_hand_errors_are_pybullets(repro):
     """The hand_error_m columns behind Fig. 8's claims: |reference - f(q)| with f from PyBullet."""
-    from pipeline.execute.world import load_pybullet_robot
+    from dualarm.execute.world import load_pybullet_robot
 
     run = _run_of(repro, "ball-game-tvgdd")
     sample = run["/ik/sample"]
@@ -318,7 +318,7 @@ def test_tvgdd_recorded_hand_errors_are_pybullets(repro):
 
 
 def test_tvgdd_bound_execution_claims_from_the_recording(repro):
-    from pipeline.execute.world import load_pybullet_robot
+    from dualarm.execute.world import load_pybullet_robot
 
     rows = claim_rows(repro.report)["TV-GDD"]
     run = _run_of(repro, "ball-game-tvgdd")
@@ -366,14 +366,13 @@ def test_tvgdd_bound_execution_claims_from_the_recording(repro):
 
 
 def test_pinv_excursion_claims_equal_the_solvers_arrays(repro):
-    from pipeline.ik.pinv import solve_pinv
-    from pipeline.ik.tvgdd import settings_for
-    from pipeline.paths import build_reference
-    from pipeline.tasks import load_task
+    from dualarm.ik.pinv import settings_for, solve_pinv
+    from dualarm.paths import build_reference
+    from dualarm.tasks import load_task
 
     rows = claim_rows(repro.report)["TV-GDD"]
     task = load_task(TASKS / "ball_game.toml")
-    path = solve_pinv(task, build_reference(task), settings_for(task).feedback_gain)
+    path = solve_pinv(task.robot, build_reference(task), task.initial_q, settings_for(task))
     recorded = _run_of(repro, "ball-game-pinv")["/ik/sample"]
     assert np.abs(recorded[[f"position.{j}" for j in path.joint_names]].to_numpy() - path.q).max() < 1e-12
     for text, values, lower, upper, unit in (
@@ -393,9 +392,9 @@ def test_pinv_excursion_claims_equal_the_solvers_arrays(repro):
 # --- MC-Inverse, Table I --------------------------------------------------------------------------
 
 def test_table_i_candidates_reach_the_analogue_pose_in_pybullet(repro):
-    from pipeline.execute.world import load_pybullet_robot
-    from pipeline.reproduce.claims import PAPER_TABLE_I as QUOTED
-    from pipeline.reproduce.experiments import TABLE_I_SOLUTION_1
+    from dualarm.execute.world import load_pybullet_robot
+    from dualarm.reproduce.claims import PAPER_TABLE_I as QUOTED
+    from dualarm.reproduce.experiments import TABLE_I_SOLUTION_1
 
     data = json.loads((repro.out / "table_i.json").read_text())
     joints, candidates = data["chain"]["joints"], data["candidates"]
@@ -555,7 +554,7 @@ def _boom(out, progress):
 @pytest.fixture(scope="module")
 def failed_repro(tmp_path_factory):
     """A reproduction whose TV-GDD part raises (in this process: --jobs 1)."""
-    from pipeline.reproduce import experiments
+    from dualarm.reproduce import experiments
 
     out = tmp_path_factory.mktemp("failed") / "reproduction"
     with pytest.MonkeyPatch.context() as mp:
@@ -602,7 +601,7 @@ def test_one_at_a_time_is_not_said_to_share_the_machine(failed_repro):
 
 
 def test_report_rewritten_from_a_copy_is_the_same(repro, tmp_path):
-    from pipeline.reproduce.report import write_reproduction_report
+    from dualarm.reproduce.report import write_reproduction_report
 
     copy = tmp_path / "copied"
     shutil.copytree(repro.out, copy)
@@ -622,10 +621,11 @@ def test_report_rewritten_from_a_copy_is_the_same(repro, tmp_path):
 @pytest.fixture(scope="module")
 def carry_box_runs(tmp_path_factory):
     """The carry_box IK of the paper's three methods, 2 repetitions each (the consistency stages)."""
-    from pipeline.run import run_task
+    from dualarm.run import record_run
+    from dualarm.tasks import load_task
 
     out = tmp_path_factory.mktemp("carry_box")
-    return [read_run(run_task(TASKS / "carry_box.toml", stages=("path", "ik"), ik=m, repetitions=2, out_dir=out)) for m in ("mc-inverse", "trac-ik", "ikfast-style")]
+    return [read_run(record_run(load_task(TASKS / "carry_box.toml", 2), m, stages=("path", "ik"), out_dir=out).directory) for m in ("mc-inverse", "trac-ik", "ikfast-style")]
 
 
 def _deviations(run, task_file: Path) -> tuple[float, float]:
@@ -650,7 +650,7 @@ def _deviations(run, task_file: Path) -> tuple[float, float]:
 
 
 def test_consistency_claims_show_the_deviations_of_the_recordings(carry_box_runs):
-    from pipeline.reproduce.claims import consistency_claims
+    from dualarm.reproduce.claims import consistency_claims
 
     found = {}
     for run in carry_box_runs:
@@ -675,7 +675,7 @@ def test_consistency_claims_show_the_deviations_of_the_recordings(carry_box_runs
 
 def test_recorded_arm_angles_are_eq1_of_pybullets_frames(carry_box_runs):
     """The arm_angle_rad columns behind the Δψ figures, against eq (1) implemented here."""
-    from pipeline.execute.world import load_pybullet_robot
+    from dualarm.execute.world import load_pybullet_robot
 
     run = next(r for r in carry_box_runs if r.manifest["settings"]["ik"]["method"] == "trac-ik")
     sample, start = run["/ik/sample"], run["/task/joint_state"].iloc[0]
@@ -692,14 +692,15 @@ def test_recorded_arm_angles_are_eq1_of_pybullets_frames(carry_box_runs):
 
 
 def test_consistency_claims_survive_a_failed_method_run(carry_box_runs, tmp_path):
-    from pipeline.reproduce.claims import consistency_claims
-    from pipeline.run import run_task
+    from dualarm.reproduce.claims import consistency_claims
+    from dualarm.run import record_run
+    from dualarm.tasks import load_task
 
     task = tmp_path / "carry_box.toml"
     text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     task.write_text(text + "\n[arm_angle]\nmax_joint_step_rad = 1e-6\n")
     with pytest.raises(DualarmError, match="max_joint_step_rad"):
-        run_task(task, stages=("path", "ik"), ik="mc-inverse", repetitions=2, out_dir=tmp_path / "runs")
+        record_run(load_task(task, 2), "mc-inverse", stages=("path", "ik"), out_dir=tmp_path / "runs")
     (failed_dir,) = (tmp_path / "runs").glob("*/*")
     failed = read_run(failed_dir)
     assert failed.status == "failed"
@@ -710,7 +711,7 @@ def test_consistency_claims_survive_a_failed_method_run(carry_box_runs, tmp_path
 
 
 def test_plan_claims_count_successes_and_average_their_times():
-    from pipeline.reproduce.claims import plan_claims
+    from dualarm.reproduce.claims import plan_claims
 
     trials = pd.DataFrame({"success": [True, False, True, True, False], "planning_time_s": [0.120, 5.0, 0.030, 0.060, 5.0]})
     found, mean = plan_claims(trials, None)
@@ -731,7 +732,7 @@ def test_plan_claims_count_successes_and_average_their_times():
 def test_an_interrupted_reproduction_is_recognised_and_emptied(tmp_path):
     """A reproduction stopped before parts.json and report.md (Ctrl-C) is still recognised as one
     by the marker written first, so the next run empties it instead of refusing it."""
-    from pipeline.reproduce.runner import MARKER, prepare
+    from dualarm.reproduce.runner import MARKER, prepare
 
     out = tmp_path / "repro"
     prepare(out)

@@ -7,10 +7,14 @@ import toppra
 import toppra.algorithm
 import toppra.constraint
 
-from pipeline.errors import StageError
-from pipeline.ik.joint_path import JointPath
-from pipeline.retime import topp
-from pipeline.retime.topp import chord_parameter, gridpoints, limit_ratios, path_deviation_max_rad, plan, retime
+from dualarm.errors import InvalidArgumentError, StageError
+from dualarm.ik.joint_path import JointPath
+from dualarm.limits import LimitRatio, limit_ratios
+from dualarm.retime import topp
+from dualarm.retime.retiming import plan, retime_path
+from dualarm.retime.timing import path_deviation_max_rad
+from dualarm.retime.topp import chord_parameter, gridpoints
+from dualarm.retime.trajectory import JointTrajectory
 
 DT = 1e-3
 ARM = tuple(f"left_j{i}" for i in range(1, 8))
@@ -55,6 +59,11 @@ def arm():
     return path, timing, timing.sample(DT)
 
 
+def sample_ratios(traj: JointTrajectory, v: np.ndarray, a: np.ndarray) -> dict[str, LimitRatio]:
+    """The largest |qd| / v and |qdd| / a over the samples (the shared limit ratios)."""
+    return limit_ratios(traj.t, traj.joint_names, {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}, "retime")
+
+
 def central_difference(x: np.ndarray, t: np.ndarray) -> np.ndarray:
     """d/dt of the samples by second-order (central) differences, one-sided at the ends."""
     return np.gradient(x, t, axis=0, edge_order=2)
@@ -64,8 +73,8 @@ def test_limits_hold_on_the_samples(arm):
     path, timing, traj = arm
     assert np.abs(traj.qd / V7).max() <= 1 + 1e-6
     assert np.abs(traj.qdd / A7).max() <= 1 + 1e-6
-    ratios = limit_ratios(traj, V7, A7)
-    assert ratios.velocity_ratio_max <= 1 + 1e-6 and ratios.acceleration_ratio_max <= 1 + 1e-6
+    ratios = sample_ratios(traj, V7, A7)
+    assert ratios["velocity"].ratio <= 1 + 1e-6 and ratios["acceleration"].ratio <= 1 + 1e-6
     assert 1.0 <= timing.stretch <= 1.001  # the between-gridpoint excess TOPP-RA leaves is small
 
 
@@ -150,9 +159,9 @@ def test_two_arms_with_holds_are_one_synchronised_path():
     path = joint_path(q, t, ARMS)
     timing = plan(path, v, a)
     traj = timing.sample(DT)
-    ratios = limit_ratios(traj, v, a)
-    assert ratios.velocity_ratio_max <= 1 + 1e-6 and ratios.acceleration_ratio_max <= 1 + 1e-6
-    assert max(ratios.velocity_ratio_max, ratios.acceleration_ratio_max) >= 0.99
+    ratios = sample_ratios(traj, v, a)
+    assert ratios["velocity"].ratio <= 1 + 1e-6 and ratios["acceleration"].ratio <= 1 + 1e-6
+    assert max(ratios["velocity"].ratio, ratios["acceleration"].ratio) >= 0.99
     assert path_deviation_max_rad(timing, path) <= 1e-6
     assert np.abs(traj.qd[[0, -1]]).max() <= 1e-9
     assert np.ptp(timing.sample_times_s[100:120]) == 0  # the hold takes no time
@@ -161,7 +170,7 @@ def test_two_arms_with_holds_are_one_synchronised_path():
 def test_a_short_motion_keeps_its_ends():
     """A motion shorter than half a sample period still gives t = [0, duration], at rest at both ends."""
     q = np.array([[0.0] * 7, [1e-7] * 7])
-    traj = retime(joint_path(q, np.array([0.0, 1.0]), ARM), V7, A7, sample_period_s=DT).trajectory
+    traj = retime_path(joint_path(q, np.array([0.0, 1.0]), ARM), V7, A7, sample_period_s=DT).trajectory
     assert len(traj) == 2 and traj.t[0] == 0 and 0 < traj.t[1] < 0.5 * DT
     assert np.abs(traj.q - q).max() <= 1e-15 and np.abs(traj.qd).max() <= 1e-12
 
@@ -178,9 +187,9 @@ def test_a_reversal_is_refined_not_slowed_down():
     path = reversal()
     timing = plan(path, V7, A7)
     traj = timing.sample(DT)
-    ratios = limit_ratios(traj, V7, A7)
-    assert ratios.velocity_ratio_max <= 1 + 1e-6 and ratios.acceleration_ratio_max <= 1 + 1e-6
-    assert max(ratios.velocity_ratio_max, ratios.acceleration_ratio_max) >= 0.99
+    ratios = sample_ratios(traj, V7, A7)
+    assert ratios["velocity"].ratio <= 1 + 1e-6 and ratios["acceleration"].ratio <= 1 + 1e-6
+    assert max(ratios["velocity"].ratio, ratios["acceleration"].ratio) >= 0.99
     assert 1.0 <= timing.stretch <= 1.001
     assert path_deviation_max_rad(timing, path) <= 1e-6
     assert np.abs(traj.qd[[0, -1]]).max() <= 1e-9
@@ -193,9 +202,9 @@ def test_the_samples_are_checked_last(monkeypatch):
     monkeypatch.setattr(topp, "CHECK_POINTS_PER_STAGE", 1)
     path = reversal()
     assert (np.abs(plan(path, V7, A7).sample(DT).qdd) / A7).max() > 1.01
-    traj = retime(path, V7, A7, sample_period_s=DT).trajectory
-    ratios = limit_ratios(traj, V7, A7)
-    assert ratios.velocity_ratio_max <= 1 + 1e-9 and ratios.acceleration_ratio_max <= 1 + 1e-9
+    traj = retime_path(path, V7, A7, sample_period_s=DT).trajectory
+    ratios = sample_ratios(traj, V7, A7)
+    assert ratios["velocity"].ratio <= 1 + 1e-9 and ratios["acceleration"].ratio <= 1 + 1e-9
 
 
 def test_repeated_samples_give_the_same_trajectory(arm):
@@ -203,7 +212,7 @@ def test_repeated_samples_give_the_same_trajectory(arm):
     index = np.sort(np.concatenate([np.arange(len(path)), [0, 0, 50, 50, 50, 120, 299, 299]]))
     held = joint_path(path.q[index], np.linspace(0.0, 10.0, len(index)), ARM)
     assert len(chord_parameter(held.q)[1]) == len(path)
-    again = retime(held, V7, A7, sample_period_s=DT).trajectory
+    again = retime_path(held, V7, A7, sample_period_s=DT).trajectory
     assert len(again) == len(traj)
     for name in ("t", "q", "qd", "qdd"):
         assert np.abs(getattr(again, name) - getattr(traj, name)).max() <= 1e-12
@@ -213,7 +222,7 @@ def test_repeated_samples_give_the_same_trajectory(arm):
 def test_a_path_that_does_not_move_gives_one_sample_at_rest(N):
     q = np.tile(np.linspace(-0.5, 0.5, 7), (N, 1))
     path = joint_path(q, np.arange(N, dtype=float), ARM, rep=np.arange(N))
-    traj = retime(path, V7, A7).trajectory
+    traj = retime_path(path, V7, A7).trajectory
     assert len(traj) == 1 and traj.t[0] == 0 and traj.rep[0] == N - 1
     assert np.array_equal(traj.q[0], q[0]) and not traj.qd.any() and not traj.qdd.any()
 
@@ -224,13 +233,13 @@ def test_a_bad_limit_is_named(arm, kind, bad):
     path = arm[0]
     limits = {"velocity": V7.copy(), "acceleration": A7.copy()}
     limits[kind][3] = bad
-    with pytest.raises(StageError, match=rf"^retime: the {kind} limit of joint 3 \(left_j4\) is [-\w.]+ rad/s(\^2)?; every limit must be a positive finite number$"):
-        retime(path, limits["velocity"], limits["acceleration"])
+    with pytest.raises(InvalidArgumentError, match=rf"^{kind}: the limit of joint 3 \(left_j4\) is [-\w.]+ rad/s(\^2)? in retime; every limit must be a positive finite number$"):
+        retime_path(path, limits["velocity"], limits["acceleration"])
 
 
 def test_limits_of_the_wrong_size_are_refused(arm):
-    with pytest.raises(StageError, match=r"expected 7 velocity limits"):
-        retime(arm[0], V7[:6], A7)
+    with pytest.raises(InvalidArgumentError, match=r"^velocity: retime expected 7 limits"):
+        retime_path(arm[0], V7[:6], A7)
 
 
 def test_a_non_finite_joint_is_named(arm):
@@ -238,27 +247,27 @@ def test_a_non_finite_joint_is_named(arm):
     q = path.q.copy()
     q[17, 2] = np.nan
     with pytest.raises(StageError, match=r"left_j3 is nan at sample 17"):
-        retime(joint_path(q, path.t, ARM), V7, A7)
+        retime_path(joint_path(q, path.t, ARM), V7, A7)
 
 
 def test_no_feasible_parameterisation_raises_not_none(arm, monkeypatch):
     monkeypatch.setattr(toppra.algorithm.TOPPRA, "compute_trajectory", lambda self, *args: None)
     with pytest.raises(StageError, match=r"^retime: TOPP-RA found no feasible time parameterisation .*joint limits: velocity \[1, 0\.9"):
-        retime(arm[0], V7, A7)
+        retime_path(arm[0], V7, A7)
 
 
 def test_keep_timing_a_slow_path_keeps_its_timing():
     t = np.linspace(5.0, 25.0, 201)  # the path's clock need not start at 0
     path = joint_path(rest_to_rest(t, 7, 2.0), t, ARM)
     timing = plan(path, V7, A7, keep_timing=True)
-    traj = retime(path, V7, A7, keep_timing=True).trajectory
+    traj = retime_path(path, V7, A7, keep_timing=True).trajectory
     assert traj.duration_s == pytest.approx(20.0, abs=1e-12)
     assert np.allclose(timing.sample_times_s, t - 5.0, rtol=0, atol=1e-12)
     assert path_deviation_max_rad(timing, path) <= 1e-12
     assert np.abs(traj.q[::100] - path.q).max() <= 1e-12  # samples every 0.1 s fall on the IK samples
     assert np.abs(traj.qd[[0, -1]]).max() <= 1e-12
-    ratios = limit_ratios(traj, V7, A7)
-    assert ratios.velocity_ratio_max < 0.5 and ratios.acceleration_ratio_max < 0.5
+    ratios = sample_ratios(traj, V7, A7)
+    assert ratios["velocity"].ratio < 0.5 and ratios["acceleration"].ratio < 0.5
     fd_qd = central_difference(traj.q, traj.t)
     assert np.abs(fd_qd - traj.qd).max() <= 1e-5
 
@@ -269,14 +278,15 @@ def test_keep_timing_a_too_fast_path_names_joint_time_and_ratio():
     q[:, 4] = 1.6 * (1 - np.cos(np.pi * t / 2))  # left_j5: 2.51 rad/s at t = 1 s (limit 1.5), 3.95 rad/s^2 at t = 0 (limit 2)
     path = joint_path(q, t, ARM)
     with pytest.raises(StageError, match=r"^retime: keep_timing: left_j5 reaches 1\.\d+x its velocity limit at t = 1\.0\d\d s") as error:
-        retime(path, V7, 100 * A7, keep_timing=True)
+        retime_path(path, V7, 100 * A7, keep_timing=True)
     assert "\n" not in str(error.value)
+    assert error.value.stage == "retime" and error.value.joint == "left_j5"
     with pytest.raises(StageError, match=r"keep_timing: left_j5 reaches 1\.9\dx its acceleration limit at t = [02]\.000 s"):
-        retime(path, 100 * V7, A7, keep_timing=True)
+        retime_path(path, 100 * V7, A7, keep_timing=True)
 
 
 def test_keep_timing_needs_increasing_times():
     t = np.linspace(0.0, 2.0, 21)
     t[7] = t[6]
     with pytest.raises(StageError, match=r"keep_timing needs increasing sample times, but sample 7 \(t = 0\.6 s\) does not come after sample 6"):
-        retime(joint_path(rest_to_rest(t, 7, 0.1), t, ARM), V7, A7, keep_timing=True)
+        retime_path(joint_path(rest_to_rest(t, 7, 0.1), t, ARM), V7, A7, keep_timing=True)

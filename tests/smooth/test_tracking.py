@@ -10,9 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.errors import StageError
-from pipeline.retime.trajectory import JointTrajectory
-from pipeline.smooth.tracking import Smoothed, limit_ratios, smooth
+from dualarm.errors import InvalidArgumentError, StageError
+from dualarm.limits import limit_ratios
+from dualarm.retime.trajectory import JointTrajectory
+from dualarm.smooth import Smoothed, smooth_trajectory
 
 V, A, J = 1.0, 3.0, 30.0  # [rad/s], [rad/s^2], [rad/s^3]
 DT = 0.001  # [s]
@@ -62,13 +63,13 @@ def fast_profile(d, t):
 @pytest.fixture(scope="module")
 def slow():
     ref = reference(slow_profile)
-    return ref, smooth(ref, V, A, J, period_s=DT)
+    return ref, smooth_trajectory(ref, V, A, J, period_s=DT)
 
 
 @pytest.fixture(scope="module")
 def fast():
     ref = reference(fast_profile)
-    return ref, smooth(ref, V, A, J, period_s=DT)
+    return ref, smooth_trajectory(ref, V, A, J, period_s=DT)
 
 
 def reference_at(ref: JointTrajectory, t: np.ndarray) -> np.ndarray:
@@ -83,6 +84,13 @@ def fd_ratios(traj: JointTrajectory, dt: float, v, a, j) -> tuple[float, float, 
         float((np.abs(np.diff(traj.qd, axis=0)) / dt / a).max()),
         float((np.abs(np.diff(traj.qdd, axis=0)) / dt / j).max()),
     )
+
+
+def ratios(out: Smoothed, v, a, j) -> dict[str, float]:
+    """The largest |velocity|, |acceleration| and |jerk| over their limits, by the shared limit ratios."""
+    traj = out.trajectory
+    samples = {"velocity": traj.qd, "acceleration": traj.qdd, "jerk": out.jerk}
+    return {kind: r.ratio for kind, r in limit_ratios(traj.t, traj.joint_names, samples, {"velocity": v, "acceleration": a, "jerk": j}, "smooth").items()}
 
 
 def test_the_references_are_as_intended():
@@ -122,12 +130,11 @@ def test_reported_jerk_and_ratios(case, request):
     traj = out.trajectory
     assert out.jerk.shape == traj.q.shape and not out.jerk[0].any()
     np.testing.assert_allclose(out.jerk[1:], np.diff(traj.qdd, axis=0) / DT, rtol=0, atol=1e-9)
-    ratios = limit_ratios(traj, out.jerk, V, A, J)
-    assert ratios == pytest.approx(
+    assert ratios(out, V, A, J) == pytest.approx(
         {
-            "velocity_ratio_max": np.abs(traj.qd).max() / V,
-            "acceleration_ratio_max": np.abs(traj.qdd).max() / A,
-            "jerk_ratio_max": np.abs(np.diff(traj.qdd, axis=0)).max() / DT / J,
+            "velocity": np.abs(traj.qd).max() / V,
+            "acceleration": np.abs(traj.qdd).max() / A,
+            "jerk": np.abs(np.diff(traj.qdd, axis=0)).max() / DT / J,
         },
         rel=1e-9,
     )
@@ -186,12 +193,12 @@ def test_per_joint_limits_and_coarse_reference():
     v = np.array([1.0, 0.5, 1.0, 0.6, 0.7, 1.0, 1.0])
     a = np.array([3.0, 1.0, 3.0, 2.0, 3.0, 0.5, 3.0])
     j = np.array([30.0, 5.0, 30.0, 1.0, 30.0, 2.0, 30.0])
-    out = smooth(ref, v, a, j, period_s=0.002)
+    out = smooth_trajectory(ref, v, a, j, period_s=0.002)
     traj = out.trajectory
     assert max(fd_ratios(traj, 0.002, v, a, j)) <= 1 + 1e-6
-    ratios = limit_ratios(traj, out.jerk, v, a, j)
-    assert max(ratios.values()) <= 1 + 1e-6
-    assert ratios["velocity_ratio_max"] > 0.99  # joint 5 is slowed to its 0.7 rad/s
+    worst = ratios(out, v, a, j)
+    assert max(worst.values()) <= 1 + 1e-6
+    assert worst["velocity"] > 0.99  # joint 5 is slowed to its 0.7 rad/s
     np.testing.assert_allclose(np.diff(traj.t), 0.002, rtol=0, atol=1e-12)
     assert np.abs(traj.q[-1] - ref.q[-1]).max() <= 1e-6 and np.abs(traj.qd[-1]).max() <= 1e-9
     np.testing.assert_allclose(out.deviation_rad, np.abs(traj.q - reference_at(ref, traj.t)), rtol=0, atol=1e-12)
@@ -201,7 +208,7 @@ def test_per_joint_limits_and_coarse_reference():
 
 def test_a_single_sample_reference_rests():
     ref = JointTrajectory("retime", NAMES, [0.0], [START], [np.zeros(7)], [np.zeros(7)], rep=[3])
-    out = smooth(ref, V, A, J)
+    out = smooth_trajectory(ref, V, A, J)
     assert isinstance(out, Smoothed)
     np.testing.assert_array_equal(out.trajectory.q[-1], START)
     assert not out.trajectory.qd.any() and (out.trajectory.rep == 3).all() and out.path_deviation_max_rad == 0
@@ -213,21 +220,21 @@ def test_bad_limits_name_the_joint(kind, bad):
     ref = reference(slow_profile, dt=0.1, duration=1.0)
     limits = {"velocity": np.full(7, V), "acceleration": np.full(7, A), "jerk": np.full(7, J)}
     limits[kind][3] = bad
-    with pytest.raises(StageError) as err:
-        smooth(ref, limits["velocity"], limits["acceleration"], limits["jerk"])
+    with pytest.raises(InvalidArgumentError) as err:
+        smooth_trajectory(ref, limits["velocity"], limits["acceleration"], limits["jerk"])
     message = str(err.value)
-    assert "\n" not in message and "'arm_j4'" in message and kind in message
+    assert "\n" not in message and "(arm_j4)" in message and kind in message and err.value.joint == "arm_j4"
     scalar = {"velocity": V, "acceleration": A, "jerk": J, kind: bad}
-    with pytest.raises(StageError, match=f"{kind} limit of joint 'arm_j1'"):
-        smooth(ref, scalar["velocity"], scalar["acceleration"], scalar["jerk"])
+    with pytest.raises(InvalidArgumentError, match=rf"^{kind}: the limit of joint 0 \(arm_j1\) is \S+ rad/s(\^[23])? in smooth; every limit must be a positive finite number$"):
+        smooth_trajectory(ref, scalar["velocity"], scalar["acceleration"], scalar["jerk"])
 
 
 @pytest.mark.parametrize("period", [0.0, -0.001, math.nan])
 def test_bad_period(period):
     with pytest.raises(StageError, match="period"):
-        smooth(reference(slow_profile, dt=0.1, duration=1.0), V, A, J, period_s=period)
+        smooth_trajectory(reference(slow_profile, dt=0.1, duration=1.0), V, A, J, period_s=period)
 
 
 def test_wrong_number_of_limits():
-    with pytest.raises(StageError, match="one per joint"):
-        smooth(reference(slow_profile, dt=0.1, duration=1.0), [V, V], A, J)
+    with pytest.raises(InvalidArgumentError, match=r"^velocity: smooth expected 7 limits \(one per joint: arm_j1, .*, arm_j7\), got \(2,\)$"):
+        smooth_trajectory(reference(slow_profile, dt=0.1, duration=1.0), [V, V], A, J)

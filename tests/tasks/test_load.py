@@ -1,4 +1,4 @@
-"""Tests of pipeline.tasks.load_task: the shipped task files load, malformed ones fail with
+"""Tests of dualarm.tasks.load_task: the shipped task files load, malformed ones fail with
 ``file:key: ...`` messages, and the CLI turns those into one error line and exit code 2."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
-from pipeline.errors import TaskFileError, UnreachablePoseError
-from pipeline.tasks import load_task
+from dualarm.errors import TaskFileError, UnreachablePoseError
+from dualarm.tasks import load_task
 
 REPO = Path(__file__).resolve().parents[2]
 TASKS = sorted((REPO / "tasks").glob("*.toml"))
@@ -255,7 +255,7 @@ CLI_CASES = [
 
 @pytest.mark.parametrize("edits", [e for _, e in CLI_CASES], ids=[i for i, _ in CLI_CASES])
 def test_cli_run_bad_task(tmp_path: Path, edits):
-    from pipeline.cli import app
+    from dualarm.cli import app
 
     path = variant(tmp_path, *edits)
     out_dir = tmp_path / "recordings"

@@ -1,0 +1,68 @@
+"""The robots and paper tasks shipped with dualarm, and how a bare name finds them.
+
+They are package data: in a checkout they are the repository's ``robots/`` and ``tasks/`` folders,
+in an installed wheel the copies inside the package (``dualarm/data/robots``, ``dualarm/data/tasks``).
+Either way they are found through the import system, never through the working directory.
+
+The rule for names, used by :func:`dualarm.load_task`, :func:`dualarm.load_robot` and the CLI:
+
+- a task given as a path that exists is that file; otherwise a bare name (``triangle`` or
+  ``triangle.toml``, no directory part) is the shipped task of that name;
+- a task's ``robot`` key is a directory relative to the task file; if there is none and the value is
+  a bare name (``humanoid``), it is the shipped robot of that name. The same holds for
+  :func:`dualarm.load_robot`, relative to the working directory.
+"""
+
+from __future__ import annotations
+
+from importlib.resources import as_file, files
+from pathlib import Path
+
+
+def _folder(package: str) -> Path:
+    with as_file(files(package)) as path:  # a real directory for a checkout and for a wheel
+        return Path(path)
+
+
+def robots_dir() -> Path:
+    """The folder of the shipped robots (one sub-folder per robot)."""
+    return _folder("dualarm.data.robots")
+
+
+def tasks_dir() -> Path:
+    """The folder of the shipped task files."""
+    return _folder("dualarm.data.tasks")
+
+
+def shipped_tasks() -> tuple[str, ...]:
+    """Names of the shipped tasks, sorted (``ball_game``, ``bowl_grasp``, ...)."""
+    return tuple(sorted(p.stem for p in tasks_dir().glob("*.toml")))
+
+
+def shipped_robots() -> tuple[str, ...]:
+    """Names of the shipped robots, sorted."""
+    return tuple(sorted(p.name for p in robots_dir().iterdir() if (p / "robot.toml").is_file()))
+
+
+def _bare(name: str) -> bool:
+    return bool(name) and Path(name).name == name and name not in (".", "..")
+
+
+def find_task(path: str | Path) -> Path:
+    """``path`` if it exists, else the shipped task a bare name (``triangle``, ``triangle.toml``)
+    names, else ``path`` unchanged (so that loading it reports the missing file)."""
+    given = Path(path)
+    if given.exists() or not _bare(str(path)):
+        return given
+    shipped = tasks_dir() / (given.name if given.suffix == ".toml" else f"{given.name}.toml")
+    return shipped if shipped.is_file() else given
+
+
+def find_robot(path: str | Path, relative_to: Path | None = None) -> Path:
+    """The robot directory ``path`` (relative to ``relative_to`` if given) if it exists, else the
+    shipped robot a bare name names, else the directory as given."""
+    given = Path(path) if relative_to is None else (Path(relative_to) / path)
+    if given.is_dir() or not _bare(str(path)):
+        return given
+    shipped = robots_dir() / str(path)
+    return shipped if shipped.is_dir() else given

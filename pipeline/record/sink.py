@@ -1,0 +1,114 @@
+"""Sinks: where the stages hand their products. The pipeline never writes files itself; it tells
+a sink, and the sink decides what to keep.
+
+- :class:`Sink`: the protocol. Each stage calls :meth:`Sink.begin` when it starts and hands its
+  product once; the driver hands the run's metrics last.
+- :class:`NullSink`: keeps nothing but when each stage began (``stage_seconds``): a run in memory.
+- :class:`MetricsSink`: keeps the metrics too.
+- :class:`~dualarm.record.recorder.Recorder`: writes ``run.mcap`` (Foxglove) and ``run.rrd`` (Rerun).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from dualarm.execute.simulate import ExecutionLog
+    from dualarm.ik.joint_path import JointPath
+    from dualarm.paths.reference import CartesianReference
+    from dualarm.retime.trajectory import JointTrajectory
+
+
+@runtime_checkable
+class Sink(Protocol):
+    """What the stages hand their products to (see the module docstring)."""
+
+    def begin(self, stage: str) -> None:
+        """A stage starts (``record`` when the sink is about to be closed)."""
+
+    def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
+        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]."""
+
+    def environment(self, objects: Sequence[Any]) -> None:
+        """The task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`)."""
+
+    def reference(self, ref: "CartesianReference") -> None:
+        """The path stage's product."""
+
+    def joint_path(self, path: "JointPath", velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+        """The IK (or plan) stage's product, with the joints' velocity limits [rad/s] and each hand's arm angle [rad] per sample."""
+
+    def trajectory(self, traj: "JointTrajectory", limits: Mapping[str, np.ndarray], hand_positions: Mapping[str, np.ndarray], extras: Mapping[str, np.ndarray] = ...) -> None:
+        """A retime or smooth stage's product, its limits (kind -> (n,)), the hands' positions (M, 3) [m] and extra per-sample arrays."""
+
+    def execution(self, log: "ExecutionLog", hand_error_m: Mapping[str, np.ndarray], expected: set[tuple[str, str]]) -> None:
+        """The execute stage's product, each hand's tracking error (K,) [m], and the expected contact pairs."""
+
+    def metrics(self, values: Mapping[str, float], t: float) -> None:
+        """The run's metrics, at motion time ``t`` [s]."""
+
+
+class NullSink:
+    """A sink that records nothing. It notes when each stage began, so that
+    :attr:`stage_seconds` gives each stage's wall time (the last one until :meth:`finish`).
+
+    Args:
+        on_begin: called with each stage's name as it begins (a progress display).
+    """
+
+    def __init__(self, on_begin: Callable[[str], None] | None = None) -> None:
+        self._marks: list[tuple[str, float]] = []
+        self._on_begin = on_begin
+
+    def begin(self, stage: str) -> None:
+        """Note the start of ``stage``."""
+        self._marks.append((stage, time.perf_counter()))
+        if self._on_begin is not None:
+            self._on_begin(stage)
+
+    def finish(self) -> None:
+        """Note the end of the last stage."""
+        self._marks.append(("", time.perf_counter()))
+
+    @property
+    def stage_seconds(self) -> dict[str, float]:
+        """Wall time of each stage that began, from its start to the next one's (or to now) [s]."""
+        marks = [*self._marks, ("", time.perf_counter())] if self._marks and self._marks[-1][0] else self._marks
+        return {stage: end - start for (stage, start), (_, end) in zip(marks, marks[1:])}
+
+    def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
+        """Ignored."""
+
+    def environment(self, objects: Sequence[Any]) -> None:
+        """Ignored."""
+
+    def reference(self, ref: "CartesianReference") -> None:
+        """Ignored."""
+
+    def joint_path(self, path: "JointPath", velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+        """Ignored."""
+
+    def trajectory(self, traj: "JointTrajectory", limits: Mapping[str, np.ndarray], hand_positions: Mapping[str, np.ndarray], extras: Mapping[str, np.ndarray] = {}) -> None:
+        """Ignored."""
+
+    def execution(self, log: "ExecutionLog", hand_error_m: Mapping[str, np.ndarray], expected: set[tuple[str, str]]) -> None:
+        """Ignored."""
+
+    def metrics(self, values: Mapping[str, float], t: float) -> None:
+        """Ignored."""
+
+
+class MetricsSink(NullSink):
+    """A sink that keeps only the run's metrics (:attr:`values`) and the stages' wall times."""
+
+    def __init__(self, on_begin: Callable[[str], None] | None = None) -> None:
+        super().__init__(on_begin)
+        self.values: dict[str, float] = {}
+
+    def metrics(self, values: Mapping[str, float], t: float) -> None:
+        """Keep ``values``."""
+        self.values.update(values)

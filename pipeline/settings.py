@@ -1,0 +1,55 @@
+"""Settings objects: frozen dataclasses (or frozen pydantic models), one per method and stage,
+changed only by making a copy with some fields replaced."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, TypeVar
+
+from pydantic import BaseModel, ValidationError
+
+from dualarm.errors import InvalidArgumentError
+
+S = TypeVar("S")
+
+
+def with_overrides(settings: S, overrides: Mapping[str, Any]) -> S:
+    """A copy of ``settings`` with ``overrides`` (field name -> value), validated like the original.
+
+    Raises:
+        InvalidArgumentError: an unknown field (listing the known ones) or a value its class refuses.
+    """
+    if isinstance(settings, BaseModel):
+        known = set(type(settings).model_fields)
+    else:
+        known = {f.name for f in dataclasses.fields(settings)}  # type: ignore[arg-type]
+    for key in overrides:
+        if key not in known:
+            raise InvalidArgumentError(key, f"not a setting of {type(settings).__name__} (settings: {', '.join(sorted(known))})")
+    if not overrides:
+        return settings
+    if isinstance(settings, BaseModel):
+        try:
+            return type(settings).model_validate({**settings.model_dump(), **overrides})
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            raise InvalidArgumentError(".".join(str(p) for p in first["loc"]), first["msg"]) from None
+    return dataclasses.replace(settings, **overrides)  # type: ignore[type-var]
+
+
+def as_record(settings: Any) -> dict[str, Any]:
+    """``settings`` as a JSON-ready dict (for a run's manifest)."""
+    if isinstance(settings, BaseModel):
+        return settings.model_dump(mode="json")
+    return {f.name: _plain(getattr(settings, f.name)) for f in dataclasses.fields(settings)}
+
+
+def _plain(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return as_record(value)
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (tuple, list)):
+        return [_plain(v) for v in value]
+    return value
