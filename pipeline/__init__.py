@@ -7,7 +7,8 @@ Robots and tasks
     :func:`load_robot` (a directory or a shipped robot's name), :class:`Robot`, :func:`hand_pose`,
     :func:`to_arm_frame`; :func:`load_task` (a task file or a shipped task's name),
     :func:`task_from_dict` (the same keys from a dict or keyword arguments), :class:`Task`.
-References
+
+References:
     :func:`build_reference` (a task's hand motions), :meth:`CartesianReference.from_poses` (your own).
 IK, each ``solve_*(robot, reference, q0, settings) -> JointPath``
     :func:`solve_tvgdd` (:class:`TvgddSettings`), :func:`solve_pinv`, :func:`solve_mc_inverse`

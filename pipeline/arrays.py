@@ -1,6 +1,4 @@
-"""Read-only arrays for the immutable stage contracts, and the checks of array arguments at the
-public entry points (each failure an :class:`~dualarm.errors.InvalidArgumentError` naming the
-argument: a wrong shape, a NaN, a matrix that is not a rigid transform)."""
+"""Read-only arrays for the immutable stage contracts, and the checks of array arguments at the public entry points (each failure an :class:`~dualarm.errors.InvalidArgumentError` naming the argument: a wrong shape, a NaN, a matrix that is not a rigid transform)."""
 
 from __future__ import annotations
 
@@ -47,8 +45,7 @@ def finite_array(a: Any, name: str, shape: tuple[int | None, ...] | None = None)
 
 
 def rigid_transforms(a: Any, name: str, *, many: bool = False) -> np.ndarray:
-    """``a`` as a 4x4 rigid transform (or (N, 4, 4) with ``many``), checked: shape, finite, a
-    rotation block with R^T R = I and det R = 1, and the last row [0, 0, 0, 1].
+    """``a`` as a 4x4 rigid transform (or (N, 4, 4) with ``many``), checked: shape, finite, a rotation block with R^T R = I and det R = 1, and the last row [0, 0, 0, 1].
 
     Raises:
         InvalidArgumentError: naming the argument and what is wrong (a 3x3 where a 4x4 belongs, a NaN, ...).
@@ -66,8 +63,7 @@ def rigid_transforms(a: Any, name: str, *, many: bool = False) -> np.ndarray:
 
 
 def joint_vector(q: Any, joint_names: tuple[str, ...], name: str) -> np.ndarray:
-    """A configuration of ``joint_names`` [rad] from an array (n,) or a mapping joint name -> value
-    (every joint named), checked finite.
+    """A configuration of ``joint_names`` [rad] from an array (n,) or a mapping joint name -> value (every joint named), checked finite.
 
     Raises:
         InvalidArgumentError: a wrong length, a joint missing from the mapping, a NaN.

@@ -69,13 +69,13 @@ def run(
     timeout: Annotated[Optional[float], typer.Option(help="Planning timeout [s] (default 5).")] = None,
 ) -> None:
     """Run a task through the pipeline and record it; prints the run directory as the last line.
+
     TASK is a task file, or the name of a shipped task (ball_game, bowl_grasp, carry_box, circle,
-    triangle) when no such file exists."""
-    from dualarm.run import record_run
+    triangle) when no such file exists.
+    """
+    from dualarm.run import TIMINGS, record_run
     from dualarm.settings import with_overrides
     from dualarm.tasks import load_task
-
-    from dualarm.run import TIMINGS
 
     if ik is not None:
         _method(ik, "ik", "--ik")
@@ -96,8 +96,16 @@ def run(
     retime = with_overrides(loaded.spec.retime, {"timing": timing}) if timing is not None else None
     with err.status(f"running {task} ...") as status:
         result = record_run(
-            loaded, method, settings=settings, stages=chosen, retime=retime, execution=_execution(gui), seed=seed, out_dir=out_dir,
-            command=["dualarm", *sys.argv[1:]], progress=lambda stage: status.update(f"running {task}: {stage} ..."),
+            loaded,
+            method,
+            settings=settings,
+            stages=chosen,
+            retime=retime,
+            execution=_execution(gui),
+            seed=seed,
+            out_dir=out_dir,
+            command=["dualarm", *sys.argv[1:]],
+            progress=lambda stage: status.update(f"running {task}: {stage} ..."),
         )
     out.print(str(result.directory), markup=False, soft_wrap=True)
 
@@ -126,8 +134,7 @@ def plan(
     out_dir: Annotated[Optional[Path], typer.Option("--out", help="Directory for plan_trials.csv and plan_summary.json (default plans/<task>-<planner>).")] = None,
     recordings: Annotated[Path, typer.Option(help="Directory that receives the recorded run of the first successful plan.")] = Path("recordings"),
 ) -> None:
-    """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed,
-    smoothed, executed and recorded as a run; exits 1 when no trial succeeded."""
+    """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed, smoothed, executed and recorded as a run; exits 1 when no trial succeeded."""
     from dualarm.plan.problem import PlanningSettings
     from dualarm.plan.trials import run_trials
 
@@ -135,11 +142,22 @@ def plan(
     directory = out_dir or Path("plans") / f"{task.stem}-{planner}"
     with err.status(f"planning {task} ...") as status:
         result = run_trials(
-            task, planner, trials, seed, directory, PlanningSettings().with_timeout(timeout), recordings, ["dualarm", *sys.argv[1:]],
+            task,
+            planner,
+            trials,
+            seed,
+            directory,
+            PlanningSettings().with_timeout(timeout),
+            recordings,
+            ["dualarm", *sys.argv[1:]],
             progress=lambda done, total: status.update(f"planning {task}: trial {done}/{total}" + (" (recording the first plan)" if done == total else "")),
         )
     s = result.summary
-    out.print(f"{planner} on {task}: {s['success_rate'] * 100:.0f} % of {s['trials']} trials; planning time median {s['planning_time_median_s'] * 1e3:.1f} ms, p95 {s['planning_time_p95_s'] * 1e3:.1f} ms (paper: {s['paper_planning_time_mean_s'] * 1e3:.2f} ms mean); {s['collision_check_time_mean_s'] * 1e6:.1f} µs per collision check", markup=False, soft_wrap=True)
+    out.print(
+        f"{planner} on {task}: {s['success_rate'] * 100:.0f} % of {s['trials']} trials; planning time median {s['planning_time_median_s'] * 1e3:.1f} ms, p95 {s['planning_time_p95_s'] * 1e3:.1f} ms (paper: {s['paper_planning_time_mean_s'] * 1e3:.2f} ms mean); {s['collision_check_time_mean_s'] * 1e6:.1f} µs per collision check",
+        markup=False,
+        soft_wrap=True,
+    )
     out.print(str(result.directory / "plan_summary.json"), markup=False, soft_wrap=True)
     if result.run is None:
         err.print(f"error: no trial found a path: {'; '.join(s['failures'])}", markup=False, soft_wrap=True)
@@ -150,13 +168,16 @@ def plan(
 @app.command()
 @user_errors
 def reproduce(
-    out_dir: Annotated[Path, typer.Option("--out", help="Directory that receives every run, table and figure, and report.md (emptied first if it holds an earlier reproduction).")] = Path("reports/reproduction"),
+    out_dir: Annotated[Path, typer.Option("--out", help="Directory that receives every run, table and figure, and report.md (emptied first if it holds an earlier reproduction).")] = Path(
+        "reports/reproduction"
+    ),
     only: Annotated[Optional[str], typer.Option(help="Comma-separated parts to run (default: all): ball-game-tvgdd, ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp.")] = None,
     jobs: Annotated[int, typer.Option(min=1, help="Parts run at once, each in its own process (default: 2, or 1 on a 1-core machine).")] = min(2, os.cpu_count() or 1),
 ) -> None:
-    """Run every experiment of the three papers, record it, and write DIR/report.md: each paper
-    claim against ours (read back from the recordings), the figures, the runs and the time of each
-    part. Exits 1 if a part failed (the report says which and why)."""
+    """Run every experiment of the three papers, record it, and write DIR/report.md: each paper claim against ours (read back from the recordings), the figures, the runs and the time of each part.
+
+    Exits 1 if a part failed (the report says which and why).
+    """
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dualarm.reproduce.experiments import BY_NAME
@@ -223,9 +244,10 @@ def report(
     run_dirs: Annotated[list[Path], typer.Argument(help="One or more run directories (recordings/<task>/<run-id>), from this machine or copied from another.")],
     out_dir: Annotated[Optional[Path], typer.Option("--out", help="Report directory (default reports/<task>/<run-id> for one run, reports/<task or runs>/<first run-id>+<n-1> for several).")] = None,
 ) -> None:
-    """Write a markdown summary and the figures each run's recording allows; for several runs also
-    runs.csv and runs.md (a row per run, every metric), figures setting them side by side and
-    report.md linking it all. Prints the report directory."""
+    """Write a markdown summary and the figures each run's recording allows; for several runs also runs.csv and runs.md (a row per run, every metric), figures setting them side by side and report.md linking it all.
+
+    Prints the report directory.
+    """
     from dualarm.report.run_report import write_report, write_runs_report
 
     with err.status(f"reporting {len(run_dirs)} run{'s' if len(run_dirs) > 1 else ''} ..."):
@@ -241,9 +263,10 @@ def compare(
     tol: Annotated[float, typer.Option(min=0.0, help="Largest absolute difference accepted, in each field's own unit (0: identical).")] = 0.0,
     csv: Annotated[Optional[Path], typer.Option(help="Also write the whole table (a row per topic and field) to this CSV file.")] = None,
 ) -> None:
-    """Per topic and field, the largest difference between two runs, aligned on repetition and
-    time; exits 0 when every field is within --tol and 1 otherwise, naming where they differ first.
-    Wall-clock measurements (solve, planning, collision-check times) are listed, never judged."""
+    """Per topic and field, the largest difference between two runs, aligned on repetition and time; exits 0 when every field is within --tol and 1 otherwise, naming where they differ first.
+
+    Wall-clock measurements (solve, planning, collision-check times) are listed, never judged.
+    """
     from dualarm.report.compare import compare_runs
 
     if csv is not None and csv.is_dir():
@@ -271,8 +294,14 @@ def compare(
     beyond = result.beyond
     first = beyond.iloc[0]
     where = f"at t = {first['first_beyond_t']:.4f} s, rep {int(first['first_beyond_rep'])}" if not _missing(first["first_beyond_t"]) else "(whole topic or field)"
-    out.print(f"differ first: {first['topic']} {first['field']} {where}" + (f" ({first['note']})" if first["note"] else f" (largest |A - B| = {first['max_difference']:.3g})"), markup=False, soft_wrap=True)
-    out.print(f"{len(beyond)} fields beyond {tol:g}, earliest first: " + ", ".join(f"{r.topic} {r.field}" for r in beyond.head(12).itertuples()) + (" ..." if len(beyond) > 12 else ""), markup=False, soft_wrap=True)
+    out.print(
+        f"differ first: {first['topic']} {first['field']} {where}" + (f" ({first['note']})" if first["note"] else f" (largest |A - B| = {first['max_difference']:.3g})"), markup=False, soft_wrap=True
+    )
+    out.print(
+        f"{len(beyond)} fields beyond {tol:g}, earliest first: " + ", ".join(f"{r.topic} {r.field}" for r in beyond.head(12).itertuples()) + (" ..." if len(beyond) > 12 else ""),
+        markup=False,
+        soft_wrap=True,
+    )
     raise typer.Exit(1)
 
 
@@ -290,15 +319,22 @@ def consistency(
     out_dir: Annotated[Optional[Path], typer.Option("--out", help="Output directory (default consistency/<task>).")] = None,
     seed: Annotated[int, typer.Option(help="Random seed, recorded in each run's manifest.")] = 0,
 ) -> None:
-    """Run each IK method on a repeated task as a recorded run and compare repetition by
-    repetition: consistency.csv, consistency.md and figures; prints the table and the directory."""
+    """Run each IK method on a repeated task as a recorded run and compare repetition by repetition: consistency.csv, consistency.md and figures; prints the table and the directory."""
     from dualarm.report.consistency import DEFAULT_METHODS, run_consistency
 
     chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else list(DEFAULT_METHODS)
     directory = out_dir or Path("consistency") / task.stem
     with err.status("consistency ...") as status:
         result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: status.update(text))
-    shown = {"rep_joint_deviation_max_rad": "rep Δq max rad", "rep_arm_angle_deviation_max_rad": "rep Δψ max rad", "closure_error_max_rad": "closure rad", "failed_reps": "failed reps", "failures": "failed samples", "max_joint_step_rad": "max step rad", "solve_time_mean_s": "solve ms/sample"}
+    shown = {
+        "rep_joint_deviation_max_rad": "rep Δq max rad",
+        "rep_arm_angle_deviation_max_rad": "rep Δψ max rad",
+        "closure_error_max_rad": "closure rad",
+        "failed_reps": "failed reps",
+        "failures": "failed samples",
+        "max_joint_step_rad": "max step rad",
+        "solve_time_mean_s": "solve ms/sample",
+    }
     table = Table(title=f"{task}: consistency over repetitions (all columns in {result.csv})", title_justify="left")
     for column in ("method", *shown.values()):
         table.add_column(column, justify="left" if column == "method" else "right")
@@ -318,9 +354,7 @@ def bench_tvgdd_command(
     repeats: Annotated[int, typer.Option(min=1, help="Repeats of the one-call rollout (best is kept).")] = 5,
     plugins: Annotated[str, typer.Option(help="Comma-separated CasADi conic plugins to compare with DAQP, e.g. qpoases,osqp,proxqp,qrqp.")] = "",
 ) -> None:
-    """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the
-    whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s (optionally other
-    conic plugins for the casadi backend)."""
+    """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s (optionally other conic plugins for the casadi backend)."""
     from dualarm.bench.tvgdd import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
 
     with err.status("benchmarking ...") as status:
@@ -329,7 +363,9 @@ def bench_tvgdd_command(
     for column in ("solver", "median µs", "p99 µs", "task s", "T_ave/ours", "T_sum/ours", "max |Δq̇| rad/s"):
         table.add_column(column, justify="left" if column == "solver" else "right")
     for r in rows:
-        table.add_row(r.name, f"{r.median_s * 1e6:.1f}", f"{r.p99_s * 1e6:.1f}", f"{r.total_s:.4f}", f"{PAPER_T_AVE_S / r.median_s:.1f}x", f"{PAPER_T_SUM_S / r.total_s:.1f}x", f"{r.velocity_gap_rad_s:.2g}")
+        table.add_row(
+            r.name, f"{r.median_s * 1e6:.1f}", f"{r.p99_s * 1e6:.1f}", f"{r.total_s:.4f}", f"{PAPER_T_AVE_S / r.median_s:.1f}x", f"{PAPER_T_SUM_S / r.total_s:.1f}x", f"{r.velocity_gap_rad_s:.2g}"
+        )
     out.print(table)
     for r in rows:
         if r.failure:
@@ -364,8 +400,7 @@ def ik_srs(
     vertical: Annotated[tuple[float, float, float], typer.Option(help="Vertical vector V of the arm angle's reference plane, in the chain base frame.")] = (0.0, 0.0, 1.0),
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON: {chain, pose, arm_angle, candidates: [{q, valid, reason, position_error_m, orientation_error_rad}]}.")] = False,
 ) -> None:
-    """The 8 MC-Inverse candidates of one hand pose at one arm angle, with validity and the error
-    of each candidate's forward kinematics (the analogue of the paper's Table I)."""
+    """The 8 MC-Inverse candidates of one hand pose at one arm angle, with validity and the error of each candidate's forward kinematics (the analogue of the paper's Table I)."""
     import json
 
     from dualarm.ik.mc_inverse import candidate_table
@@ -401,8 +436,7 @@ def bench_ik_command(
     poses: Annotated[int, typer.Option(min=1, help="Random reachable poses.")] = 10_000,
     seed: Annotated[int, typer.Option(help="Seed of the random configurations.")] = 0,
 ) -> None:
-    """MC-Inverse time per pose called singly and batched (all 8 candidates), and DLS-SVD, TRAC-IK
-    and PyBullet IK time and success rate, on the same random reachable poses, with ratios."""
+    """MC-Inverse time per pose called singly and batched (all 8 candidates), and DLS-SVD, TRAC-IK and PyBullet IK time and success rate, on the same random reachable poses, with ratios."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dualarm.bench.ik import MC_BATCHED, TARGET_BATCHED_S, TARGET_DLS_SUCCESS, bench_ik, ratios
@@ -428,14 +462,15 @@ def bench_ik_command(
     for r in rows:
         out.print(f"- {r.name}: {r.note}", markup=False, soft_wrap=True)
     by_name = {r.name: r for r in rows}
-    out.print(f"targets: batched MC-Inverse <= {TARGET_BATCHED_S * 1e6:.0f} µs/pose ({by_name[MC_BATCHED].mean_s * 1e6:.2f}), DLS-SVD success >= {TARGET_DLS_SUCCESS:.1%} ({by_name['DLS-SVD'].success_rate:.2%})")
+    out.print(
+        f"targets: batched MC-Inverse <= {TARGET_BATCHED_S * 1e6:.0f} µs/pose ({by_name[MC_BATCHED].mean_s * 1e6:.2f}), DLS-SVD success >= {TARGET_DLS_SUCCESS:.1%} ({by_name['DLS-SVD'].success_rate:.2%})"
+    )
 
 
 @bench_app.command("pipeline")
 @user_errors
 def bench_pipeline_command() -> None:
-    """Each stage's share of a whole recorded run, on the triangle and the circle (MC-Inverse) and
-    the ball game (TV-GDD)."""
+    """Each stage's share of a whole recorded run, on the triangle and the circle (MC-Inverse) and the ball game (TV-GDD)."""
     from dualarm.bench.pipeline import PARTS, bench_pipeline
 
     with err.status("benchmarking ...") as status:
@@ -455,8 +490,7 @@ def bench_plan_command(
     trials: Annotated[int, typer.Option(min=1, help="Trials per planner (interleaved).")] = 30,
     seed: Annotated[int, typer.Option(help="Seed of the first trial.")] = 0,
 ) -> None:
-    """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals: planning times
-    and their ratio, collision checks and the time of one check."""
+    """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals: planning times and their ratio, collision checks and the time of one check."""
     from dualarm.bench.plan import bench_plan
     from dualarm.plan.trials import PAPER_PLANNING_TIME_S
 
@@ -466,7 +500,17 @@ def bench_plan_command(
     for column in ("planner", "success", "median ms", "p95 ms", "mean ms", "checks (median)", "µs / check", "path rad (median)", "paper mean / ours"):
         table.add_column(column, justify="left" if column == "planner" else "right", no_wrap=column == "planner")
     for r in rows:
-        table.add_row(r.planner, f"{r.success_rate:.0%}", f"{r.median_s * 1e3:.1f}", f"{r.p95_s * 1e3:.1f}", f"{r.mean_s * 1e3:.1f}", f"{r.checks_median:.0f}", f"{r.check_time_s * 1e6:.1f}", f"{r.path_length_median_rad:.2f}", f"{PAPER_PLANNING_TIME_S / r.mean_s:.0f}x")
+        table.add_row(
+            r.planner,
+            f"{r.success_rate:.0%}",
+            f"{r.median_s * 1e3:.1f}",
+            f"{r.p95_s * 1e3:.1f}",
+            f"{r.mean_s * 1e3:.1f}",
+            f"{r.checks_median:.0f}",
+            f"{r.check_time_s * 1e6:.1f}",
+            f"{r.path_length_median_rad:.2f}",
+            f"{PAPER_PLANNING_TIME_S / r.mean_s:.0f}x",
+        )
     out.print(table)
     mcikrrt, ompl = rows[0], rows[1]
     out.print(f"median planning time, ompl-rrtconnect / mcikrrt: {ompl.median_s / mcikrrt.median_s:.2f}x", markup=False)
@@ -482,8 +526,7 @@ def robot_check(
     samples: Annotated[int, typer.Option(min=1, help="Random configurations per chain.")] = 1000,
     seed: Annotated[int, typer.Option(help="Seed of the random configurations.")] = 0,
 ) -> None:
-    """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics,
-    PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
+    """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics, PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
     from dualarm.model.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain
     from dualarm.model.srs import srs_geometry
 

@@ -1,5 +1,4 @@
-"""The IK methods and planners, in one registry: name -> what it is, what it needs, its settings
-class and its solve function.
+"""The IK methods and planners, in one registry: name -> what it is, what it needs, its settings class and its solve function.
 
 An IK method's solve function has one signature, ``solve(robot, reference, q0=None, settings=None)
 -> JointPath``; its settings default from a task with ``settings_for(task, **overrides)``. A
@@ -70,8 +69,7 @@ class Method:
         return self._get(self.settings_class)
 
     def settings_for(self, task: "Task | None" = None, **overrides: Any) -> Any:
-        """The method's settings: from ``task``'s tables when given, else the class defaults, with
-        ``overrides`` (fields of the settings class) on top.
+        """The method's settings: from ``task``'s tables when given, else the class defaults, with ``overrides`` (fields of the settings class) on top.
 
         Raises:
             InvalidArgumentError: an unknown field or a value the settings class refuses.
@@ -90,9 +88,29 @@ METHODS: Mapping[str, Method] = MappingProxyType(
     {
         m.name: m
         for m in (
-            Method("tvgdd", "ik", "TV-GDD: velocity-level QP with time-varying gesture bounds (Zhang, Kong, Niu, eqs 15-27)", False, False, "dualarm.ik.tvgdd", "solve_tvgdd", "TvgddSettings", "settings_for"),
+            Method(
+                "tvgdd",
+                "ik",
+                "TV-GDD: velocity-level QP with time-varying gesture bounds (Zhang, Kong, Niu, eqs 15-27)",
+                False,
+                False,
+                "dualarm.ik.tvgdd",
+                "solve_tvgdd",
+                "TvgddSettings",
+                "settings_for",
+            ),
             Method("pinv", "ik", "pseudoinverse baseline of TV-GDD eqs (2)-(3), no bounds", False, False, "dualarm.ik.pinv", "solve_pinv", "PinvSettings", "settings_for"),
-            Method("mc-inverse", "ik", "MC-Inverse: closed-form S-R-S IK at a chosen arm angle, one branch kept (Zou, Min, Xu)", True, True, "dualarm.ik.mc_path", "solve_mc_inverse", "ArmAngle", "settings_for"),
+            Method(
+                "mc-inverse",
+                "ik",
+                "MC-Inverse: closed-form S-R-S IK at a chosen arm angle, one branch kept (Zou, Min, Xu)",
+                True,
+                True,
+                "dualarm.ik.mc_path",
+                "solve_mc_inverse",
+                "ArmAngle",
+                "settings_for",
+            ),
             Method("trac-ik", "ik", "TRAC-IK (pytracik) pose by pose, seeded with the previous answer", False, True, _POINTWISE, "solve_trac_ik", "TracIkSettings"),
             Method("pybullet", "ik", "pybullet.calculateInverseKinematics pose by pose", False, True, _POINTWISE, "solve_pybullet", "PyBulletIkSettings"),
             Method("dls-svd", "ik", "damped least squares through the SVD, pose by pose (Li, Liang, eqs 12-20)", False, True, _POINTWISE, "solve_dls_svd", "DlsSettings"),

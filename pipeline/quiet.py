@@ -1,5 +1,4 @@
-"""Silencing of what C libraries print straight to the process's file descriptors (PyBullet's
-banners, qpOASES's licence text), so the CLI's stdout stays machine-readable."""
+"""Silencing of what C libraries print straight to the process's file descriptors (PyBullet's banners, qpOASES's licence text), so the CLI's stdout stays machine-readable."""
 
 from __future__ import annotations
 

@@ -18,7 +18,6 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from dualarm.version import __version__
 from dualarm.errors import DualarmError
 from dualarm.ik.joint_path import JointPath
 from dualarm.methods import IK_METHODS, PLANNERS
@@ -30,6 +29,7 @@ from dualarm.retime.trajectory import JointTrajectory
 from dualarm.stages import ExecuteStage, IkStage, PathStage, PlanStage, RetimeStage, SmoothStage, Stage
 from dualarm.tasks import Task, load_task
 from dualarm.tasks.schema import Retime
+from dualarm.version import __version__
 
 if TYPE_CHECKING:
     from dualarm.execute.simulate import ExecutionLog, ExecutionSettings
@@ -75,8 +75,10 @@ _PRODUCT = {"path": "reference", "ik": "joint_path", "plan": "joint_path", "reti
 
 
 def resolve_stages(stages: Sequence[str] | None, ik: str | None = None, planner: str | None = None) -> tuple[str, ...]:
-    """Validate a stage list, in pipeline order. Without one: every stage but plan when an IK
-    method is named, every stage but ik when a planner is, else the path stage alone.
+    """Validate a stage list, in pipeline order.
+
+    Without one: every stage but plan when an IK method is named, every stage but ik when a planner
+    is, else the path stage alone.
 
     Raises:
         DualarmError: an unknown stage or method, or a stage without one it needs.
@@ -160,9 +162,11 @@ def build_stages(
 
 
 def run_stages(task: Task, stages: Sequence[Stage], sink: Sink | None = None) -> RunResult:
-    """Run ``stages`` in order on ``task``, handing every product to ``sink`` (default
-    :class:`~dualarm.record.sink.NullSink`), then the metrics. Stages holding resources (the plan
-    stage's PyBullet client) are closed afterwards, whatever happens."""
+    """Run ``stages`` in order on ``task``, handing every product to ``sink`` (default :class:`~dualarm.record.sink.NullSink`), then the metrics.
+
+    Stages holding resources (the plan stage's PyBullet client) are closed afterwards, whatever
+    happens.
+    """
     sink = sink if sink is not None else NullSink()
     products: dict[str, Any] = {}
     metrics: dict[str, float] = {}
@@ -193,8 +197,7 @@ def run_task(
     seed: int = 0,
     sink: Sink | None = None,
 ) -> RunResult:
-    """Run ``task`` (a :class:`Task`, a task file or a shipped task's name) through the pipeline in
-    memory; with ``sink`` the products go to it too (see :func:`record_run` for files).
+    """Run ``task`` (a :class:`Task`, a task file or a shipped task's name) through the pipeline in memory; with ``sink`` the products go to it too (see :func:`record_run` for files).
 
     The arguments are those of :func:`build_stages`; the result holds every product and the metrics.
     """
@@ -211,10 +214,10 @@ def record_run(
     progress: Callable[[str], None] | None = None,
     **options: Any,
 ) -> RunResult:
-    """Run ``task`` as :func:`run_task` does (``options``: its keyword arguments) and record it in
-    ``out_dir/<task>/<run-id>/`` (run.mcap, run.rrd, manifest.json, metrics.json); the result's
-    ``directory`` is the run directory. ``command`` is recorded in the manifest (default ``sys.argv``); ``progress`` is told
-    each stage's name as it starts, and ``record`` when the files are being closed.
+    """Run ``task`` as :func:`run_task` does (``options``: its keyword arguments) and record it in ``out_dir/<task>/<run-id>/`` (run.mcap, run.rrd, manifest.json, metrics.json); the result's ``directory`` is the run directory.
+
+    ``command`` is recorded in the manifest (default ``sys.argv``); ``progress`` is told each
+    stage's name as it starts, and ``record`` when the files are being closed.
 
     The task and the options are validated before anything is written: a malformed task leaves no
     run behind. A stage that fails leaves a run marked ``failed`` and re-raises.
@@ -223,7 +226,9 @@ def record_run(
     return record_stages(task, build_stages(task, method, **options), out_dir=out_dir, seed=options.get("seed", 0), command=command, progress=progress)
 
 
-def record_stages(task: Task, stages: Sequence[Stage], *, out_dir: str | Path = "recordings", seed: int = 0, command: Sequence[str] | None = None, progress: Callable[[str], None] | None = None) -> RunResult:
+def record_stages(
+    task: Task, stages: Sequence[Stage], *, out_dir: str | Path = "recordings", seed: int = 0, command: Sequence[str] | None = None, progress: Callable[[str], None] | None = None
+) -> RunResult:
     """Run ``stages`` on ``task`` into a new recorded run (see :func:`record_run`)."""
     from dualarm.record.recorder import Recorder
 

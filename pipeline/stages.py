@@ -1,5 +1,4 @@
-"""The pipeline's stages, each of one shape: built from a task and its settings, called on the
-previous stage's product and a sink, returning its own product and its metrics.
+"""The pipeline's stages, each of one shape: built from a task and its settings, called on the previous stage's product and a sink, returning its own product and its metrics.
 
     task -> [path] -> CartesianReference -> [ik | plan] -> JointPath -> [retime] -> JointTrajectory
          -> [smooth] -> JointTrajectory -> [execute] -> ExecutionLog
@@ -65,10 +64,12 @@ class PathStage:
     name: ClassVar[str] = "path"
 
     def settings_record(self) -> dict[str, Any]:
+        """The path stage's settings: the control period [s], the time scaling, the repetitions."""
         spec = self.task.spec
         return {"control_period_s": spec.control_period_s, "time_scaling": "quintic", "repetitions": spec.repetitions}
 
     def __call__(self, task: Task, sink: Sink) -> tuple[CartesianReference, dict[str, float]]:
+        """Sample the task's hand motions: task -> CartesianReference."""
         sink.begin(self.name)
         sink.robot_state("path", 0.0, task.initial_q)
         sink.environment(task.spec.environment)
@@ -78,8 +79,7 @@ class PathStage:
 
 
 def path_metrics(ref: CartesianReference) -> dict[str, float]:
-    """``path.*`` metrics of a reference: samples, duration [s], repetitions, the longest hand path
-    [m] and the highest hand speed [m/s]."""
+    """``path.*`` metrics of a reference: samples, duration [s], repetitions, the longest hand path [m] and the highest hand speed [m/s]."""
     lengths = [float(np.linalg.norm(np.diff(h.position, axis=0), axis=1).sum()) for h in ref.hands.values()]
     speeds = [float(np.linalg.norm(h.linear_velocity, axis=1).max()) for h in ref.hands.values()]
     return {
@@ -101,9 +101,11 @@ class IkStage:
     name: ClassVar[str] = "ik"
 
     def settings_record(self) -> dict[str, Any]:
+        """The IK method's name and settings."""
         return {"method": self.method.name, **as_record(self.settings)}
 
     def __call__(self, reference: CartesianReference, sink: Sink) -> tuple[JointPath, dict[str, float]]:
+        """Solve the reference from the task's initial configuration: CartesianReference -> JointPath."""
         sink.begin(self.name)
         robot = self.task.robot
         path = self.method.solve(robot, reference, self.task.initial_q, self.settings)
@@ -114,9 +116,11 @@ class IkStage:
 
 @dataclass(frozen=True)
 class PlanStage:
-    """A planner of the registry from the task's initial configuration to its WTAs (the reference is
-    not used). ``planned`` is a plan already made for the problem (``dualarm plan`` records its
-    first successful trial so). The problem (and its PyBullet checker) is released by :meth:`close`."""
+    """A planner of the registry from the task's initial configuration to its WTAs (the reference is not used).
+
+    ``planned`` is a plan already made for the problem (``dualarm plan`` records its first
+    successful trial so). The problem (and its PyBullet checker) is released by :meth:`close`.
+    """
 
     problem: "PlanningProblem"
     planner: str
@@ -125,11 +129,13 @@ class PlanStage:
     name: ClassVar[str] = "plan"
 
     def settings_record(self) -> dict[str, Any]:
+        """The planner's name and settings."""
         return {"planner": self.planner, **as_record(self.problem.settings)}
 
     def __call__(self, reference: CartesianReference, sink: Sink) -> tuple[JointPath, dict[str, float]]:
-        from dualarm.plan.stage import plan_metrics, planned_joint_path
+        """Plan (or take the plan already made): the reference (unused) -> JointPath."""
         from dualarm.errors import StageError
+        from dualarm.plan.stage import plan_metrics, planned_joint_path
 
         sink.begin(self.name)
         result = self.planned or self.problem.solve(self.planner, self.seed)
@@ -157,9 +163,11 @@ class RetimeStage:
     name: ClassVar[str] = "retime"
 
     def settings_record(self) -> dict[str, Any]:
+        """The timing, the share of the limits it may use, the sample period and toppra's parametrizer."""
         return {**self.settings.model_dump(), "sample_period_s": CONTROL_PERIOD_S, "parametrizer": "ParametrizeConstAccel"}
 
     def __call__(self, path: JointPath, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
+        """Time the joint path: JointPath -> JointTrajectory (stage ``retime``)."""
         from dualarm.retime import retime_path
 
         sink.begin(self.name)
@@ -193,9 +201,11 @@ class SmoothStage:
     name: ClassVar[str] = "smooth"
 
     def settings_record(self) -> dict[str, Any]:
+        """The tracking method and its control period [s]."""
         return {"method": "ruckig online tracking", "control_period_s": CONTROL_PERIOD_S}
 
     def __call__(self, retimed: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
+        """Track the retimed trajectory: JointTrajectory -> JointTrajectory (stage ``smooth``)."""
         from dualarm.smooth import smooth_trajectory
 
         sink.begin(self.name)
@@ -232,9 +242,11 @@ class ExecuteStage:
     name: ClassVar[str] = "execute"
 
     def settings_record(self) -> dict[str, Any]:
+        """The simulation's settings."""
         return {**as_record(self.settings), "simulator": "pybullet"}
 
     def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple["ExecutionLog", dict[str, float]]:
+        """Play the trajectory in PyBullet: JointTrajectory -> ExecutionLog."""
         from dualarm.execute.simulate import execute_trajectory
 
         sink.begin(self.name)

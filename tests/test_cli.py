@@ -9,7 +9,10 @@ from tests.conftest import HUMANOID, TASKS
 runner = CliRunner()
 
 
-@pytest.mark.parametrize("command", [[], ["run"], ["inspect"], ["report"], ["bench"], ["bench", "tvgdd"], ["bench", "ik"], ["bench", "plan"], ["plan"], ["consistency"], ["robot"], ["robot", "check"], ["ik"], ["ik", "srs"]])
+@pytest.mark.parametrize(
+    "command",
+    [[], ["run"], ["inspect"], ["report"], ["bench"], ["bench", "tvgdd"], ["bench", "ik"], ["bench", "plan"], ["plan"], ["consistency"], ["robot"], ["robot", "check"], ["ik"], ["ik", "srs"]],
+)
 def test_every_command_has_help(command):
     result = runner.invoke(app, [*command, "--help"])
     assert result.exit_code == 0

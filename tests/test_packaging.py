@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
@@ -16,7 +15,9 @@ REPO = Path(__file__).resolve().parents[1]
 def test_every_package_of_the_tree_is_listed():
     config = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
     listed = set(config["packages"])
-    tree = {"dualarm" + "".join(f".{part}" for part in d.relative_to(REPO / "pipeline").parts) for d in [REPO / "pipeline", *(REPO / "pipeline").rglob("*")] if d.is_dir() and (d / "__init__.py").is_file()}
+    tree = {
+        "dualarm" + "".join(f".{part}" for part in d.relative_to(REPO / "pipeline").parts) for d in [REPO / "pipeline", *(REPO / "pipeline").rglob("*")] if d.is_dir() and (d / "__init__.py").is_file()
+    }
     assert tree | {"dualarm.data.robots", "dualarm.data.tasks"} == listed
     assert config["package-dir"] == {"dualarm": "pipeline", "dualarm.data.robots": "robots", "dualarm.data.tasks": "tasks"}
 
@@ -34,7 +35,9 @@ def test_wheel_holds_the_data_and_the_stub(wheel_env: Path, tmp_path: Path):
 
 def test_wheel_runs_the_cli_on_a_shipped_task_from_another_directory(wheel_env: Path, tmp_path: Path):
     """(tests/test_examples.py runs every example with the same wheel.)"""
-    run = subprocess.run([str(wheel_env / "bin" / "dualarm"), "run", "triangle", "--ik", "mc-inverse", "--stages", "path,ik", "--reps", "2", "--out", "out"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    run = subprocess.run(
+        [str(wheel_env / "bin" / "dualarm"), "run", "triangle", "--ik", "mc-inverse", "--stages", "path,ik", "--reps", "2", "--out", "out"], cwd=tmp_path, capture_output=True, text=True, timeout=600
+    )
     assert run.returncode == 0, run.stderr
     directory = tmp_path / run.stdout.strip().splitlines()[-1]
     manifest = json.loads((directory / "manifest.json").read_text())

@@ -142,7 +142,7 @@ def test_task_timing_too_fast_for_a_tightened_limit_is_one_line_and_a_failed_run
     """The triangle at its own timing (2 s per edge) with every velocity limit at 0.05 rad/s."""
     text = TRIANGLE.read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     task_file = tmp_path / "triangle.toml"
-    task_file.write_text(text + "\n[limits]\nvelocity = 0.05\n\n[retime]\ntiming = \"task\"\n")
+    task_file.write_text(text + '\n[limits]\nvelocity = 0.05\n\n[retime]\ntiming = "task"\n')
     result = CliRunner().invoke(app, ["run", str(task_file), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")])
     assert result.exit_code == 2
     lines = result.output.strip().splitlines()

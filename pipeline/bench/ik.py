@@ -128,8 +128,7 @@ def reachable_poses(robot: Robot, arm: str, poses: int, seed: int, mc: McInverse
 
 
 def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, seed: int = 0, progress: Progress | None = None) -> list[IkBenchRow]:
-    """Time and success rate of MC-Inverse (single and batched), DLS-SVD, TRAC-IK and PyBullet on
-    the same random reachable poses of one arm (see the module docstring).
+    """Time and success rate of MC-Inverse (single and batched), DLS-SVD, TRAC-IK and PyBullet on the same random reachable poses of one arm (see the module docstring).
 
     Args:
         robot: the robot, or its directory (as for :func:`~dualarm.model.robot.load_robot`).
@@ -235,8 +234,7 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
 
 
 def _closest(candidates: np.ndarray, reason: np.ndarray, q: np.ndarray) -> float:
-    """Largest joint difference [rad] between ``q`` (7,) and the closest valid row of
-    ``candidates`` (8, 7); inf when no candidate is valid."""
+    """Largest joint difference [rad] between ``q`` (7,) and the closest valid row of ``candidates`` (8, 7); inf when no candidate is valid."""
     from dualarm.ik.mc_inverse import VALID
 
     valid = candidates[reason == VALID]

@@ -49,8 +49,7 @@ def _bare(name: str) -> bool:
 
 
 def find_task(path: str | Path) -> Path:
-    """``path`` if it exists, else the shipped task a bare name (``triangle``, ``triangle.toml``)
-    names, else ``path`` unchanged (so that loading it reports the missing file)."""
+    """``path`` if it exists, else the shipped task a bare name (``triangle``, ``triangle.toml``) names, else ``path`` unchanged (so that loading it reports the missing file)."""
     given = Path(path)
     if given.exists() or not _bare(str(path)):
         return given
@@ -59,8 +58,7 @@ def find_task(path: str | Path) -> Path:
 
 
 def find_robot(path: str | Path, relative_to: Path | None = None) -> Path:
-    """The robot directory ``path`` (relative to ``relative_to`` if given) if it exists, else the
-    shipped robot a bare name names, else the directory as given."""
+    """The robot directory ``path`` (relative to ``relative_to`` if given) if it exists, else the shipped robot a bare name names, else the directory as given."""
     given = Path(path) if relative_to is None else (Path(relative_to) / path)
     if given.is_dir() or not _bare(str(path)):
         return given

@@ -90,7 +90,16 @@ class ExecutionLog:
 
     def __post_init__(self) -> None:
         K, n = len(self.t), len(self.joint_names)
-        for name, shape, dtype in (("t", (K,), float), ("q", (K, n), float), ("qd", (K, n), float), ("q_command", (K, n), float), ("rep", (K,), int), ("self_contacts", (K,), int), ("environment_contacts", (K,), int), ("expected_contacts", (K,), int)):
+        for name, shape, dtype in (
+            ("t", (K,), float),
+            ("q", (K, n), float),
+            ("qd", (K, n), float),
+            ("q_command", (K, n), float),
+            ("rep", (K,), int),
+            ("self_contacts", (K,), int),
+            ("environment_contacts", (K,), int),
+            ("expected_contacts", (K,), int),
+        ):
             object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
         object.__setattr__(self, "hand_poses", MappingProxyType({h: frozen(p, (K, 4, 4), f"hand_poses[{h}]") for h, p in self.hand_poses.items()}))
         object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))

@@ -20,7 +20,6 @@ from dualarm.errors import StageError
 from dualarm.model.poses import pose_matrix
 from dualarm.quiet import c_output_silenced
 
-
 with c_output_silenced():
     import pybullet as pb
 
@@ -67,8 +66,7 @@ class PyBulletRobot:
         return {i for i in self.link_index.values() if pb.getCollisionShapeData(self.body, i, physicsClientId=self.client)}
 
     def solid_parents(self) -> dict[int, tuple[int, bool]]:
-        """For each link with collision geometry below another such link: that nearest ancestor
-        with geometry, and whether the way up passes through links without geometry."""
+        """For each link with collision geometry below another such link: that nearest ancestor with geometry, and whether the way up passes through links without geometry."""
         parent = {i: pb.getJointInfo(self.body, i, physicsClientId=self.client)[16] for i in range(pb.getNumJoints(self.body, physicsClientId=self.client))}
         solid = self.collision_links()
         out = {}
@@ -116,8 +114,7 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
 
 
 def add_environment(sim: PyBulletRobot, objects) -> dict[int, str]:
-    """Static bodies in ``sim``'s client for a task's fixed objects
-    (:class:`~dualarm.tasks.schema.EnvironmentObject`); body id -> object name."""
+    """Static bodies in ``sim``'s client for a task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`); body id -> object name."""
     bodies = {}
     for obj in objects:
         if obj.shape == "box":

@@ -55,8 +55,7 @@ class ArmSolution:
 
 
 def arm_problems(robot: Robot, reference: CartesianReference, q0: Mapping[str, float]) -> list[ArmProblem]:
-    """Every hand of ``reference`` as an :class:`ArmProblem`: its targets in its arm chain's base
-    frame, the joints between the reference's frame and the arm held at ``q0`` [rad]."""
+    """Every hand of ``reference`` as an :class:`ArmProblem`: its targets in its arm chain's base frame, the joints between the reference's frame and the arm held at ``q0`` [rad]."""
     frame = reference.frame_in(robot)
     problems = []
     for hand in reference.hands:
@@ -69,9 +68,7 @@ def arm_problems(robot: Robot, reference: CartesianReference, q0: Mapping[str, f
 
 
 def joint_path(method: str, reference: CartesianReference, problems: Sequence[ArmProblem], solutions: Sequence[ArmSolution], q0: Mapping[str, float]) -> JointPath:
-    """The stage output of per-arm solutions: velocities by central differences [rad/s], status
-    failed where any arm failed, solve times summed over the arms, hand errors by the chains' FK,
-    every other joint fixed at ``q0`` [rad]."""
+    """The stage output of per-arm solutions: velocities by central differences [rad/s], status failed where any arm failed, solve times summed over the arms, hand errors by the chains' FK, every other joint fixed at ``q0`` [rad]."""
     q = np.hstack([s.q for s in solutions])
     names = tuple(n for p in problems for n in p.chain.joint_names)
     errors = [np.linalg.norm(ChainKinematics.of(p.chain).poses(s.q)[:, :3, 3] - p.targets[:, :3, 3], axis=1) for p, s in zip(problems, solutions)]

@@ -260,8 +260,7 @@ class TracIkSolver:
 
     @property
     def orientation_tolerance_rad(self) -> float:
-        """Largest orientation error of a successful solve [rad]: every component of the rotation
-        vector below epsilon or KDL's resolution, whichever is larger."""
+        """Largest orientation error of a successful solve [rad]: every component of the rotation vector below epsilon or KDL's resolution, whichever is larger."""
         return math.sqrt(3) * max(self.epsilon, KDL_ROTATION_RESOLUTION_RAD)
 
     def solve(self, target: np.ndarray, seed: np.ndarray) -> BaselineResult:
@@ -293,8 +292,7 @@ class TracIkSolver:
 
 @dataclass(frozen=True, eq=False)
 class PyBulletIkSolver:
-    """PyBullet's damped-least-squares IK for one chain, in its own DIRECT client (build with
-    :meth:`of`; close with :meth:`close` or use as a context manager).
+    """PyBullet's damped-least-squares IK for one chain, in its own DIRECT client (build with :meth:`of`; close with :meth:`close` or use as a context manager).
 
     Attributes:
         chain: the chain; ``q`` follows ``chain.joint_names``.
@@ -329,10 +327,7 @@ class PyBulletIkSolver:
     _tip_index: int = field(repr=False)
 
     def __repr__(self) -> str:
-        return (
-            f"PyBulletIkSolver({self.chain.name}, max_iterations={self.max_iterations}, "
-            f"residual_threshold_m={self.residual_threshold_m}, joint_damping={self.joint_damping})"
-        )
+        return f"PyBulletIkSolver({self.chain.name}, max_iterations={self.max_iterations}, residual_threshold_m={self.residual_threshold_m}, joint_damping={self.joint_damping})"
 
     @classmethod
     def of(
@@ -379,11 +374,7 @@ class PyBulletIkSolver:
                 raise RobotModelError(f"locked.{name}: the joint belongs to the chain {chain.name} and cannot be locked")
         world = load_pybullet_robot(robot.urdf.path)
         try:
-            dofs = tuple(
-                name
-                for name, index in sorted(world.joint_index.items(), key=lambda item: item[1])
-                if pb.getJointInfo(world.body, index, physicsClientId=world.client)[2] != pb.JOINT_FIXED
-            )
+            dofs = tuple(name for name, index in sorted(world.joint_index.items(), key=lambda item: item[1]) if pb.getJointInfo(world.body, index, physicsClientId=world.client)[2] != pb.JOINT_FIXED)
             if set(dofs) != set(robot.limits):
                 raise RobotModelError(f"{robot.urdf.path}: PyBullet's movable joints differ from the URDF's")
             rest = np.array([np.clip(locked.get(n, 0.0), robot.limits[n].lower, robot.limits[n].upper) for n in dofs])

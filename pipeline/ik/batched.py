@@ -54,8 +54,7 @@ class BatchedCandidates:
         return self._buffers[size]
 
     def __call__(self, poses: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidates of N poses (N, 4, 4) [m] at scalars x (N,) (or one for all): full chunks, then
-        the rest in a map of the rest's size rounded up to :data:`REST_STEP`.
+        """Candidates of N poses (N, 4, 4) [m] at scalars x (N,) (or one for all): full chunks, then the rest in a map of the rest's size rounded up to :data:`REST_STEP`.
 
         Returns:
             Q (N, C, n) [rad] and reason codes (N, C).

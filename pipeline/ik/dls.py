@@ -1,5 +1,4 @@
-"""DLS-SVD inverse kinematics: Li & Liang, *Study on Humanoid Robot's Dual-arm Collision Avoidance
-Motion Planning Algorithm*, eqs (12)-(20).
+"""DLS-SVD inverse kinematics: Li & Liang, *Study on Humanoid Robot's Dual-arm Collision Avoidance Motion Planning Algorithm*, eqs (12)-(20).
 
 One or several tips (hands) are driven to full 6-D poses given in a common base link's frame. The
 joints are the union of the base -> tip chains, shared joints (the waist of the 17-DOF model,
@@ -71,7 +70,6 @@ from dualarm.errors import StageError
 from dualarm.model.kinematics import chain_frames, geometric_jacobian
 from dualarm.model.robot import Robot
 
-
 #: Singular values below this fraction of the largest count as zero when there is no damping.
 RANK_TOLERANCE = 1e-12
 #: Levenberg-Marquardt factor mu: multiplied by this after a step that lowered |dx|^2 ...
@@ -136,8 +134,7 @@ class DlsResult:
 
 
 def damping(smallest_singular_value: float, settings: DlsSettings) -> float:
-    """Damping factor lambda of eqs (12)-(20) by the Nakamura-Maciejewski singular-region rule:
-    lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) for s_min < eps, else 0.
+    """Damping factor lambda of eqs (12)-(20) by the Nakamura-Maciejewski singular-region rule: lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) for s_min < eps, else 0.
 
     Args:
         smallest_singular_value: s_min of the stacked Jacobian [mixed units of J].
@@ -307,8 +304,7 @@ class DlsSolver:
         return np.clip(seed, self.lower, self.upper)
 
     def _evaluator(self, targets: Sequence[np.ndarray]):
-        """A callable ``theta -> (dx, errors, J)`` evaluating :attr:`evaluate` through a
-        FunctionBuffer on numpy arrays (returned arrays are overwritten by the next call)."""
+        """A callable ``theta -> (dx, errors, J)`` evaluating :attr:`evaluate` through a FunctionBuffer on numpy arrays (returned arrays are overwritten by the next call)."""
         h = len(self.tips)
         x = np.concatenate([np.zeros(self.n), self._pack_targets(targets)])
         dx, errors, J = np.zeros(6 * h), np.zeros(2 * h), np.zeros((6 * h, self.n))
@@ -326,9 +322,7 @@ class DlsSolver:
         return evaluate
 
     def damping_at(self, q: np.ndarray) -> float:
-        """The rule's damping lambda at configuration ``q`` [rad], (n,), clamped to the limits (see
-        :func:`damping`): the lambda of the first step from ``q``, before any Levenberg-Marquardt
-        scaling."""
+        """The rule's damping lambda at configuration ``q`` [rad], (n,), clamped to the limits (see :func:`damping`): the lambda of the first step from ``q``, before any Levenberg-Marquardt scaling."""
         J = self._evaluator([np.eye(4)] * len(self.tips))(self._seed(q))[2]
         return damping(float(np.linalg.svd(J, compute_uv=False)[-1]), self.settings)
 

@@ -58,8 +58,7 @@ DEFAULT_RESOLUTION_RAD = 0.01
 
 
 def _free_grid(lower: float, upper: float, resolution: float) -> np.ndarray:
-    """Values of the free joint from ``lower`` to ``upper`` [rad], both included, evenly spaced at
-    most ``resolution`` [rad] apart (+-pi for an unlimited joint)."""
+    """Values of the free joint from ``lower`` to ``upper`` [rad], both included, evenly spaced at most ``resolution`` [rad] apart (+-pi for an unlimited joint)."""
     lo = lower if np.isfinite(lower) else -np.pi
     hi = upper if np.isfinite(upper) else np.pi
     if hi <= lo:
@@ -169,9 +168,7 @@ class IkfastStyle:
         return self._batched(poses, theta3)
 
     def nearest(self, pose: np.ndarray, previous: np.ndarray) -> "IkfastResult":
-        """The valid candidate over all free values nearest ``previous`` (7,) [rad] (Euclidean
-        joint distance) for one hand pose (4x4, chain base frame) [m]: one mapped call over the
-        F x 8 candidates."""
+        """The valid candidate over all free values nearest ``previous`` (7,) [rad] (Euclidean joint distance) for one hand pose (4x4, chain base frame) [m]: one mapped call over the F x 8 candidates."""
         previous = np.asarray(previous, dtype=float)
         F = len(self.free_values)
         q, reason = self._batched(np.broadcast_to(np.asarray(pose, dtype=float), (F, 4, 4)), self.free_values)

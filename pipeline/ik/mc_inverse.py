@@ -184,8 +184,7 @@ class McSolution:
         return self.reason == VALID
 
     def nearest(self, seed: np.ndarray | Mapping[str, float]) -> np.ndarray:
-        """The valid candidate nearest ``seed`` (largest joint difference), (7,) [rad]: the branch
-        MC-Inverse keeps along a path when ``seed`` is the initial configuration.
+        """The valid candidate nearest ``seed`` (largest joint difference), (7,) [rad]: the branch MC-Inverse keeps along a path when ``seed`` is the initial configuration.
 
         Args:
             seed: the arm's joints (7,) [rad], or a configuration joint name -> value holding them.
@@ -203,8 +202,7 @@ class McSolution:
 
 
 def nearest_candidate(q: np.ndarray, reason: np.ndarray, seed: np.ndarray) -> int | None:
-    """Index of the valid candidate of ``q`` (8, 7) [rad] (``reason`` (8,)) nearest ``seed`` (7,)
-    [rad] by the largest joint difference, or None if none is valid."""
+    """Index of the valid candidate of ``q`` (8, 7) [rad] (``reason`` (8,)) nearest ``seed`` (7,) [rad] by the largest joint difference, or None if none is valid."""
     valid = np.flatnonzero(reason == VALID)
     if valid.size == 0:
         return None

@@ -53,8 +53,7 @@ def settings_for(task: "Task", **overrides: object) -> ArmAngle:
 
 
 def arm_angles(spec: ArmAngle, hand: str, reference: CartesianReference, solver: McInverse, q0: np.ndarray) -> np.ndarray:
-    """psi per sample (N,) [rad] for ``hand`` by the ``[arm_angle]`` settings ``spec``; ``q0`` is the
-    arm's initial configuration [rad] (``auto`` gives its psi, the preferred one; see :func:`_auto`)."""
+    """Psi per sample (N,) [rad] for ``hand`` by the ``[arm_angle]`` settings ``spec``; ``q0`` is the arm's initial configuration [rad] (``auto`` gives its psi, the preferred one; see :func:`_auto`)."""
     N = len(reference)
     if spec.mode in ("initial", "auto"):
         return np.full(N, float(solver.kinematics.arm_angles(q0)[0]))
@@ -116,25 +115,27 @@ def _kept_branch(hand: str, names, q0: np.ndarray, reference: CartesianReference
     if invalid.size:
         k = invalid[0]
         raise StageError(
-            f"MC-Inverse, {hand} arm: sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]}) has no valid "
-            f"solution on the kept branch {branch + 1}: {REASONS[int(reasons[k, branch])]}",
-            stage="ik", sample=int(k), t_s=float(reference.t[k]),
+            f"MC-Inverse, {hand} arm: sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]}) has no valid solution on the kept branch {branch + 1}: {REASONS[int(reasons[k, branch])]}",
+            stage="ik",
+            sample=int(k),
+            t_s=float(reference.t[k]),
         )
     steps = np.abs(np.diff(q, axis=0))
     jumps = np.argwhere(steps > max_step)
     if jumps.size:
         k, j = jumps[0]
         raise StageError(
-            f"MC-Inverse, {hand} arm: {names[j]} jumps {steps[k, j]:.3f} rad between samples {k} and {k + 1} "
-            f"(t = {reference.t[k + 1]:.3f} s), above arm_angle.max_joint_step_rad = {max_step}",
-            stage="ik", sample=int(k + 1), t_s=float(reference.t[k + 1]), joint=names[j],
+            f"MC-Inverse, {hand} arm: {names[j]} jumps {steps[k, j]:.3f} rad between samples {k} and {k + 1} (t = {reference.t[k + 1]:.3f} s), above arm_angle.max_joint_step_rad = {max_step}",
+            stage="ik",
+            sample=int(k + 1),
+            t_s=float(reference.t[k + 1]),
+            joint=names[j],
         )
     return q
 
 
 def _margins(solver: McInverse, candidates: np.ndarray, reasons: np.ndarray) -> np.ndarray:
-    """Distance to the nearest joint limit [rad] per candidate, -inf where a candidate is invalid
-    for another reason than the limits: candidates (..., 8, 7), reasons (..., 8) -> (..., 8)."""
+    """Distance to the nearest joint limit [rad] per candidate, -inf where a candidate is invalid for another reason than the limits: candidates (..., 8, 7), reasons (..., 8) -> (..., 8)."""
     margin = np.minimum(candidates - solver.lower, solver.upper - candidates).min(axis=-1)
     return np.where((reasons == VALID) | (margin < 0), margin, -np.inf)
 
@@ -191,8 +192,7 @@ def _auto(solver: McInverse, targets: np.ndarray, reference: CartesianReference,
 
 
 def _step_costs(q: np.ndarray, max_step: float) -> np.ndarray:
-    """Largest joint change [rad] of the step into grid cell g at sample k from cell g - d at
-    k - 1, d = -W..W, inf where it exceeds ``max_step``: q (n, G, 7) [rad] -> (n - 1, G, 2 W + 1)."""
+    """Largest joint change [rad] of the step into grid cell g at sample k from cell g - d at k - 1, d = -W..W, inf where it exceeds ``max_step``: q (n, G, 7) [rad] -> (n - 1, G, 2 W + 1)."""
     shifts = range(-AUTO_MAX_CELLS, AUTO_MAX_CELLS + 1)
     with np.errstate(invalid="ignore"):
         change = np.stack([np.abs(q[1:] - np.roll(q[:-1], d, axis=1)).max(axis=2) for d in shifts], axis=2)
@@ -200,10 +200,11 @@ def _step_costs(q: np.ndarray, max_step: float) -> np.ndarray:
 
 
 def _cheapest_profile(node: np.ndarray, steps: np.ndarray, start: np.ndarray, closed: bool):
-    """Dynamic programming over the (sample, grid cell) graph of :func:`_auto`: node costs
-    (n, G), step costs (n - 1, G, 2 W + 1) (see :func:`_step_costs`), start costs (G,). Returns (cost, cells (n,)) of the
-    cheapest profile (ending on its start cell when ``closed``), or, when there is none, the
-    first sample that no profile reaches."""
+    """Dynamic programming over the (sample, grid cell) graph of :func:`_auto`: node costs (n, G), step costs (n - 1, G, 2 W + 1) (see :func:`_step_costs`), start costs (G,).
+
+    Returns (cost, cells (n,)) of the cheapest profile (ending on its start cell when ``closed``),
+    or, when there is none, the first sample that no profile reaches.
+    """
     n, G = node.shape
     shifts = np.arange(-AUTO_MAX_CELLS, AUTO_MAX_CELLS + 1)
     move = np.abs(shifts) * (2 * np.pi / G)

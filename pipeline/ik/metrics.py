@@ -18,9 +18,7 @@ CLOSED_TOLERANCE_M = 1e-9
 
 
 def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
-    """Hand position errors (norms over samples and hands), limit violations against the robot's
-    position and velocity limits (a task's overrides applied), the largest joint step, solve
-    times, failures.
+    """Hand position errors (norms over samples and hands), limit violations against the robot's position and velocity limits (a task's overrides applied), the largest joint step, solve times, failures.
 
     A violation is one (sample, joint) pair outside its limit by more than
     :data:`VIOLATION_TOLERANCE`.
@@ -45,9 +43,7 @@ def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
 
 
 def arm_angles(path: JointPath, robot: Robot, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict[str, np.ndarray]:
-    """Arm angle psi of eq (1) of MC-Inverse per hand of the path along it (N,) [rad], with V =
-    ``vertical`` in each arm's base frame; hands whose arm joints are not all in the path, or
-    whose arm is not S-R-S, are left out."""
+    """Arm angle psi of eq (1) of MC-Inverse per hand of the path along it (N,) [rad], with V = ``vertical`` in each arm's base frame; hands whose arm joints are not all in the path, or whose arm is not S-R-S, are left out."""
     v = np.asarray(vertical, dtype=float)
     angles = {}
     for hand in path.hands:
@@ -63,8 +59,7 @@ def arm_angles(path: JointPath, robot: Robot, vertical: tuple[float, float, floa
 
 
 def consistency_metrics(path: JointPath, reference: CartesianReference, angles: dict[str, np.ndarray]) -> dict[str, float]:
-    """``ik.*`` consistency across repetitions (DESIGN.md; rep 0 is the reference), for a path of
-    two or more repetitions, with the hands' arm angles ``angles`` (see :func:`arm_angles`) [rad].
+    """``ik.*`` consistency across repetitions (DESIGN.md; rep 0 is the reference), for a path of two or more repetitions, with the hands' arm angles ``angles`` (see :func:`arm_angles`) [rad].
 
     - ``failed_reps``: repetitions with a failed sample.
     - ``rep_joint_deviation_max_rad``: largest |q_r - q_0| between samples at the same place of

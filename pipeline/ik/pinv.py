@@ -55,8 +55,7 @@ def settings_for(task: "Task", **overrides: object) -> PinvSettings:
 
 
 def solve_pinv(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: PinvSettings = PinvSettings()) -> JointPath:
-    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler
-    steps at the reference's period; hand positions only, as TV-GDD.
+    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps at the reference's period; hand positions only, as TV-GDD.
 
     Nothing bounds the joints; the path's extras hold the bands TV-GDD would impose
     (:func:`~dualarm.ik.tvgdd.gesture_band` with ``settings.bands``).

@@ -145,8 +145,7 @@ def solve_pointwise(
     settings: Any = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> JointPath:
-    """Joint path of every hand of ``reference`` by ``method`` (:data:`POINTWISE_METHODS`), one
-    sample at a time, each seeded with the arm's last successful solution (the first with ``q0``).
+    """Joint path of every hand of ``reference`` by ``method`` (:data:`POINTWISE_METHODS`), one sample at a time, each seeded with the arm's last successful solution (the first with ``q0``).
 
     Args:
         method: ``trac-ik``, ``pybullet``, ``dls-svd`` or ``ikfast-style``.

@@ -58,8 +58,7 @@ class HandStack:
 
 
 def active_joints(robot: Robot, hands: Sequence[str], frame: str, free_waist: bool) -> tuple[str, ...]:
-    """The active joints: the joints from ``frame`` to each hand's tip that belong to its arm
-    chain, plus the others on the way (the waist) when ``free_waist``, in URDF order."""
+    """The active joints: the joints from ``frame`` to each hand's tip that belong to its arm chain, plus the others on the way (the waist) when ``free_waist``, in URDF order."""
     names: list[str] = []
     for hand in hands:
         arm = set(robot.hand_chain(hand).joint_names)
@@ -70,8 +69,7 @@ def active_joints(robot: Robot, hands: Sequence[str], frame: str, free_waist: bo
 
 
 def hand_stack(robot: Robot, hands: Sequence[str], q0: Mapping[str, float], *, frame: str | None = None, free_waist: bool = False) -> HandStack:
-    """The stacked position kinematics of ``hands`` in ``frame`` (default the robot's root link),
-    the joints that are not active at their values in ``q0`` [rad]."""
+    """The stacked position kinematics of ``hands`` in ``frame`` (default the robot's root link), the joints that are not active at their values in ``q0`` [rad]."""
     frame = frame or robot.urdf.root
     names = active_joints(robot, hands, frame, free_waist)
     fixed = {n: v for n, v in q0.items() if n not in names}
@@ -113,10 +111,7 @@ START_TOLERANCE_M = 1e-9
 
 
 def start_configuration(stack: HandStack, reference: CartesianReference, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """Where a velocity-level method starts [rad], (n,): the task's initial values if they put the
-    hands on the reference's first sample (within :data:`START_TOLERANCE_M`), otherwise the
-    configuration nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares
-    problem min |theta - initial|^2 s.t. f(theta) = r_0 solved by IPOPT through CasADi.
+    """Where a velocity-level method starts [rad], (n,): the task's initial values if they put the hands on the reference's first sample (within :data:`START_TOLERANCE_M`), otherwise the configuration nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares problem min |theta - initial|^2 s.t. f(theta) = r_0 solved by IPOPT through CasADi.
 
     Raises:
         StageError: IPOPT finds no such configuration.

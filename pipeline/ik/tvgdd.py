@@ -159,10 +159,7 @@ class TvgddProblem:
         return np.concatenate([theta, [t], r, rdot, theta0])
 
     def stepper(self):
-        """A callable ``inputs (packed, see :meth:`pack`) -> (thetadot (n,), violation)`` that
-        evaluates :attr:`packed_step` through a CasADi FunctionBuffer, reading and writing numpy
-        arrays in place: it skips the DM conversions of a plain call, which cost three quarters of
-        a step."""
+        """A callable ``inputs (packed, see :meth:`pack`) -> (thetadot (n,), violation)`` that evaluates :attr:`packed_step` through a CasADi FunctionBuffer, reading and writing numpy arrays in place: it skips the DM conversions of a plain call, which cost three quarters of a step."""
         buffer, evaluate = self.packed_step.buffer()
         inputs, thetadot, violation = np.zeros(self.packed_step.size1_in(0)), np.zeros(self.stack.n), np.zeros(1)
         buffer.set_arg(0, memoryview(inputs))
@@ -177,9 +174,7 @@ class TvgddProblem:
         return step
 
     def rollout(self, samples: int) -> cs.Function:
-        """The whole Euler integration as one CasADi call (``mapaccum``):
-        ``(theta0 (n), U (1 + 2m, N), theta_ref0 (n)) -> (theta (n, N), thetadot (n, N))`` where
-        column k of U is [t_k; r_k; rdot_k] and theta[:, k] is the state after step k."""
+        """The whole Euler integration as one CasADi call (``mapaccum``): ``(theta0 (n), U (1 + 2m, N), theta_ref0 (n)) -> (theta (n, N), thetadot (n, N))`` where column k of U is [t_k; r_k; rdot_k] and theta[:, k] is the state after step k."""
         n, m = self.stack.n, self.stack.m
         theta, u, theta0 = cs.MX.sym("theta", n), cs.MX.sym("u", 1 + 2 * m), cs.MX.sym("theta0", n)
         velocity, _ = self.step(theta, u[0], u[1 : 1 + m], u[1 + m :], theta0)
@@ -188,8 +183,8 @@ class TvgddProblem:
 
 
 def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings, period_s: float):
-    """theta_new-+(t) of eq (19) and zeta_new-+(t) of eqs (21)-(22), with the bounds' rate over
-    the step [t, t + tau] (tau = ``period_s``) as feedforward when ``settings.bound_feedforward``."""
+    """theta_new-+(t) of eq (19) and zeta_new-+(t) of eqs (21)-(22), with the bounds' rate over the step [t, t + tau] (tau = ``period_s``) as feedforward when ``settings.bound_feedforward``."""
+
     def at(time):
         return position_bounds(time, bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
 
@@ -203,8 +198,7 @@ def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings, period_s: flo
 
 
 def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings, period_s: float, urdf_xml: str = "", all_joints: tuple[str, ...] = ()) -> TvgddProblem:
-    """Formulate the TV-GDD QP for ``stack`` with Euler step ``period_s`` [s] (``urdf_xml`` and
-    ``all_joints`` are needed for MKE)."""
+    """Formulate the TV-GDD QP for ``stack`` with Euler step ``period_s`` [s] (``urdf_xml`` and ``all_joints`` are needed for MKE)."""
     n, m = stack.n, stack.m
     theta = stack.theta
     t = cs.SX.sym("t")
@@ -246,8 +240,11 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
 
 
 def _plugin_options(plugin: str) -> dict:
-    """Quiet, tight options per conic plugin. A failed solve does not raise (CasADi would print
-    every input of the enclosing Functions first); the step's ``violation`` output reports it."""
+    """Quiet, tight options per conic plugin.
+
+    A failed solve does not raise (CasADi would print every input of the enclosing Functions first);
+    the step's ``violation`` output reports it.
+    """
     options = {
         "qpoases": {"printLevel": "none"},
         "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 100000}},
@@ -303,8 +300,7 @@ def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: f
 
 
 def joint_bounds(robot: Robot, stack: HandStack, settings: TvgddSettings) -> JointBounds:
-    """Physical limits and gesture goals of the stack's joints; a joint without a goal keeps its
-    limits as goals.
+    """Physical limits and gesture goals of the stack's joints; a joint without a goal keeps its limits as goals.
 
     Raises:
         InvalidArgumentError: a goal for a joint the stack does not move.
@@ -325,8 +321,7 @@ def joint_bounds(robot: Robot, stack: HandStack, settings: TvgddSettings) -> Joi
 
 
 def settings_for(task: "Task", **overrides: object) -> TvgddSettings:
-    """TV-GDD settings from a task's ``[gesture]`` table and ``waist`` (defaults where it has
-    none), with ``overrides`` (fields of :class:`TvgddSettings`) on top."""
+    """TV-GDD settings from a task's ``[gesture]`` table and ``waist`` (defaults where it has none), with ``overrides`` (fields of :class:`TvgddSettings`) on top."""
     g = task.spec.gesture
     base = TvgddSettings()
     values: dict[str, object] = {"free_waist": task.spec.waist == "free"}
@@ -401,7 +396,6 @@ def solve_tvgdd(robot: Robot, reference: CartesianReference, q0: Mapping[str, fl
 
 
 def gesture_band(bounds: JointBounds, settings: TvgddSettings, period_s: float, t: np.ndarray, q: np.ndarray) -> dict[str, np.ndarray]:
-    """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path: t (N,) [s],
-    q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``, ``zeta_upper`` [rad/s], each (N, n)."""
+    """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path: t (N,) [s], q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``, ``zeta_upper`` [rad/s], each (N, n)."""
     lower_t, upper_t, zeta_lo, zeta_hi = _bands(q, t[:, None], bounds, settings, period_s)
     return {"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi}

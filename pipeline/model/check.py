@@ -108,8 +108,7 @@ def pybullet_poses(robot: Robot, chain: Chain, Q: np.ndarray) -> np.ndarray:
 
 
 def finite_difference_jacobians(kin: ChainKinematics, Q: np.ndarray, h: float = FD_STEP) -> np.ndarray:
-    """Central-difference geometric Jacobians (N, 6, n): linear rows from positions, angular rows
-    from the rotation vector of R(q + h e_i) R(q - h e_i)^T."""
+    """Central-difference geometric Jacobians (N, 6, n): linear rows from positions, angular rows from the rotation vector of R(q + h e_i) R(q - h e_i)^T."""
     N, n = Q.shape
     J = np.empty((N, 6, n))
     for i in range(n):

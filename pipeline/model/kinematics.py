@@ -150,24 +150,22 @@ def _values(robot: Robot, chain: Chain, q: "Mapping[str, float] | str | None") -
 
 
 def hand_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
-    """The pose of ``hand``'s frame in the robot's base frame (its root link) [m], 4x4, at
-    configuration ``q``: a home pose's name, a mapping joint -> value [rad] (others at 0), or None
-    (all at 0). Task poses are given in this frame."""
+    """The pose of ``hand``'s frame in the robot's base frame (its root link) [m], 4x4, at configuration ``q``: a home pose's name, a mapping joint -> value [rad] (others at 0), or None (all at 0).
+
+    Task poses are given in this frame.
+    """
     chain = robot.chain_between(robot.urdf.root, robot.hand_chain(hand).tip)
     return ChainKinematics.of(chain).pose(_values(robot, chain, q))
 
 
 def arm_base_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
-    """The pose of the base frame of ``hand``'s arm chain (the torso, for the humanoid) in the
-    robot's base frame [m], 4x4, with the joints between them (a waist) at ``q`` (as :func:`hand_pose`)."""
+    """The pose of the base frame of ``hand``'s arm chain (the torso, for the humanoid) in the robot's base frame [m], 4x4, with the joints between them (a waist) at ``q`` (as :func:`hand_pose`)."""
     chain = robot.chain_between(robot.urdf.root, robot.hand_chain(hand).base)
     return ChainKinematics.of(chain).pose(_values(robot, chain, q)) if chain.dof else np.asarray(ChainKinematics.of(chain).pose(np.zeros(0)))
 
 
 def to_arm_frame(robot: Robot, hand: str, pose: np.ndarray, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
-    """A hand pose (4x4, or (N, 4, 4)) [m] given in the robot's base frame, expressed in the base
-    frame of ``hand``'s arm chain, the frame analytic arm solvers work in (``dualarm ik srs`` takes
-    poses in it); the waist at ``q`` (as :func:`hand_pose`).
+    """A hand pose (4x4, or (N, 4, 4)) [m] given in the robot's base frame, expressed in the base frame of ``hand``'s arm chain, the frame analytic arm solvers work in (``dualarm ik srs`` takes poses in it); the waist at ``q`` (as :func:`hand_pose`).
 
     Raises:
         InvalidArgumentError: ``pose`` is not a rigid transform.
@@ -178,8 +176,7 @@ def to_arm_frame(robot: Robot, hand: str, pose: np.ndarray, q: "Mapping[str, flo
 
 
 def motion_matrix(joint: JointSpec, q: float | np.ndarray) -> np.ndarray:
-    """Homogeneous transforms (numpy) of a joint's motion by ``q`` [rad or m], a number or (K,)
-    values -> (4, 4) or (K, 4, 4); identity if fixed."""
+    """Homogeneous transforms (numpy) of a joint's motion by ``q`` [rad or m], a number or (K,) values -> (4, 4) or (K, 4, 4); identity if fixed."""
     q = np.asarray(q, dtype=float)
     T = np.broadcast_to(np.eye(4), (*q.shape, 4, 4)).copy()
     if joint.type == "prismatic":
@@ -190,8 +187,9 @@ def motion_matrix(joint: JointSpec, q: float | np.ndarray) -> np.ndarray:
 
 
 def joint_transforms(joints: tuple[JointSpec, ...], q: Mapping[str, float | np.ndarray]) -> list[tuple[str, str, np.ndarray]]:
-    """(parent link, child link, child-in-parent transform) of every joint at configuration ``q``
-    (joint name -> a value, or (K,) values for K configurations; joints not named are at 0).
-    The transforms are (4, 4), or (K, 4, 4) when any value is an array of K."""
+    """(parent link, child link, child-in-parent transform) of every joint at configuration ``q`` (joint name -> a value, or (K,) values for K configurations; joints not named are at 0).
+
+    The transforms are (4, 4), or (K, 4, 4) when any value is an array of K.
+    """
     shape = np.broadcast_shapes(*(np.shape(v) for v in q.values()))
     return [(j.parent, j.child, origin_matrix(j) @ motion_matrix(j, np.broadcast_to(q.get(j.name, 0.0), shape))) for j in joints]

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -130,14 +129,13 @@ class Robot:
         )
 
     def limit_array(self, kind: str, joint_names: tuple[str, ...]) -> np.ndarray:
-        """The ``kind`` limits (``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3],
-        ``effort`` [N m]) of ``joint_names``, (n,)."""
+        """The ``kind`` limits (``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3], ``effort`` [N m]) of ``joint_names``, (n,)."""
         return np.array([getattr(self.limits[n], kind) for n in joint_names], dtype=float)
 
     def with_limits(self, **overrides: float | Mapping[str, float] | None) -> "Robot":
-        """The same robot with some limits replaced: ``kind=value`` for every joint, or
-        ``kind={joint: value}`` for some (kinds ``velocity``, ``acceleration``, ``jerk``; None
-        keeps the robot's). A task's ``[limits]`` table is applied so.
+        """The same robot with some limits replaced: ``kind=value`` for every joint, or ``kind={joint: value}`` for some (kinds ``velocity``, ``acceleration``, ``jerk``; None keeps the robot's).
+
+        A task's ``[limits]`` table is applied so.
 
         Raises:
             InvalidArgumentError: an unknown kind or joint.
@@ -156,8 +154,7 @@ class Robot:
         return replace(self, limits=MappingProxyType(limits))
 
     def configuration(self, q: "Mapping[str, float] | str | None" = None, name: str = "q") -> Mapping[str, float]:
-        """Every movable joint's value [rad]: a home pose's name, or a mapping joint -> value
-        (joints not named at 0), or None (all at 0).
+        """Every movable joint's value [rad]: a home pose's name, or a mapping joint -> value (joints not named at 0), or None (all at 0).
 
         Raises:
             InvalidArgumentError: an unknown home or joint, a value that is not finite or is
@@ -247,8 +244,7 @@ def _joint_values(data: object, where: str, joints: tuple[str, ...]) -> dict[str
 
 
 def load_robot(directory: str | Path) -> Robot:
-    """Load ``directory/robot.toml`` and the URDF it names; a bare name that is no directory here
-    (``humanoid``) is a shipped robot (see :mod:`dualarm.data`).
+    """Load ``directory/robot.toml`` and the URDF it names; a bare name that is no directory here (``humanoid``) is a shipped robot (see :mod:`dualarm.data`).
 
     Raises:
         RobotModelError: naming ``robot.toml:key`` for anything missing or malformed.
@@ -302,9 +298,7 @@ def load_robot(directory: str | Path) -> Robot:
         for joint, value in given.items():
             lim = limits[joint]
             if not lim.lower <= value <= lim.upper:
-                raise RobotModelError(
-                    f"{where}:home.{name}.{joint}: {value} outside the joint limits [{lim.lower}, {lim.upper}]"
-                )
+                raise RobotModelError(f"{where}:home.{name}.{joint}: {value} outside the joint limits [{lim.lower}, {lim.upper}]")
         homes[name] = MappingProxyType({n: given.get(n, 0.0) for n in movable})
 
     return Robot(

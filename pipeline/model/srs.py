@@ -104,9 +104,7 @@ def srs_geometry(chain: Chain, *, seed: int = 7) -> SrsGeometry:
     p4, d4 = lines[3]
     elbow = p4 + d4 * np.dot(shoulder - p4, d4)  # the point of the elbow axis nearest S
     if abs(np.dot(wrist - elbow, d4)) > INTERSECTION_TOLERANCE_M:
-        raise NotSRSError(
-            f"chain '{chain.name}': shoulder, elbow axis ({names[3]}) and wrist are not coplanar, the elbow axis must be normal to S-E-W"
-        )
+        raise NotSRSError(f"chain '{chain.name}': shoulder, elbow axis ({names[3]}) and wrist are not coplanar, the elbow axis must be normal to S-E-W")
 
     frames = chain_frames(chain)
     f = cs.Function("frames", [frames.q], [frames.after[2], frames.after[3], frames.tip])
@@ -182,6 +180,6 @@ class SrsKinematics:
         return cls(geometry=geometry, points=points, psi=psi, vertical=vertical)
 
     def arm_angles(self, Q: np.ndarray) -> np.ndarray:
-        """psi at N configurations (N, 7) [rad] -> (N,) [rad], one mapped call."""
+        """Psi at N configurations (N, 7) [rad] -> (N,) [rad], one mapped call."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         return np.asarray(self.psi.map(Q.shape[0])(Q.T)).ravel()

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dualarm.errors import UnreachablePoseError, TaskFileError
+from dualarm.errors import TaskFileError, UnreachablePoseError
 from dualarm.model.poses import invert, pose_matrix
 from dualarm.paths.reference import CartesianReference, HandReference
 from dualarm.tasks.load import Task, arm_reach
@@ -66,9 +66,7 @@ def _segment(move: HandMove | None, T0: np.ndarray, task: Task, tau: np.ndarray,
 def _slave_from_master(task: Task, master: HandReference) -> HandReference:
     """MC-Inverse eq (11): B_T_Tl Tl_T_obj = B_T_Tr Tr_T_obj, so T_r = T_l Tl_T_obj (Tr_T_obj)^-1."""
     obj = task.spec.object
-    relative = pose_matrix(obj.master_to_object.position, obj.master_to_object.rpy) @ invert(
-        pose_matrix(obj.slave_to_object.position, obj.slave_to_object.rpy)
-    )
+    relative = pose_matrix(obj.master_to_object.position, obj.master_to_object.rpy) @ invert(pose_matrix(obj.slave_to_object.position, obj.slave_to_object.rpy))
     T = master.poses @ relative
     offset = T[:, :3, 3] - master.position
     return HandReference(
@@ -127,10 +125,7 @@ def build_reference(task: Task) -> CartesianReference:
         ok = reach.within(ref.poses)
         if not ok.all():
             k = int(np.argmin(ok))
-            raise UnreachablePoseError(
-                f"{task.where(f'moves[{seg_index[k]}]')}: at t = {k * period:.3f} s (repetition {rep_index[k]}) "
-                f"{reach.explain(ref.poses[k])}"
-            )
+            raise UnreachablePoseError(f"{task.where(f'moves[{seg_index[k]}]')}: at t = {k * period:.3f} s (repetition {rep_index[k]}) {reach.explain(ref.poses[k])}")
     return CartesianReference(
         task=task.name,
         frame=task.robot.urdf.root,

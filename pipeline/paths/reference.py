@@ -55,9 +55,10 @@ class HandReference:
 
 @dataclass(frozen=True)
 class CartesianReference:
-    """What the hands should do, sample by sample: the output of the path stage, and the input of
-    every IK method. Build one from a task (:func:`~dualarm.paths.build_reference`) or from sampled
-    hand poses (:meth:`from_poses`).
+    """What the hands should do, sample by sample: the output of the path stage, and the input of every IK method.
+
+    Build one from a task (:func:`~dualarm.paths.build_reference`) or from sampled hand poses
+    (:meth:`from_poses`).
 
     Attributes:
         period_s: sample period [s]; the IK methods step at it (it is the only control period).
@@ -147,8 +148,7 @@ class CartesianReference:
         return float(self.t[-1])
 
     def frame_in(self, robot: "Robot") -> str:
-        """The link of ``robot`` the poses are in (its root link when :attr:`frame` is ""), after
-        checking that the robot has the reference's hands.
+        """The link of ``robot`` the poses are in (its root link when :attr:`frame` is ""), after checking that the robot has the reference's hands.
 
         Raises:
             InvalidArgumentError: the frame is no link of the robot, or a hand is not one of its hands.
@@ -182,9 +182,11 @@ def _angular_velocity(R: np.ndarray, period_s: float) -> np.ndarray:
 
 
 def time_in_repetition(t: np.ndarray, rep: np.ndarray) -> np.ndarray:
-    """Time since the repetition began, per sample (N,) [s], for sample times ``t`` [s] and
-    repetition indices ``rep``. Repetition r spans (r T, (r + 1) T] (the first also holds t = 0),
-    so samples at the same place of every repetition get the same value."""
+    """Time since the repetition began, per sample (N,) [s], for sample times ``t`` [s] and repetition indices ``rep``.
+
+    Repetition r spans (r T, (r + 1) T] (the first also holds t = 0), so samples at the same place
+    of every repetition get the same value.
+    """
     period = t[rep == rep[0]][-1] - t[0]
     return t - t[0] - (rep - rep[0]) * period
 

@@ -1,2 +1,4 @@
-"""Collision-avoiding dual-arm planning (Li & Liang): Workspace Target Areas, collision checking,
-MCIKRRT and the OMPL RRTConnect baseline. The planners are listed in :data:`dualarm.methods.PLANNERS`."""
+"""Collision-avoiding dual-arm planning (Li & Liang): Workspace Target Areas, collision checking, MCIKRRT and the OMPL RRTConnect baseline.
+
+The planners are listed in :data:`dualarm.methods.PLANNERS`.
+"""

@@ -58,8 +58,7 @@ def inflated_urdf(text: str, margin_m: float) -> str:
 
 
 def bisection_order(steps: int) -> np.ndarray:
-    """The integers 1 .. steps - 1 in bisection order: the middle first, then the middles of the
-    two halves, and so on (each once)."""
+    """The integers 1 .. steps - 1 in bisection order: the middle first, then the middles of the two halves, and so on (each once)."""
     order, seen, spans = [], set(), [(0, steps)]
     while spans:
         next_spans = []
@@ -90,9 +89,10 @@ class Contact:
 
 
 class CollisionChecker:
-    """Checks configurations of ``joint_names`` (the others at ``fixed``) against self-collision
-    and the task's fixed objects, with a safety margin. Pairs in ``allowed_contacts`` (a task's
-    ``expected_contacts``: a palm on the bowl it grasps) are not checked.
+    """Checks configurations of ``joint_names`` (the others at ``fixed``) against self-collision and the task's fixed objects, with a safety margin.
+
+    Pairs in ``allowed_contacts`` (a task's ``expected_contacts``: a palm on the bowl it grasps) are
+    not checked.
 
     Attributes:
         joint_names: the planned joints, the order of every configuration.
@@ -102,7 +102,16 @@ class CollisionChecker:
         check_time_s: time spent in checks so far [s].
     """
 
-    def __init__(self, robot: Robot, joint_names: Sequence[str], fixed: Mapping[str, float], environment=(), allowed_contacts: Sequence[tuple[str, str]] = (), margin_m: float = 0.01, resolution_rad: float = 0.02):
+    def __init__(
+        self,
+        robot: Robot,
+        joint_names: Sequence[str],
+        fixed: Mapping[str, float],
+        environment=(),
+        allowed_contacts: Sequence[tuple[str, str]] = (),
+        margin_m: float = 0.01,
+        resolution_rad: float = 0.02,
+    ):
         if not (np.isfinite(margin_m) and margin_m >= 0):
             raise StageError(f"collision checking: the safety margin must be a non-negative number of metres, not {margin_m}")
         if not (np.isfinite(resolution_rad) and resolution_rad > 0):
@@ -139,8 +148,7 @@ class CollisionChecker:
 
     @staticmethod
     def _filter_pairs(sim: PyBulletRobot, margin_m: float) -> frozenset[tuple[str, str]]:
-        """Disable the pairs that are not checked (module docstring); returns them by name. The
-        robot must be at the zero configuration (as loaded)."""
+        """Disable the pairs that are not checked (module docstring); returns them by name. The robot must be at the zero configuration (as loaded)."""
         body, client = sim.body, sim.client
         name = {i: n for n, i in sim.link_index.items()}
         skipped = set()
@@ -179,20 +187,16 @@ class CollisionChecker:
         return all(point[8] >= 0.0 for point in self._contact_points(q))
 
     def segment_steps(self, a: np.ndarray, b: np.ndarray) -> int:
-        """Into how many equal steps the segment from ``a`` to ``b`` [rad] is cut so that no joint
-        moves more than :attr:`resolution_rad` in one (at least 1)."""
+        """Into how many equal steps the segment from ``a`` to ``b`` [rad] is cut so that no joint moves more than :attr:`resolution_rad` in one (at least 1)."""
         return max(1, int(np.ceil(np.abs(b - a).max() / self.resolution_rad)))
 
     def segment_configurations(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """The configurations checked strictly between ``a`` and ``b`` [rad], evenly spaced at
-        most :attr:`resolution_rad` apart in every joint, in bisection order (the midpoint, then
-        the quarter points, ...) so that a blocked segment is found blocked early; (k, n), k may be 0."""
+        """The configurations checked strictly between ``a`` and ``b`` [rad], evenly spaced at most :attr:`resolution_rad` apart in every joint, in bisection order (the midpoint, then the quarter points, ...) so that a blocked segment is found blocked early; (k, n), k may be 0."""
         steps = self.segment_steps(a, b)
         return a + bisection_order(steps)[:, None] / steps * (b - a)
 
     def segment_free(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """The straight joint-space segment from ``a`` to ``b`` is free at :attr:`resolution_rad`
-        (the ends are not checked)."""
+        """The straight joint-space segment from ``a`` to ``b`` is free at :attr:`resolution_rad` (the ends are not checked)."""
         return all(self.free(q) for q in self.segment_configurations(a, b))
 
     def close(self) -> None:

@@ -73,8 +73,7 @@ class WtaGoalSampler:
         return DlsSolver.of(robot, base, tips, DlsSettings(position_tolerance_m=GOAL_TOLERANCE[0], orientation_tolerance_rad=GOAL_TOLERANCE[1], max_iterations=100))
 
     def __call__(self) -> np.ndarray | None:
-        """One goal sample: a goal configuration [rad], or None when the IK did not converge or
-        the solution collides."""
+        """One goal sample: a goal configuration [rad], or None when the IK did not converge or the solution collides."""
         drawn = [sample_hand_pose(self.areas[hand], self.rng) for hand in self.areas]
         started = time.perf_counter()
         result = self.solver.solve([pose for _, pose in drawn], self.seed)

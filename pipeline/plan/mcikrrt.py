@@ -53,9 +53,13 @@ class Checker(Protocol):
 
     checks: int
 
-    def free(self, q: np.ndarray) -> bool: ...
+    def free(self, q: np.ndarray) -> bool:
+        """Whether configuration ``q`` [rad] is collision-free."""
+        ...
 
-    def segment_free(self, a: np.ndarray, b: np.ndarray) -> bool: ...
+    def segment_free(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether the straight joint-space segment from ``a`` to ``b`` [rad] is collision-free."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -167,8 +171,7 @@ def _connect(tree: _Tree, near: int, target: np.ndarray, checker: Checker, step:
 
 
 def shortcut(path: list[np.ndarray], checker: Checker, iterations: int, rng: np.random.Generator) -> list[np.ndarray]:
-    """SmoothSolution: ``iterations`` times, join two random waypoints directly when the segment
-    between them is collision-free."""
+    """SmoothSolution: ``iterations`` times, join two random waypoints directly when the segment between them is collision-free."""
     path = list(path)
     for _ in range(iterations):
         if len(path) < 3:
@@ -188,8 +191,7 @@ def mcikrrt(
     rng: np.random.Generator,
     settings: PlannerSettings = PlannerSettings(),
 ) -> PlanResult:
-    """Plan from ``start`` [rad] to a configuration ``sample_goal`` provides (None: the sample gave
-    none), within ``lower``/``upper`` [rad], every node and edge free by ``checker``.
+    """Plan from ``start`` [rad] to a configuration ``sample_goal`` provides (None: the sample gave none), within ``lower``/``upper`` [rad], every node and edge free by ``checker``.
 
     Raises:
         StageError: ``start`` is not collision-free.

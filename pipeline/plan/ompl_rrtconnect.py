@@ -53,9 +53,7 @@ def ompl_rrtconnect(
     settings: PlannerSettings = PlannerSettings(),
     goal_time_s: float = 0.0,
 ) -> PlanResult:
-    """Plan from ``start`` [rad] to any of ``goals`` [rad] with OMPL's RRTConnect, within
-    ``lower``/``upper`` [rad]; ``goal_time_s`` [s], the time it took to find the goals, is added
-    to the planning time.
+    """Plan from ``start`` [rad] to any of ``goals`` [rad] with OMPL's RRTConnect, within ``lower``/``upper`` [rad]; ``goal_time_s`` [s], the time it took to find the goals, is added to the planning time.
 
     Raises:
         StageError: no goals, or ``start`` in collision.

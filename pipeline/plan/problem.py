@@ -14,9 +14,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from dualarm.errors import StageError
+from dualarm.methods import PLANNERS
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.poses import invert
-from dualarm.methods import PLANNERS
 from dualarm.plan.collision import CollisionChecker
 from dualarm.plan.goals import WtaGoalSampler
 from dualarm.plan.mcikrrt import PlannerSettings, PlanResult, mcikrrt
@@ -83,7 +83,9 @@ class PlanningProblem:
         if contacts:
             worst = contacts[0]
             self.close()
-            raise StageError(f"{task.file}: the start configuration is in collision: {worst.a} with {worst.b} ({worst.depth_m * 1e3:.1f} mm deep, the {settings.margin_m * 1e3:g} mm safety margin included)")
+            raise StageError(
+                f"{task.file}: the start configuration is in collision: {worst.a} with {worst.b} ({worst.depth_m * 1e3:.1f} mm deep, the {settings.margin_m * 1e3:g} mm safety margin included)"
+            )
 
     def goal_sampler(self, seed: int) -> WtaGoalSampler:
         """A goal sampler whose WTA samples are drawn from ``seed``'s own stream."""
@@ -137,10 +139,8 @@ class PlanningProblem:
         self.close()
 
 
-
 def plan_task(task: Task, planner: str, settings: PlanningSettings = PlanningSettings(), seed: int = 0) -> PlanResult:
-    """One planning query of ``task`` (its WTAs, scene and initial configuration) with ``planner``
-    (``mcikrrt`` or ``ompl-rrtconnect``) from ``seed``.
+    """One planning query of ``task`` (its WTAs, scene and initial configuration) with ``planner`` (``mcikrrt`` or ``ompl-rrtconnect``) from ``seed``.
 
     Raises:
         StageError: the task has no WTA, its start is in collision, or the planner is unknown.

@@ -1,5 +1,4 @@
-"""The plan stage's product and metrics (the stage itself is :class:`dualarm.stages.PlanStage`): a
-task with Workspace Target Areas -> a collision-free joint path.
+"""The plan stage's product and metrics (the stage itself is :class:`dualarm.stages.PlanStage`): a task with Workspace Target Areas -> a collision-free joint path.
 
 The plan's waypoints are joined by straight joint-space segments, each collision-checked at the
 checker's resolution; the stage's :class:`~dualarm.ik.joint_path.JointPath` holds those checked

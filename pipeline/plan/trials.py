@@ -1,5 +1,4 @@
-"""``dualarm plan``: repeated planning trials on one task, their table and summary, and the first
-successful plan recorded as a run.
+"""``dualarm plan``: repeated planning trials on one task, their table and summary, and the first successful plan recorded as a run.
 
 Trial ``i`` plans from seed ``seed + i`` on one planning problem (one collision checker for all
 trials). ``DIR/plan_trials.csv`` has a row per trial; ``DIR/plan_summary.json`` the success rate,
@@ -56,8 +55,8 @@ def run_trials(
     command: list[str] | None = None,
     progress: Callable[[int, int], None] = lambda done, total: None,
 ) -> TrialsResult:
-    """Plan ``trials`` times with ``planner``, write the CSV and the summary into ``out_dir``, and
-    record the first successful plan through retime, smooth and execute under ``recordings``.
+    """Plan ``trials`` times with ``planner``, write the CSV and the summary into ``out_dir``, and record the first successful plan through retime, smooth and execute under ``recordings``.
+
     ``progress`` is told the trials done and the total after each trial.
     """
     from dualarm.run import build_stages, record_stages

@@ -41,8 +41,7 @@ _TF_COLUMNS = ("parent_frame_id", "child_frame_id", "translation.x", "translatio
 
 
 def _json_frame(times: list[float], payloads: list[bytes]) -> pd.DataFrame:
-    """JSON messages -> a DataFrame (nested fields joined with dots); a message's own ``t`` wins
-    over its log time."""
+    """JSON messages -> a DataFrame (nested fields joined with dots); a message's own ``t`` wins over its log time."""
     df = pd.json_normalize(json.loads(b"[" + b",".join(payloads) + b"]"), sep=".")
     if "t" not in df:
         df.insert(0, "t", times)
@@ -71,8 +70,7 @@ def _flatten(data: Mapping, prefix: str = "") -> dict:
 
 
 def _protobuf_frame(schema_name: str, times: list[float], messages: list) -> pd.DataFrame:
-    """Other protobuf messages -> flat rows; a message holding a list of poses or entities gives a
-    row per item."""
+    """Other protobuf messages -> flat rows; a message holding a list of poses or entities gives a row per item."""
     rows = []
     for t, message in zip(times, messages):
         data = MessageToDict(message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True)
@@ -209,8 +207,7 @@ def read_run(directory: str | Path) -> RunData:
 
 
 def read_runs(directories: Iterable[str | Path], topics: Iterable[str] | None = None) -> dict[str, pd.DataFrame]:
-    """Many runs, concatenated per topic (only ``topics`` when given), with ``run`` (run id) and
-    ``task`` columns added."""
+    """Many runs, concatenated per topic (only ``topics`` when given), with ``run`` (run id) and ``task`` columns added."""
     wanted = None if topics is None else set(topics)
     per_topic: dict[str, list[pd.DataFrame]] = defaultdict(list)
     for directory in directories:

@@ -92,8 +92,7 @@ class Recorder(NullSink):
         return self._channels[topic]
 
     def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
-        """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world
-        (logged on first use)."""
+        """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world (logged on first use)."""
         if stage not in self._robot_trees:
             tree = rr.urdf.UrdfTree.from_file_path(self.robot.urdf.path, entity_path_prefix=stage, frame_prefix=f"{stage}/")
             tree.log_urdf_to_recording(self._rr)
@@ -107,8 +106,7 @@ class Recorder(NullSink):
 
     # -- products ----------------------------------------------------------------------------------
     def _tf(self, stage: str, t: np.ndarray | float, q: Mapping[str, np.ndarray | float]) -> None:
-        """The robot's link frames on ``/tf`` at times ``t`` (K,) [s] (joint name -> (K,) positions
-        [rad]), prefixed ``<stage>/`` and hung from ``world``."""
+        """The robot's link frames on ``/tf`` at times ``t`` (K,) [s] (joint name -> (K,) positions [rad]), prefixed ``<stage>/`` and hung from ``world``."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
         q = {name: np.broadcast_to(np.asarray(v, dtype=float), t.shape) for name, v in q.items()}
         root = self.robot.urdf.root
@@ -149,21 +147,14 @@ class Recorder(NullSink):
 
     # -- products ----------------------------------------------------------------------------------
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
-        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: ``/tf`` (frames
-        ``<stage>/<link>``) and ``<family>/joint_state`` in the MCAP, the URDF under ``/<stage>`` in Rerun."""
+        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: ``/tf`` (frames ``<stage>/<link>``) and ``<family>/joint_state`` in the MCAP, the URDF under ``/<stage>`` in Rerun."""
         self._tf(stage, t, q)
         family = STAGE_TOPICS.get(stage, f"/{stage}")
-        self._json(f"{family}/joint_state", schemas.JOINT_STATE).log(
-            {"t": t, "rep": rep, "position": {n: float(v) for n, v in q.items()}}, log_time=_ns(t)
-        )
+        self._json(f"{family}/joint_state", schemas.JOINT_STATE).log({"t": t, "rep": rep, "position": {n: float(v) for n, v in q.items()}}, log_time=_ns(t))
         self._rerun_motion(stage, np.array([t]), {n: np.array([v]) for n, v in q.items()})
 
     def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
-        """The IK (or plan) stage's product, under ``stage``'s topics: ``/ik/limits`` once (the robot's position limits and
-        ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` (with each hand's
-        ``arm_angles`` [rad], (N,) per hand) and (TV-GDD) ``/ik/bounds`` per sample, the robot on
-        ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's
-        position, velocity and bounds and the arm angles as time series."""
+        """The IK (or plan) stage's product, under ``stage``'s topics: ``/ik/limits`` once (the robot's position limits and ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` (with each hand's ``arm_angles`` [rad], (N,) per hand) and (TV-GDD) ``/ik/bounds`` per sample, the robot on ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's position, velocity and bounds and the arm angles as time series."""
         family = STAGE_TOPICS[stage]
         names = path.joint_names
         self._limits(stage, names, {"velocity": velocity_limits})
@@ -197,8 +188,7 @@ class Recorder(NullSink):
         self._series(f"{stage}/arm_angle_rad", path.t, arm_angles)
 
     def _animation(self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> None:
-        """The robot of ``stage`` on ``/tf`` and in Rerun, every :data:`ANIMATION_PERIOD_S` and at
-        the last sample."""
+        """The robot of ``stage`` on ``/tf`` and in Rerun, every :data:`ANIMATION_PERIOD_S` and at the last sample."""
         stride = max(1, int(round(ANIMATION_PERIOD_S / float(np.median(np.diff(t))))) if len(t) > 1 else 1)
         rows = np.unique(np.r_[np.arange(0, len(t), stride), len(t) - 1])
         self._tf(stage, t[rows], {**fixed, **dict(zip(names, q[rows].T))})
@@ -299,9 +289,7 @@ class Recorder(NullSink):
         self._series("execute/contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
 
     def environment(self, objects) -> None:
-        """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the
-        robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate) and in
-        Rerun under ``/world/environment/<name>``."""
+        """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate) and in Rerun under ``/world/environment/<name>``."""
         entities = []
         for obj in objects:
             T = pose_matrix(obj.pose.position, obj.pose.rpy)
@@ -327,9 +315,7 @@ class Recorder(NullSink):
             SceneUpdateChannel(f"{STAGE_TOPICS['path']}/environment", context=self._context).log(SceneUpdate(entities=entities), log_time=0)
 
     def reference(self, ref: CartesianReference) -> None:
-        """The path stage's product: one ``/task/reference/<hand>`` message per sample, the whole
-        path once on ``/task/reference_path/<hand>`` (Foxglove PosesInFrame), and in Rerun the
-        path as a 3D line strip and the position components as time series."""
+        """The path stage's product: one ``/task/reference/<hand>`` message per sample, the whole path once on ``/task/reference_path/<hand>`` (Foxglove PosesInFrame), and in Rerun the path as a 3D line strip and the position components as time series."""
         family = STAGE_TOPICS["path"]
         frame = ref.frame_in(self.robot)
         for hand, hr in ref.hands.items():
@@ -354,10 +340,7 @@ class Recorder(NullSink):
                 PosesInFrame(
                     timestamp=Timestamp.from_epoch_secs(0.0),
                     frame_id=frame,
-                    poses=[
-                        Pose(position=Vector3(**_vec(p)), orientation=Quaternion(**_quat(q)))
-                        for p, q in zip(hr.position[::stride], quats[::stride])
-                    ],
+                    poses=[Pose(position=Vector3(**_vec(p)), orientation=Quaternion(**_quat(q))) for p, q in zip(hr.position[::stride], quats[::stride])],
                 ),
                 log_time=0,
             )

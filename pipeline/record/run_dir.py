@@ -45,8 +45,7 @@ def package_versions() -> dict[str, str]:
 
 
 def write_whole(path: Path, text: str) -> Path:
-    """Write ``text`` beside ``path``, then rename it into place: a file that exists is complete.
-    Creates ``path``'s directory; returns ``path``."""
+    """Write ``text`` beside ``path``, then rename it into place: a file that exists is complete. Creates ``path``'s directory; returns ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(f".{path.name}.partial")
     partial.write_text(text)

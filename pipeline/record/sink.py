@@ -1,5 +1,4 @@
-"""Sinks: where the stages hand their products. The pipeline never writes files itself; it tells
-a sink, and the sink decides what to keep.
+"""Sinks: where the stages hand their products. The pipeline never writes files itself; it tells a sink, and the sink decides what to keep.
 
 - :class:`Sink`: the protocol. Each stage calls :meth:`Sink.begin` when it starts and hands its
   product once; the driver hands the run's metrics last.
@@ -53,8 +52,10 @@ class Sink(Protocol):
 
 
 class NullSink:
-    """A sink that records nothing. It notes when each stage began, so that
-    :attr:`stage_seconds` gives each stage's wall time (the last one until :meth:`finish`).
+    """A sink that records nothing.
+
+    It notes when each stage began, so that :attr:`stage_seconds` gives each stage's wall time (the
+    last one until :meth:`finish`).
 
     Args:
         on_begin: called with each stage's name as it begins (a progress display).

@@ -69,7 +69,20 @@ def _keyed(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def _row(topic: str, field: str, rows_a: int, rows_b: int, aligned: int, **values) -> dict[str, object]:
-    row = {"topic": topic, "field": field, "max_difference": np.inf, "t": np.nan, "rep": np.nan, "first_beyond_t": np.nan, "first_beyond_rep": np.nan, "rows_a": rows_a, "rows_b": rows_b, "aligned": aligned, "wall_clock": bool(WALL_CLOCK.search(field)), "note": ""}
+    row = {
+        "topic": topic,
+        "field": field,
+        "max_difference": np.inf,
+        "t": np.nan,
+        "rep": np.nan,
+        "first_beyond_t": np.nan,
+        "first_beyond_rep": np.nan,
+        "rows_a": rows_a,
+        "rows_b": rows_b,
+        "aligned": aligned,
+        "wall_clock": bool(WALL_CLOCK.search(field)),
+        "note": "",
+    }
     row.update(values)
     return row
 
@@ -93,8 +106,15 @@ def _field(topic: str, field: str, both: pd.DataFrame, tolerance: float, counts:
     beyond = np.flatnonzero(diff > tolerance)
     first = beyond[0] if len(beyond) else None
     return _row(
-        topic, field, *counts, max_difference=float(diff[worst]), t=float(both["t_a"].iloc[worst]), rep=int(both["rep"].iloc[worst]),
-        first_beyond_t=np.nan if first is None else float(both["t_a"].iloc[first]), first_beyond_rep=np.nan if first is None else int(both["rep"].iloc[first]), note=note,
+        topic,
+        field,
+        *counts,
+        max_difference=float(diff[worst]),
+        t=float(both["t_a"].iloc[worst]),
+        rep=int(both["rep"].iloc[worst]),
+        first_beyond_t=np.nan if first is None else float(both["t_a"].iloc[first]),
+        first_beyond_rep=np.nan if first is None else int(both["rep"].iloc[first]),
+        note=note,
     )
 
 
@@ -109,7 +129,16 @@ def compare_topic(topic: str, a: pd.DataFrame, b: pd.DataFrame, tolerance: float
     if len(unmatched):
         first = unmatched.iloc[0]
         first_t = first["t_a"] if first["_merge"] == "left_only" else first["t_b"]
-        rows.append(_row(topic, "(rows)", *counts, first_beyond_t=float(first_t), first_beyond_rep=int(first["rep"]), note=f"{(unmatched['_merge'] == 'left_only').sum()} rows only in A, {(unmatched['_merge'] == 'right_only').sum()} only in B"))
+        rows.append(
+            _row(
+                topic,
+                "(rows)",
+                *counts,
+                first_beyond_t=float(first_t),
+                first_beyond_rep=int(first["rep"]),
+                note=f"{(unmatched['_merge'] == 'left_only').sum()} rows only in A, {(unmatched['_merge'] == 'right_only').sum()} only in B",
+            )
+        )
     fields_a, fields_b = set(ka.columns) - set(_KEYS), set(kb.columns) - set(_KEYS)
     for field in sorted(fields_a | fields_b):
         if field in ("t", "t_ns"):
@@ -133,7 +162,9 @@ def compare_runs(run_a: str | Path | RunData, run_b: str | Path | RunData, toler
     for topic in dict.fromkeys([*a.topics, *b.topics]):
         if topic not in a.topics or topic not in b.topics:
             present = a.topics if topic in a.topics else b.topics
-            rows.append(_row(topic, "(topic)", len(present[topic]) if topic in a.topics else 0, len(present[topic]) if topic in b.topics else 0, 0, note=f"only in {'A' if topic in a.topics else 'B'}"))
+            rows.append(
+                _row(topic, "(topic)", len(present[topic]) if topic in a.topics else 0, len(present[topic]) if topic in b.topics else 0, 0, note=f"only in {'A' if topic in a.topics else 'B'}")
+            )
             continue
         rows.extend(compare_topic(topic, a[topic], b[topic], tolerance))
     return Comparison(a=a.directory, b=b.directory, tolerance=tolerance, table=pd.DataFrame(rows, columns=COLUMNS))

@@ -128,7 +128,12 @@ def _figures(task, samples: dict[str, pd.DataFrame], out_dir: Path) -> tuple[Pat
 
 def _markdown(task, table: pd.DataFrame, written: tuple[Path, ...], repetitions: int | None) -> str:
     reps = repetitions or task.spec.repetitions
-    lines = [f"# Consistency: {task.name}, {reps} repetitions", "", f"Task file `{task.file}`. Rep 0 is the reference; deviations compare samples at the same place of every repetition where both succeeded.", ""]
+    lines = [
+        f"# Consistency: {task.name}, {reps} repetitions",
+        "",
+        f"Task file `{task.file}`. Rep 0 is the reference; deviations compare samples at the same place of every repetition where both succeeded.",
+        "",
+    ]
     header = ["method", *COLUMNS]
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for _, row in table.iterrows():

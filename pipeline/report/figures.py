@@ -27,8 +27,7 @@ def _grid(n: int):
 
 
 def joints_against_bounds(sample: pd.DataFrame, bounds: pd.DataFrame, kind: str, title: str, path: Path) -> Path:
-    """Each joint's position (``kind="position"``, against theta_new+-) or velocity
-    (``kind="velocity"``, against zeta_new+-) over time; excursions are shaded red."""
+    """Each joint's position (``kind="position"``, against theta_new+-) or velocity (``kind="velocity"``, against zeta_new+-) over time; excursions are shaded red."""
     lower, upper = ("theta_lower", "theta_upper") if kind == "position" else ("zeta_lower", "zeta_upper")
     unit = "rad" if kind == "position" else "rad/s"
     joints = _joints(sample, kind)
@@ -78,8 +77,10 @@ def hand_errors(sample: pd.DataFrame, title: str, path: Path) -> Path:
 
 
 def bound_profiles(duration_s: float, path: Path) -> Path:
-    """TV-GDD eq (19) with theta+- = 0 and theta_goal+- = 5 (the paper's Fig. 2): left, several
-    c_tuning with N = 2; right, several N with c_tuning = 0.9. T_SP = T_d / N."""
+    """TV-GDD eq (19) with theta+- = 0 and theta_goal+- = 5 (the paper's Fig. 2): left, several c_tuning with N = 2; right, several N with c_tuning = 0.9.
+
+    T_SP = T_d / N.
+    """
     t = np.linspace(0, duration_s, 600)
     fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.2), sharey=True)
     for c in (0.1, 0.3, 0.6, 0.9, 1.0):
@@ -107,8 +108,7 @@ ROMAN = ("I", "II", "III", "IV", "V", "VI", "VII", "VIII", "IX", "X")
 
 
 def _per_repetition(ax, sample: pd.DataFrame, column: str, colours) -> None:
-    """``column`` of ``sample`` against the time within the repetition, one line per repetition;
-    failed samples are left out."""
+    """``column`` of ``sample`` against the time within the repetition, one line per repetition; failed samples are left out."""
     phase = time_in_repetition(sample["t"].to_numpy(), sample["rep"].to_numpy())
     values = np.where(sample["status"].to_numpy() == 0, sample[column].to_numpy(), np.nan)
     for i, rep in enumerate(np.unique(sample["rep"])):
@@ -130,9 +130,7 @@ def _finish_per_repetition(fig, axes, title: str, path: Path) -> Path:
 
 
 def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], title: str, path: Path) -> Path:
-    """The MC-Inverse paper's Figs 9 and 12: each joint of ``joints`` (columns) per method (rows)
-    against the time within the repetition, one line per repetition (I, II, ...), so a method
-    that repeats itself draws one line [rad]."""
+    """The MC-Inverse paper's Figs 9 and 12: each joint of ``joints`` (columns) per method (rows) against the time within the repetition, one line per repetition (I, II, ...), so a method that repeats itself draws one line [rad]."""
     colours = plt.get_cmap("tab10").colors
     fig, axes = plt.subplots(len(samples), len(joints), figsize=(2.1 * len(joints), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
     for row, (method, sample) in zip(axes, samples.items()):
@@ -148,8 +146,7 @@ def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], t
 
 
 def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str], title: str, path: Path) -> Path:
-    """The MC-Inverse paper's Figs 10, 13 and 16: each hand's arm angle psi (columns) per method
-    (rows) against the time within the repetition, one line per repetition [rad]."""
+    """The MC-Inverse paper's Figs 10, 13 and 16: each hand's arm angle psi (columns) per method (rows) against the time within the repetition, one line per repetition [rad]."""
     colours = plt.get_cmap("tab10").colors
     fig, axes = plt.subplots(len(samples), len(hands), figsize=(max(7.5, 5 * len(hands)), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
     for row, (method, sample) in zip(axes, samples.items()):
@@ -179,8 +176,7 @@ def runs_over_time(series: dict[str, tuple[np.ndarray, np.ndarray]], ylabel: str
 
 
 def limit_ratios(ratios: pd.DataFrame, title: str, path: Path) -> Path:
-    """Grouped bars: each run (rows of ``ratios``) against each ratio (columns, e.g. "smooth
-    jerk"); the limit is drawn at 1."""
+    """Grouped bars: each run (rows of ``ratios``) against each ratio (columns, e.g. "smooth jerk"); the limit is drawn at 1."""
     fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(ratios.columns) * max(1, len(ratios)) ** 0.5), 3.6))
     width = 0.8 / max(1, len(ratios))
     x = np.arange(len(ratios.columns))

@@ -1,5 +1,4 @@
-"""``dualarm report RUN_DIR...``: a markdown summary of each run and the figures its topics allow;
-for several runs also tables across them (CSV and markdown) and figures that set them side by side.
+"""``dualarm report RUN_DIR...``: a markdown summary of each run and the figures its topics allow; for several runs also tables across them (CSV and markdown) and figures that set them side by side.
 
 Everything comes from the pandas read-back of the recordings (:mod:`dualarm.record.readback`), so
 runs copied from another machine report the same.
@@ -19,8 +18,7 @@ from dualarm.report import figures
 
 
 def _outside(sample: pd.DataFrame, kind: str, lower_of, upper_of) -> pd.DataFrame:
-    """Per joint, how far and when ``kind`` (position or velocity) leaves [lower_of(joint),
-    upper_of(joint)]: columns joint, max_outside, t_first_out, t_max_out (only joints that leave)."""
+    """Per joint, how far and when ``kind`` (position or velocity) leaves [lower_of(joint), upper_of(joint)]: columns joint, max_outside, t_first_out, t_max_out (only joints that leave)."""
     rows = []
     t = sample["t"].to_numpy()
     for column in sample.columns:
@@ -35,8 +33,7 @@ def _outside(sample: pd.DataFrame, kind: str, lower_of, upper_of) -> pd.DataFram
 
 
 def excursions(sample: pd.DataFrame, bounds: pd.DataFrame, kind: str) -> pd.DataFrame:
-    """Where ``kind`` (position or velocity) leaves the time-varying bounds of ``/ik/bounds``
-    (theta_new+- or zeta_new+-); see :func:`_outside` for the columns."""
+    """Where ``kind`` (position or velocity) leaves the time-varying bounds of ``/ik/bounds`` (theta_new+- or zeta_new+-); see :func:`_outside` for the columns."""
     lower, upper = ("theta_lower", "theta_upper") if kind == "position" else ("zeta_lower", "zeta_upper")
     return _outside(sample, kind, lambda j: bounds[f"{lower}.{j}"].to_numpy(), lambda j: bounds[f"{upper}.{j}"].to_numpy())
 
@@ -110,25 +107,34 @@ RUN_COLUMNS = ("label", "run", "task", "method", "status", "stages", "repetition
 
 
 def runs_table(runs: Sequence[RunData]) -> pd.DataFrame:
-    """A row per run: :data:`RUN_COLUMNS`, then every metric of any of the runs (NaN where a run
-    has none). Labels are made unique with the run id where two runs share one."""
+    """A row per run: :data:`RUN_COLUMNS`, then every metric of any of the runs (NaN where a run has none).
+
+    Labels are made unique with the run id where two runs share one.
+    """
     base = [run_label(r) for r in runs]
     labels = _unique([b if base.count(b) == 1 else f"{b} {r.run_id}" for b, r in zip(base, runs)])
     rows = []
     for run, label in zip(runs, labels):
-        rows.append({
-            "label": label, "run": run.run_id, "task": run.manifest.get("task"), "method": str(label).split(" ")[1], "status": run.status,
-            "stages": ",".join(run.manifest.get("stages", [])), "repetitions": (run.manifest.get("settings") or {}).get("path", {}).get("repetitions"),
-            "directory": str(run.directory), **run.metrics,
-        })
+        rows.append(
+            {
+                "label": label,
+                "run": run.run_id,
+                "task": run.manifest.get("task"),
+                "method": str(label).split(" ")[1],
+                "status": run.status,
+                "stages": ",".join(run.manifest.get("stages", [])),
+                "repetitions": (run.manifest.get("settings") or {}).get("path", {}).get("repetitions"),
+                "directory": str(run.directory),
+                **run.metrics,
+            }
+        )
     table = pd.DataFrame(rows)
     metrics = sorted(c for c in table.columns if c not in RUN_COLUMNS)
     return table.reindex(columns=[*RUN_COLUMNS, *metrics])
 
 
 def _unique(names: Sequence[str]) -> list[str]:
-    """``names`` with " (2)", " (3)", ... added to repeats (the same run given twice, or a run and
-    its copy from another machine)."""
+    """``names`` with " (2)", " (3)", ... added to repeats (the same run given twice, or a run and its copy from another machine)."""
     seen: dict[str, int] = {}
     out = []
     for name in names:
@@ -158,8 +164,11 @@ def _slug(text: str) -> str:
 
 #: Limit ratios drawn side by side: (label, metric).
 RATIOS = (
-    ("retime velocity", "retime.velocity_ratio_max"), ("retime acceleration", "retime.acceleration_ratio_max"),
-    ("smooth velocity", "smooth.velocity_ratio_max"), ("smooth acceleration", "smooth.acceleration_ratio_max"), ("smooth jerk", "smooth.jerk_ratio_max"),
+    ("retime velocity", "retime.velocity_ratio_max"),
+    ("retime acceleration", "retime.acceleration_ratio_max"),
+    ("smooth velocity", "smooth.velocity_ratio_max"),
+    ("smooth acceleration", "smooth.acceleration_ratio_max"),
+    ("smooth jerk", "smooth.jerk_ratio_max"),
 )
 
 
@@ -174,19 +183,30 @@ def _hand_error(sample: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path) -> list[tuple[str, Path]]:
-    """Figures that put the runs side by side, each only when some runs hold its data: IK hand
-    errors, execution tracking errors, retime and smooth limit ratios, and per task with
-    repetitions, the joints and arm angles per repetition. Returns (caption, file) pairs."""
+    """Figures that put the runs side by side, each only when some runs hold its data: IK hand errors, execution tracking errors, retime and smooth limit ratios, and per task with repetitions, the joints and arm angles per repetition.
+
+    Returns (caption, file) pairs.
+    """
     written = []
     ik = {label: _hand_error(r["/ik/sample"]) for r, label in zip(runs, labels) if "/ik/sample" in r.topics}
     if ik:
         written.append(("IK: the larger hand position error, per run", figures.runs_over_time(ik, "position error [m]", "IK hand position error |r - f(q)| (larger hand)", out / "ik_hand_errors.png")))
     executed = {label: _hand_error(r["/execute/sample"]) for r, label in zip(runs, labels) if "/execute/sample" in r.topics}
     if executed:
-        written.append(("Execution: distance of the measured hand from the commanded one (larger hand), per run", figures.runs_over_time(executed, "tracking error [m]", "PyBullet execution tracking error (larger hand)", out / "tracking_errors.png")))
+        written.append(
+            (
+                "Execution: distance of the measured hand from the commanded one (larger hand), per run",
+                figures.runs_over_time(executed, "tracking error [m]", "PyBullet execution tracking error (larger hand)", out / "tracking_errors.png"),
+            )
+        )
     ratios = pd.DataFrame({name: [r.metrics.get(key, np.nan) for r in runs] for name, key in RATIOS}, index=list(labels)).dropna(how="all").dropna(axis=1, how="all")
     if not ratios.empty:
-        written.append(("Retime and smooth: largest velocity, acceleration and jerk as a fraction of the limits", figures.limit_ratios(ratios, "largest value / limit per run (dashed: the limit)", out / "limit_ratios.png")))
+        written.append(
+            (
+                "Retime and smooth: largest velocity, acceleration and jerk as a fraction of the limits",
+                figures.limit_ratios(ratios, "largest value / limit per run (dashed: the limit)", out / "limit_ratios.png"),
+            )
+        )
     by_task: dict[str, dict[str, pd.DataFrame]] = {}
     for run, label in zip(runs, labels):
         if "/ik/sample" in run.topics and run["/ik/sample"]["rep"].nunique() > 1:
@@ -200,15 +220,14 @@ def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path)
         for hand in hands:
             mine = [j for j in joints if j.startswith(f"{hand}_")]
             if mine and all(f"position.{j}" in s for s in samples.values() for j in mine):
-                written.append((f"{task}: {hand} arm joints per repetition", figures.joints_per_repetition(samples, mine, f"{task}: {hand} arm joints per repetition", out / f"joints_{_slug(task)}_{hand}.png")))
+                written.append(
+                    (f"{task}: {hand} arm joints per repetition", figures.joints_per_repetition(samples, mine, f"{task}: {hand} arm joints per repetition", out / f"joints_{_slug(task)}_{hand}.png"))
+                )
     return written
 
 
 def write_runs_report(run_dirs: Sequence[str | Path], out_dir: str | Path | None = None) -> Path:
-    """Report several runs: each run's summary in ``<task>-<run-id>/``, ``runs.csv`` and
-    ``runs.md`` (a row per run, every metric), the cross-run figures and ``report.md`` linking it
-    all; returns the report directory (default ``reports/<task>/<first run id>+<n - 1>``, the task
-    being ``runs`` when they differ).
+    """Report several runs: each run's summary in ``<task>-<run-id>/``, ``runs.csv`` and ``runs.md`` (a row per run, every metric), the cross-run figures and ``report.md`` linking it all; returns the report directory (default ``reports/<task>/<first run id>+<n - 1>``, the task being ``runs`` when they differ).
 
     Raises:
         RecordingError: a run directory is missing or its recording unreadable.

@@ -41,7 +41,9 @@ def _run(task: str, ik: str, stages: tuple[str, ...] | None, out: Path, progress
 
     chosen = resolve_stages(stages, ik)
     command = ["dualarm", "run", f"tasks/{task}.toml", "--ik", ik, *(["--stages", ",".join(stages)] if stages else [])]
-    run = record_run(TASKS / f"{task}.toml", ik, stages=chosen, out_dir=out / "runs", command=command, progress=lambda stage: progress(chosen.index(stage) / len(chosen) if stage in chosen else 0.95, stage))
+    run = record_run(
+        TASKS / f"{task}.toml", ik, stages=chosen, out_dir=out / "runs", command=command, progress=lambda stage: progress(chosen.index(stage) / len(chosen) if stage in chosen else 0.95, stage)
+    )
     return {"runs": [_relative(run.directory, out)]}
 
 
@@ -56,9 +58,7 @@ def ball_game_pinv(out: Path, progress: Progress) -> dict[str, object]:
 
 
 def table_i_pose() -> tuple[list[float], float]:
-    """The Table I analogue's hand pose (X Y Z [m] ROLL PITCH YAW [rad], in the left arm's base
-    frame) and arm angle [rad]: where this robot's left hand is, and its arm angle, with the arm at
-    the paper's solution 1 joints."""
+    """The Table I analogue's hand pose (X Y Z [m] ROLL PITCH YAW [rad], in the left arm's base frame) and arm angle [rad]: where this robot's left hand is, and its arm angle, with the arm at the paper's solution 1 joints."""
     import numpy as np
     from scipy.spatial.transform import Rotation
 
@@ -74,8 +74,7 @@ def table_i_pose() -> tuple[list[float], float]:
 
 
 def table_i(out: Path, progress: Progress) -> dict[str, object]:
-    """MC-Inverse Table I: the 8 candidates of one pose at one arm angle, as ``table_i.json`` (the
-    JSON of ``dualarm ik srs --json``)."""
+    """MC-Inverse Table I: the 8 candidates of one pose at one arm angle, as ``table_i.json`` (the JSON of ``dualarm ik srs --json``)."""
     from dualarm.ik.mc_inverse import candidate_table
     from dualarm.model.robot import load_robot
 
@@ -114,23 +113,31 @@ def circle_consistency(out: Path, progress: Progress) -> dict[str, object]:
 
 
 def carry_box(out: Path, progress: Progress) -> dict[str, object]:
-    """The dual-arm box carried up and down 5 times: the paper's three methods compared over the
-    repetitions (Fig. 16), and MC-Inverse through every stage (eq 11, Fig. 14)."""
+    """The dual-arm box carried up and down 5 times: the paper's three methods compared over the repetitions (Fig. 16), and MC-Inverse through every stage (eq 11, Fig. 14)."""
     compared = _consistency("carry_box", CARRY_BOX_METHODS, out, lambda f, text: progress(0.6 * f, text))
     executed = _run("carry_box", "mc-inverse", None, out, lambda f, text: progress(0.6 + 0.4 * f, text))
     return {"table": compared["table"], "runs": [*compared["runs"], *executed["runs"]]}
 
 
 def bowl_grasp(out: Path, progress: Progress) -> dict[str, object]:
-    """MCIKRRT planning the bowl grasp :data:`PLAN_TRIALS` times; the first plan retimed,
-    smoothed, executed and recorded (Li & Liang, section 5)."""
+    """MCIKRRT planning the bowl grasp :data:`PLAN_TRIALS` times; the first plan retimed, smoothed, executed and recorded (Li & Liang, section 5)."""
     from dualarm.plan.trials import run_trials
 
     result = run_trials(
-        TASKS / "bowl_grasp.toml", "mcikrrt", PLAN_TRIALS, 0, out / "plan" / "bowl_grasp-mcikrrt", recordings=out / "runs",
-        command=["dualarm", "plan", "tasks/bowl_grasp.toml", "--trials", str(PLAN_TRIALS)], progress=lambda done, total: progress(0.7 * done / total, f"trial {done}/{total}"),
+        TASKS / "bowl_grasp.toml",
+        "mcikrrt",
+        PLAN_TRIALS,
+        0,
+        out / "plan" / "bowl_grasp-mcikrrt",
+        recordings=out / "runs",
+        command=["dualarm", "plan", "tasks/bowl_grasp.toml", "--trials", str(PLAN_TRIALS)],
+        progress=lambda done, total: progress(0.7 * done / total, f"trial {done}/{total}"),
     )
-    return {"table": _relative(result.directory / "plan_trials.csv", out), "summary": _relative(result.directory / "plan_summary.json", out), "runs": [_relative(result.run, out)] if result.run else []}
+    return {
+        "table": _relative(result.directory / "plan_trials.csv", out),
+        "summary": _relative(result.directory / "plan_summary.json", out),
+        "runs": [_relative(result.run, out)] if result.run else [],
+    }
 
 
 @dataclass(frozen=True)
@@ -160,7 +167,14 @@ PARTS = (
     Part("table-i", "MC-Inverse", "Table I analogue", "dualarm ik srs robots/humanoid --arm left --pose {pose} --arm-angle {psi}", table_i, 1),
     Part("triangle", "MC-Inverse", "triangle drawn 5 times, every IK method", "dualarm consistency tasks/triangle.toml", triangle_consistency, 28),
     Part("circle", "MC-Inverse", "circle drawn 5 times, every IK method", "dualarm consistency tasks/circle.toml", circle_consistency, 18),
-    Part("carry-box", "MC-Inverse", "dual-arm box carried 5 times", f"dualarm consistency tasks/carry_box.toml --methods {','.join(CARRY_BOX_METHODS)}; dualarm run tasks/carry_box.toml --ik mc-inverse", carry_box, 15),
+    Part(
+        "carry-box",
+        "MC-Inverse",
+        "dual-arm box carried 5 times",
+        f"dualarm consistency tasks/carry_box.toml --methods {','.join(CARRY_BOX_METHODS)}; dualarm run tasks/carry_box.toml --ik mc-inverse",
+        carry_box,
+        15,
+    ),
     Part("bowl-grasp", "Li & Liang", f"bowl grasp planned {PLAN_TRIALS} times (MCIKRRT)", f"dualarm plan tasks/bowl_grasp.toml --trials {PLAN_TRIALS}", bowl_grasp, 18),
 )
 #: Parts by name.

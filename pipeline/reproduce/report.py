@@ -1,6 +1,4 @@
-"""``report.md`` of a reproduction: each paper claim against ours, the figures, the runs and the
-time of each part, written from the reproduction directory's files alone (so it can be rewritten
-from a directory copied from another machine)."""
+"""``report.md`` of a reproduction: each paper claim against ours, the figures, the runs and the time of each part, written from the reproduction directory's files alone (so it can be rewritten from a directory copied from another machine)."""
 
 from __future__ import annotations
 
@@ -46,9 +44,12 @@ def _claims_table(claims: list[Claim], out: Path, parts: Mapping[str, Mapping]) 
 def _table_i(out: Path, parts: Mapping[str, Mapping]) -> list[str]:
     data = json.loads((out / parts["table-i"]["outputs"]["table"]).read_text())
     lines = [
-        "## Table I, ours and the paper's", "",
-        f"HR2's arm base frame and link lengths are not this robot's, so the paper's pose cannot be reused. The analogue puts this robot's left arm at the paper's solution 1 joints (its axes run z, y, z, y, z, y, z like HR2's) and asks MC-Inverse for the hand pose found there, {data['pose']} (m, rad, in `{data['chain']['base']}`), at that configuration's arm angle ψ = {data['arm_angle']:g} rad (the paper's 2.2 rad is in HR2's convention).", "",
-        "| # | θ1 | θ2 | θ3 | θ4 | θ5 | θ6 | θ7 | ours | ψ(q) [rad] | FK error [m] |", "|---|" + "---:|" * 7 + "---|---:|---:|",
+        "## Table I, ours and the paper's",
+        "",
+        f"HR2's arm base frame and link lengths are not this robot's, so the paper's pose cannot be reused. The analogue puts this robot's left arm at the paper's solution 1 joints (its axes run z, y, z, y, z, y, z like HR2's) and asks MC-Inverse for the hand pose found there, {data['pose']} (m, rad, in `{data['chain']['base']}`), at that configuration's arm angle ψ = {data['arm_angle']:g} rad (the paper's 2.2 rad is in HR2's convention).",
+        "",
+        "| # | θ1 | θ2 | θ3 | θ4 | θ5 | θ6 | θ7 | ours | ψ(q) [rad] | FK error [m] |",
+        "|---|" + "---:|" * 7 + "---|---:|---:|",
     ]
     lines += [f"| {i + 1} | " + " | ".join(f"{v:.5f}" for v in c["q"]) + f" | {c['reason']} | {c['arm_angle_rad']:.5f} | {c['position_error_m']:.1e} |" for i, c in enumerate(data["candidates"])]
     lines += [f"| paper {j + 1} | " + " | ".join(f"{v:.5f}" for v in column) + " | valid | | |" for j, column in enumerate(PAPER_TABLE_I)]
@@ -56,14 +57,18 @@ def _table_i(out: Path, parts: Mapping[str, Mapping]) -> list[str]:
 
 
 def _figures(out: Path, parts: Mapping[str, Mapping]) -> list[tuple[str, str]]:
-    """(caption, path relative to ``out``) of the report's figures, made or found for the
-    completed parts."""
+    """(caption, path relative to ``out``) of the report's figures, made or found for the completed parts."""
     made = []
     done = {n for n, p in parts.items() if p["status"] == "complete"}
     for name, caption in (("ball-game-pinv", "pinv (TV-GDD Figs 3-4)"), ("ball-game-tvgdd", "TV-GDD (Figs 5-6, 8; eq (19) profiles as Fig. 2)")):
         if name in done:
             directory = write_report(out / parts[name]["outputs"]["runs"][0], out / "figures" / name)
-            for png, what in (("joints_vs_bounds.png", "joint positions against θ_new±"), ("velocities_vs_bounds.png", "joint velocities against ζ_new±"), ("hand_errors.png", "hand position errors"), ("bound_profiles.png", "bound profiles of eq (19)")):
+            for png, what in (
+                ("joints_vs_bounds.png", "joint positions against θ_new±"),
+                ("velocities_vs_bounds.png", "joint velocities against ζ_new±"),
+                ("hand_errors.png", "hand position errors"),
+                ("bound_profiles.png", "bound profiles of eq (19)"),
+            ):
                 if (directory / png).exists() and not (name == "ball-game-pinv" and png in ("hand_errors.png", "bound_profiles.png")):
                     made.append((f"Ball game, {caption}: {what}", str((directory / png).relative_to(out))))
     for name, task in (("triangle", "triangle"), ("circle", "circle"), ("carry-box", "carry_box")):
@@ -74,7 +79,13 @@ def _figures(out: Path, parts: Mapping[str, Mapping]) -> list[tuple[str, str]]:
         trials = pd.read_csv(out / parts["bowl-grasp"]["outputs"]["table"])
         times = trials.loc[trials["success"], "planning_time_s"].to_numpy() * 1e3
         if len(times):
-            path = figures.histogram(times, "planning time [ms]", f"MCIKRRT on the bowl grasp: {len(times)} successful trials", out / "figures" / "planning_times.png", {f"ours, mean {times.mean():.0f} ms": float(times.mean())})
+            path = figures.histogram(
+                times,
+                "planning time [ms]",
+                f"MCIKRRT on the bowl grasp: {len(times)} successful trials",
+                out / "figures" / "planning_times.png",
+                {f"ours, mean {times.mean():.0f} ms": float(times.mean())},
+            )
             made.append(("Bowl grasp: MCIKRRT planning times (the paper's mean, 4210.88 ms, is off this scale)", str(path.relative_to(out))))
     return made
 
@@ -95,10 +106,12 @@ def write_reproduction_report(out: str | Path) -> Path:
     claims = all_claims(out, parts)
     judged = [c for c in claims if c.agrees is not None]
     lines = [
-        "# dualarm: the three papers reproduced", "",
-        f"{sum(c.agrees for c in judged)} of {len(judged)} claims agree. Every figure under \"ours\" is read back from the recordings in this directory; the papers' figures are quoted from their text. "
+        "# dualarm: the three papers reproduced",
+        "",
+        f'{sum(c.agrees for c in judged)} of {len(judged)} claims agree. Every figure under "ours" is read back from the recordings in this directory; the papers\' figures are quoted from their text. '
         f"The parts ran {index['jobs']} at a time on a {index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s"
-        + (", so computing times were measured with another part running (`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)." if index["jobs"] > 1 else "."), "",
+        + (", so computing times were measured with another part running (`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)." if index["jobs"] > 1 else "."),
+        "",
     ]
     missing = [p for p in PARTS if p.name not in parts or parts[p.name]["status"] != "complete"]
     for paper, title in PAPERS.items():
@@ -123,4 +136,3 @@ def write_reproduction_report(out: str | Path) -> Path:
     lines += [f"| {p['name']} | {BY_NAME[p['name']].title} | {p['status']} | {p['seconds']:.1f} |" for p in index["parts"]]
     lines += [f"| all | {index['jobs']} at a time | | {index['wall_time_s']:.1f} |", ""]
     return write_whole(out / "report.md", "\n".join(lines))
-

@@ -100,9 +100,10 @@ def _run_part_in_worker(name: str, out: Path, queue) -> PartResult:
 
 
 def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgress) -> list[PartResult]:
-    """Run the parts ``names`` into ``out`` (after :func:`prepare`), ``jobs`` processes at a time
-    (the longest first; ``jobs = 1`` runs them in this process), and write :data:`PARTS_FILE`.
-    Returns the results in report order."""
+    """Run the parts ``names`` into ``out`` (after :func:`prepare`), ``jobs`` processes at a time (the longest first; ``jobs = 1`` runs them in this process), and write :data:`PARTS_FILE`.
+
+    Returns the results in report order.
+    """
     started = time.perf_counter()
     results: dict[str, PartResult] = {}
     if jobs == 1:

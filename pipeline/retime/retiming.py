@@ -122,8 +122,7 @@ def _within_limits(timing: Timing, traj: JointTrajectory, velocity: np.ndarray, 
 
 
 def check_limits(traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray) -> None:
-    """Raise a StageError naming the joint, time and ratio if ``traj`` exceeds a limit by more than
-    :data:`dualarm.limits.LIMIT_TOLERANCE` (the ``keep_timing`` check).
+    """Raise a StageError naming the joint, time and ratio if ``traj`` exceeds a limit by more than :data:`dualarm.limits.LIMIT_TOLERANCE` (the ``keep_timing`` check).
 
     Args:
         traj: the sampled trajectory (its ``qd`` [rad/s] and ``qdd`` [rad/s^2]).

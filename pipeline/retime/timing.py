@@ -97,7 +97,7 @@ class _Slowed:
     k: float
 
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """q [rad], qd [rad/s], qdd [rad/s^2] at times ``t`` [s] of the slowed motion."""
+        """Q [rad], qd [rad/s], qdd [rad/s^2] at times ``t`` [s] of the slowed motion."""
         q, qd, qdd = self.evaluate(np.asarray(t, dtype=float) / self.k)
         return q, qd / self.k, qdd / self.k**2
 

@@ -184,7 +184,7 @@ class ConstAccelProfile:
         return ConstAccelProfile(self.path, self.s_grid, self.sd_grid, self.t_grid, self.u, self.stretch * k)
 
     def path_state(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """s [rad], s' [rad/s] and s'' [rad/s^2] at times ``t`` [s] (stretch included)."""
+        """S [rad], s' [rad/s] and s'' [rad/s^2] at times ``t`` [s] (stretch included)."""
         tau = np.clip(np.asarray(t, dtype=float) / self.stretch, 0.0, self.t_grid[-1])
         i = np.clip(np.searchsorted(self.t_grid, tau, side="right") - 1, 0, len(self.u) - 1)
         dt = tau - self.t_grid[i]
@@ -193,7 +193,7 @@ class ConstAccelProfile:
         return s, sd / self.stretch, self.u[i] / self.stretch**2
 
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """q [rad], qd [rad/s], qdd [rad/s^2] at times ``t`` [s], each (len(t), n)."""
+        """Q [rad], qd [rad/s], qdd [rad/s^2] at times ``t`` [s], each (len(t), n)."""
         s, sd, sdd = self.path_state(t)
         dq = self.path(s, 1)
         return self.path(s, 0), dq * sd[:, None], self.path(s, 2) * sd[:, None] ** 2 + dq * sdd[:, None]

@@ -47,8 +47,7 @@ class JointTrajectory:
         return len(self.t)
 
     def interpolate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """q, qd, qdd (K, n) linearly interpolated at ``times`` (K,) [s] (held at the ends), and the
-        repetition index of the last sample at or before each time (K,)."""
+        """q, qd, qdd (K, n) linearly interpolated at ``times`` (K,) [s] (held at the ends), and the repetition index of the last sample at or before each time (K,)."""
         times = np.asarray(times, dtype=float)
         q, qd, qdd = (np.stack([np.interp(times, self.t, x[:, j]) for j in range(x.shape[1])], axis=1).reshape(len(times), x.shape[1]) for x in (self.q, self.qd, self.qdd))
         rep = self.rep[np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, len(self) - 1)]

@@ -218,8 +218,7 @@ class Tracker:
         return ""
 
     def _durations(self, state: np.ndarray, rows: np.ndarray) -> np.ndarray | None:
-        """Time-optimal duration [s] of each joint from ``state`` (3, n) to its target row ``rows`` (n,),
-        or None if Ruckig fails."""
+        """Time-optimal duration [s] of each joint from ``state`` (3, n) to its target row ``rows`` (n,), or None if Ruckig fails."""
         inp = self.probe_inp
         inp.current_position, inp.current_velocity, inp.current_acceleration = list(state[0]), list(state[1]), list(state[2])
         p, v, a = self.targets.rows(rows)
@@ -233,9 +232,10 @@ class Tracker:
         return np.array(self.probe_traj.independent_min_durations)
 
     def _leads(self, k: int, state: np.ndarray, m_prev: np.ndarray) -> np.ndarray:
-        """Periods ahead (>= 1) each joint aims at in the cycle from t_k: ``m_prev - 1`` while it is
-        still reachable in time, else the earliest reachable sample (marching ahead in doubling
-        steps, then bisecting). A probe that Ruckig fails on leaves the current choice."""
+        """Periods ahead (>= 1) each joint aims at in the cycle from t_k: ``m_prev - 1`` while it is still reachable in time, else the earliest reachable sample (marching ahead in doubling steps, then bisecting).
+
+        A probe that Ruckig fails on leaves the current choice.
+        """
         dt, end = self.dt, self.targets.end
         m = np.maximum(1, m_prev - 1)
         durations = self._durations(state, k + m)

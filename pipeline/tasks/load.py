@@ -77,13 +77,11 @@ class Task:
         return hand_pose(self.robot, hand, self.initial_q)
 
     def velocity_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
-        """Velocity limits of ``joint_names`` [rad/s]: the task's ``limits.velocity`` where it sets
-        one, the robot's otherwise."""
+        """Velocity limits of ``joint_names`` [rad/s]: the task's ``limits.velocity`` where it sets one, the robot's otherwise."""
         return self.robot.limit_array("velocity", joint_names)
 
     def acceleration_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
-        """Acceleration limits of ``joint_names`` [rad/s^2]: the task's ``limits.acceleration``
-        where it sets one, the robot's otherwise."""
+        """Acceleration limits of ``joint_names`` [rad/s^2]: the task's ``limits.acceleration`` where it sets one, the robot's otherwise."""
         return self.robot.limit_array("acceleration", joint_names)
 
     def jerk_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
@@ -91,8 +89,7 @@ class Task:
         return self.robot.limit_array("jerk", joint_names)
 
     def hand_poses(self, joint_names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> dict[str, np.ndarray]:
-        """Each driven hand's pose (N, 4, 4) [m] at configurations ``q`` (N, n) [rad] of
-        ``joint_names``, the other joints at ``fixed`` or else at their initial values."""
+        """Each driven hand's pose (N, 4, 4) [m] at configurations ``q`` (N, n) [rad] of ``joint_names``, the other joints at ``fixed`` or else at their initial values."""
         return hand_poses(self.robot, self.spec.hands, joint_names, q, {**self.initial_q, **fixed})
 
     def waypoint_pose(self, name: str) -> np.ndarray:
@@ -107,8 +104,7 @@ class Task:
 
 
 def hand_poses(robot: Robot, hands: Sequence[str], joint_names: Sequence[str], q: np.ndarray, others: Mapping[str, float]) -> dict[str, np.ndarray]:
-    """Each of ``hands``' pose (N, 4, 4) [m] in the robot base frame at configurations ``q`` (N, n)
-    [rad] of ``joint_names``, every other joint at its value in ``others`` [rad]."""
+    """Each of ``hands``' pose (N, 4, 4) [m] in the robot base frame at configurations ``q`` (N, n) [rad] of ``joint_names``, every other joint at its value in ``others`` [rad]."""
     q = np.asarray(q, dtype=float).reshape(-1, len(joint_names))
     columns = {n: q[:, i] for i, n in enumerate(joint_names)}
     poses = {}
@@ -120,9 +116,12 @@ def hand_poses(robot: Robot, hands: Sequence[str], joint_names: Sequence[str], q
 
 
 def _key_path(error: dict, data: object) -> str:
-    """The task-file key of a pydantic error. Location parts that are not keys of the input (the
-    names pydantic gives union members, such as ``str`` or ``constrained-float``) are dropped by
-    walking the input alongside; a missing key is the one part kept that the input lacks."""
+    """The task-file key of a pydantic error.
+
+    Location parts that are not keys of the input (the names pydantic gives union members, such as
+    ``str`` or ``constrained-float``) are dropped by walking the input alongside; a missing key is
+    the one part kept that the input lacks.
+    """
     out, node = "", data
     loc = error["loc"]
     for i, part in enumerate(loc):
@@ -248,10 +247,10 @@ def _check_structure(task: Task) -> None:
 
 @dataclass(frozen=True)
 class ArmReach:
-    """The workspace test of one hand: the wrist centre W of a hand pose must lie within
-    [|L2 - L3|, L2 + L3] of the shoulder S (less :data:`REACH_MARGIN_M`). With the waist free, S
-    may move on a sphere about the waist centre, and the test becomes the necessary condition
-    | |W - centre| - |S - centre| | <= L2 + L3.
+    """The workspace test of one hand: the wrist centre W of a hand pose must lie within [|L2 - L3|, L2 + L3] of the shoulder S (less :data:`REACH_MARGIN_M`).
+
+    With the waist free, S may move on a sphere about the waist centre, and the test becomes the
+    necessary condition | |W - centre| - |S - centre| | <= L2 + L3.
 
     Attributes:
         hand: the hand.
@@ -284,10 +283,7 @@ class ArmReach:
         d = float(self.distances(T[None])[0])
         p = ", ".join(f"{v:.3f}" for v in T[:3, 3])
         origin = "the waist's reach" if self.waist_centre is not None else "the shoulder"
-        return (
-            f"the {self.hand} hand cannot reach [{p}] with this orientation: its wrist centre is {d:.3f} m "
-            f"from {origin}, the arm spans {self.geometry.min_reach:.3f}-{self.geometry.reach:.3f} m"
-        )
+        return f"the {self.hand} hand cannot reach [{p}] with this orientation: its wrist centre is {d:.3f} m from {origin}, the arm spans {self.geometry.min_reach:.3f}-{self.geometry.reach:.3f} m"
 
 
 def arm_reach(task: Task, hand: str) -> ArmReach:
@@ -323,8 +319,7 @@ def _check_reach(task: Task) -> None:
 
 
 def _check_environment(task: Task) -> None:
-    """Refuse a fixed object that overlaps a link of the robot's base (a link no joint moves),
-    by PyBullet's closest points (imported only for tasks with objects)."""
+    """Refuse a fixed object that overlaps a link of the robot's base (a link no joint moves), by PyBullet's closest points (imported only for tasks with objects)."""
     if not task.spec.environment:
         return
     from dualarm.execute.world import add_environment, load_pybullet_robot, pb
@@ -363,8 +358,7 @@ def load_task(path: str | Path, repetitions: int | None = None) -> Task:
 
 
 def task_from_dict(data: Mapping[str, Any] | None = None, /, *, robot: Robot | str | Path | None = None, base_dir: str | Path = ".", **keys: Any) -> Task:
-    """A task from a plain dict and/or keyword arguments, with the keys and checks of a task file
-    (see ``tasks/README.md``): ``task_from_dict(name="circle", control_period_s=0.01, ...)``.
+    """A task from a plain dict and/or keyword arguments, with the keys and checks of a task file (see ``tasks/README.md``): ``task_from_dict(name="circle", control_period_s=0.01, ...)``.
 
     Args:
         data: the task's keys, as a TOML file would give them (optional).
@@ -387,8 +381,7 @@ def task_from_dict(data: Mapping[str, Any] | None = None, /, *, robot: Robot | s
 
 
 def _resolve(spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Robot | None, repetitions: int | None) -> Task:
-    """The validated task: the robot loaded (unless given) with the task's limits, the initial
-    configuration resolved, and every check run."""
+    """The validated task: the robot loaded (unless given) with the task's limits, the initial configuration resolved, and every check run."""
     source = str(file) if file is not None else "<dict>"
     if repetitions is not None:
         if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:

@@ -7,7 +7,6 @@ Units are in the key names: ``_s`` seconds, ``_m`` metres, ``_rad`` radians. Pos
 from __future__ import annotations
 
 import math
-
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, model_validator
@@ -69,8 +68,10 @@ class HandMove(_Model):
 
 
 class Move(_Model):
-    """One segment of the path: every driven hand moves for ``duration_s`` with a smooth time
-    scaling (zero velocity and acceleration at both ends). A driven hand not named holds still."""
+    """One segment of the path: every driven hand moves for ``duration_s`` with a smooth time scaling (zero velocity and acceleration at both ends).
+
+    A driven hand not named holds still.
+    """
 
     duration_s: PositiveFloat
     left: HandMove | None = None
@@ -82,16 +83,14 @@ class Move(_Model):
 
 
 class Start(_Model):
-    """Start pose of each driven hand: a waypoint name, or ``"initial"`` for the pose the hand has
-    at the task's initial configuration."""
+    """Start pose of each driven hand: a waypoint name, or ``"initial"`` for the pose the hand has at the task's initial configuration."""
 
     left: str | None = None
     right: str | None = None
 
 
 class Limits(_Model):
-    """Task-specific joint limits that replace the robot's: a number for every joint, or a table
-    joint -> value."""
+    """Task-specific joint limits that replace the robot's: a number for every joint, or a table joint -> value."""
 
     velocity: PositiveFloat | dict[str, PositiveFloat] | None = None
     acceleration: PositiveFloat | dict[str, PositiveFloat] | None = None
@@ -194,8 +193,11 @@ class ArmAngle(_Model):
 
 
 class CarriedObject(_Model):
-    """An object held by both hands (MC-Inverse section IV, eq 11). The slave hand's pose follows
-    from the master's: T_slave = T_master * master_to_object * inverse(slave_to_object)."""
+    """An object held by both hands (MC-Inverse section IV, eq 11).
+
+    The slave hand's pose follows from the master's: T_slave = T_master * master_to_object *
+    inverse(slave_to_object).
+    """
 
     name: str = "box"
     size_m: tuple[PositiveFloat, PositiveFloat, PositiveFloat]
@@ -212,8 +214,11 @@ class CarriedObject(_Model):
 
 
 class EnvironmentObject(_Model):
-    """A fixed object of the scene. ``box`` needs ``size_m``; ``cylinder`` needs ``radius_m`` and
-    ``height_m`` (axis along its z); ``sphere`` needs ``radius_m``."""
+    """A fixed object of the scene.
+
+    ``box`` needs ``size_m``; ``cylinder`` needs ``radius_m`` and ``height_m`` (axis along its z);
+    ``sphere`` needs ``radius_m``.
+    """
 
     name: str
     shape: Literal["box", "cylinder", "sphere"]

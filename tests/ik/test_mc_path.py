@@ -50,7 +50,7 @@ def test_repetitions_give_identical_joints(carry_box):
 def test_a_joint_jump_fails_naming_the_sample(tmp_path):
     text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     path = tmp_path / "carry_box.toml"
-    path.write_text(text + '\n[arm_angle]\nmax_joint_step_rad = 1e-6\n')
+    path.write_text(text + "\n[arm_angle]\nmax_joint_step_rad = 1e-6\n")
     task = load_task(path)
     with pytest.raises(StageError, match=r"MC-Inverse, left arm: left_\w+ jumps [\d.]+ rad between samples 0 and 1 \(t = 0\.010 s\)"):
         solve_mc_inverse(task.robot, build_reference(task), task.initial_q, settings_for(task))

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import quadprog
 
+from dualarm.execute.world import load_pybullet_robot
 from dualarm.ik.stack import hand_stack, stacked_reference
 from dualarm.ik.tvgdd import TvgddSettings, build_problem, joint_bounds, lvi_solve, settings_for
 from dualarm.model.check import PYBULLET_TOLERANCE
-from dualarm.execute.world import load_pybullet_robot
 from dualarm.paths import build_reference
 from dualarm.tasks import load_task
 from tests.conftest import TASKS

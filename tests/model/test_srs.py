@@ -22,10 +22,7 @@ def test_shoulder_elbow_wrist_match_pybullet_joint_frames(humanoid, side):
         for q in Q:
             sim.set_positions(chain.joint_names, q)
             base = np.linalg.inv(sim.link_pose(chain.base))
-            expected = [
-                (base @ sim.link_pose(link))[:3, 3]
-                for link in (f"{side}_shoulder_yaw_link", f"{side}_forearm", f"{side}_forearm_roll_link")
-            ]
+            expected = [(base @ sim.link_pose(link))[:3, 3] for link in (f"{side}_shoulder_yaw_link", f"{side}_forearm", f"{side}_forearm_roll_link")]
             for ours, theirs in zip(srs.points(q), expected):
                 assert np.linalg.norm(np.asarray(ours).ravel() - theirs) <= PYBULLET_TOLERANCE
 

@@ -96,7 +96,9 @@ def test_plan_command_writes_trials_summary_and_a_collision_free_run(tmp_path, b
 
 
 def test_unreachable_wta_is_named_at_the_timeout(tmp_path):
-    text = BOWL.read_text().replace('name = "bowl_right"\nhand = "right"\nreference = { position = [0.40, 0.0, 0.93] }', 'name = "bowl_right"\nhand = "right"\nreference = { position = [1.60, 0.0, 0.93] }')
+    text = BOWL.read_text().replace(
+        'name = "bowl_right"\nhand = "right"\nreference = { position = [0.40, 0.0, 0.93] }', 'name = "bowl_right"\nhand = "right"\nreference = { position = [1.60, 0.0, 0.93] }'
+    )
     (tmp_path / "far.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
     result = runner.invoke(app, ["run", str(tmp_path / "far.toml"), "--timeout", "0.5", "--out", str(tmp_path / "rec")])
     assert result.exit_code == 2
@@ -132,7 +134,9 @@ def test_unknown_planner_is_one_line():
 
 
 def test_ompl_without_goals_names_the_wta(tmp_path):
-    text = BOWL.read_text().replace('name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 0.0, 0.93] }', 'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 1.50, 0.93] }')
+    text = BOWL.read_text().replace(
+        'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 0.0, 0.93] }', 'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 1.50, 0.93] }'
+    )
     (tmp_path / "far.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
     settings = PlanningSettings(planner=PlannerSettings(timeout_s=0.3))
     with PlanningProblem(load_task(tmp_path / "far.toml"), settings) as problem:

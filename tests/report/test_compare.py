@@ -91,7 +91,6 @@ def run_data(run: Path) -> RunData:
     return _READ[run]
 
 
-
 def paired_differences(run_a: Path, run_b: Path) -> dict[tuple[str, str], tuple[np.ndarray, np.ndarray]]:
     """(topic, field) -> (t, |A - B| per row) for two runs whose topics hold the same rows (rep, t)
     in the same order, rows paired by position; text that differs is inf, NaN in both is 0."""

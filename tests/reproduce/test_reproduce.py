@@ -34,8 +34,13 @@ runner = CliRunner()
 CHOSEN = ("table-i", "ball-game-pinv", "ball-game-tvgdd")
 #: Every part and its paper, as the README and `dualarm reproduce --help` list them.
 ALL_PARTS = {
-    "ball-game-tvgdd": "TV-GDD", "ball-game-pinv": "TV-GDD", "table-i": "MC-Inverse", "triangle": "MC-Inverse",
-    "circle": "MC-Inverse", "carry-box": "MC-Inverse", "bowl-grasp": "Li & Liang",
+    "ball-game-tvgdd": "TV-GDD",
+    "ball-game-pinv": "TV-GDD",
+    "table-i": "MC-Inverse",
+    "triangle": "MC-Inverse",
+    "circle": "MC-Inverse",
+    "carry-box": "MC-Inverse",
+    "bowl-grasp": "Li & Liang",
 }
 PAPERS = ("TV-GDD", "MC-Inverse", "Li & Liang")
 TVGDD_COMMAND = "dualarm run tasks/ball_game.toml --ik tvgdd"
@@ -47,12 +52,14 @@ PAPER_T_AVE_S, PAPER_T_SUM_S = 0.001, 1.12
 #: Li & Liang, section 5 (seed 001): "The average planning time is 4,210.88 ms."
 PAPER_PLANNING_MS = 4210.88
 #: Zou, Min, Xu, Table I (seed 004): solutions 1-4 (rows here), joints 1-7.
-PAPER_TABLE_I = np.array([
-    [-1.84799, 0.21282, -2.08281, -1.94261, 0.54827, 1.29769, 1.38904],
-    [-1.29361, -0.21282, 1.05878, -1.94261, 0.54827, 1.29769, 1.38904],
-    [-1.84799, 0.21282, -2.08281, -1.94261, -2.59332, -1.29769, 1.75256],
-    [1.29361, -0.21282, 1.05878, -1.94261, -2.59332, -1.29769, 1.75256],
-])
+PAPER_TABLE_I = np.array(
+    [
+        [-1.84799, 0.21282, -2.08281, -1.94261, 0.54827, 1.29769, 1.38904],
+        [-1.29361, -0.21282, 1.05878, -1.94261, 0.54827, 1.29769, 1.38904],
+        [-1.84799, 0.21282, -2.08281, -1.94261, -2.59332, -1.29769, 1.75256],
+        [1.29361, -0.21282, 1.05878, -1.94261, -2.59332, -1.29769, 1.75256],
+    ]
+)
 #: "Equal to 5 decimals": half a unit of the 5th decimal, twice (the paper's rounding and that of
 #: the 6-decimal analogue pose), so 1e-5 rad.
 FIVE_DECIMALS = 1e-5
@@ -61,6 +68,7 @@ ZERO = 1e-9
 
 
 # --- helpers --------------------------------------------------------------------------------------
+
 
 def _cells(line: str) -> list[str]:
     parts = re.split(r"(?<!\\)\|", line.strip())
@@ -153,6 +161,7 @@ def wrapped(a) -> np.ndarray:
 
 # --- the shared reproduction --------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def repro(tmp_path_factory):
     """`dualarm reproduce --only table-i,ball-game-pinv,ball-game-tvgdd --jobs 2` (a process pool)."""
@@ -227,7 +236,7 @@ def test_report_sections_not_available_commands_and_links(repro):
     for r in rows["MC-Inverse"]:
         command = shlex.split(r["command"].strip("`"))
         assert r["command"].strip("`").startswith(ik_srs), r
-        pose = [float(v) for v in command[command.index("--pose") + 1:command.index("--pose") + 7]]
+        pose = [float(v) for v in command[command.index("--pose") + 1 : command.index("--pose") + 7]]
         assert np.allclose(pose, table_i["pose"], atol=1e-5) and float(command[command.index("--arm-angle") + 1]) == pytest.approx(table_i["arm_angle"], abs=1e-6)
     assert len(rows["MC-Inverse"]) == 5
 
@@ -258,6 +267,7 @@ def test_report_sections_not_available_commands_and_links(repro):
 
 
 # --- TV-GDD ---------------------------------------------------------------------------------------
+
 
 def test_tvgdd_hand_error_and_time_claims_from_the_recording(repro):
     rows = claim_rows(repro.report)["TV-GDD"]
@@ -391,6 +401,7 @@ def test_pinv_excursion_claims_equal_the_solvers_arrays(repro):
 
 # --- MC-Inverse, Table I --------------------------------------------------------------------------
 
+
 def test_table_i_candidates_reach_the_analogue_pose_in_pybullet(repro):
     from dualarm.execute.world import load_pybullet_robot
     from dualarm.reproduce.claims import PAPER_TABLE_I as QUOTED
@@ -405,6 +416,7 @@ def test_table_i_candidates_reach_the_analogue_pose_in_pybullet(repro):
     target[:3, 3] = data["pose"][:3]
     assert len(candidates) == 8
     with load_pybullet_robot(HUMANOID / "humanoid.urdf") as sim:
+
         def hand() -> np.ndarray:
             return np.linalg.inv(sim.link_pose("torso")) @ sim.link_pose("left_hand")
 
@@ -497,11 +509,12 @@ def test_table_i_command_of_the_report_reproduces_the_table(repro, monkeypatch):
 def test_table_i_command_of_the_report_runs_the_parts_exact_pose(repro):
     command = _table_i_command(repro)
     data = json.loads((repro.out / "table_i.json").read_text())
-    pose = [float(v) for v in command[command.index("--pose") + 1:command.index("--pose") + 7]]
+    pose = [float(v) for v in command[command.index("--pose") + 1 : command.index("--pose") + 7]]
     assert pose == data["pose"] and float(command[command.index("--arm-angle") + 1]) == data["arm_angle"]
 
 
 # --- failures and re-runs -------------------------------------------------------------------------
+
 
 def test_unknown_part_is_one_line_naming_the_parts(tmp_path):
     result = reproduce(tmp_path / "out", "nonsense", 1)
@@ -580,8 +593,11 @@ def test_a_failing_part_exits_1_and_is_reported_not_available(failed_repro):
     assert not any(r["command"] == f"`{TVGDD_COMMAND}`" for r in rows["TV-GDD"])  # nothing of TV-GDD's is made up
     assert "figures/ball-game-tvgdd" not in report
     assert [r["claim"] for r in rows["MC-Inverse"]] == [
-        "one pose and arm angle give 8 candidate solutions", "4 of them are valid", "the valid solutions have the arm angle asked for",
-        "the valid solutions share θ4 and differ only at the shoulder and the wrist", "the joint values of the 4 solutions",
+        "one pose and arm angle give 8 candidate solutions",
+        "4 of them are valid",
+        "the valid solutions have the arm angle asked for",
+        "the valid solutions share θ4 and differ only at the shoulder and the wrist",
+        "the joint values of the 4 solutions",
     ]
     time_rows = {c[0]: c for c in (_cells(line) for line in body["Time of each part"] if line.startswith("| "))}
     assert time_rows["ball-game-tvgdd"][2] == "failed"
@@ -617,6 +633,7 @@ def test_report_rewritten_from_a_copy_is_the_same(repro, tmp_path):
 
 
 # --- consistency and planning claims on cheap inputs ----------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def carry_box_runs(tmp_path_factory):

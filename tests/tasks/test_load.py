@@ -111,7 +111,7 @@ MALFORMED = [
     ("hand_without_start", [(FIRST_MOVE, FIRST_MOVE + '\nright = { to = "B" }')], "moves[0].right"),
     ("two_kinds_to_and_by", [('left = { to = "B" }', 'left = { to = "B", by = [0.0, 0.0, 0.1] }')], "moves[0].left"),
     ("hold_and_to", [('left = { to = "B" }', 'left = { to = "B", hold = true }')], "moves[0].left"),
-    ("partial_arc", [('left = { to = "B" }', 'left = { arc_center = [0.3, 0.1, 1.1] }')], "moves[0].left"),
+    ("partial_arc", [('left = { to = "B" }', "left = { arc_center = [0.3, 0.1, 1.1] }")], "moves[0].left"),
     ("duration_not_whole_periods", [(FIRST_MOVE, 'duration_s = 2.005\nleft = { to = "B" }')], "moves[0].duration_s"),
     ("initial_home_missing", [('initial = "ready"', 'initial = "sitting"')], "initial"),
     ("initial_unknown_joint", [('initial = "ready"', "initial = { left_knee = 0.1 }")], "initial.left_knee"),
@@ -127,7 +127,7 @@ def test_malformed_task_raises(tmp_path: Path, edits, key: str):
         load_task(path)
     message = str(info.value)
     assert message.startswith(f"{path}:"), message
-    after = message[len(f"{path}:"):]
+    after = message[len(f"{path}:") :]
     # the key comes right after "file:", followed by ':' / '.' / '[' (never a longer key name)
     assert re.match(re.escape(key) + r"(:|\.|\[)", after), message
     assert "\n" not in message
@@ -218,7 +218,7 @@ def test_wrong_type_for_union_key_names_the_key(tmp_path: Path):
         (("control_period_s = 0.01", "control_period_s = inf"), "control_period_s"),
         (("control_period_s = 0.01", "control_period_s = 1e-300"), "control_period_s"),
         (("control_period_s = 0.01", "control_period_s = 5.0"), "moves[0].duration_s"),
-        (('initial = "ready"', "initial = { left_elbow = \"bent\" }"), "initial.left_elbow"),
+        (('initial = "ready"', 'initial = { left_elbow = "bent" }'), "initial.left_elbow"),
     ],
 )
 def test_extreme_or_mistyped_values_name_their_key(tmp_path: Path, edit, key):
