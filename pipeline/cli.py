@@ -221,7 +221,7 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
     m = data.manifest
     out.print(f"run      {data.run_id}  ({data.status})", markup=False)
     out.print(f"task     {m.get('task')}  ({m.get('task_file')})", markup=False)
-    out.print(f"stages   {', '.join(m.get('stages', []))}", markup=False)
+    out.print(f"stages   {', '.join(data.stages)}", markup=False)
     if m.get("error"):
         out.print(f"error    {m['error']}", markup=False, soft_wrap=True)
     table = Table(title="topics", title_justify="left")
@@ -278,9 +278,9 @@ def compare(
         table.add_column(column, justify="left" if column in ("topic", "in field") else "right", no_wrap=column == "topic")
     judged = result.table[~result.table["wall_clock"]]
     for topic, rows in judged.groupby("topic", sort=False):
-        worst = rows.loc[rows["max_difference"].fillna(-np.inf).idxmax()]
-        where = ("", "", "") if worst["max_difference"] == 0 else (str(worst["field"]), "" if _missing(worst["t"]) else f"{worst['t']:.3f}", "" if _missing(worst["rep"]) else str(int(worst["rep"])))
-        table.add_row(topic, str(worst["rows_a"]), str(worst["rows_b"]), str(worst["aligned"]), f"{worst['max_difference']:.3g}", *where, "yes" if worst["max_difference"] <= tol else "NO")
+        worst = rows.iloc[rows["max_difference"].fillna(-np.inf).argmax()]
+        located = ("", "", "") if worst["max_difference"] == 0 else (str(worst["field"]), "" if _missing(worst["t"]) else f"{worst['t']:.3f}", "" if _missing(worst["rep"]) else str(int(worst["rep"])))
+        table.add_row(str(topic), str(worst["rows_a"]), str(worst["rows_b"]), str(worst["aligned"]), f"{worst['max_difference']:.3g}", *located, "yes" if worst["max_difference"] <= tol else "NO")
     out.print(table)
     clock = result.table[result.table["wall_clock"]]
     if len(clock):
@@ -378,13 +378,13 @@ def _robot(robot_dir: Optional[Path], urdf: Optional[Path], base: Optional[str],
     """The robot of ``ROBOT_DIR`` or of ``--urdf PATH --base LINK --tip LINK`` (one chain named ``chain``)."""
     from dualarm.model.robot import load_robot, robot_from_urdf
 
-    if (robot_dir is None) == (urdf is None):
+    if robot_dir is not None and urdf is None:
+        return load_robot(robot_dir)
+    if robot_dir is not None or urdf is None:  # both given, or neither
         raise DualarmError("give either ROBOT_DIR or --urdf PATH --base LINK --tip LINK")
-    if urdf is not None:
-        if not base or not tip:
-            raise DualarmError("--urdf needs --base LINK and --tip LINK")
-        return robot_from_urdf(urdf, base, tip)
-    return load_robot(robot_dir)
+    if not base or not tip:
+        raise DualarmError("--urdf needs --base LINK and --tip LINK")
+    return robot_from_urdf(urdf, base, tip)
 
 
 @ik_app.command("srs")
@@ -437,14 +437,14 @@ def bench_ik_command(
     seed: Annotated[int, typer.Option(help="Seed of the random configurations.")] = 0,
 ) -> None:
     """MC-Inverse time per pose called singly and batched (all 8 candidates), and DLS-SVD, TRAC-IK and PyBullet IK time and success rate, on the same random reachable poses, with ratios."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
     from dualarm.bench.ik import MC_BATCHED, TARGET_BATCHED_S, TARGET_DLS_SUCCESS, bench_ik, ratios
     from dualarm.model.robot import load_robot
 
     model = load_robot(robot_dir)
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True) as bar:
-        tasks: dict[str, object] = {}
+        tasks: dict[str, TaskID] = {}
 
         def progress(name: str, done: int, total: int) -> None:
             if name not in tasks:

@@ -91,5 +91,5 @@ def limit_ratios(t: np.ndarray, joint_names: Sequence[str], samples: Mapping[str
             continue
         ratio = np.abs(values) / per_joint(limit, joint_names, kind, stage)
         k, j = np.unravel_index(np.argmax(ratio), ratio.shape)
-        out[kind] = LimitRatio(kind, float(ratio[k, j]), joint_names[j], float(t[k]))
+        out[kind] = LimitRatio(kind, float(ratio[k, j]), joint_names[int(j)], float(t[k]))
     return out

@@ -39,13 +39,13 @@ CONTROL_PERIOD_S = 0.001
 class Stage(Protocol):
     """A stage: ``name``, the settings it records, and ``(product, sink) -> (product, metrics)``."""
 
-    name: str
+    name: ClassVar[str]
 
     def settings_record(self) -> dict[str, Any]:
         """The stage's settings, JSON-ready (a run's manifest records them)."""
         ...
 
-    def __call__(self, product: Any, sink: Sink) -> tuple[Any, dict[str, float]]:
+    def __call__(self, product: Any, sink: Sink, /) -> tuple[Any, dict[str, float]]:
         """Run on the previous stage's product (the task, for the path stage)."""
         ...
 
@@ -129,8 +129,8 @@ class PlanStage:
     name: ClassVar[str] = "plan"
 
     def settings_record(self) -> dict[str, Any]:
-        """The planner's name and settings."""
-        return {"planner": self.planner, **as_record(self.problem.settings)}
+        """The planner's name (``method``; ``planner`` holds its settings) and the query's settings."""
+        return {"method": self.planner, **as_record(self.problem.settings)}
 
     def __call__(self, reference: CartesianReference, sink: Sink) -> tuple[JointPath, dict[str, float]]:
         """Plan (or take the plan already made): the reference (unused) -> JointPath."""
@@ -251,11 +251,11 @@ class ExecuteStage:
 
         sink.begin(self.name)
         task = self.task
-        expected = {tuple(sorted(pair)) for pair in task.spec.expected_contacts}
-        log = execute_trajectory(traj, task.robot, task.spec.hands, task.spec.environment, expected, self.settings)
+        expected = {(min(a, b), max(a, b)) for a, b in task.spec.expected_contacts}
+        log = execute_trajectory(traj, task.robot, task.spec.hands, task.spec.environment, sorted(expected), self.settings)
         command = task.hand_poses(log.joint_names, log.q_command, log.fixed)
         errors = {hand: np.linalg.norm(log.hand_poses[hand][:, :3, 3] - command[hand][:, :3, 3], axis=1) for hand in command}
-        sink.execution(log, errors, expected)  # type: ignore[arg-type]
+        sink.execution(log, errors, expected)
         all_errors = np.concatenate([np.zeros(0), *errors.values()])
         if not all_errors.size:  # a trajectory that does not move: no physics step
             all_errors = np.zeros(1)

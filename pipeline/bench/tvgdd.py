@@ -63,7 +63,8 @@ def bench_tvgdd(task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...
             with c_output_silenced():  # qpOASES prints its licence from C
                 path = solve_tvgdd(task.robot, reference, task.initial_q, run_settings)
         except StageError as exc:
-            rows.append(BenchRow(name, *[float("nan")] * 3, len(reference), float("nan"), str(exc)))
+            nan = float("nan")
+            rows.append(BenchRow(name, nan, nan, nan, len(reference), nan, str(exc)))
             continue
         first = path.qd if first is None else first
         times = path.solve_time_s

@@ -180,11 +180,11 @@ def execute_trajectory(
             qd[k] = [s[1] for s in states]
             for h, link in hand_links.items():
                 hand_poses[h][k] = sim.link_pose(link_name[link])
-            touching = set()
+            touching: set[tuple[str, str]] = set()
             for contact in pb.getContactPoints(bodyA=body, physicsClientId=client):
                 other = contact[2]
-                pair = (link_name[contact[3]], link_name[contact[4]] if other == body else objects.get(other, str(other)))
-                key = tuple(sorted(pair))
+                first, second = sorted((link_name[contact[3]], link_name[contact[4]] if other == body else objects.get(other, str(other))))
+                key = (first, second)
                 touching.add(key)
                 counter = expected_contacts_ if key in expected_pairs else self_contacts if other == body else environment_contacts
                 counter[k] += 1

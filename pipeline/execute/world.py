@@ -40,7 +40,7 @@ class PyBulletRobot:
     joint_index: dict[str, int]
     link_index: dict[str, int]
 
-    def set_positions(self, names: Sequence[str], q: Sequence[float]) -> None:
+    def set_positions(self, names: Sequence[str], q: Sequence[float] | np.ndarray) -> None:
         """Teleport joints ``names`` to positions ``q`` [rad] (no dynamics)."""
         for name, value in zip(names, q):
             pb.resetJointState(self.body, self.joint_index[name], float(value), physicsClientId=self.client)

@@ -42,10 +42,10 @@ class BatchedCandidates:
             mapped = self.function.map(size, "thread", THREADS)
             buffer, evaluate = mapped.buffer()
             arrays = (np.zeros(mapped.numel_in(0)), np.zeros(mapped.numel_in(1)), np.zeros(mapped.numel_out(0)), np.zeros(mapped.numel_out(1)))
-            buffer.set_arg(0, memoryview(arrays[0]))
-            buffer.set_arg(1, memoryview(arrays[1]))
-            buffer.set_res(0, memoryview(arrays[2]))
-            buffer.set_res(1, memoryview(arrays[3]))
+            buffer.set_arg(0, arrays[0].data)
+            buffer.set_arg(1, arrays[1].data)
+            buffer.set_res(0, arrays[2].data)
+            buffer.set_res(1, arrays[3].data)
 
             def run(_keep=buffer) -> None:
                 evaluate()

@@ -309,10 +309,10 @@ class DlsSolver:
         x = np.concatenate([np.zeros(self.n), self._pack_targets(targets)])
         dx, errors, J = np.zeros(6 * h), np.zeros(2 * h), np.zeros((6 * h, self.n))
         buffer, run = self.evaluate.buffer()
-        buffer.set_arg(0, memoryview(x))
-        buffer.set_res(0, memoryview(dx))
-        buffer.set_res(1, memoryview(errors))
-        buffer.set_res(2, memoryview(J))
+        buffer.set_arg(0, x.data)
+        buffer.set_res(0, dx.data)
+        buffer.set_res(1, errors.data)
+        buffer.set_res(2, J.data)
 
         def evaluate(theta: np.ndarray, _keep=buffer):
             x[: self.n] = theta

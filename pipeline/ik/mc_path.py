@@ -209,13 +209,13 @@ def _cheapest_profile(node: np.ndarray, steps: np.ndarray, start: np.ndarray, cl
     shifts = np.arange(-AUTO_MAX_CELLS, AUTO_MAX_CELLS + 1)
     move = np.abs(shifts) * (2 * np.pi / G)
 
-    def forward(cost: np.ndarray, keep: bool):
+    def forward(cost: np.ndarray, keep: bool) -> tuple[np.ndarray | int, np.ndarray | None]:
         back = np.zeros((n, *cost.shape), np.int8) if keep else None
         for k in range(1, n):
             best = np.full(cost.shape, np.inf)
             for j, (d, m) in enumerate(zip(shifts, move)):
                 option = np.roll(cost, d, axis=-1) + (m + steps[k - 1, :, j])
-                if keep:
+                if back is not None:
                     back[k][option < best] = j
                 np.minimum(best, option, out=best)
             cost = best + node[k]
@@ -236,6 +236,7 @@ def _cheapest_profile(node: np.ndarray, steps: np.ndarray, start: np.ndarray, cl
         return n - 1
     i = int(np.argmin(total))
     end, back = forward(initial[i], keep=True)
+    assert back is not None  # the same start reaches the end again, now keeping the choices
     cells = np.empty(n, int)
     cells[-1] = starts[i] if closed else int(np.argmin(end))
     for k in range(n - 1, 0, -1):

@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import casadi as cs
 import numpy as np
@@ -162,9 +162,9 @@ class TvgddProblem:
         """A callable ``inputs (packed, see :meth:`pack`) -> (thetadot (n,), violation)`` that evaluates :attr:`packed_step` through a CasADi FunctionBuffer, reading and writing numpy arrays in place: it skips the DM conversions of a plain call, which cost three quarters of a step."""
         buffer, evaluate = self.packed_step.buffer()
         inputs, thetadot, violation = np.zeros(self.packed_step.size1_in(0)), np.zeros(self.stack.n), np.zeros(1)
-        buffer.set_arg(0, memoryview(inputs))
-        buffer.set_res(0, memoryview(thetadot))
-        buffer.set_res(1, memoryview(violation))
+        buffer.set_arg(0, inputs.data)
+        buffer.set_res(0, thetadot.data)
+        buffer.set_res(1, violation.data)
 
         def step(packed: np.ndarray, _keep=buffer) -> tuple[np.ndarray, float]:
             inputs[:] = packed
@@ -239,21 +239,24 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
     return TvgddProblem(stack=stack, settings=settings, period_s=period_s, data=data, step=step, packed_step=packed_step)
 
 
-def _plugin_options(plugin: str) -> dict:
-    """Quiet, tight options per conic plugin.
+#: Quiet, tight options per conic plugin.
+PLUGIN_OPTIONS: dict[str, dict[str, Any]] = {
+    "qpoases": {"printLevel": "none"},
+    "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 100000}},
+    "daqp": {"daqp": {"primal_tol": 1e-12, "dual_tol": 1e-12}},
+    "highs": {"highs": {"output_flag": False}},
+    "proxqp": {"proxqp": {"eps_abs": 1e-10, "eps_rel": 0.0}},
+    "qrqp": {"print_iter": False, "print_header": False, "print_info": False},
+}
+
+
+def _plugin_options(plugin: str) -> dict[str, Any]:
+    """The plugin's :data:`PLUGIN_OPTIONS`, and no exception on a failed solve.
 
     A failed solve does not raise (CasADi would print every input of the enclosing Functions first);
     the step's ``violation`` output reports it.
     """
-    options = {
-        "qpoases": {"printLevel": "none"},
-        "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 100000}},
-        "daqp": {"daqp": {"primal_tol": 1e-12, "dual_tol": 1e-12}},
-        "highs": {"highs": {"output_flag": False}},
-        "proxqp": {"proxqp": {"eps_abs": 1e-10, "eps_rel": 0.0}},
-        "qrqp": {"print_iter": False, "print_header": False, "print_info": False},
-    }.get(plugin, {})
-    return {**options, "error_on_fail": False}
+    return {**PLUGIN_OPTIONS.get(plugin, {}), "error_on_fail": False}
 
 
 def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: float = LVI_TOLERANCE, max_iter: int = 1_000_000):

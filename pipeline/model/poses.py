@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 
-def pose_matrix(position: Sequence[float], rpy: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+def pose_matrix(position: ArrayLike, rpy: ArrayLike = (0.0, 0.0, 0.0)) -> np.ndarray:
     """4x4 transform from a position [m] and extrinsic x-y-z roll-pitch-yaw [rad] (R = Rz Ry Rx)."""
     T = np.eye(4)
     T[:3, :3] = Rotation.from_euler("xyz", rpy).as_matrix()

@@ -42,8 +42,8 @@ def _segment(move: HandMove | None, T0: np.ndarray, task: Task, tau: np.ndarray,
     omega = np.zeros((n, 3))
     if move is None or move.kind == "hold":
         return position, rotation, velocity, omega
-    if move.kind in ("to", "by"):
-        if move.kind == "to":
+    if move.to is not None or move.by is not None:
+        if move.to is not None:
             T1 = task.waypoint_pose(move.to)
             p1, R1 = T1[:3, 3], T1[:3, :3]
         else:
@@ -54,11 +54,13 @@ def _segment(move: HandMove | None, T0: np.ndarray, task: Task, tau: np.ndarray,
         rotation = R0 @ Rotation.from_rotvec(s[:, None] * phi).as_matrix()
         omega = sdot[:, None] * (R0 @ phi)  # R0 exp(s phi) turns about R0 phi at rate s'
         return position, rotation, velocity, omega
-    axis = np.asarray(move.arc_axis) / np.linalg.norm(move.arc_axis)
-    centre = np.asarray(move.arc_center)
-    turn = Rotation.from_rotvec((s * move.arc_angle_rad)[:, None] * axis)
+    arc_axis, arc_center, arc_angle = move.arc_axis, move.arc_center, move.arc_angle_rad
+    assert arc_axis is not None and arc_center is not None and arc_angle is not None  # HandMove validates an arc whole
+    axis = np.asarray(arc_axis) / np.linalg.norm(arc_axis)
+    centre = np.asarray(arc_center)
+    turn = Rotation.from_rotvec((s * arc_angle)[:, None] * axis)
     position = centre + turn.apply(p0 - centre)
-    rate = sdot * move.arc_angle_rad
+    rate = sdot * arc_angle
     velocity = rate[:, None] * np.cross(axis, position - centre)
     return position, rotation, velocity, omega
 
@@ -66,6 +68,7 @@ def _segment(move: HandMove | None, T0: np.ndarray, task: Task, tau: np.ndarray,
 def _slave_from_master(task: Task, master: HandReference) -> HandReference:
     """MC-Inverse eq (11): B_T_Tl Tl_T_obj = B_T_Tr Tr_T_obj, so T_r = T_l Tl_T_obj (Tr_T_obj)^-1."""
     obj = task.spec.object
+    assert obj is not None  # called only for a task that carries an object
     relative = pose_matrix(obj.master_to_object.position, obj.master_to_object.rpy) @ invert(pose_matrix(obj.slave_to_object.position, obj.slave_to_object.rpy))
     T = master.poses @ relative
     offset = T[:, :3, 3] - master.position

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
@@ -15,6 +15,10 @@ from dualarm.errors import InvalidArgumentError
 
 if TYPE_CHECKING:
     from dualarm.model.robot import Robot
+
+
+#: The default of CartesianReference's t, rep and segment: derived from the period and the samples.
+_UNSET = np.empty(0)
 
 
 @dataclass(frozen=True)
@@ -74,9 +78,9 @@ class CartesianReference:
 
     period_s: float
     hands: Mapping[str, HandReference]
-    t: np.ndarray | None = None
-    rep: np.ndarray | None = None
-    segment: np.ndarray | None = None
+    t: np.ndarray = field(default_factory=lambda: _UNSET)
+    rep: np.ndarray = field(default_factory=lambda: _UNSET)
+    segment: np.ndarray = field(default_factory=lambda: _UNSET)
     frame: str = ""
     task: str = ""
 
@@ -91,13 +95,13 @@ class CartesianReference:
             if len(ref.position) != n:
                 raise InvalidArgumentError(f"hands[{hand}]", f"{len(ref.position)} samples, another hand has {n}")
         uniform = np.arange(n) * float(self.period_s)
-        t = uniform if self.t is None else finite_array(self.t, "t", (n,))
+        t = uniform if self.t is _UNSET else finite_array(self.t, "t", (n,))
         if np.abs(t - uniform).max(initial=0.0) > 1e-9 * max(1.0, float(uniform[-1]) if n else 1.0):
             raise InvalidArgumentError("t", f"sample times must be arange(N) * period_s ({self.period_s} s): the reference's period is its only control period")
         object.__setattr__(self, "period_s", float(self.period_s))
         object.__setattr__(self, "t", frozen(t, (n,), "t"))
-        object.__setattr__(self, "rep", frozen(np.zeros(n, int) if self.rep is None else self.rep, (n,), "rep", int))
-        object.__setattr__(self, "segment", frozen(np.zeros(n, int) if self.segment is None else self.segment, (n,), "segment", int))
+        object.__setattr__(self, "rep", frozen(np.zeros(n, int) if self.rep is _UNSET else self.rep, (n,), "rep", int))
+        object.__setattr__(self, "segment", frozen(np.zeros(n, int) if self.segment is _UNSET else self.segment, (n,), "segment", int))
         if n and ((np.diff(self.rep) < 0).any() or self.rep[0] < 0):
             raise InvalidArgumentError("rep", "repetition indices must start at 0 or more and never decrease")
         object.__setattr__(self, "hands", MappingProxyType(dict(self.hands)))
@@ -110,7 +114,7 @@ class CartesianReference:
         *,
         rep: np.ndarray | None = None,
         frame: str = "",
-    ) -> "CartesianReference":
+    ) -> CartesianReference:
         """A reference from sampled hand poses, e.g. a path of one's own.
 
         Velocities are the poses' central differences (one-sided at the ends): the linear velocity
@@ -137,7 +141,7 @@ class CartesianReference:
                 linear_velocity=_derivative(T[:, :3, 3], period_s),
                 angular_velocity=_angular_velocity(T[:, :3, :3], period_s),
             )
-        return cls(period_s=period_s, hands=hands, rep=rep, frame=frame)
+        return cls(period_s=period_s, hands=hands, rep=_UNSET if rep is None else np.asarray(rep), frame=frame)
 
     def __len__(self) -> int:
         return len(self.t)

@@ -47,14 +47,22 @@ def inflated_urdf(text: str, margin_m: float) -> str:
     for geometry in root.iter("collision"):
         for shape in geometry.iter():
             if shape.tag in ("capsule", "sphere", "cylinder"):
-                shape.set("radius", repr(float(shape.get("radius")) + margin_m))
+                shape.set("radius", repr(float(_attribute(shape, "radius")) + margin_m))
                 if shape.tag == "cylinder":
-                    shape.set("length", repr(float(shape.get("length")) + 2 * margin_m))
+                    shape.set("length", repr(float(_attribute(shape, "length")) + 2 * margin_m))
             elif shape.tag == "box":
-                shape.set("size", " ".join(repr(float(s) + 2 * margin_m) for s in shape.get("size").split()))
+                shape.set("size", " ".join(repr(float(s) + 2 * margin_m) for s in _attribute(shape, "size").split()))
             elif shape.tag == "mesh":
                 raise StageError("collision checking: mesh collision shapes cannot be inflated by the safety margin (use capsules, spheres, cylinders or boxes)")
     return ET.tostring(root, encoding="unicode")
+
+
+def _attribute(shape: ET.Element, name: str) -> str:
+    """The attribute ``name`` of a URDF collision shape, which URDF requires of it."""
+    value = shape.get(name)
+    if value is None:
+        raise StageError(f"collision checking: a <{shape.tag}> collision shape has no '{name}' attribute")
+    return value
 
 
 def bisection_order(steps: int) -> np.ndarray:
@@ -151,14 +159,15 @@ class CollisionChecker:
         """Disable the pairs that are not checked (module docstring); returns them by name. The robot must be at the zero configuration (as loaded)."""
         body, client = sim.body, sim.client
         name = {i: n for n, i in sim.link_index.items()}
-        skipped = set()
+        skipped: set[tuple[str, str]] = set()
         for link, (up, through_bare) in sim.solid_parents().items():
             points = pb.getClosestPoints(body, body, 1.0, link, up, physicsClientId=client)  # inflated shapes:
             touching = bool(points) and min(p[8] for p in points) + 2 * margin_m < TOUCHING_M  # distance before the margin
             if through_bare and not touching:
                 continue
             pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
-            skipped.add(tuple(sorted((name[link], name[up]))))
+            first, second = sorted((name[link], name[up]))
+            skipped.add((first, second))
         return frozenset(skipped)
 
     def _contact_points(self, q: np.ndarray) -> list:

@@ -110,6 +110,7 @@ def run_trials(
         "failures": sorted(set(table.reason[~table.success])),
         "run": None,
     }
+    run: Path | None = None
     if first is not None:
         trial_seed, result = first
         stages = build_stages(task, planner, settings=settings, seed=trial_seed)
@@ -119,4 +120,4 @@ def run_trials(
         summary["run_seed"] = trial_seed
     write_whole(out_dir / "plan_trials.csv", table.to_csv(index=False))
     write_whole(out_dir / "plan_summary.json", json.dumps(summary, indent=2) + "\n")
-    return TrialsResult(table, summary, out_dir, Path(summary["run"]) if summary["run"] else None)
+    return TrialsResult(table, summary, out_dir, run)

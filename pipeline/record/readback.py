@@ -18,6 +18,7 @@ from types import MappingProxyType
 
 import pandas as pd
 from google.protobuf.json_format import MessageToDict
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 
@@ -135,6 +136,8 @@ class McapTopics(Mapping[str, pd.DataFrame]):
                 df = _json_frame(times, payloads)
             else:
                 decode = ProtobufDecoderFactory().decoder_for(channel.message_encoding, schema)
+                if decode is None or schema is None:
+                    raise McapError(f"no decoder for message encoding '{channel.message_encoding}'")
                 messages = [decode(data) for data in payloads]
                 if schema.name == "foxglove.FrameTransforms":
                     df = _frame_transforms(times, messages)
@@ -176,6 +179,24 @@ class RunData:
         """``complete`` or ``failed``."""
         return str(self.manifest.get("status"))
 
+    @property
+    def task(self) -> str | None:
+        """The task's name (None if the manifest has none)."""
+        task = self.manifest.get("task")
+        return None if task is None else str(task)
+
+    @property
+    def stages(self) -> list[str]:
+        """The stages the run ran, in order (empty if the manifest has none)."""
+        stages = self.manifest.get("stages", [])
+        return [str(s) for s in stages] if isinstance(stages, list) else []
+
+    def setting(self, stage: str, key: str) -> object:
+        """The manifest's ``settings[stage][key]`` (None where the run has none)."""
+        settings = self.manifest.get("settings")
+        of_stage = settings.get(stage) if isinstance(settings, Mapping) else None
+        return of_stage.get(key) if isinstance(of_stage, Mapping) else None
+
     def __getitem__(self, topic: str) -> pd.DataFrame:
         if topic not in self.topics:
             raise RecordingError(f"{self.directory}: no topic '{topic}' (topics: {', '.join(self.topics)})")
@@ -214,5 +235,5 @@ def read_runs(directories: Iterable[str | Path], topics: Iterable[str] | None = 
         run = read_run(directory)
         for topic in run.topics:
             if wanted is None or topic in wanted:
-                per_topic[topic].append(run[topic].assign(run=run.run_id, task=run.manifest.get("task")))
+                per_topic[topic].append(run[topic].assign(run=run.run_id, task=run.task))
     return {topic: pd.concat(frames, ignore_index=True) for topic, frames in per_topic.items()}

@@ -137,7 +137,7 @@ class Recorder(NullSink):
         for joint in tree.joints():
             if joint.joint_type != "fixed":
                 values = q.get(joint.name, np.zeros(len(t)))
-                self._rr.send_columns(f"{stage}/transforms/{joint.name}", indexes=[times], columns=joint.compute_transform_columns(np.asarray(values, float), clamp=False))
+                self._rr.send_columns(f"{stage}/transforms/{joint.name}", indexes=[times], columns=joint.compute_transform_columns(np.asarray(values, float).tolist(), clamp=False))
 
     def _series(self, prefix: str, t: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
         """Rerun time series ``plots/<prefix>/<name>``."""
@@ -297,19 +297,23 @@ class Recorder(NullSink):
             pose = Pose(position=Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3]), orientation=Quaternion(x=x, y=y, z=z, w=w))
             color = Color(r=0.55, g=0.45, b=0.35, a=0.8)
             path = f"world/environment/{obj.name}"
+            archetype: rr.Boxes3D | rr.Cylinders3D | rr.Ellipsoids3D
             if obj.shape == "box":
                 size = obj.size_m
-                primitive = {"cubes": [CubePrimitive(pose=pose, size=Vector3(x=size[0], y=size[1], z=size[2]), color=color)]}
+                cube = CubePrimitive(pose=pose, size=Vector3(x=size[0], y=size[1], z=size[2]), color=color)
+                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, cubes=[cube])
                 archetype = rr.Boxes3D(half_sizes=[[s / 2 for s in size]], centers=[T[:3, 3]], quaternions=[[x, y, z, w]], fill_mode="solid")
             elif obj.shape == "cylinder":
                 d = 2 * obj.radius_m
-                primitive = {"cylinders": [CylinderPrimitive(pose=pose, size=Vector3(x=d, y=d, z=obj.height_m), bottom_scale=1.0, top_scale=1.0, color=color)]}
+                cylinder = CylinderPrimitive(pose=pose, size=Vector3(x=d, y=d, z=obj.height_m), bottom_scale=1.0, top_scale=1.0, color=color)
+                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, cylinders=[cylinder])
                 archetype = rr.Cylinders3D(lengths=[obj.height_m], radii=[obj.radius_m], centers=[T[:3, 3]], quaternions=[[x, y, z, w]], fill_mode="solid")
             else:
                 d = 2 * obj.radius_m
-                primitive = {"spheres": [SpherePrimitive(pose=pose, size=Vector3(x=d, y=d, z=d), color=color)]}
+                sphere = SpherePrimitive(pose=pose, size=Vector3(x=d, y=d, z=d), color=color)
+                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, spheres=[sphere])
                 archetype = rr.Ellipsoids3D(half_sizes=[[obj.radius_m] * 3], centers=[T[:3, 3]], fill_mode="solid")
-            entities.append(SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, **primitive))
+            entities.append(entity)
             self._rr.log(path, archetype, static=True)
         if entities:
             SceneUpdateChannel(f"{STAGE_TOPICS['path']}/environment", context=self._context).log(SceneUpdate(entities=entities), log_time=0)

@@ -85,13 +85,15 @@ def run_consistency(
     task = load_task(task_file, repetitions)
     out_dir = Path(out_dir)
     runs_dir = out_dir / "runs"
-    rows, samples = [], {}
+    rows: list[dict[str, object]] = []
+    samples: dict[str, pd.DataFrame] = {}
     for method in methods:
         if progress is not None:
             progress(f"{task.name}: {method} ...")
         before = set((runs_dir / task.name).glob("*")) if (runs_dir / task.name).exists() else set()
         try:
             recorded = record_run(task, method, stages=CONSISTENCY_STAGES, out_dir=runs_dir, seed=seed, command=["dualarm", "consistency", str(task_file), "--methods", method])
+            assert recorded.directory is not None  # record_run always returns its run directory
             run = read_run(recorded.directory)
         except DualarmError as exc:
             failed = sorted(set((runs_dir / task.name).glob("*")) - before)

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.colors import TABLEAU_COLORS  # noqa: E402
 
 from dualarm.ik.gesture import position_bounds  # noqa: E402
 from dualarm.paths.reference import time_in_repetition  # noqa: E402
@@ -105,9 +106,11 @@ def bound_profiles(duration_s: float, path: Path) -> Path:
 MIN_SPAN_RAD = 0.1
 #: Repetition labels, as in the MC-Inverse paper's figures.
 ROMAN = ("I", "II", "III", "IV", "V", "VI", "VII", "VIII", "IX", "X")
+#: The colours of Matplotlib's "tab10" colormap, by name ("tab:blue", ...).
+TAB10 = tuple(TABLEAU_COLORS)
 
 
-def _per_repetition(ax, sample: pd.DataFrame, column: str, colours) -> None:
+def _per_repetition(ax, sample: pd.DataFrame, column: str, colours: tuple[str, ...]) -> None:
     """``column`` of ``sample`` against the time within the repetition, one line per repetition; failed samples are left out."""
     phase = time_in_repetition(sample["t"].to_numpy(), sample["rep"].to_numpy())
     values = np.where(sample["status"].to_numpy() == 0, sample[column].to_numpy(), np.nan)
@@ -131,7 +134,7 @@ def _finish_per_repetition(fig, axes, title: str, path: Path) -> Path:
 
 def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], title: str, path: Path) -> Path:
     """The MC-Inverse paper's Figs 9 and 12: each joint of ``joints`` (columns) per method (rows) against the time within the repetition, one line per repetition (I, II, ...), so a method that repeats itself draws one line [rad]."""
-    colours = plt.get_cmap("tab10").colors
+    colours = TAB10
     fig, axes = plt.subplots(len(samples), len(joints), figsize=(2.1 * len(joints), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
     for row, (method, sample) in zip(axes, samples.items()):
         for ax, joint in zip(row, joints):
@@ -147,7 +150,7 @@ def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], t
 
 def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str], title: str, path: Path) -> Path:
     """The MC-Inverse paper's Figs 10, 13 and 16: each hand's arm angle psi (columns) per method (rows) against the time within the repetition, one line per repetition [rad]."""
-    colours = plt.get_cmap("tab10").colors
+    colours = TAB10
     fig, axes = plt.subplots(len(samples), len(hands), figsize=(max(7.5, 5 * len(hands)), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
     for row, (method, sample) in zip(axes, samples.items()):
         for ax, hand in zip(row, hands):
@@ -199,7 +202,7 @@ def histogram(values: np.ndarray, xlabel: str, title: str, path: Path, marks: di
     fig, ax = plt.subplots(figsize=(7, 3.2))
     ax.hist(values, bins=30, color="tab:blue", alpha=0.8)
     for i, (label, x) in enumerate((marks or {}).items()):
-        ax.axvline(x, color=plt.get_cmap("tab10").colors[(i + 1) % 10], ls="--", lw=1.2, label=label)
+        ax.axvline(x, color=TAB10[(i + 1) % 10], ls="--", lw=1.2, label=label)
     ax.set_xlabel(xlabel)
     ax.set_ylabel("count")
     ax.set_title(title, fontsize=10)

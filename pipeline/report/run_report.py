@@ -69,7 +69,7 @@ def write_report(run_dir: str | Path | RunData, out_dir: str | Path | None = Non
     out = Path(out_dir) if out_dir is not None else Path("reports") / str(data.manifest.get("task")) / data.run_id
     out.mkdir(parents=True, exist_ok=True)
     m = data.manifest
-    lines = [f"# Run {data.run_id}", "", f"- task: `{m.get('task')}` ({m.get('task_file')})", f"- status: {data.status}", f"- stages: {', '.join(m.get('stages', []))}"]
+    lines = [f"# Run {data.run_id}", "", f"- task: `{m.get('task')}` ({m.get('task_file')})", f"- status: {data.status}", f"- stages: {', '.join(data.stages)}"]
     if m.get("error"):
         lines.append(f"- error: {m['error']}")
     if "/ik/sample" in data.topics:
@@ -97,8 +97,7 @@ def write_report(run_dir: str | Path | RunData, out_dir: str | Path | None = Non
 
 def run_label(run: RunData) -> str:
     """A run's task and method: its IK method or planner ("triangle mc-inverse"), or "path"."""
-    settings = run.manifest.get("settings") or {}
-    method = (settings.get("ik") or {}).get("method") or (settings.get("plan") or {}).get("planner") or "path"
+    method = run.setting("ik", "method") or run.setting("plan", "method") or "path"
     return f"{run.manifest.get('task')} {method}"
 
 
@@ -122,8 +121,8 @@ def runs_table(runs: Sequence[RunData]) -> pd.DataFrame:
                 "task": run.manifest.get("task"),
                 "method": str(label).split(" ")[1],
                 "status": run.status,
-                "stages": ",".join(run.manifest.get("stages", [])),
-                "repetitions": (run.manifest.get("settings") or {}).get("path", {}).get("repetitions"),
+                "stages": ",".join(run.stages),
+                "repetitions": run.setting("path", "repetitions"),
                 "directory": str(run.directory),
                 **run.metrics,
             }

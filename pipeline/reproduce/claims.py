@@ -59,7 +59,7 @@ def _largest(table: pd.DataFrame, unit: str) -> tuple[float, str]:
     """(largest excursion, its description) of an excursion table; (0, "none") when empty."""
     if table.empty:
         return 0.0, "none"
-    row = table.loc[table["max_outside"].idxmax()]
+    row = table.iloc[table["max_outside"].argmax()]
     return float(row["max_outside"]), f"{row['max_outside']:.3g} {unit} ({row['joint']}, first at {row['t_first_out']:.2f} s)"
 
 
@@ -238,7 +238,7 @@ def table_i_claims(table: Mapping) -> list[Claim]:
 
 def _by_method(runs: list[RunData]) -> dict[str, Mapping[str, float]]:
     """Method -> metrics of the consistency runs (IK only) of one task."""
-    return {str(r.manifest["settings"]["ik"]["method"]): r.metrics for r in runs if r.status == "complete" and "retime" not in r.manifest.get("stages", [])}
+    return {str(r.setting("ik", "method")): r.metrics for r in runs if r.status == "complete" and "retime" not in r.stages}
 
 
 def _deviation(metrics: Mapping[str, float]) -> str:
@@ -412,7 +412,7 @@ def all_claims(out: Path, parts: Mapping[str, Mapping]) -> list[Claim]:
         ({"table-i"}, lambda: table_i_claims(json.loads((out / parts["table-i"]["outputs"]["table"]).read_text()))),
         ({"triangle"}, lambda: consistency_claims("triangle", runs("triangle"))),
         ({"circle"}, lambda: consistency_claims("circle", runs("circle"))),
-        ({"carry-box"}, lambda: consistency_claims("carry_box", runs("carry-box")) + carry_box_claims([r for r in runs("carry-box") if "execute" in r.manifest.get("stages", [])][0])),
+        ({"carry-box"}, lambda: consistency_claims("carry_box", runs("carry-box")) + carry_box_claims([r for r in runs("carry-box") if "execute" in r.stages][0])),
         ({"bowl-grasp"}, lambda: plan_claims(pd.read_csv(out / parts["bowl-grasp"]["outputs"]["table"]), runs("bowl-grasp")[0] if parts["bowl-grasp"]["outputs"].get("runs") else None)),
     ]
     claims = []

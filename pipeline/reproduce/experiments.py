@@ -12,6 +12,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypedDict
 
 from dualarm.data import robots_dir, tasks_dir
 
@@ -21,6 +22,21 @@ TASKS = tasks_dir()
 ROBOT = robots_dir() / "humanoid"
 
 Progress = Callable[[float, str], None]
+
+
+class Outputs(TypedDict, total=False):
+    """The paths a part wrote, relative to the reproduction directory.
+
+    Attributes:
+        runs: its run directories.
+        table: its table (CSV or JSON).
+        summary: its JSON summary.
+    """
+
+    runs: list[str]
+    table: str
+    summary: str
+
 
 #: The MC-Inverse paper's Table I solution 1 [rad] (HR2's left arm, joints 1-7). Its pose is
 #: given in HR2's arm base frame, which this robot does not share; the analogue puts this robot's
@@ -36,7 +52,7 @@ def _relative(path: Path, out: Path) -> str:
     return str(Path(path).resolve().relative_to(out.resolve()))
 
 
-def _run(task: str, ik: str, stages: tuple[str, ...] | None, out: Path, progress: Progress) -> dict[str, object]:
+def _run(task: str, ik: str, stages: tuple[str, ...] | None, out: Path, progress: Progress) -> Outputs:
     from dualarm.run import record_run, resolve_stages
 
     chosen = resolve_stages(stages, ik)
@@ -44,15 +60,16 @@ def _run(task: str, ik: str, stages: tuple[str, ...] | None, out: Path, progress
     run = record_run(
         TASKS / f"{task}.toml", ik, stages=chosen, out_dir=out / "runs", command=command, progress=lambda stage: progress(chosen.index(stage) / len(chosen) if stage in chosen else 0.95, stage)
     )
+    assert run.directory is not None  # record_run always returns its run directory
     return {"runs": [_relative(run.directory, out)]}
 
 
-def ball_game_tvgdd(out: Path, progress: Progress) -> dict[str, object]:
+def ball_game_tvgdd(out: Path, progress: Progress) -> Outputs:
     """TV-GDD on the ball game, through every stage (Zhang, Kong, Niu, section 4, Figs 5-8)."""
     return _run("ball_game", "tvgdd", None, out, progress)
 
 
-def ball_game_pinv(out: Path, progress: Progress) -> dict[str, object]:
+def ball_game_pinv(out: Path, progress: Progress) -> Outputs:
     """The pseudoinverse baseline on the ball game, IK only (Figs 3-4)."""
     return _run("ball_game", "pinv", ("path", "ik"), out, progress)
 
@@ -73,22 +90,22 @@ def table_i_pose() -> tuple[list[float], float]:
     return [round(v, 6) for v in pose], round(float(SrsKinematics.of(chain).arm_angles(q)[0]), 6)
 
 
-def table_i(out: Path, progress: Progress) -> dict[str, object]:
+def table_i(out: Path, progress: Progress) -> Outputs:
     """MC-Inverse Table I: the 8 candidates of one pose at one arm angle, as ``table_i.json`` (the JSON of ``dualarm ik srs --json``)."""
     from dualarm.ik.mc_inverse import candidate_table
     from dualarm.model.robot import load_robot
 
     pose, psi = table_i_pose()
-    data = candidate_table(load_robot(ROBOT).hand_chain("left"), pose, psi)
+    data = candidate_table(load_robot(ROBOT).hand_chain("left"), tuple(pose), psi)
     path = out / "table_i.json"
     path.write_text(json.dumps(data, indent=2) + "\n")
     return {"table": _relative(path, out)}
 
 
-def _consistency(task: str, methods: tuple[str, ...], out: Path, progress: Progress) -> dict[str, object]:
+def _consistency(task: str, methods: tuple[str, ...], out: Path, progress: Progress) -> Outputs:
     from dualarm.report.consistency import run_consistency
 
-    done = []
+    done: list[str] = []
 
     def step(text: str) -> None:
         progress(len(done) / len(methods), text)
@@ -98,28 +115,28 @@ def _consistency(task: str, methods: tuple[str, ...], out: Path, progress: Progr
     return {"table": _relative(result.csv, out), "runs": [_relative(Path(r), out) for r in result.table["run"] if r]}
 
 
-def triangle_consistency(out: Path, progress: Progress) -> dict[str, object]:
+def triangle_consistency(out: Path, progress: Progress) -> Outputs:
     """Every IK method drawing the triangle 5 times (MC-Inverse V.B, Figs 9-10)."""
     from dualarm.report.consistency import DEFAULT_METHODS
 
     return _consistency("triangle", DEFAULT_METHODS, out, progress)
 
 
-def circle_consistency(out: Path, progress: Progress) -> dict[str, object]:
+def circle_consistency(out: Path, progress: Progress) -> Outputs:
     """Every IK method drawing the circle 5 times (MC-Inverse V.C, Figs 12-13)."""
     from dualarm.report.consistency import DEFAULT_METHODS
 
     return _consistency("circle", DEFAULT_METHODS, out, progress)
 
 
-def carry_box(out: Path, progress: Progress) -> dict[str, object]:
+def carry_box(out: Path, progress: Progress) -> Outputs:
     """The dual-arm box carried up and down 5 times: the paper's three methods compared over the repetitions (Fig. 16), and MC-Inverse through every stage (eq 11, Fig. 14)."""
     compared = _consistency("carry_box", CARRY_BOX_METHODS, out, lambda f, text: progress(0.6 * f, text))
     executed = _run("carry_box", "mc-inverse", None, out, lambda f, text: progress(0.6 + 0.4 * f, text))
     return {"table": compared["table"], "runs": [*compared["runs"], *executed["runs"]]}
 
 
-def bowl_grasp(out: Path, progress: Progress) -> dict[str, object]:
+def bowl_grasp(out: Path, progress: Progress) -> Outputs:
     """MCIKRRT planning the bowl grasp :data:`PLAN_TRIALS` times; the first plan retimed, smoothed, executed and recorded (Li & Liang, section 5)."""
     from dualarm.plan.trials import run_trials
 
@@ -157,7 +174,7 @@ class Part:
     paper: str
     title: str
     command: str
-    run: Callable[[Path, Progress], dict[str, object]]
+    run: Callable[[Path, Progress], Outputs]
     seconds: float
 
 

@@ -108,7 +108,7 @@ def write_reproduction_report(out: str | Path) -> Path:
     lines = [
         "# dualarm: the three papers reproduced",
         "",
-        f'{sum(c.agrees for c in judged)} of {len(judged)} claims agree. Every figure under "ours" is read back from the recordings in this directory; the papers\' figures are quoted from their text. '
+        f'{sum(bool(c.agrees) for c in judged)} of {len(judged)} claims agree. Every figure under "ours" is read back from the recordings in this directory; the papers\' figures are quoted from their text. '
         f"The parts ran {index['jobs']} at a time on a {index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s"
         + (", so computing times were measured with another part running (`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)." if index["jobs"] > 1 else "."),
         "",
@@ -127,11 +127,11 @@ def write_reproduction_report(out: str | Path) -> Path:
     for p in index["parts"]:
         for run in p["outputs"].get("runs", []):
             try:
-                manifest = read_run(out / run).manifest
+                recorded = read_run(out / run)
             except RecordingError as exc:
                 lines.append(f"| {p['name']} | {run} | unreadable: {exc} | |")
                 continue
-            lines.append(f"| {p['name']} | [{run}]({run}) | {manifest.get('status')} | {', '.join(manifest.get('stages', []))} |")
+            lines.append(f"| {p['name']} | [{run}]({run}) | {recorded.manifest.get('status')} | {', '.join(recorded.stages)} |")
     lines += ["", "## Time of each part", "", "| part | what | status | time [s] |", "|---|---|---|---:|"]
     lines += [f"| {p['name']} | {BY_NAME[p['name']].title} | {p['status']} | {p['seconds']:.1f} |" for p in index["parts"]]
     lines += [f"| all | {index['jobs']} at a time | | {index['wall_time_s']:.1f} |", ""]

@@ -8,6 +8,7 @@ is emptied first; any other non-empty directory is refused.
 
 from __future__ import annotations
 
+import functools
 import json
 import multiprocessing
 import os
@@ -21,7 +22,7 @@ from queue import Empty
 
 from dualarm.errors import DualarmError
 from dualarm.record.run_dir import write_whole
-from dualarm.reproduce.experiments import BY_NAME, PARTS
+from dualarm.reproduce.experiments import BY_NAME, PARTS, Outputs
 
 #: The index of a reproduction directory.
 PARTS_FILE = "parts.json"
@@ -50,7 +51,7 @@ class PartResult:
     status: str
     error: str
     seconds: float
-    outputs: dict
+    outputs: Outputs
 
 
 def parts_named(names: Sequence[str] | None) -> tuple[str, ...]:
@@ -108,7 +109,7 @@ def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgres
     results: dict[str, PartResult] = {}
     if jobs == 1:
         for name in names:
-            results[name] = _run_part(name, out, lambda fraction, text, name=name: on_progress(name, fraction, text))
+            results[name] = _run_part(name, out, functools.partial(on_progress, name))
             on_progress(name, 1.0, results[name].status)
     else:
         longest_first = sorted(names, key=lambda n: -BY_NAME[n].seconds)

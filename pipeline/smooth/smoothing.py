@@ -30,10 +30,10 @@ Units: positions [rad], velocities [rad/s], accelerations [rad/s^2], jerks [rad/
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from dualarm.arrays import frozen
 from dualarm.errors import StageError
@@ -76,9 +76,9 @@ class Smoothed:
 
 def smooth_trajectory(
     reference: JointTrajectory,
-    velocity: float | Sequence[float],
-    acceleration: float | Sequence[float],
-    jerk: float | Sequence[float],
+    velocity: ArrayLike,
+    acceleration: ArrayLike,
+    jerk: ArrayLike,
     *,
     period_s: float = 0.001,
 ) -> Smoothed:

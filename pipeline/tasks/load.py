@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
+from pydantic_core import ErrorDetails
 
 from dualarm.errors import RobotModelError, TaskFileError, UnreachablePoseError
 from dualarm.model.kinematics import ChainKinematics, hand_pose, origin_matrix
@@ -115,7 +116,7 @@ def hand_poses(robot: Robot, hands: Sequence[str], joint_names: Sequence[str], q
     return poses
 
 
-def _key_path(error: dict, data: object) -> str:
+def _key_path(error: ErrorDetails, data: object) -> str:
     """The task-file key of a pydantic error.
 
     Location parts that are not keys of the input (the names pydantic gives union members, such as
@@ -307,7 +308,7 @@ def arm_reach(task: Task, hand: str) -> ArmReach:
 def _check_reach(task: Task) -> None:
     spec = task.spec
     for hand in spec.hands:
-        names = [getattr(spec.start, hand)] + [m.for_hand(hand).to for m in spec.moves if m.for_hand(hand) is not None]
+        names = [getattr(spec.start, hand)] + [move.to for m in spec.moves if (move := m.for_hand(hand)) is not None]
         names = [n for n in names if n is not None and n != "initial"]
         if not names:
             continue

@@ -32,6 +32,8 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from scipy.spatial.transform import Rotation
 
+from dualarm.record.readback import read_run
+from dualarm.report.run_report import run_label
 from dualarm.run import record_run
 from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
@@ -397,6 +399,9 @@ def test_metadata_holds_the_manifest_and_attachments_the_inputs(run, mcap_file):
     spec, run_dir = run
     manifest = json.loads((run_dir / "manifest.json").read_text())
     assert manifest["status"] == "complete" and tuple(manifest["stages"]) == spec.stages
+    joint_path_stage = "plan" if "plan" in spec.stages else "ik"
+    assert manifest["settings"][joint_path_stage]["method"] == spec.method  # a planner's name is not hidden by its settings
+    assert run_label(read_run(run_dir)) == f"{run_dir.parent.name} {spec.method}"
     (metadata,) = mcap_file.metadata
     assert metadata.name == "manifest"
     assert {k: json.loads(v) for k, v in metadata.metadata.items()} == manifest
