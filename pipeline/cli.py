@@ -73,7 +73,7 @@ def run(
     TASK is a task file, or the name of a shipped task (ball_game, bowl_grasp, carry_box, circle,
     triangle) when no such file exists.
     """
-    from dualarm.run import TIMINGS, record_run
+    from dualarm.run import TIMINGS, default_method, record_run
     from dualarm.settings import with_overrides
     from dualarm.tasks import load_task
 
@@ -87,12 +87,12 @@ def run(
         raise DualarmError(f"unknown timing '{timing}' (timings: {', '.join(TIMINGS)})")
     loaded = load_task(task, reps)
     chosen = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
-    method = ik or planner
+    method = default_method(loaded, ik or planner, chosen)
     settings = None
-    if ik == "tvgdd":
-        settings = _method(ik).settings_for(loaded, scheme=scheme, backend=qp_backend, lvi_tolerance=lvi_tolerance)
-    elif planner is not None or (ik is None and loaded.spec.wta and not (chosen and "ik" in chosen)):
-        settings = _method(planner or "mcikrrt").settings_for(loaded).with_timeout(timeout)
+    if method == "tvgdd":
+        settings = _method(method).settings_for(loaded, scheme=scheme, backend=qp_backend, lvi_tolerance=lvi_tolerance)
+    elif method is not None and _method(method).kind == "planner":
+        settings = _method(method).settings_for(loaded).with_timeout(timeout)
     retime = with_overrides(loaded.spec.retime, {"timing": timing}) if timing is not None else None
     with err.status(f"running {task} ...") as status:
         result = record_run(

@@ -109,6 +109,16 @@ def _as_task(task: Task | str | Path) -> Task:
     return task if isinstance(task, Task) else load_task(task)
 
 
+def default_method(task: Task, method: str | None, stages: Sequence[str] | None = None) -> str | None:
+    """``method``, or ``mcikrrt`` for a task with Workspace Target Areas when none is given.
+
+    Such a task is planned, unless an ``ik`` stage is asked for.
+    """
+    if method is None and task.spec.wta and not (stages and "ik" in stages):
+        return "mcikrrt"
+    return method
+
+
 def build_stages(
     task: Task,
     method: str | None = None,
@@ -134,11 +144,9 @@ def build_stages(
     Raises:
         DualarmError: an unknown stage or method, settings of the wrong class, a planning start in collision.
     """
-    kind = registered(method).kind if method is not None else None
-    if method is None and task.spec.wta and not (stages and "ik" in stages):
-        method, kind = "mcikrrt", "planner"
-    chosen = resolve_stages(stages, method if kind == "ik" else None, method if kind == "planner" else None)
+    method = default_method(task, method, stages)
     m = registered(method) if method is not None else None
+    chosen = resolve_stages(stages, m.name if m and m.kind == "ik" else None, m.name if m and m.kind == "planner" else None)
     if m is not None:
         settings = m.settings_for(task) if settings is None else settings
         if not isinstance(settings, m.settings_type):

@@ -30,7 +30,7 @@ import numpy as np
 
 from dualarm.errors import InvalidArgumentError
 from dualarm.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
-from dualarm.ik.dls import DlsSettings
+from dualarm.ik.dls import DlsSettings as DlsSettings  # DLS-SVD's settings, with the others here
 from dualarm.ik.joint_path import JointPath
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference
@@ -93,10 +93,6 @@ class IkfastStyleSettings:
             raise InvalidArgumentError("resolution_rad", f"must be a positive number, not {self.resolution_rad!r}")
 
 
-#: The settings class of each method.
-SETTINGS: Mapping[str, type] = {"trac-ik": TracIkSettings, "pybullet": PyBulletIkSettings, "dls-svd": DlsSettings, "ikfast-style": IkfastStyleSettings}
-
-
 @contextmanager
 def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str, float], settings: Any) -> Iterator[ArmSolver]:
     """The method's solver for one arm."""
@@ -152,14 +148,17 @@ def solve_pointwise(
         robot: the robot.
         reference: the hands' poses.
         q0: the initial configuration (a home pose's name or joint -> value [rad], others at 0).
-        settings: the method's settings (:data:`SETTINGS`; default its defaults).
+        settings: the method's settings (its class in :data:`dualarm.methods.METHODS`; default its defaults).
         progress: called with (samples done, total) as samples are solved.
     """
-    if method not in SETTINGS:
+    from dualarm.methods import METHODS
+
+    if method not in POINTWISE_METHODS:
         raise InvalidArgumentError("method", f"unknown pose-level IK method '{method}' (methods: {', '.join(POINTWISE_METHODS)})")
-    settings = SETTINGS[method]() if settings is None else settings
-    if not isinstance(settings, SETTINGS[method]):
-        raise InvalidArgumentError("settings", f"{method} takes {SETTINGS[method].__name__}, not {type(settings).__name__}")
+    kind = METHODS[method].settings_type
+    settings = kind() if settings is None else settings
+    if not isinstance(settings, kind):
+        raise InvalidArgumentError("settings", f"{method} takes {kind.__name__}, not {type(settings).__name__}")
     q0 = robot.configuration(q0, "q0")
     problems = arm_problems(robot, reference, q0)
     N = len(reference)
@@ -185,7 +184,7 @@ def _solver_of(method: str) -> Callable[..., JointPath]:
         return solve_pointwise(method, robot, reference, q0, settings)
 
     solve.__name__ = f"solve_{method.replace('-', '_')}"
-    solve.__doc__ = f"{method} along a path: :func:`solve_pointwise` with ``method='{method}'`` (settings: {SETTINGS[method].__name__})."
+    solve.__doc__ = f"{method} along a path: :func:`solve_pointwise` with ``method='{method}'`` (settings: see :data:`dualarm.methods.METHODS`)."
     return solve
 
 
