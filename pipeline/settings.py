@@ -20,21 +20,22 @@ def with_overrides(settings: S, overrides: Mapping[str, Any]) -> S:
         InvalidArgumentError: an unknown field (listing the known ones) or a value its class refuses.
     """
     if isinstance(settings, BaseModel):
-        known = set(type(settings).model_fields)
-    else:
-        known = {f.name for f in dataclasses.fields(settings)}  # type: ignore[arg-type]
-    for key in overrides:
-        if key not in known:
-            raise InvalidArgumentError(key, f"not a setting of {type(settings).__name__} (settings: {', '.join(sorted(known))})")
-    if not overrides:
-        return settings
-    if isinstance(settings, BaseModel):
+        _check_keys(settings, set(type(settings).model_fields), overrides)
         try:
-            return type(settings).model_validate({**settings.model_dump(), **overrides})
+            return type(settings).model_validate({**settings.model_dump(), **overrides}) if overrides else settings
         except ValidationError as exc:
             first = exc.errors()[0]
             raise InvalidArgumentError(".".join(str(p) for p in first["loc"]), first["msg"]) from None
-    return dataclasses.replace(settings, **overrides)  # type: ignore[type-var]
+    if dataclasses.is_dataclass(settings) and not isinstance(settings, type):
+        _check_keys(settings, {f.name for f in dataclasses.fields(settings)}, overrides)
+        return dataclasses.replace(settings, **overrides)
+    raise InvalidArgumentError("settings", f"expected a dataclass or a pydantic model, got {type(settings).__name__}")
+
+
+def _check_keys(settings: object, known: set[str], overrides: Mapping[str, Any]) -> None:
+    for key in overrides:
+        if key not in known:
+            raise InvalidArgumentError(key, f"not a setting of {type(settings).__name__} (settings: {', '.join(sorted(known))})")
 
 
 def as_record(settings: Any) -> dict[str, Any]:

@@ -103,6 +103,12 @@ class UrdfModel:
         return tuple(reversed(path))
 
 
+def _vector3(values) -> tuple[float, float, float]:
+    """Three numbers as a tuple of floats."""
+    x, y, z = (float(v) for v in values)
+    return x, y, z
+
+
 def _finite(value: float | None, default: float) -> float:
     return default if value is None else float(value)
 
@@ -138,8 +144,8 @@ def load_urdf(path: str | Path) -> UrdfModel:
     joints = []
     for j in robot.joints:
         origin = j.origin
-        xyz = tuple(float(v) for v in (origin.xyz if origin is not None and origin.xyz is not None else (0, 0, 0)))
-        rpy = tuple(float(v) for v in (origin.rpy if origin is not None and origin.rpy is not None else (0, 0, 0)))
+        xyz = _vector3(origin.xyz if origin is not None and origin.xyz is not None else (0, 0, 0))
+        rpy = _vector3(origin.rpy if origin is not None and origin.rpy is not None else (0, 0, 0))
         axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
         if j.type in MOVABLE_TYPES and not np.isclose(np.linalg.norm(axis), 1.0, atol=1e-9):
             norm = np.linalg.norm(axis)
@@ -157,9 +163,9 @@ def load_urdf(path: str | Path) -> UrdfModel:
                 type=j.type,
                 parent=j.parent,
                 child=j.child,
-                origin_xyz=xyz,  # type: ignore[arg-type]
-                origin_rpy=rpy,  # type: ignore[arg-type]
-                axis=tuple(float(v) for v in axis),  # type: ignore[arg-type]
+                origin_xyz=xyz,
+                origin_rpy=rpy,
+                axis=_vector3(axis),
                 lower=lower,
                 upper=upper,
                 velocity=_finite(limit.velocity if limit is not None else None, np.inf),
