@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
+from dualarm.errors import StageError
 from dualarm.ik.joint_path import JointPath
 from dualarm.ik.metrics import arm_angles, consistency_metrics, ik_metrics
 from dualarm.limits import limit_ratios
@@ -134,7 +135,6 @@ class PlanStage:
 
     def __call__(self, reference: CartesianReference, sink: Sink) -> tuple[JointPath, dict[str, float]]:
         """Plan (or take the plan already made): the reference (unused) -> JointPath."""
-        from dualarm.errors import StageError
         from dualarm.plan.stage import plan_metrics, planned_joint_path
 
         sink.begin(self.name)
@@ -172,7 +172,8 @@ class RetimeStage:
 
         sink.begin(self.name)
         settings, names = self.settings, path.joint_names
-        v, a = self.task.velocity_limits(names), self.task.acceleration_limits(names)
+        robot = self.task.robot
+        v, a = robot.limit_array("velocity", names), robot.limit_array("acceleration", names)
         if settings.timing == "task":
             result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=True)
         else:
@@ -210,7 +211,7 @@ class SmoothStage:
 
         sink.begin(self.name)
         names = retimed.joint_names
-        v, a, j = self.task.velocity_limits(names), self.task.acceleration_limits(names), self.task.jerk_limits(names)
+        v, a, j = (self.task.robot.limit_array(kind, names) for kind in ("velocity", "acceleration", "jerk"))
         result = smooth_trajectory(retimed, v, a, j, period_s=CONTROL_PERIOD_S)
         traj = result.trajectory
         ratios = limit_ratios(traj.t, names, {"velocity": traj.qd, "acceleration": traj.qdd, "jerk": result.jerk}, {"velocity": v, "acceleration": a, "jerk": j}, self.name)

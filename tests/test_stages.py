@@ -59,7 +59,7 @@ def test_recorded_limits_are_the_robot_files(triangle):
     task, _, data = triangle
     for stage in ("retime", "smooth"):
         names, limits = _limits(data, stage)
-        assert np.array_equal(limits["velocity"], task.velocity_limits(tuple(names)))
+        assert np.array_equal(limits["velocity"], task.robot.limit_array("velocity", tuple(names)))
         assert np.array_equal(limits["acceleration"], [task.robot.limits[n].acceleration for n in names])
     names, limits = _limits(data, "smooth")
     assert np.array_equal(limits["jerk"], [task.robot.limits[n].jerk for n in names])

@@ -161,7 +161,7 @@ def hand_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = N
 def arm_base_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
     """The pose of the base frame of ``hand``'s arm chain (the torso, for the humanoid) in the robot's base frame [m], 4x4, with the joints between them (a waist) at ``q`` (as :func:`hand_pose`)."""
     chain = robot.chain_between(robot.urdf.root, robot.hand_chain(hand).base)
-    return ChainKinematics.of(chain).pose(_values(robot, chain, q)) if chain.dof else np.asarray(ChainKinematics.of(chain).pose(np.zeros(0)))
+    return ChainKinematics.of(chain).pose(_values(robot, chain, q))
 
 
 def to_arm_frame(robot: Robot, hand: str, pose: np.ndarray, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:

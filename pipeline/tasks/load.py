@@ -19,7 +19,7 @@ import numpy as np
 from pydantic import ValidationError
 from pydantic_core import ErrorDetails
 
-from dualarm.errors import RobotModelError, TaskFileError, UnreachablePoseError
+from dualarm.errors import InvalidArgumentError, RobotModelError, TaskFileError, UnreachablePoseError
 from dualarm.model.kinematics import ChainKinematics, hand_pose, origin_matrix
 from dualarm.model.poses import pose_matrix
 from dualarm.model.robot import Chain, Robot, load_robot
@@ -76,18 +76,6 @@ class Task:
     def initial_hand_pose(self, hand: str) -> np.ndarray:
         """The pose of ``hand`` at the initial configuration, in the robot base frame (4x4) [m]."""
         return hand_pose(self.robot, hand, self.initial_q)
-
-    def velocity_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
-        """Velocity limits of ``joint_names`` [rad/s]: the task's ``limits.velocity`` where it sets one, the robot's otherwise."""
-        return self.robot.limit_array("velocity", joint_names)
-
-    def acceleration_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
-        """Acceleration limits of ``joint_names`` [rad/s^2]: the task's ``limits.acceleration`` where it sets one, the robot's otherwise."""
-        return self.robot.limit_array("acceleration", joint_names)
-
-    def jerk_limits(self, joint_names: tuple[str, ...]) -> np.ndarray:
-        """The robot's jerk limits of ``joint_names`` [rad/s^3]."""
-        return self.robot.limit_array("jerk", joint_names)
 
     def hand_poses(self, joint_names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> dict[str, np.ndarray]:
         """Each driven hand's pose (N, 4, 4) [m] at configurations ``q`` (N, n) [rad] of ``joint_names``, the other joints at ``fixed`` or else at their initial values."""
@@ -178,20 +166,12 @@ def _check_joint_names(location: str, names, robot: Robot) -> None:
             raise TaskFileError(f"{location}.{name}: no such joint in robot '{robot.name}'")
 
 
-def _initial_configuration(source: str, spec: TaskSpec, robot: Robot) -> dict[str, float]:
-    where = f"{source}:initial"
-    if isinstance(spec.initial, str):
-        if spec.initial not in robot.homes:
-            raise TaskFileError(f"{where}: robot '{robot.name}' has no home pose '{spec.initial}' (homes: {', '.join(robot.homes)})")
-        return dict(robot.home(spec.initial))
-    _check_joint_names(where, spec.initial, robot)
-    q = {n: 0.0 for n in robot.joint_names}
-    for name, value in spec.initial.items():
-        lim = robot.limits[name]
-        if not lim.lower <= value <= lim.upper:
-            raise TaskFileError(f"{where}.{name}: {value} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]")
-        q[name] = value
-    return q
+def _initial_configuration(source: str, spec: TaskSpec, robot: Robot) -> Mapping[str, float]:
+    """The task's ``initial`` as every joint's value (:meth:`Robot.configuration`), its errors as the task file's."""
+    try:
+        return robot.configuration(spec.initial, f"{source}:initial")
+    except InvalidArgumentError as exc:
+        raise TaskFileError(str(exc)) from None
 
 
 def _check_structure(task: Task) -> None:
@@ -401,7 +381,7 @@ def _resolve(spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Ro
             _check_joint_names(f"{source}:limits.{kind}", value, robot)
     robot = robot.with_limits(velocity=spec.limits.velocity, acceleration=spec.limits.acceleration)
     initial = _initial_configuration(source, spec, robot)
-    task = Task(spec=spec, file=file, text=text, robot=robot, initial_q=MappingProxyType(initial))
+    task = Task(spec=spec, file=file, text=text, robot=robot, initial_q=MappingProxyType(dict(initial)))
     _check_structure(task)
     _check_reach(task)
     _check_environment(task)
