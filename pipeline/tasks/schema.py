@@ -114,6 +114,19 @@ class Retime(_Model):
     acceleration_fraction: Annotated[float, Field(strict=True, gt=0, le=1, allow_inf_nan=False)] = 0.3
 
 
+class Ik(_Model):
+    """How IK methods read the task.
+
+    Attributes:
+        task_space: ``pose``: every method solves the hands' positions and orientations;
+            ``position``: the velocity-level methods (TV-GDD, pinv) solve positions only, as the
+            TV-GDD paper does (m = 3 per hand, eq 13), and their orientation error is measured but
+            not asked for. Pose-level methods always solve the whole pose.
+    """
+
+    task_space: Literal["pose", "position"] = "pose"
+
+
 class Gesture(_Model):
     """TV-GDD time-varying gesture bounds (Zhang, Kong, Niu, eqs 19-22).
 
@@ -279,6 +292,7 @@ class TaskSpec(_Model):
     moves: tuple[Move, ...] = ()
     limits: Limits = Limits()
     retime: Retime = Retime()
+    ik: Ik = Ik()
     gesture: Gesture | None = None
     arm_angle: ArmAngle = ArmAngle()
     object: CarriedObject | None = None
