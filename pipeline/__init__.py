@@ -16,9 +16,11 @@ IK, each ``solve_*(robot, reference, q0, settings) -> JointPath``
     :func:`solve_ikfast_style`; one pose: :func:`mc_inverse` -> :class:`McSolution` (``.nearest``).
     Every method and planner is in the registry :data:`METHODS`.
 Planning, timing, execution
-    :func:`plan_task`, :func:`retime_path`, :func:`smooth_trajectory`, :func:`execute_trajectory`.
+    :func:`plan_task`, :func:`retime_path`, :func:`smooth_trajectory`, :func:`approach_trajectory`
+    (from the initial configuration to a trajectory's start), :func:`execute_trajectory`.
 The pipeline
-    :func:`run_task` (in memory, products and metrics in a :class:`RunResult`), :func:`record_run`
+    :func:`run_task` (in memory, products, metrics and the :class:`Verdict` -- complete, violated
+    with each :class:`Violation`, judged against :class:`Checks` -- in a :class:`RunResult`), :func:`record_run`
     (MCAP + Rerun files), sinks :class:`Sink`, :class:`NullSink`, :class:`MetricsSink`,
     :class:`Recorder`; reading runs back into pandas: :func:`read_run`, :func:`read_runs`.
 Contracts between stages

@@ -4,6 +4,7 @@ from .errors import DualarmError as DualarmError
 from .errors import InvalidArgumentError as InvalidArgumentError
 from .errors import NoSolutionFound as NoSolutionFound
 from .errors import NotSRSError as NotSRSError
+from .errors import OutputError as OutputError
 from .errors import RecordingError as RecordingError
 from .errors import RobotModelError as RobotModelError
 from .errors import StageError as StageError
@@ -55,10 +56,14 @@ from .retime.trajectory import JointTrajectory as JointTrajectory
 from .run import RunResult as RunResult
 from .run import record_run as record_run
 from .run import run_task as run_task
+from .smooth.approach import approach_trajectory as approach_trajectory
 from .smooth.smoothing import Smoothed as Smoothed
 from .smooth.smoothing import smooth_trajectory as smooth_trajectory
 from .tasks.load import Task as Task
 from .tasks.load import load_task as load_task
 from .tasks.load import task_from_dict as task_from_dict
 from .tasks.schema import ArmAngle as ArmAngle
+from .verdict import Checks as Checks
+from .verdict import Verdict as Verdict
+from .verdict import Violation as Violation
 from .version import __version__ as __version__

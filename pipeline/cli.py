@@ -1,28 +1,44 @@
 """The ``dualarm`` command line (Typer).
 
-User mistakes (a malformed task file, an unknown robot, a corrupt recording, ...) print one line
-on stderr and exit with code 2; no traceback.
+User mistakes (a malformed task file, an unknown robot, a corrupt recording, an argument outside
+its range, an output directory holding files dualarm did not write, ...) print one line on
+stderr and exit with code 2; no traceback. Every argument is checked before any work. Messages
+are printed as they are (no markup, no emoji codes) and quote at most about 80 characters of a
+user's string (:func:`dualarm.errors.excerpt`); a line is cut at :data:`MAX_LINE` characters.
+
+Exit codes (:data:`EXIT_CODES`): 0 complete, 3 violated (the run finished, but a check failed),
+1 failed, 2 a user's mistake, 130 interrupted by Ctrl-C (SIGINT), 143 terminated (SIGTERM). An
+interrupted run is kept as failed, as any run that stops half-way.
 """
 
 from __future__ import annotations
 
 import functools
+import math
 import os
+import signal
+import stat
 import sys
+import threading
 from pathlib import Path
-from typing import Annotated, Callable, Optional
+from typing import Annotated, Any, Callable, Optional
 
 import numpy as np
 import typer
 from rich.console import Console
+from rich.status import Status
 from rich.table import Table
 
-from dualarm.errors import DualarmError, NotSRSError
+from dualarm.errors import DualarmError, NotSRSError, StageError, Terminated, excerpt
+
+#: Exit codes of every command.
+EXIT_CODES = {"complete": 0, "violated": 3, "failed": 1, "user error": 2, "interrupted (SIGINT)": 130, "terminated (SIGTERM)": 143}
 
 app = typer.Typer(
     name="dualarm",
-    help="Humanoid dual-arm motion papers as runnable, recorded, repeatable experiments.",
+    help="Humanoid dual-arm motion papers as runnable, recorded, repeatable experiments.\n\nExit codes: " + ", ".join(f"{code} {what}" for what, code in EXIT_CODES.items()) + ".",
     no_args_is_help=True,
+    rich_markup_mode=None,  # help as written: rich markup would eat "[s]", "[rad]", ...
     add_completion=False,
     pretty_exceptions_enable=False,
 )
@@ -33,38 +49,164 @@ app.add_typer(bench_app, name="bench")
 ik_app = typer.Typer(help="Inverse kinematics of single poses.", no_args_is_help=True)
 app.add_typer(ik_app, name="ik")
 
-out = Console(highlight=False, width=None if sys.stdout.isatty() else 120)  # tables unwrapped in pipes and files
-err = Console(stderr=True, highlight=False)
+# Text is printed as it is: no markup, no emoji codes (":robot:" stays), in messages and table cells.
+out = Console(highlight=False, markup=False, emoji=False, width=None if sys.stdout.isatty() else 120)  # tables unwrapped in pipes and files
+err = Console(stderr=True, highlight=False, markup=False, emoji=False)
+#: The longest line an error prints [characters] (a message quotes a user's string in ~80).
+MAX_LINE = 400
 
 
 def user_errors(func: Callable) -> Callable:
-    """Turn a DualarmError into one line on stderr and exit code 2."""
+    """Turn a DualarmError into one line on stderr and exit code 2; a StageError from a recorded run (a run that failed on valid input, kept as failed) into ``verdict: failed``, the error and where the run is kept, and exit code 1.
+
+    Ctrl-C (SIGINT) and SIGTERM during the command end it with one line and exit code 130 or 143
+    (:data:`EXIT_CODES`); a run being recorded is kept as failed (:func:`_catch_signals`).
+    """
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
+        received = _received
+        received.clear()
+        previous = _catch_signals(received)
         try:
             return func(*args, **kwargs)
+        except StageError as exc:  # valid input, but a stage could not produce its output: the run failed
+            if exc.run_directory is None:  # refused before any run was recorded: the input cannot be run
+                err.print(excerpt(f"error: {exc}", MAX_LINE), markup=False, soft_wrap=True)
+                raise typer.Exit(2) from None
+            err.print("verdict: failed", markup=False, soft_wrap=True)
+            for line in (f"error: {exc}", *getattr(exc, "__notes__", ())):
+                err.print(line, markup=False, soft_wrap=True)
+            raise typer.Exit(1) from None
         except DualarmError as exc:
-            err.print(f"error: {exc}", markup=False, soft_wrap=True)
+            err.print(excerpt(f"error: {exc}", MAX_LINE), markup=False, soft_wrap=True)
             raise typer.Exit(2) from None
+        except (KeyboardInterrupt, Terminated) as exc:
+            if not received:  # raised without our handler (outside the main thread)
+                received.append(signal.SIGINT if isinstance(exc, KeyboardInterrupt) else signal.SIGTERM)
+        finally:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+            sys.unraisablehook = sys.__unraisablehook__
+            if received:  # also when a library swallowed the exception (CasADi turns it into a failed solve)
+                what = "interrupted (SIGINT)" if received[0] == signal.SIGINT else "terminated (SIGTERM)"
+                err.print(what, markup=False)
+                raise typer.Exit(EXIT_CODES[what]) from None  # the signal decides the exit code, whatever the command was doing
 
     return wrapper
+
+
+#: The signals the running command received.
+_received: list[int] = []
+
+
+def _raise_swallowed() -> None:
+    """Raise again a signal the command received whose exception a library swallowed (CasADi turns it into a failed solve); called between stages."""
+    if _received:
+        raise KeyboardInterrupt if _received[0] == signal.SIGINT else Terminated()
+
+
+def _unraisable(unraisable: Any) -> None:
+    """``sys.unraisablehook``: silent for the exception of a signal, which Python cannot raise from a ``__del__`` (:func:`_raise_swallowed` raises it again); Python's own hook for anything else."""
+    if not issubclass(unraisable.exc_type, (KeyboardInterrupt, Terminated)):
+        sys.__unraisablehook__(unraisable)
+
+
+def _update(status: Status, text: str) -> None:
+    """Show ``text`` on the status line, once :func:`_raise_swallowed` let the command go on."""
+    _raise_swallowed()
+    status.update(text)
+
+
+def _catch_signals(received: list[int]) -> dict[int, Any]:
+    """Install the command's SIGINT and SIGTERM handlers; returns the handlers they replace.
+
+    Each appends its signal to ``received`` and raises (KeyboardInterrupt or
+    :class:`~dualarm.errors.Terminated`), so that a run being recorded is kept as failed. SIGINT
+    is left alone when it is ignored (a command started in the background); outside the main
+    thread nothing is installed.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+
+    def handler(signum: int, frame: object) -> None:
+        received.append(signum)
+        raise KeyboardInterrupt if signum == signal.SIGINT else Terminated()
+
+    sys.unraisablehook = _unraisable  # a signal raised in a __del__ is raised again between stages, without a traceback
+
+    previous: dict[int, Any] = {signal.SIGTERM: signal.signal(signal.SIGTERM, handler)}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, handler)
+    return previous
+
+
+#: Largest planning timeout [s].
+MAX_TIMEOUT_S = 86_400.0
+#: Largest hand position coordinate of ``ik srs --pose`` [m] and largest angle [rad].
+MAX_POSITION_M, MAX_ANGLE_RAD = 1e3, 1e3
+#: Largest counts: planning trials, benchmark poses, robot check samples, benchmark repeats.
+MAX_TRIALS, MAX_POSES, MAX_SAMPLES, MAX_REPEATS = 100_000, 1_000_000, 1_000_000, 1_000
+
+
+def _out_path(text: str, option: str) -> Path:
+    """``text``, given as ``option``, as an output path; an empty one (which ``Path`` would read as the working directory) is refused."""
+    if not text.strip():
+        raise DualarmError(f"{option} '{excerpt(text)}': an empty path; give a directory or file name")
+    if "\0" in text:
+        raise DualarmError(f"{option} '{excerpt(text)}': a path cannot hold a NUL byte")
+    return Path(text)
+
+
+def _seed(seed: int, option: str = "--seed") -> int:
+    """``seed`` if it is an integer >= 0 (of any size: numpy's Generator takes them all)."""
+    if seed < 0:
+        raise DualarmError(f"{option} {excerpt(seed)}: a seed is an integer >= 0 (of any size)")
+    return seed
+
+
+def _within(value: float, option: str, low: float, high: float = math.inf, *, above_low: bool = False) -> float:
+    """``value``, given as ``option``, if it is finite and in [low, high] ((low, high] with ``above_low``); a DualarmError with the range otherwise."""
+    if math.isfinite(value) and (value > low if above_low else value >= low) and value <= high:
+        return value
+    bounds = f"{'>' if above_low else '>='} {low:g}" if high == math.inf else f"in {'(' if above_low else '['}{low:g}, {high:g}]"
+    raise DualarmError(f"{option} {excerpt(value)}: give a finite number {bounds}")
+
+
+def _stages(stages: str | None) -> list[str] | None:
+    """The stages of ``--stages`` (None when not given); a value naming none is refused."""
+    if stages is None:
+        return None
+    from dualarm.run import ALL_STAGES
+
+    chosen = [s.strip() for s in stages.split(",") if s.strip()]
+    if not chosen:
+        raise DualarmError(f"--stages '{excerpt(stages)}': names no stage (stages: {', '.join(ALL_STAGES)})")
+    return chosen
 
 
 @app.command()
 @user_errors
 def run(
     task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml, or a shipped task's name (triangle).")],
-    stages: Annotated[Optional[str], typer.Option(help="Comma-separated stages to run: path, ik, retime, smooth, execute (default: all of them when --ik is given, else path).")] = None,
+    stages: Annotated[
+        Optional[str],
+        typer.Option(
+            help="Comma-separated stages to run: path, ik or plan, retime, smooth, approach (from the task's initial configuration to the motion's start), execute (default: all of them when --ik or --planner is given, else path)."
+        ),
+    ] = None,
     ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd, pinv, mc-inverse, trac-ik, pybullet, dls-svd or ikfast-style.")] = None,
     scheme: Annotated[str, typer.Option(help="TV-GDD scheme: mvn (minimum velocity norm), rmp (repetitive motion) or mke (minimum kinetic energy).")] = "mvn",
     qp_backend: Annotated[str, typer.Option(help="TV-GDD QP solver: casadi (DAQP through CasADi conic) or lvi (the paper's projection solver).")] = "casadi",
     lvi_tolerance: Annotated[float, typer.Option(help="Stop of the lvi backend on ||eps(u)||_2 (the paper's 1e-5; its velocity error can be ~35x this, see docs).")] = 1e-5,
-    out_dir: Annotated[Path, typer.Option("--out", help="Directory that receives <task>/<run-id>/.")] = Path("recordings"),
-    seed: Annotated[int, typer.Option(help="Random seed, recorded in the manifest.")] = 0,
+    out_text: Annotated[str, typer.Option("--out", help="Directory that receives <task>/<run-id>/ (a recordings directory: runs are added, nothing in it is deleted or overwritten).")] = "recordings",
+    seed: Annotated[int, typer.Option(help="Random seed (an integer >= 0), recorded in the manifest.")] = 0,
     reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
     timing: Annotated[Optional[str], typer.Option(help="Retime: optimal (TOPP-RA) or task (the task's own timing, checked against the limits); default: the task file's retime.timing.")] = None,
     gui: Annotated[bool, typer.Option("--gui", help="Show the execution in a PyBullet window (needs a display).")] = False,
+    execute_anyway: Annotated[
+        bool, typer.Option("--execute-anyway", help="Play a trajectory that fails its validation (limits, collisions) for diagnosis; the run is then at best 'violated'.")
+    ] = False,
     planner: Annotated[Optional[str], typer.Option(help="Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no --ik: mcikrrt).")] = None,
     timeout: Annotated[Optional[float], typer.Option(help="Planning timeout [s] (default 5).")] = None,
 ) -> None:
@@ -77,6 +219,12 @@ def run(
     from dualarm.settings import with_overrides
     from dualarm.tasks import load_task
 
+    out_dir = _out_path(out_text, "--out")
+    _seed(seed)
+    _within(lvi_tolerance, "--lvi-tolerance", 0.0, 1.0, above_low=True)
+    if timeout is not None:
+        _within(timeout, "--timeout", 0.0, MAX_TIMEOUT_S, above_low=True)
+    chosen = _stages(stages)
     if ik is not None:
         _method(ik, "ik", "--ik")
     if planner is not None:
@@ -84,9 +232,8 @@ def run(
     if ik is not None and planner is not None:
         raise DualarmError("give either --ik METHOD or --planner PLANNER: both make the joint path")
     if timing is not None and timing not in TIMINGS:
-        raise DualarmError(f"unknown timing '{timing}' (timings: {', '.join(TIMINGS)})")
+        raise DualarmError(f"unknown timing '{excerpt(timing)}' (timings: {', '.join(TIMINGS)})")
     loaded = load_task(task, reps)
-    chosen = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     method = default_method(loaded, ik or planner, chosen)
     settings = None
     if method == "tvgdd":
@@ -101,13 +248,17 @@ def run(
             settings=settings,
             stages=chosen,
             retime=retime,
-            execution=_execution(gui),
+            execution=_execution(gui, execute_anyway),
             seed=seed,
             out_dir=out_dir,
             command=["dualarm", *sys.argv[1:]],
-            progress=lambda stage: status.update(f"running {task}: {stage} ..."),
+            progress=lambda stage: _update(status, f"running {task}: {stage} ..."),
         )
+    for line in result.verdict.lines():
+        err.print(line, markup=False, soft_wrap=True)
     out.print(str(result.directory), markup=False, soft_wrap=True)
+    if result.verdict.exit_code:
+        raise typer.Exit(result.verdict.exit_code)
 
 
 def _method(name: str, kind=None, option: str = "method"):
@@ -117,10 +268,10 @@ def _method(name: str, kind=None, option: str = "method"):
     return method(name, kind, option)
 
 
-def _execution(gui: bool):
+def _execution(gui: bool, execute_anyway: bool = False):
     from dualarm.execute.simulate import ExecutionSettings
 
-    return ExecutionSettings(gui=gui)
+    return ExecutionSettings(gui=gui, execute_anyway=execute_anyway)
 
 
 @app.command()
@@ -128,16 +279,22 @@ def _execution(gui: bool):
 def plan(
     task: Annotated[Path, typer.Argument(help="Task file (TOML) with [[wta]] tables, e.g. tasks/bowl_grasp.toml.")],
     planner: Annotated[str, typer.Option(help="mcikrrt (Li & Liang) or ompl-rrtconnect (OMPL's RRTConnect, same checker and goals).")] = "mcikrrt",
-    trials: Annotated[int, typer.Option(min=1, help="Planning trials; trial i uses seed SEED + i.")] = 100,
-    seed: Annotated[int, typer.Option(help="Seed of the first trial.")] = 0,
+    trials: Annotated[int, typer.Option(min=1, help=f"Planning trials (at most {MAX_TRIALS}); trial i uses seed SEED + i.")] = 100,
+    seed: Annotated[int, typer.Option(help="Seed of the first trial (an integer >= 0).")] = 0,
     timeout: Annotated[Optional[float], typer.Option(help="Planning timeout per trial [s] (default 5).")] = None,
-    out_dir: Annotated[Optional[Path], typer.Option("--out", help="Directory for plan_trials.csv and plan_summary.json (default plans/<task>-<planner>).")] = None,
-    recordings: Annotated[Path, typer.Option(help="Directory that receives the recorded run of the first successful plan.")] = Path("recordings"),
+    out_text: Annotated[Optional[str], typer.Option("--out", help="Directory for plan_trials.csv and plan_summary.json (default plans/<task>-<planner>).")] = None,
+    recordings_text: Annotated[str, typer.Option("--recordings", help="Directory that receives the recorded run of the first successful plan.")] = "recordings",
 ) -> None:
-    """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed, smoothed, executed and recorded as a run; exits 1 when no trial succeeded."""
+    """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed, smoothed, executed and recorded as a run; exits 1 when no trial succeeded, else with the verdict of that run (0 complete, 3 violated, 1 failed)."""
     from dualarm.plan.problem import PlanningSettings
     from dualarm.plan.trials import run_trials
 
+    out_dir = _out_path(out_text, "--out") if out_text is not None else None
+    recordings = _out_path(recordings_text, "--recordings")
+    _seed(seed)
+    _within(trials, "--trials", 1, MAX_TRIALS)
+    if timeout is not None:
+        _within(timeout, "--timeout", 0.0, MAX_TIMEOUT_S, above_low=True)
     _method(planner, "planner", "--planner")  # an unknown planner is named before anything runs
     directory = out_dir or Path("plans") / f"{task.stem}-{planner}"
     with err.status(f"planning {task} ...") as status:
@@ -150,7 +307,7 @@ def plan(
             PlanningSettings().with_timeout(timeout),
             recordings,
             ["dualarm", *sys.argv[1:]],
-            progress=lambda done, total: status.update(f"planning {task}: trial {done}/{total}" + (" (recording the first plan)" if done == total else "")),
+            progress=lambda done, total: _update(status, f"planning {task}: trial {done}/{total}" + (" (recording the first plan)" if done == total else "")),
         )
     s = result.summary
     out.print(
@@ -159,38 +316,45 @@ def plan(
         soft_wrap=True,
     )
     out.print(str(result.directory / "plan_summary.json"), markup=False, soft_wrap=True)
-    if result.run is None:
+    if result.verdict is None:
         err.print(f"error: no trial found a path: {'; '.join(s['failures'])}", markup=False, soft_wrap=True)
         raise typer.Exit(1)
-    out.print(str(result.run), markup=False, soft_wrap=True)
+    for line in result.verdict.lines():
+        err.print(f"first plan's run: {line}" if line.startswith("verdict") else line, markup=False, soft_wrap=True)
+    if result.run is not None:
+        out.print(str(result.run), markup=False, soft_wrap=True)
+    if result.verdict.exit_code:
+        raise typer.Exit(result.verdict.exit_code)
 
 
 @app.command()
 @user_errors
 def reproduce(
-    out_dir: Annotated[Path, typer.Option("--out", help="Directory that receives every run, table and figure, and report.md (emptied first if it holds an earlier reproduction).")] = Path(
-        "reports/reproduction"
-    ),
+    out_text: Annotated[
+        str, typer.Option("--out", help="Directory that receives every run, table and figure, and report.md (emptied first if it holds only an earlier reproduction).")
+    ] = "reports/reproduction",
     only: Annotated[Optional[str], typer.Option(help="Comma-separated parts to run (default: all): ball-game-tvgdd, ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp.")] = None,
     jobs: Annotated[int, typer.Option(min=1, help="Parts run at once, each in its own process (default: 2, or 1 on a 1-core machine).")] = min(2, os.cpu_count() or 1),
 ) -> None:
     """Run every experiment of the three papers, record it, and write DIR/report.md: each paper claim against ours (read back from the recordings), the figures, the runs and the time of each part.
 
-    Exits 1 if a part failed (the report says which and why).
+    Exits 1 if a part failed (the report says which and why), else 3 if a claim rests on a run whose verdict is not complete (MC-Inverse's runs, TV-GDD's executed ball game, the carried box, the planner's executed plan; a baseline's violations are reported, not fatal), else 0.
     """
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dualarm.reproduce.experiments import BY_NAME
-    from dualarm.reproduce.report import write_reproduction_report
+    from dualarm.reproduce.report import reproduction_claims, write_reproduction_report
     from dualarm.reproduce.runner import parts_named, prepare, run_parts
 
+    out_dir = _out_path(out_text, "--out")
     names = parts_named([n.strip() for n in only.split(",") if n.strip()] if only is not None else None)
-    prepare(out_dir)
-    columns = (TextColumn("{task.fields[part]:<16}"), BarColumn(), TextColumn("{task.percentage:>3.0f} %"), TimeElapsedColumn(), TextColumn("{task.fields[text]}"))
-    with Progress(*columns, console=err) as bar:
+    _claim = prepare(out_dir)  # out_dir stays locked until the command ends: a second reproduction into it is refused
+    columns = (TextColumn("{task.fields[part]:<16}", markup=False), BarColumn(), TextColumn("{task.percentage:>3.0f} %"), TimeElapsedColumn(), TextColumn("{task.fields[text]}", markup=False))
+    with Progress(*columns, console=err, transient=not err.is_terminal) as bar:  # in a file, the bars would print once at the end: the time table says it
         tasks = {name: bar.add_task(BY_NAME[name].title, total=1.0, part=name, text="waiting", start=False) for name in names}
 
         def on_progress(name: str, fraction: float, text: str) -> None:
+            _raise_swallowed()
             bar.start_task(tasks[name])
             bar.update(tasks[name], completed=fraction, text=text)
             if fraction >= 1.0:
@@ -198,7 +362,8 @@ def reproduce(
 
         results = run_parts(out_dir, names, jobs, on_progress)
         report_task = bar.add_task("report", total=1.0, part="report", text="reading the recordings back")
-        report_path = write_reproduction_report(out_dir)
+        claims = reproduction_claims(out_dir)
+        report_path = write_reproduction_report(out_dir, claims)
         bar.update(report_task, completed=1.0, text="done")
     table = Table(title=f"time of each part ({jobs} at a time)", title_justify="left")
     for column in ("part", "status", "seconds"):
@@ -206,15 +371,20 @@ def reproduce(
     for r in results:
         table.add_row(r.name, r.status if not r.error else f"failed: {r.error}", f"{r.seconds:.1f}")
     out.print(table)
+    for c in claims:
+        if c.contradicted:
+            err.print(f"contradicted: {c.paper} {c.where}: {c.claim}: {c.verdict}", markup=False, soft_wrap=True)
     out.print(str(report_path), markup=False, soft_wrap=True)
     if any(r.status != "complete" for r in results):
         raise typer.Exit(1)
+    if any(c.contradicted for c in claims):
+        raise typer.Exit(3)
 
 
 @app.command()
 @user_errors
 def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>).")]) -> None:
-    """Print a run's status, topics (message counts and time range) and metrics."""
+    """Print a run's verdict (status, error, each violation), topics (message counts and time range) and metrics."""
     from dualarm.record.readback import read_run
 
     data = read_run(run_dir)
@@ -224,6 +394,8 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
     out.print(f"stages   {', '.join(data.stages)}", markup=False)
     if m.get("error"):
         out.print(f"error    {m['error']}", markup=False, soft_wrap=True)
+    for violation in data.violations:
+        out.print(f"violated {violation}", markup=False, soft_wrap=True)
     table = Table(title="topics", title_justify="left")
     for column in ("topic", "stage", "rows", "t from [s]", "t to [s]"):
         table.add_column(column, justify="left" if column in ("topic", "stage") else "right")
@@ -242,7 +414,7 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
 @user_errors
 def report(
     run_dirs: Annotated[list[Path], typer.Argument(help="One or more run directories (recordings/<task>/<run-id>), from this machine or copied from another.")],
-    out_dir: Annotated[Optional[Path], typer.Option("--out", help="Report directory (default reports/<task>/<run-id> for one run, reports/<task or runs>/<first run-id>+<n-1> for several).")] = None,
+    out_text: Annotated[Optional[str], typer.Option("--out", help="Report directory (default reports/<task>/<run-id> for one run, reports/<task or runs>/<first run-id>+<n-1> for several).")] = None,
 ) -> None:
     """Write a markdown summary and the figures each run's recording allows; for several runs also runs.csv and runs.md (a row per run, every metric), figures setting them side by side and report.md linking it all.
 
@@ -250,6 +422,7 @@ def report(
     """
     from dualarm.report.run_report import write_report, write_runs_report
 
+    out_dir = _out_path(out_text, "--out") if out_text is not None else None
     with err.status(f"reporting {len(run_dirs)} run{'s' if len(run_dirs) > 1 else ''} ..."):
         directory = write_report(run_dirs[0], out_dir) if len(run_dirs) == 1 else write_runs_report(run_dirs, out_dir)
     out.print(str(directory), markup=False, soft_wrap=True)
@@ -260,17 +433,18 @@ def report(
 def compare(
     run_a: Annotated[Path, typer.Argument(help="A run directory.")],
     run_b: Annotated[Path, typer.Argument(help="Another run directory.")],
-    tol: Annotated[float, typer.Option(min=0.0, help="Largest absolute difference accepted, in each field's own unit (0: identical).")] = 0.0,
-    csv: Annotated[Optional[Path], typer.Option(help="Also write the whole table (a row per topic and field) to this CSV file.")] = None,
+    tol: Annotated[float, typer.Option(help="Largest absolute difference accepted, in each field's own unit (a finite number >= 0; 0: identical).")] = 0.0,
+    csv_text: Annotated[Optional[str], typer.Option("--csv", help="Also write the whole table (a row per topic and field) to this CSV file (a new file, or one an earlier compare wrote).")] = None,
 ) -> None:
     """Per topic and field, the largest difference between two runs, aligned on repetition and time; exits 0 when every field is within --tol and 1 otherwise, naming where they differ first.
 
     Wall-clock measurements (solve, planning, collision-check times) are listed, never judged.
     """
+    from dualarm.record.run_dir import write_whole
     from dualarm.report.compare import compare_runs
 
-    if csv is not None and csv.is_dir():
-        raise DualarmError(f"--csv {csv}: is a directory; give a file name")
+    _within(tol, "--tol", 0.0)
+    csv = _compare_csv(csv_text) if csv_text is not None else None
     with err.status(f"comparing {run_a} and {run_b} ..."):
         result = compare_runs(run_a, run_b, tol)
     table = Table(title=f"A = {run_a}\nB = {run_b}", title_justify="left")
@@ -286,8 +460,7 @@ def compare(
     if len(clock):
         out.print(f"not judged (wall clock): {', '.join(f'{r.topic} {r.field}' for r in clock.itertuples())}", markup=False, soft_wrap=True)
     if csv is not None:
-        csv.parent.mkdir(parents=True, exist_ok=True)
-        result.table.to_csv(csv, index=False)
+        write_whole(csv, result.table.to_csv(index=False))
     if result.within:
         out.print(f"identical within {tol:g} in every judged field", markup=False)
         return
@@ -305,6 +478,33 @@ def compare(
     raise typer.Exit(1)
 
 
+#: How a table ``dualarm compare`` wrote begins.
+COMPARE_HEADER = "topic,field,max_difference,"
+
+
+def _compare_csv(text: str) -> Path:
+    """The ``--csv`` path of compare: a new file, or a regular file whose first line is :data:`COMPARE_HEADER` (an earlier compare's table); anything else is refused, untouched."""
+    path = _out_path(text, "--csv")
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return path
+    except OSError as exc:  # through a file, too long, no permission
+        raise DualarmError(f"--csv {excerpt(path)}: {exc.strerror}; give another file name") from None
+    if stat.S_ISDIR(mode):
+        raise DualarmError(f"--csv {excerpt(path)}: is a directory; give a file name")
+    first = ""
+    if stat.S_ISREG(mode):
+        try:
+            with path.open("rb") as f:
+                first = f.readline(len(COMPARE_HEADER)).decode("utf-8", errors="replace")
+        except OSError as exc:
+            raise DualarmError(f"--csv {excerpt(path)}: cannot read it ({exc.strerror}); give another file name") from None
+    if not first.startswith(COMPARE_HEADER):
+        raise DualarmError(f"--csv {excerpt(path)}: exists and is not a table dualarm compare wrote (it does not begin '{COMPARE_HEADER}'); give another file name")
+    return path
+
+
 def _missing(value) -> bool:
     """Whether a table cell is missing (NaN or None)."""
     return value is None or (isinstance(value, float) and np.isnan(value))
@@ -316,19 +516,25 @@ def consistency(
     task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
     methods: Annotated[Optional[str], typer.Option(help="Comma-separated IK methods to compare (default: mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd,tvgdd,pinv).")] = None,
     reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
-    out_dir: Annotated[Optional[Path], typer.Option("--out", help="Output directory (default consistency/<task>).")] = None,
-    seed: Annotated[int, typer.Option(help="Random seed, recorded in each run's manifest.")] = 0,
+    out_text: Annotated[Optional[str], typer.Option("--out", help="Output directory (default consistency/<task>).")] = None,
+    seed: Annotated[int, typer.Option(help="Random seed (an integer >= 0), recorded in each run's manifest.")] = 0,
 ) -> None:
-    """Run each IK method on a repeated task as a recorded run and compare repetition by repetition: consistency.csv, consistency.md and figures; prints the table and the directory."""
-    from dualarm.report.consistency import DEFAULT_METHODS, run_consistency
+    """Run each IK method on a repeated task as a recorded run and compare repetition by repetition: consistency.csv, consistency.md and figures; prints the table (with each run's verdict) and the directory.
 
+    Exits 0 when every run is complete, 3 when one is violated (its first violation is printed), 1 when one failed.
+    """
+    from dualarm.report.consistency import DEFAULT_METHODS, method_label, run_consistency
+
+    out_dir = _out_path(out_text, "--out") if out_text is not None else None
+    _seed(seed)
     chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else list(DEFAULT_METHODS)
     directory = out_dir or Path("consistency") / task.stem
     with err.status("consistency ...") as status:
-        result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: status.update(text))
+        result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: _update(status, text))
     shown = {
         "rep_joint_deviation_max_rad": "rep Δq max rad",
         "rep_arm_angle_deviation_max_rad": "rep Δψ max rad",
+        "orientation_error_max_rad": "orient. err max rad",
         "closure_error_max_rad": "closure rad",
         "failed_reps": "failed reps",
         "failures": "failed samples",
@@ -336,27 +542,39 @@ def consistency(
         "solve_time_mean_s": "solve ms/sample",
     }
     table = Table(title=f"{task}: consistency over repetitions (all columns in {result.csv})", title_justify="left")
-    for column in ("method", *shown.values()):
-        table.add_column(column, justify="left" if column == "method" else "right")
+    for column in ("method", "verdict", *shown.values()):
+        table.add_column(column, justify="left" if column in ("method", "verdict") else "right", no_wrap=column in ("method", "verdict"))
+    for _, row in result.table.iterrows():
+        if row["status"] == "failed":
+            table.add_row(row["method"], f"failed: {row['error']}", *[""] * len(shown))
+            continue
+        table.add_row(method_label(row), row["status"], *(f"{row[c] * (1e3 if c.endswith('_s') else 1):.3g}" for c in shown))
+    out.print(table)
     for _, row in result.table.iterrows():
         if row["status"] != "complete":
-            table.add_row(row["method"], f"failed: {row['error']}", *[""] * (len(shown) - 1))
-            continue
-        table.add_row(row["method"], *(f"{row[c] * (1e3 if c.endswith('_s') else 1):.3g}" for c in shown))
-    out.print(table)
+            err.print(f"{row['method']}: {row['status']}: {row['error'] or row['violation']}", markup=False, soft_wrap=True)
     out.print(str(directory), markup=False, soft_wrap=True)
+    raise typer.Exit(_worst(result.table["status"]))
+
+
+def _worst(statuses) -> int:
+    """The exit code of several runs' verdicts: 1 if one failed, else 3 if one was violated, else 0."""
+    from dualarm.verdict import EXIT_CODES
+
+    return max((EXIT_CODES[s] for s in statuses), key=lambda code: (code == 1, code), default=0)
 
 
 @bench_app.command("tvgdd")
 @user_errors
 def bench_tvgdd_command(
     task: Annotated[Path, typer.Option(help="Task to run TV-GDD on.")] = Path("tasks/ball_game.toml"),
-    repeats: Annotated[int, typer.Option(min=1, help="Repeats of the one-call rollout (best is kept).")] = 5,
+    repeats: Annotated[int, typer.Option(min=1, help=f"Repeats of the one-call rollout (best is kept; at most {MAX_REPEATS}).")] = 5,
     plugins: Annotated[str, typer.Option(help="Comma-separated CasADi conic plugins to compare with DAQP, e.g. qpoases,osqp,proxqp,qrqp.")] = "",
 ) -> None:
     """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s (optionally other conic plugins for the casadi backend)."""
     from dualarm.bench.tvgdd import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
 
+    _within(repeats, "--repeats", 1, MAX_REPEATS)
     with err.status("benchmarking ...") as status:
         rows = bench_tvgdd(task, repeats, tuple(p.strip() for p in plugins.split(",") if p.strip()), progress=lambda text: status.update(text))
     table = Table(title=f"TV-GDD on {task} ({rows[0].steps} steps)", title_justify="left")
@@ -405,6 +623,11 @@ def ik_srs(
 
     from dualarm.ik.mc_inverse import candidate_table
 
+    for name, value, bound in zip(("X", "Y", "Z", "ROLL", "PITCH", "YAW"), pose, (MAX_POSITION_M,) * 3 + (MAX_ANGLE_RAD,) * 3):
+        _within(value, f"--pose {name}", -bound, bound)
+    _within(arm_angle, "--arm-angle", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
+    for value in vertical:
+        _within(value, "--vertical", -MAX_POSITION_M, MAX_POSITION_M)
     robot = _robot(robot_dir, urdf, base, tip)
     if urdf is not None:
         chain = robot.chain("chain")
@@ -433,8 +656,8 @@ def ik_srs(
 def bench_ik_command(
     robot_dir: Annotated[Path, typer.Argument(help="Robot directory.")] = Path("robots/humanoid"),
     arm: Annotated[str, typer.Option(help="Arm whose chain is solved: left or right.")] = "left",
-    poses: Annotated[int, typer.Option(min=1, help="Random reachable poses.")] = 10_000,
-    seed: Annotated[int, typer.Option(help="Seed of the random configurations.")] = 0,
+    poses: Annotated[int, typer.Option(min=1, help=f"Random reachable poses (at most {MAX_POSES}).")] = 10_000,
+    seed: Annotated[int, typer.Option(help="Seed of the random configurations (an integer >= 0).")] = 0,
 ) -> None:
     """MC-Inverse time per pose called singly and batched (all 8 candidates), and DLS-SVD, TRAC-IK and PyBullet IK time and success rate, on the same random reachable poses, with ratios."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
@@ -442,6 +665,8 @@ def bench_ik_command(
     from dualarm.bench.ik import MC_BATCHED, TARGET_BATCHED_S, TARGET_DLS_SUCCESS, bench_ik, ratios
     from dualarm.model.robot import load_robot
 
+    _seed(seed)
+    _within(poses, "--poses", 1, MAX_POSES)
     model = load_robot(robot_dir)
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True) as bar:
         tasks: dict[str, TaskID] = {}
@@ -487,13 +712,15 @@ def bench_pipeline_command() -> None:
 @user_errors
 def bench_plan_command(
     task: Annotated[Path, typer.Option(help="Task with [[wta]] tables.")] = Path("tasks/bowl_grasp.toml"),
-    trials: Annotated[int, typer.Option(min=1, help="Trials per planner (interleaved).")] = 30,
-    seed: Annotated[int, typer.Option(help="Seed of the first trial.")] = 0,
+    trials: Annotated[int, typer.Option(min=1, help=f"Trials per planner (interleaved; at most {MAX_TRIALS}).")] = 30,
+    seed: Annotated[int, typer.Option(help="Seed of the first trial (an integer >= 0).")] = 0,
 ) -> None:
     """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals: planning times and their ratio, collision checks and the time of one check."""
     from dualarm.bench.plan import bench_plan
     from dualarm.plan.trials import PAPER_PLANNING_TIME_S
 
+    _seed(seed)
+    _within(trials, "--trials", 1, MAX_TRIALS)
     with err.status("benchmarking ...") as status:
         rows = bench_plan(task, trials, seed, progress=lambda text: status.update(f"benchmarking {text} ..."))
     table = Table(title=f"planning {task} ({trials} trials each, interleaved)", title_justify="left")
@@ -523,13 +750,15 @@ def robot_check(
     urdf: Annotated[Optional[Path], typer.Option(help="Check one chain of a bare URDF instead (needs --base and --tip).")] = None,
     base: Annotated[Optional[str], typer.Option(help="Base link of the chain (with --urdf).")] = None,
     tip: Annotated[Optional[str], typer.Option(help="Tip link of the chain (with --urdf).")] = None,
-    samples: Annotated[int, typer.Option(min=1, help="Random configurations per chain.")] = 1000,
-    seed: Annotated[int, typer.Option(help="Seed of the random configurations.")] = 0,
+    samples: Annotated[int, typer.Option(min=1, help=f"Random configurations per chain (at most {MAX_SAMPLES}).")] = 1000,
+    seed: Annotated[int, typer.Option(help="Seed of the random configurations (an integer >= 0).")] = 0,
 ) -> None:
     """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics, PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
     from dualarm.model.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain
     from dualarm.model.srs import srs_geometry
 
+    _seed(seed)
+    _within(samples, "--samples", 1, MAX_SAMPLES)
     robot = _robot(robot_dir, urdf, base, tip)
     out.print(f"robot {robot.name}: {robot.urdf.path}  ({len(robot.joint_names)} movable joints)", markup=False)
     results = []

@@ -1,7 +1,8 @@
 """The one exception hierarchy of dualarm.
 
 Every error a user can cause derives from :class:`DualarmError`; the CLI prints its message as one
-line on stderr and exits with code 2. Messages name the file, key, argument or joint at fault;
+line on stderr and exits with code 2, except a :class:`StageError` (a run that failed on valid
+input, its verdict ``failed``): exit code 1. Messages name the file, key, argument or joint at fault;
 errors that carry data (the sample, the time, the joint) carry it as attributes too, so code that
 catches them need not parse the message.
 
@@ -11,9 +12,16 @@ catches them need not parse the message.
 - :class:`TaskFileError`, :class:`UnreachablePoseError`: a task is malformed or impossible.
 - :class:`RecordingError`: a run directory or recording is missing, incomplete or corrupt.
 - :class:`StageError`, :class:`NoSolutionFound`: a pipeline stage failed on valid input.
+- :class:`OutputError`: an output path cannot be written without harm (not a directory dualarm
+  made, holding a file it did not write, locked by another process, or refused by the system).
+
+:class:`Terminated` is not a user's mistake: it is SIGTERM, turned into an exception as Ctrl-C is.
+Messages quote a user's strings through :func:`excerpt`.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 
 class DualarmError(Exception):
@@ -77,12 +85,61 @@ class StageError(DualarmError):
         sample: the index of the sample (or control step) where it failed, or None.
         t_s: the time of that sample [s], or None.
         joint: the joint at fault, or None.
+        violations: the checks that made the stage refuse its input (:class:`~dualarm.verdict.Violation`;
+            the execute stage refusing a trajectory), recorded with the failed run.
+        run_directory: where a recorded run that failed is kept (set by
+            :func:`~dualarm.run.record_stages`), else None.
     """
 
-    def __init__(self, message: str, *, stage: str = "", sample: int | None = None, t_s: float | None = None, joint: str | None = None) -> None:
+    run_directory: Path | None = None
+
+    def __init__(self, message: str, *, stage: str = "", sample: int | None = None, t_s: float | None = None, joint: str | None = None, violations: tuple = ()) -> None:
         super().__init__(message)
-        self.stage, self.sample, self.t_s, self.joint = stage, sample, t_s, joint
+        self.stage, self.sample, self.t_s, self.joint, self.violations = stage, sample, t_s, joint, tuple(violations)
 
 
 class NoSolutionFound(StageError):
     """An IK solver found no valid solution for a pose (the reasons per candidate in the message)."""
+
+
+class OutputError(DualarmError):
+    """An output path cannot be written without harm: it is not a directory dualarm made, holds an entry dualarm did not write, is in use by another dualarm process, or the system refuses it (the message names the path and the cause).
+
+    Attributes:
+        path: the path at fault.
+    """
+
+    def __init__(self, message: str, path: str = "") -> None:
+        super().__init__(message)
+        self.path = path
+
+
+class Terminated(SystemExit):
+    """The process received SIGTERM.
+
+    Raised by :meth:`on_sigterm`, the handler the command line and the reproduction's workers
+    install, so that SIGTERM unwinds the stack as Ctrl-C's KeyboardInterrupt does: a run being
+    recorded is kept as failed with its files closed. It is a SystemExit with code 143, as the usual
+    ``sys.exit`` handler raises: ``except Exception`` does not catch it and a process it ends prints
+    no traceback.
+    """
+
+    def __init__(self) -> None:
+        super().__init__(143)
+
+    def __str__(self) -> str:
+        return "SIGTERM"
+
+    @classmethod
+    def on_sigterm(cls, signum: int, frame: object) -> None:
+        """A ``signal.signal`` handler: raise :class:`Terminated`."""
+        raise cls()
+
+
+def excerpt(text: object, limit: int = 80) -> str:
+    """``str(text)`` as a message may quote it: at most ``limit`` characters (its middle cut to "..."), control characters escaped as in a Python literal, so that it stays one line and cannot drive a terminal."""
+    s = str(text)
+    if len(s) > limit:
+        head = (limit - 3) // 2
+        s = s[:head] + "..." + s[len(s) - (limit - 3 - head) :]
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in s)

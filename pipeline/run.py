@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from dualarm.errors import DualarmError
+from dualarm.errors import DualarmError, StageError
 from dualarm.ik.joint_path import JointPath
 from dualarm.methods import IK_METHODS, PLANNERS
 from dualarm.methods import method as registered
@@ -26,19 +26,21 @@ from dualarm.paths import CartesianReference
 from dualarm.record.run_dir import RunDirectory, package_versions, sha256_file
 from dualarm.record.sink import NullSink, Sink
 from dualarm.retime.trajectory import JointTrajectory
-from dualarm.stages import ExecuteStage, IkStage, PathStage, PlanStage, RetimeStage, SmoothStage, Stage
+from dualarm.stages import ApproachStage, ExecuteStage, IkStage, PathStage, PlanStage, RetimeStage, SmoothStage, Stage
 from dualarm.tasks import Task, load_task
 from dualarm.tasks.schema import Retime
+from dualarm.verdict import Checks, Verdict, Violation
 from dualarm.version import __version__
 
 if TYPE_CHECKING:
     from dualarm.execute.simulate import ExecutionLog, ExecutionSettings
 
 #: Every stage of the pipeline, in order (a run makes its joint path by ik or by plan).
-ALL_STAGES = ("path", "ik", "plan", "retime", "smooth", "execute")
+ALL_STAGES = ("path", "ik", "plan", "retime", "smooth", "approach", "execute")
 #: The stages one of which each stage needs (execute plays the smoothed trajectory when smooth
-#: runs, else the retimed one).
-NEEDS = {"ik": ("path",), "plan": ("path",), "retime": ("ik", "plan"), "smooth": ("retime",), "execute": ("retime",)}
+#: runs, else the retimed one, after the approach from the task's initial configuration when
+#: ``approach`` runs).
+NEEDS = {"ik": ("path",), "plan": ("path",), "retime": ("ik", "plan"), "smooth": ("retime",), "approach": ("retime",), "execute": ("retime",)}
 #: Timings of the retime stage (a task's ``retime.timing``).
 TIMINGS = ("optimal", "task")
 
@@ -53,8 +55,12 @@ class RunResult:
         joint_path: the IK or plan stage's joint path.
         retimed: the retime stage's trajectory.
         smoothed: the smooth stage's trajectory.
+        approached: the trajectory handed to execute, carrying its ``approach`` from the task's
+            initial configuration (the approach stage's product).
         execution: the execute stage's log.
         metrics: ``<stage>.<name>`` -> value (units in the names).
+        verdict: ``complete`` or ``violated`` with the failed checks (:mod:`dualarm.verdict`); a
+            run that fails raises instead (a recorded one is kept as ``failed``).
         stage_seconds: each stage's wall time [s] (with ``record``, the closing of the files, for a recorded run).
         directory: the run directory of a recorded run (:func:`record_run`), else None.
     """
@@ -64,14 +70,16 @@ class RunResult:
     joint_path: JointPath | None = None
     retimed: JointTrajectory | None = None
     smoothed: JointTrajectory | None = None
+    approached: JointTrajectory | None = None
     execution: "ExecutionLog | None" = None
     metrics: dict[str, float] = field(default_factory=dict)
+    verdict: Verdict = field(default_factory=lambda: Verdict("complete"))
     stage_seconds: dict[str, float] = field(default_factory=dict)
     directory: Path | None = None
 
 
 #: Which RunResult field each stage's product fills.
-_PRODUCT = {"path": "reference", "ik": "joint_path", "plan": "joint_path", "retime": "retimed", "smooth": "smoothed", "execute": "execution"}
+_PRODUCT = {"path": "reference", "ik": "joint_path", "plan": "joint_path", "retime": "retimed", "smooth": "smoothed", "approach": "approached", "execute": "execution"}
 
 
 def resolve_stages(stages: Sequence[str] | None, ik: str | None = None, planner: str | None = None) -> tuple[str, ...]:
@@ -127,6 +135,7 @@ def build_stages(
     stages: Sequence[str] | None = None,
     retime: Retime | None = None,
     execution: "ExecutionSettings | None" = None,
+    checks: Checks | None = None,
     seed: int = 0,
 ) -> tuple[Stage, ...]:
     """The stages of a run of ``task``, validated before anything runs.
@@ -139,6 +148,7 @@ def build_stages(
         stages: the stages to run (default: see :func:`resolve_stages`).
         retime: the retime stage's settings (default the task's ``[retime]`` table).
         execution: the simulation's settings (default :class:`~dualarm.execute.simulate.ExecutionSettings`).
+        checks: the bounds the run is judged against (default :class:`~dualarm.verdict.Checks`).
         seed: the planner's seed.
 
     Raises:
@@ -151,17 +161,20 @@ def build_stages(
         settings = m.settings_for(task) if settings is None else settings
         if not isinstance(settings, m.settings_type):
             raise DualarmError(f"{m.name} takes {m.settings_type.__name__} settings, not {type(settings).__name__}")
+    checks = checks or Checks()
     built: list[Stage] = [PathStage(task)]
     if "ik" in chosen and m is not None:
-        built.append(IkStage(task, m, settings))
+        built.append(IkStage(task, m, settings, checks, retimed="retime" in chosen))
     if "retime" in chosen:  # the back half's imports (toppra, ruckig, pybullet) wait until it runs
         built.append(RetimeStage(task, retime or task.spec.retime))
     if "smooth" in chosen:
         built.append(SmoothStage(task))
+    if "approach" in chosen:
+        built.append(ApproachStage(task))
     if "execute" in chosen:
         from dualarm.execute.simulate import ExecutionSettings
 
-        built.append(ExecuteStage(task, execution or ExecutionSettings()))
+        built.append(ExecuteStage(task, execution or ExecutionSettings(), checks))
     if "plan" in chosen and m is not None:  # last: it opens a PyBullet client, refusing a start in collision
         from dualarm.plan.problem import PlanningProblem
 
@@ -169,15 +182,17 @@ def build_stages(
     return tuple(built)
 
 
-def run_stages(task: Task, stages: Sequence[Stage], sink: Sink | None = None) -> RunResult:
-    """Run ``stages`` in order on ``task``, handing every product to ``sink`` (default :class:`~dualarm.record.sink.NullSink`), then the metrics.
+def run_stages(task: Task, stages: Sequence[Stage], sink: Sink | None = None, violations: list[Violation] | None = None) -> RunResult:
+    """Run ``stages`` in order on ``task``, handing every product to ``sink`` (default :class:`~dualarm.record.sink.NullSink`), then the metrics; judge each product (the verdict).
 
     Stages holding resources (the plan stage's PyBullet client) are closed afterwards, whatever
-    happens.
+    happens. ``violations``, when given, receives each stage's violations as they are found, so a
+    caller still has them when a later stage raises.
     """
     sink = sink if sink is not None else NullSink()
     products: dict[str, Any] = {}
     metrics: dict[str, float] = {}
+    violations = [] if violations is None else violations
     product: Any = task
     end = 0.0
     try:
@@ -185,13 +200,14 @@ def run_stages(task: Task, stages: Sequence[Stage], sink: Sink | None = None) ->
             product, stage_metrics = stage(product, sink)
             products[_PRODUCT[stage.name]] = product
             metrics.update(stage_metrics)
+            violations += stage.violations(product)
             if isinstance(product, (CartesianReference, JointTrajectory)):
                 end = product.duration_s
         sink.metrics(metrics, end)
     finally:
         _close(stages)
     seconds = sink.stage_seconds if isinstance(sink, NullSink) else {}
-    return RunResult(task=task, metrics=metrics, stage_seconds=seconds, **products)
+    return RunResult(task=task, metrics=metrics, verdict=Verdict.of(violations), stage_seconds=seconds, **products)
 
 
 def run_task(
@@ -228,7 +244,8 @@ def record_run(
     stage's name as it starts, and ``record`` when the files are being closed.
 
     The task and the options are validated before anything is written: a malformed task leaves no
-    run behind. A stage that fails leaves a run marked ``failed`` and re-raises.
+    run behind. The manifest holds the verdict (``status``, ``violations``); a stage that fails
+    leaves a run marked ``failed`` and re-raises.
     """
     task = _as_task(task)
     return record_stages(task, build_stages(task, method, **options), out_dir=out_dir, seed=options.get("seed", 0), command=command, progress=progress)
@@ -245,16 +262,29 @@ def record_stages(
     except BaseException:
         _close(stages)
         raise
-    recorder = Recorder(run.staging, run.run_id, task.robot, _attachments(task), on_begin=progress)
     try:
-        result = run_stages(task, stages, recorder)
-        recorder.begin("record")
-    except BaseException as exc:
-        run.conclude(str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}")
-        recorder.close(run.manifest)
+        recorder = Recorder(run.staging, run.run_id, task.robot, _attachments(task), on_begin=progress)
+    except BaseException as exc:  # stopped (Ctrl-C, SIGTERM) before any stage ran: kept as failed, without the recorder's unfinished files
+        _close(stages)
+        for unfinished in run.staging.iterdir():
+            unfinished.unlink()
+        run.conclude(Verdict.failure(str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}"))
         run.finish(None)
         raise
-    run.conclude(None)
+    found: list[Violation] = []
+    try:
+        result = run_stages(task, stages, recorder, found)
+        recorder.begin("record")
+    except BaseException as exc:
+        refused = exc.violations if isinstance(exc, StageError) else ()
+        run.conclude(Verdict.failure(str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}", [*found, *refused]))
+        recorder.close(run.manifest)
+        directory = run.finish(None)
+        exc.add_note(f"the run is kept as failed in {directory}")
+        if isinstance(exc, StageError):
+            exc.run_directory = directory
+        raise
+    run.conclude(result.verdict)
     recorder.close(run.manifest)
     return replace(result, directory=run.finish(result.metrics), stage_seconds=recorder.stage_seconds)
 

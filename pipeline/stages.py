@@ -6,6 +6,8 @@
 ``stage(product, sink) -> (product, metrics)``: the stage tells the sink when it begins and hands
 it its product once; metrics are ``<stage>.<name>`` keys with the unit as suffix. Limit ratios
 are always against the task's full limits (the robot's, or the task's own where it sets them).
+``stage.violations(product)`` judges the product against the checks of :mod:`dualarm.verdict`;
+the run's verdict is every stage's violations together.
 Heavy libraries (toppra, ruckig, pybullet) are imported only by the stages that use them.
 """
 
@@ -27,6 +29,7 @@ from dualarm.retime.trajectory import JointTrajectory
 from dualarm.settings import as_record
 from dualarm.tasks import Task
 from dualarm.tasks.schema import Retime
+from dualarm.verdict import Checks, Violation, ik_violations, position_limit_violations, trajectory_violations
 
 if TYPE_CHECKING:
     from dualarm.execute.simulate import ExecutionLog, ExecutionSettings
@@ -48,6 +51,10 @@ class Stage(Protocol):
 
     def __call__(self, product: Any, sink: Sink, /) -> tuple[Any, dict[str, float]]:
         """Run on the previous stage's product (the task, for the path stage)."""
+        ...
+
+    def violations(self, product: Any, /) -> list[Violation]:
+        """The checks (:mod:`dualarm.verdict`) this stage's own product fails."""
         ...
 
 
@@ -78,6 +85,10 @@ class PathStage:
         sink.reference(reference)
         return reference, path_metrics(reference)
 
+    def violations(self, reference: CartesianReference) -> list[Violation]:
+        """None: the reference is what the task asks."""
+        return []
+
 
 def path_metrics(ref: CartesianReference) -> dict[str, float]:
     """``path.*`` metrics of a reference: samples, duration [s], repetitions, the longest hand path [m] and the highest hand speed [m/s]."""
@@ -99,6 +110,8 @@ class IkStage:
     task: Task
     method: Method
     settings: Any
+    checks: Checks = field(default_factory=Checks)
+    retimed: bool = True
     name: ClassVar[str] = "ik"
 
     def settings_record(self) -> dict[str, Any]:
@@ -113,6 +126,10 @@ class IkStage:
         angles = arm_angles(path, robot, self.task.spec.arm_angle.vertical)
         sink.joint_path(path, robot.limit_array("velocity", path.joint_names), angles)
         return path, {**ik_metrics(path, robot), **consistency_metrics(path, reference, angles)}
+
+    def violations(self, path: JointPath) -> list[Violation]:
+        """Failed samples, hands off the asked pose (the orientation when the method solved it), position limits; velocity limits when no retime stage follows (``retimed`` False)."""
+        return ik_violations(path, self.task.robot, self.checks, retimed=self.retimed)
 
 
 @dataclass(frozen=True)
@@ -144,6 +161,10 @@ class PlanStage:
         path = planned_joint_path(self.problem, result, self.planner)
         sink.joint_path(path, self.problem.task.robot.limit_array("velocity", path.joint_names), {}, stage="plan")
         return path, {**plan_metrics(result), "plan.wta_position_distance_max_m": float(path.hand_error_m[-1].max())}
+
+    def violations(self, path: JointPath) -> list[Violation]:
+        """Position limits (the planner samples within them; this checks its output)."""
+        return position_limit_violations("plan", path.t, path.joint_names, path.q, self.problem.task.robot)
 
     def close(self) -> None:
         """Release the planning problem."""
@@ -189,6 +210,10 @@ class RetimeStage:
             "retime.stretch": result.stretch,
         }
 
+    def violations(self, traj: JointTrajectory) -> list[Violation]:
+        """Position, velocity and acceleration limits (the retimed trajectory's jerk is the smooth stage's to bound)."""
+        return trajectory_violations(traj, self.task.robot, jerk=False)
+
 
 @dataclass(frozen=True)
 class SmoothStage:
@@ -228,36 +253,87 @@ class SmoothStage:
             "smooth.fallbacks": float(result.fallbacks),
         }
 
+    def violations(self, traj: JointTrajectory) -> list[Violation]:
+        """Position, velocity, acceleration and jerk limits."""
+        return trajectory_violations(traj, self.task.robot, jerk=True)
+
+
+@dataclass(frozen=True)
+class ApproachStage:
+    """The move from the task's initial configuration to the trajectory's start (:mod:`dualarm.smooth.approach`), jerk-limited within the task's full limits.
+
+    Its product is the trajectory it was given, carrying the approach (``approach``) that the
+    execute stage plays first; the approach is recorded on its own clock (``/approach``).
+    """
+
+    task: Task
+    name: ClassVar[str] = "approach"
+
+    def settings_record(self) -> dict[str, Any]:
+        """The method, the limits it uses and its sample period [s]."""
+        return {"method": "ruckig, time-optimal, rest to rest", "limits": "the task's full limits", "sample_period_s": CONTROL_PERIOD_S}
+
+    def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
+        """Plan the approach: JointTrajectory -> the same JointTrajectory with its ``approach``."""
+        from dataclasses import replace
+
+        from dualarm.smooth.approach import approach_trajectory
+
+        sink.begin(self.name)
+        names, robot = traj.joint_names, self.task.robot
+        initial = np.array([self.task.initial_q[n] for n in names])
+        limits = {kind: robot.limit_array(kind, names) for kind in ("velocity", "acceleration", "jerk")}
+        approach = approach_trajectory(names, initial, traj.q[0], limits["velocity"], limits["acceleration"], limits["jerk"], CONTROL_PERIOD_S, dict(traj.fixed))
+        sink.trajectory(approach, limits, hand_positions(self.task, approach), {"jerk": approach.mean_jerk()})
+        return replace(traj, approach=approach), {
+            "approach.duration_s": approach.duration_s,
+            "approach.joint_distance_max_rad": float(np.abs(traj.q[0] - initial).max()) if len(names) else 0.0,
+        }
+
+    def violations(self, traj: JointTrajectory) -> list[Violation]:
+        """Position, velocity, acceleration and jerk limits of the approach."""
+        return trajectory_violations(traj.approach, self.task.robot, jerk=True) if traj.approach is not None else []
+
 
 @dataclass(frozen=True)
 class ExecuteStage:
-    """Play the trajectory on the robot in PyBullet, in the task's environment.
+    """Validate the trajectory, then play it on the robot in PyBullet, in the task's environment.
 
-    The tracking error is the distance between each measured hand position (PyBullet) and the
-    forward kinematics (this project's) of the commanded joints at the same time. Collisions are
-    counted in physics steps with an unexpected contact.
+    Before anything moves, the trajectory is checked against every limit and for collisions
+    (:mod:`dualarm.execute.preflight`); a trajectory that fails is refused (a StageError naming
+    the first violation) unless ``settings.execute_anyway``, in which case it is played and its
+    violations count in the verdict. The tracking error is the distance between each measured hand
+    position (PyBullet) and the forward kinematics (this project's) of the commanded joints at the
+    same time. Collisions are counted in physics steps with an unexpected contact.
     """
 
     task: Task
     settings: "ExecutionSettings"
+    checks: Checks = field(default_factory=Checks)
     name: ClassVar[str] = "execute"
 
     def settings_record(self) -> dict[str, Any]:
-        """The simulation's settings."""
-        return {**as_record(self.settings), "simulator": "pybullet"}
+        """The simulation's settings and the bounds it is judged against."""
+        return {**as_record(self.settings), "simulator": "pybullet", "tracking_bound_m": self.checks.tracking_bound_m}
 
     def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple["ExecutionLog", dict[str, float]]:
-        """Play the trajectory in PyBullet: JointTrajectory -> ExecutionLog."""
+        """Validate and play the trajectory in PyBullet: JointTrajectory -> ExecutionLog."""
+        from dataclasses import replace
+
+        from dualarm.execute.preflight import preflight
         from dualarm.execute.simulate import execute_trajectory
 
         sink.begin(self.name)
         task = self.task
-        expected = {(min(a, b), max(a, b)) for a, b in task.spec.expected_contacts}
-        log = execute_trajectory(traj, task.robot, task.spec.hands, task.spec.environment, sorted(expected), self.settings)
-        command = task.hand_poses(log.joint_names, log.q_command, log.fixed)
-        errors = {hand: np.linalg.norm(log.hand_poses[hand][:, :3, 3] - command[hand][:, :3, 3], axis=1) for hand in command}
-        sink.execution(log, errors, expected)
-        all_errors = np.concatenate([np.zeros(0), *errors.values()])
+        found = [*(preflight(traj.approach, task) if traj.approach is not None else []), *preflight(traj, task)]
+        if found and not self.settings.execute_anyway:
+            more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
+            raise StageError(f"execute: refused to play the trajectory: {found[0].message}{more}; --execute-anyway plays it for diagnosis", stage=self.name, t_s=found[0].t_s, violations=tuple(found))
+        log = execute_trajectory(traj, task.robot, task.spec.hands, task.spec.environment, task.spec.expected_contacts, self.settings)
+        approach = replace(log.approach, hand_error_m=hand_errors(task, log.approach)) if log.approach is not None else None
+        log = replace(log, preflight=tuple(found), approach=approach, hand_error_m=hand_errors(task, log))
+        sink.execution(log)
+        all_errors = np.concatenate([np.zeros(0), *log.hand_error_m.values()])
         if not all_errors.size:  # a trajectory that does not move: no physics step
             all_errors = np.zeros(1)
         return log, {
@@ -267,4 +343,21 @@ class ExecuteStage:
             "execute.self_collisions": float((log.self_contacts > 0).sum()),
             "execute.environment_collisions": float((log.environment_contacts > 0).sum()),
             "execute.expected_contact_steps": float((log.expected_contacts > 0).sum()),
+            "execute.contact_depth_max_m": max((c.depth_max_m for c in log.contacts if not c.expected), default=0.0),
+            "execute.preflight_violations": float(len(found)),
         }
+
+    def violations(self, log: "ExecutionLog") -> list[Violation]:
+        """What the preflight found (a trajectory played anyway), unexpected contacts and hands beyond the tracking bound."""
+        from dualarm.verdict import execution_violations
+
+        approach = execution_violations(log.approach, self.checks, "approach") if log.approach is not None else []
+        return [*log.preflight, *approach, *execution_violations(log, self.checks)]
+
+
+def hand_errors(task: Task, log: "ExecutionLog") -> dict[str, np.ndarray]:
+    """Each hand's distance between its measured position and the forward kinematics of the commanded joints (K,) [m]."""
+    if not len(log.t):  # nothing was played (a trajectory, or an approach, of no duration)
+        return {hand: np.zeros(0) for hand in log.hand_poses}
+    command = task.hand_poses(log.joint_names, log.q_command, log.fixed)
+    return {hand: np.linalg.norm(log.hand_poses[hand][:, :3, 3] - command[hand][:, :3, 3], axis=1) for hand in command}

@@ -178,7 +178,7 @@ def test_every_stage_has_the_one_shape():
 
     task = dualarm.load_task("triangle", 1)
     stages = build_stages(task, "mc-inverse")
-    assert [s.name for s in stages] == ["path", "ik", "retime", "smooth", "execute"]
+    assert [s.name for s in stages] == ["path", "ik", "retime", "smooth", "approach", "execute"]
     for stage in stages:
         assert callable(stage) and isinstance(stage.settings_record(), dict)
     with pytest.raises(DualarmError, match="mc-inverse takes ArmAngle settings, not TvgddSettings"):

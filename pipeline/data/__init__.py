@@ -18,6 +18,8 @@ from __future__ import annotations
 from importlib.resources import as_file, files
 from pathlib import Path
 
+from dualarm.files import DIRECTORY, REGULAR_FILE, kind
+
 
 def _folder(package: str) -> Path:
     with as_file(files(package)) as path:  # a real directory for a checkout and for a wheel
@@ -49,18 +51,25 @@ def _bare(name: str) -> bool:
 
 
 def find_task(path: str | Path) -> Path:
-    """``path`` if it exists, else the shipped task a bare name (``triangle``, ``triangle.toml``) names, else ``path`` unchanged (so that loading it reports the missing file)."""
+    """``path`` if it exists, else the shipped task a bare name (``triangle``, ``triangle.toml``) names, else ``path`` unchanged (so that loading it reports why it cannot be read).
+
+    Never raises: a path the OS refuses to look at (a NUL byte, a name too long, a symlink loop)
+    counts as not existing.
+    """
     given = Path(path)
-    if given.exists() or not _bare(str(path)):
+    if kind(given) is not None or not _bare(str(path)):
         return given
     shipped = tasks_dir() / (given.name if given.suffix == ".toml" else f"{given.name}.toml")
-    return shipped if shipped.is_file() else given
+    return shipped if kind(shipped) == REGULAR_FILE else given
 
 
 def find_robot(path: str | Path, relative_to: Path | None = None) -> Path:
-    """The robot directory ``path`` (relative to ``relative_to`` if given) if it exists, else the shipped robot a bare name names, else the directory as given."""
+    """The robot directory ``path`` (relative to ``relative_to`` if given) if it exists, else the shipped robot a bare name names, else the directory as given.
+
+    Never raises, as :func:`find_task`.
+    """
     given = Path(path) if relative_to is None else (Path(relative_to) / path)
-    if given.is_dir() or not _bare(str(path)):
+    if kind(given) == DIRECTORY or not _bare(str(path)):
         return given
     shipped = robots_dir() / str(path)
-    return shipped if shipped.is_dir() else given
+    return shipped if kind(shipped) == DIRECTORY else given

@@ -2,10 +2,9 @@
 
 The robot is loaded in DIRECT mode with a fixed base and self-collision on, with the task's fixed
 objects (:class:`~dualarm.tasks.schema.EnvironmentObject`) as static bodies. Link pairs that touch
-by construction are not collision-checked: a pair whose kinematic path passes only through links
-without collision geometry (the pelvis and the torso through the waist's yaw and pitch links, the
-forearm and the palm through the wrist links) always overlaps; the others are checked, as MoveIt
-disables "adjacent" pairs.
+by construction are not collision-checked, as MoveIt disables "adjacent" pairs; the list is the
+planners' own (:func:`~dualarm.execute.world.disable_touching_pairs`), so the upper arms are
+checked against the torso here as there.
 
 Each physics step (``step_s``, 1 kHz by default) the joints are driven by PyBullet's position
 motors with the robot's effort limits. PyBullet's motor asks for the joint velocity
@@ -16,25 +15,27 @@ trajectory's position there, ``q_command``). Without the velocity term (velocity
 motors went unstable on the triangle at position gains of 0.5 and 1. Locked joints are held by the
 same motors.
 
-Contacts are counted per step and per pair of bodies (a robot link and another link, or a link and
-a named object); pairs the task expects (``expected_contacts``, such as the palms on a carried box)
-are counted apart from the others. With ``gui`` the steps are paced to real time.
+Contacts are recorded per step and per pair of bodies (a robot link and another link, or a link
+and a named object), with the pair's deepest penetration in that step; pairs the task expects
+(``expected_contacts``, such as the palms on a carried box) are told apart from the others. With
+``gui`` the steps are paced to real time.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
 import numpy as np
 
 from dualarm.arrays import frozen
 from dualarm.errors import StageError
-from dualarm.execute.world import add_environment, load_pybullet_robot, pb
+from dualarm.execute.world import PyBulletRobot, add_environment, disable_touching_pairs, load_pybullet_robot, pb
 from dualarm.model.robot import Robot
 from dualarm.retime.trajectory import JointTrajectory
+from dualarm.verdict import Violation
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,8 @@ class ExecutionSettings:
         velocity_gain: PyBullet's ``velocityGain`` [1].
         gravity_m_s2: gravity along -z [m/s^2].
         gui: show the simulation in a PyBullet window, in real time (needs a display).
+        execute_anyway: play a trajectory that fails its validation (limits, collisions) for
+            diagnosis; the run is then at best ``violated``.
     """
 
     step_s: float = 0.001
@@ -54,6 +57,49 @@ class ExecutionSettings:
     velocity_gain: float = 1.0
     gravity_m_s2: float = 9.81
     gui: bool = False
+    execute_anyway: bool = False
+
+
+@dataclass(frozen=True)
+class ContactEvent:
+    """One pair of bodies touching in one physics step.
+
+    Attributes:
+        t_s: the step's end time [s].
+        rep: the repetition index at that time.
+        first: a robot link or an object (the pair sorted by name).
+        second: the other.
+        depth_m: the deepest penetration between them in the step [m] (0 when they only touch).
+        expected: the task expects this pair to touch (``expected_contacts``).
+    """
+
+    t_s: float
+    rep: int
+    first: str
+    second: str
+    depth_m: float
+    expected: bool
+
+
+@dataclass(frozen=True)
+class PairContact:
+    """Every step in which one pair of bodies touched, summed up.
+
+    Attributes:
+        first: a robot link or an object (sorted by name).
+        second: the other.
+        expected: the task expects this pair to touch.
+        first_t_s: the end time of the first step in which they touched [s].
+        depth_max_m: the deepest penetration over those steps [m].
+        steps: how many steps they touched in.
+    """
+
+    first: str
+    second: str
+    expected: bool
+    first_t_s: float
+    depth_max_m: float
+    steps: int
 
 
 @dataclass(frozen=True)
@@ -71,8 +117,12 @@ class ExecutionLog:
         self_contacts: unexpected robot-robot contact points per step (K,).
         environment_contacts: unexpected robot-environment contact points per step (K,).
         expected_contacts: contact points of the expected pairs per step (K,).
-        contact_pairs: every (link, link or object) pair that touched -> the number of steps it
-            touched in, expected pairs included.
+        contact_events: every pair touching in every step, in time order (expected pairs included).
+        fixed: values of the locked joints [rad].
+        preflight: what the validation before execution found in a trajectory played anyway.
+        approach: the log of the approach played before the trajectory (its own clock), if any.
+        hand_error_m: per hand, the distance between the measured hand position and the forward
+            kinematics of the commanded joints (K,) [m] (filled by the execute stage).
     """
 
     joint_names: tuple[str, ...]
@@ -85,8 +135,11 @@ class ExecutionLog:
     self_contacts: np.ndarray
     environment_contacts: np.ndarray
     expected_contacts: np.ndarray
-    contact_pairs: Mapping[tuple[str, str], int] = field(default_factory=dict)
+    contact_events: tuple[ContactEvent, ...] = ()
     fixed: Mapping[str, float] = field(default_factory=dict)
+    preflight: tuple[Violation, ...] = ()
+    approach: "ExecutionLog | None" = None
+    hand_error_m: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         K, n = len(self.t), len(self.joint_names)
@@ -103,13 +156,20 @@ class ExecutionLog:
             object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
         object.__setattr__(self, "hand_poses", MappingProxyType({h: frozen(p, (K, 4, 4), f"hand_poses[{h}]") for h, p in self.hand_poses.items()}))
         object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
-        object.__setattr__(self, "contact_pairs", MappingProxyType(dict(self.contact_pairs)))
+        object.__setattr__(self, "hand_error_m", MappingProxyType({h: frozen(e, (K,), f"hand_error_m[{h}]") for h, e in self.hand_error_m.items()}))
+        object.__setattr__(self, "contact_events", tuple(self.contact_events))
 
-
-def _disable_touching_by_construction(sim) -> None:
-    """No collision check between links joined only through links without collision geometry."""
-    for link, (up, _) in sim.solid_parents().items():
-        pb.setCollisionFilterPair(sim.body, sim.body, link, up, enableCollision=0, physicsClientId=sim.client)
+    @property
+    def contacts(self) -> tuple[PairContact, ...]:
+        """Each pair that touched, in the order of its first contact."""
+        pairs: dict[tuple[str, str], PairContact] = {}
+        for e in self.contact_events:
+            seen = pairs.get((e.first, e.second))
+            if seen is None:
+                pairs[(e.first, e.second)] = PairContact(e.first, e.second, e.expected, e.t_s, e.depth_m, 1)
+            else:
+                pairs[(e.first, e.second)] = PairContact(e.first, e.second, e.expected, seen.first_t_s, max(seen.depth_max_m, e.depth_m), seen.steps + 1)
+        return tuple(pairs.values())
 
 
 def execute_trajectory(
@@ -120,7 +180,7 @@ def execute_trajectory(
     expected_contacts: Sequence[tuple[str, str]] = (),
     settings: ExecutionSettings = ExecutionSettings(),
 ) -> ExecutionLog:
-    """Play ``trajectory`` on ``robot`` in PyBullet and measure it each step.
+    """Play ``trajectory`` (after its ``approach``, when it has one) on ``robot`` in PyBullet and measure it each step.
 
     Args:
         trajectory: what the joints are to do (``fixed`` joints are held).
@@ -131,35 +191,55 @@ def execute_trajectory(
             expected and counted apart.
         settings: the simulation's settings.
 
+    Returns:
+        The trajectory's log, with the approach's (on its own clock) as its ``approach``.
+
     Raises:
         StageError: a trajectory joint the robot does not have, or a non-positive step.
     """
     if not settings.step_s > 0:
         raise StageError(f"execute: the physics step must be positive, not {settings.step_s}")
-    expected_pairs = {tuple(sorted(pair)) for pair in expected_contacts}
     with load_pybullet_robot(robot.urdf.path, self_collision=True, gui=settings.gui) as sim:
         missing = [n for n in (*trajectory.joint_names, *trajectory.fixed) if n not in sim.joint_index]
         if missing:
             raise StageError(f"execute: the robot has no joint {missing[0]}")
-        _disable_touching_by_construction(sim)
-        objects = add_environment(sim, environment)
-        client, body = sim.client, sim.body
-        pb.setGravity(0, 0, -settings.gravity_m_s2, physicsClientId=client)
-        pb.setTimeStep(settings.step_s, physicsClientId=client)
+        disable_touching_pairs(sim)
+        player = _Player(sim, robot, hands, add_environment(sim, environment), {tuple(sorted(pair)) for pair in expected_contacts}, settings)
+        pb.setGravity(0, 0, -settings.gravity_m_s2, physicsClientId=sim.client)
+        pb.setTimeStep(settings.step_s, physicsClientId=sim.client)
+        first = trajectory.approach if trajectory.approach is not None else trajectory
+        sim.set_positions([*first.joint_names, *first.fixed], [*first.q[0], *first.fixed.values()])
+        approach = player.play(trajectory.approach) if trajectory.approach is not None else None
+        return replace(player.play(trajectory), approach=approach)
+
+
+@dataclass
+class _Player:
+    """Plays trajectories one after the other in one simulation (see :func:`execute_trajectory`)."""
+
+    sim: PyBulletRobot
+    robot: Robot
+    hands: Sequence[str]
+    objects: dict[int, str]
+    expected_pairs: set[tuple[str, ...]]
+    settings: ExecutionSettings
+
+    def play(self, trajectory: JointTrajectory) -> ExecutionLog:
+        """Drive the joints along ``trajectory`` from where they are, step by step; its log (times from the end of the first step)."""
+        sim, settings, client, body = self.sim, self.settings, self.sim.client, self.sim.body
         names = list(trajectory.joint_names) + list(trajectory.fixed)
         index = [sim.joint_index[n] for n in names]
-        effort = [robot.limits[n].effort for n in names]
-        sim.set_positions(names, [*trajectory.q[0], *trajectory.fixed.values()])
+        effort = [self.robot.limits[n].effort for n in names]
         t_end = np.arange(1, int(np.ceil(trajectory.duration_s / settings.step_s - 1e-9)) + 1) * settings.step_s
         command, command_velocity, _, _ = trajectory.interpolate(t_end - settings.step_s)
         expected, _, _, rep = trajectory.interpolate(t_end)
         held = np.array(list(trajectory.fixed.values()))
         K, n = len(t_end), len(trajectory.joint_names)
         q, qd = np.empty((K, n)), np.empty((K, n))
-        hand_links = {h: sim.link_index[robot.hand_chain(h).tip] for h in hands}
-        hand_poses = {h: np.empty((K, 4, 4)) for h in hands}
-        self_contacts, environment_contacts, expected_contacts_ = (np.zeros(K, int) for _ in range(3))
-        pair_steps: dict[tuple[str, str], int] = {}
+        hand_links = {h: self.robot.hand_chain(h).tip for h in self.hands}
+        hand_poses = {h: np.empty((K, 4, 4)) for h in self.hands}
+        self_contacts, environment_contacts, expected_contacts = (np.zeros(K, int) for _ in range(3))
+        events: list[ContactEvent] = []
         link_name = {i: n for n, i in sim.link_index.items()}
         start = time.monotonic()
         for k in range(K):
@@ -179,17 +259,16 @@ def execute_trajectory(
             q[k] = [s[0] for s in states]
             qd[k] = [s[1] for s in states]
             for h, link in hand_links.items():
-                hand_poses[h][k] = sim.link_pose(link_name[link])
-            touching: set[tuple[str, str]] = set()
+                hand_poses[h][k] = sim.link_pose(link)
+            depth: dict[tuple[str, str], float] = {}
             for contact in pb.getContactPoints(bodyA=body, physicsClientId=client):
                 other = contact[2]
-                first, second = sorted((link_name[contact[3]], link_name[contact[4]] if other == body else objects.get(other, str(other))))
+                first, second = sorted((link_name[contact[3]], link_name[contact[4]] if other == body else self.objects.get(other, str(other))))
                 key = (first, second)
-                touching.add(key)
-                counter = expected_contacts_ if key in expected_pairs else self_contacts if other == body else environment_contacts
+                depth[key] = max(depth.get(key, 0.0), -float(contact[8]))
+                counter = expected_contacts if key in self.expected_pairs else self_contacts if other == body else environment_contacts
                 counter[k] += 1
-            for key in touching:
-                pair_steps[key] = pair_steps.get(key, 0) + 1
+            events += [ContactEvent(float(t_end[k]), int(rep[k]), a, b, d, (a, b) in self.expected_pairs) for (a, b), d in sorted(depth.items())]
             if settings.gui:
                 time.sleep(max(0.0, start + t_end[k] - time.monotonic()))
         return ExecutionLog(
@@ -202,7 +281,7 @@ def execute_trajectory(
             hand_poses=hand_poses,
             self_contacts=self_contacts,
             environment_contacts=environment_contacts,
-            expected_contacts=expected_contacts_,
-            contact_pairs=dict(sorted(pair_steps.items())),
+            expected_contacts=expected_contacts,
+            contact_events=tuple(events),
             fixed=trajectory.fixed,
         )

@@ -90,6 +90,38 @@ class PyBulletRobot:
         self.close()
 
 
+#: Two links joined only through links without collision geometry and closer than this at the zero
+#: configuration touch by construction and are not checked [m] (see :func:`disable_touching_pairs`).
+TOUCHING_M = 1e-3
+
+
+def disable_touching_pairs(sim: PyBulletRobot, margin_m: float = 0.0) -> frozenset[tuple[str, str]]:
+    """Turn off the self-collision pairs that touch by construction; returns them by name (sorted pairs).
+
+    The one list of pairs not checked, shared by the planners' checker and the execute stage: a
+    link and its nearest ancestor with collision geometry when they are joined directly (PyBullet's
+    own rule for a parent), or when they are joined through links without geometry and are within
+    :data:`TOUCHING_M` of each other at the zero configuration, ``margin_m`` aside (the shapes of
+    ``sim`` grown by ``margin_m``; the pelvis and the torso through the waist's yaw and pitch links,
+    the forearm and the palm through the wrist links). Every other pair is checked: the upper arms
+    keep 45 mm from the torso at rest, and an arm swung across the chest does hit it.
+
+    The robot must be at the zero configuration (as loaded).
+    """
+    body, client = sim.body, sim.client
+    name = {i: n for n, i in sim.link_index.items()}
+    skipped: set[tuple[str, str]] = set()
+    for link, (up, through_bare) in sim.solid_parents().items():
+        points = pb.getClosestPoints(body, body, 1.0, link, up, physicsClientId=client)
+        touching = bool(points) and min(p[8] for p in points) + 2 * margin_m < TOUCHING_M  # the distance before the margin
+        if through_bare and not touching:
+            continue
+        pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
+        first, second = sorted((name[link], name[up]))
+        skipped.add((first, second))
+    return frozenset(skipped)
+
+
 def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: bool = False) -> PyBulletRobot:
     """Start a client (DIRECT, or a window with ``gui``) and load ``urdf`` with a fixed base at the origin.
 

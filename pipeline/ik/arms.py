@@ -4,8 +4,8 @@ MC-Inverse and the pose-level baselines (TRAC-IK, PyBullet, DLS-SVD, ikfast-styl
 chains. A waist is held at its initial value; each hand's Cartesian reference is expressed in
 its arm chain's base frame (the torso) through the reference-frame-to-torso forward kinematics at
 the initial configuration. :func:`joint_path` assembles the arms' solutions into the stage's
-:class:`~dualarm.ik.joint_path.JointPath`, measuring each hand's position error with the project's
-forward kinematics.
+:class:`~dualarm.ik.joint_path.JointPath`, measuring each hand's position and orientation errors
+with the project's forward kinematics.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualarm.ik.joint_path import JointPath
+from dualarm.ik.orientation import orientation_errors
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.poses import invert
 from dualarm.model.robot import Chain, Robot
@@ -68,10 +69,12 @@ def arm_problems(robot: Robot, reference: CartesianReference, q0: Mapping[str, f
 
 
 def joint_path(method: str, reference: CartesianReference, problems: Sequence[ArmProblem], solutions: Sequence[ArmSolution], q0: Mapping[str, float]) -> JointPath:
-    """The stage output of per-arm solutions: velocities by central differences [rad/s], status failed where any arm failed, solve times summed over the arms, hand errors by the chains' FK, every other joint fixed at ``q0`` [rad]."""
+    """The stage output of per-arm solutions: velocities by central differences [rad/s], status failed where any arm failed, solve times summed over the arms, hand position [m] and orientation [rad] errors by the chains' FK, every other joint fixed at ``q0`` [rad]."""
     q = np.hstack([s.q for s in solutions])
     names = tuple(n for p in problems for n in p.chain.joint_names)
-    errors = [np.linalg.norm(ChainKinematics.of(p.chain).poses(s.q)[:, :3, 3] - p.targets[:, :3, 3], axis=1) for p, s in zip(problems, solutions)]
+    reached = [ChainKinematics.of(p.chain).poses(s.q) for p, s in zip(problems, solutions)]
+    errors = [np.linalg.norm(T[:, :3, 3] - p.targets[:, :3, 3], axis=1) for p, T in zip(problems, reached)]
+    angles = [orientation_errors(p.targets[:, :3, :3], T[:, :3, :3]) for p, T in zip(problems, reached)]
     ok = np.logical_and.reduce([s.ok for s in solutions])
     return JointPath(
         method=method,
@@ -83,6 +86,7 @@ def joint_path(method: str, reference: CartesianReference, problems: Sequence[Ar
         status=np.where(ok, 0, 1),
         solve_time_s=np.sum([s.solve_time_s for s in solutions], axis=0),
         hand_error_m=np.stack(errors, axis=1),
+        hand_orientation_error_rad=np.stack(angles, axis=1),
         hands=tuple(p.hand for p in problems),
         fixed={n: v for n, v in q0.items() if n not in names},
     )

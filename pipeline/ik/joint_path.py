@@ -9,9 +9,13 @@ from types import MappingProxyType
 import numpy as np
 
 from dualarm.arrays import frozen
+from dualarm.errors import InvalidArgumentError
 
 #: Per-sample solver status codes.
 OK, FAILED = 0, 1
+
+#: The default of ``hand_orientation_error_rad``: not measured (NaN), e.g. a planner's path, which follows no reference.
+_NOT_MEASURED = np.empty(0)
 
 
 @dataclass(frozen=True)
@@ -29,6 +33,10 @@ class JointPath:
         solve_time_s: per-sample solve time (N,) [s].
         hand_error_m: per-sample hand position error |r - f(q)| per hand (N, h) [m].
         hands: the hands, the columns of ``hand_error_m``.
+        hand_orientation_error_rad: per-sample hand orientation error, the angle of
+            R_asked^T R_reached per hand (N, h) [rad]; NaN where not measured (the default).
+        task_space: what the method solved: ``pose`` (the hands' positions and orientations) or
+            ``position`` (positions only; the orientation error is measured, not asked for).
         fixed: values of the robot's locked joints [rad].
         extras: method-specific per-sample arrays (N, n), e.g. TV-GDD bounds.
     """
@@ -43,11 +51,17 @@ class JointPath:
     solve_time_s: np.ndarray
     hand_error_m: np.ndarray
     hands: tuple[str, ...]
+    hand_orientation_error_rad: np.ndarray = field(default_factory=lambda: _NOT_MEASURED)
+    task_space: str = "pose"
     fixed: Mapping[str, float] = field(default_factory=dict)
     extras: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         N, n = len(self.t), len(self.joint_names)
+        if self.hand_orientation_error_rad is _NOT_MEASURED:
+            object.__setattr__(self, "hand_orientation_error_rad", np.full((N, len(self.hands)), np.nan))
+        if self.task_space not in ("pose", "position"):
+            raise InvalidArgumentError("task_space", f"must be 'pose' or 'position', not {str(self.task_space)[:80]!r}")
         for name, shape, dtype in (
             ("t", (N,), float),
             ("rep", (N,), int),
@@ -56,6 +70,7 @@ class JointPath:
             ("status", (N,), int),
             ("solve_time_s", (N,), float),
             ("hand_error_m", (N, len(self.hands)), float),
+            ("hand_orientation_error_rad", (N, len(self.hands)), float),
         ):
             object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
         object.__setattr__(self, "extras", MappingProxyType({k: frozen(v, (N, n), k) for k, v in self.extras.items()}))

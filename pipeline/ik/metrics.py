@@ -21,7 +21,10 @@ def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
     """Hand position errors (norms over samples and hands), limit violations against the robot's position and velocity limits (a task's overrides applied), the largest joint step, solve times, failures.
 
     A violation is one (sample, joint) pair outside its limit by more than
-    :data:`VIOLATION_TOLERANCE`.
+    :data:`VIOLATION_TOLERANCE`. Orientation (when the path measured it, which every IK method's
+    does): ``orientation_error_max_rad`` and ``_mean_rad`` over samples and hands, the angle of
+    R_asked^T R_reached; ``orientation_solved`` 1.0 when the method solved the asked orientation,
+    0.0 when it solved positions only (TV-GDD and pinv in ``position`` task space).
     """
     names = path.joint_names
     lower, upper = robot.lower_upper(names)
@@ -39,7 +42,17 @@ def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
         "ik.solve_time_median_s": float(np.median(path.solve_time_s)),
         "ik.solve_time_total_s": float(path.solve_time_s.sum()),
         "ik.failures": float((path.status != 0).sum()),
+        **_orientation_metrics(path),
     }
+
+
+def _orientation_metrics(path: JointPath) -> dict[str, float]:
+    """``ik.orientation_*`` of :func:`ik_metrics`; the errors only when measured (not NaN)."""
+    angle = path.hand_orientation_error_rad
+    metrics = {"ik.orientation_solved": 1.0 if path.task_space == "pose" else 0.0}
+    if angle.size and np.isfinite(angle).all():
+        metrics |= {"ik.orientation_error_max_rad": float(angle.max()), "ik.orientation_error_mean_rad": float(angle.mean())}
+    return metrics
 
 
 def arm_angles(path: JointPath, robot: Robot, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict[str, np.ndarray]:

@@ -1,7 +1,10 @@
 """The pseudoinverse baseline of TV-GDD eqs (2)-(3).
 
-thetadot = J^+(theta) (rdot + K (r - f(theta))) + (I - J^+ J) w with w = 0, the same position
-feedback as TV-GDD and no limits at all: the scheme the paper shows leaving its bounds.
+thetadot = J^+(theta) (rdot + K (r - f(theta))) + (I - J^+ J) w with w = 0, the same feedback as
+TV-GDD and no limits at all: the scheme the paper shows leaving its bounds. In ``pose`` task space
+the orientation rows are stacked under the position rows as in TV-GDD (J_omega, omega_d and
+K log(R_d R^T); see :class:`~dualarm.ik.stack.HandStack`); in ``position`` task space, the paper's,
+only the positions.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import numpy as np
 
 from dualarm.errors import InvalidArgumentError
 from dualarm.ik.joint_path import JointPath
-from dualarm.ik.stack import reference_stack, stack_joint_path, stacked_reference, start_configuration
+from dualarm.ik.stack import TASK_SPACES, reference_stack, stack_joint_path, stacked_reference, start_configuration
 from dualarm.ik.tvgdd import TvgddSettings, gesture_band, joint_bounds
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference
@@ -33,6 +36,8 @@ class PinvSettings:
     Attributes:
         feedback_gain: K [1/s].
         free_waist: move the joints between the reference's frame and the arms too.
+        task_space: ``pose`` (the hands' positions and orientations) or ``position`` (positions
+            only, as in the paper).
         bands: the TV-GDD settings whose bands (eqs 19-22) are recorded beside the path, for
             comparison with TV-GDD on the same task (the paper's Figs 3-4); they bound nothing.
     """
@@ -40,22 +45,25 @@ class PinvSettings:
     feedback_gain: float = 20.0
     free_waist: bool = False
     bands: TvgddSettings = TvgddSettings()
+    task_space: str = "pose"
 
     def __post_init__(self) -> None:
+        if self.task_space not in TASK_SPACES:
+            raise InvalidArgumentError("task_space", f"unknown task space '{str(self.task_space)[:80]}' (task spaces: {', '.join(TASK_SPACES)})")
         if isinstance(self.feedback_gain, bool) or not isinstance(self.feedback_gain, (int, float)) or not (np.isfinite(self.feedback_gain) and self.feedback_gain > 0):
             raise InvalidArgumentError("feedback_gain", f"must be a positive number, not {self.feedback_gain!r}")
 
 
 def settings_for(task: "Task", **overrides: object) -> PinvSettings:
-    """The baseline's settings for a task: TV-GDD's gain and bands from its ``[gesture]`` table."""
+    """The baseline's settings for a task: TV-GDD's gain, bands and task space from its ``[gesture]`` and ``[ik]`` tables."""
     from dualarm.ik.tvgdd import settings_for as tvgdd_settings
 
     bands = tvgdd_settings(task)
-    return with_overrides(PinvSettings(feedback_gain=bands.feedback_gain, free_waist=bands.free_waist, bands=bands), overrides)
+    return with_overrides(PinvSettings(feedback_gain=bands.feedback_gain, free_waist=bands.free_waist, bands=bands, task_space=bands.task_space), overrides)
 
 
 def solve_pinv(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: PinvSettings = PinvSettings()) -> JointPath:
-    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps at the reference's period; hand positions only, as TV-GDD.
+    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps at the reference's period; the hands' positions, and in ``pose`` task space their orientations, as TV-GDD.
 
     Nothing bounds the joints; the path's extras hold the bands TV-GDD would impose
     (:func:`~dualarm.ik.tvgdd.gesture_band` with ``settings.bands``).
@@ -64,13 +72,13 @@ def solve_pinv(robot: Robot, reference: CartesianReference, q0: Mapping[str, flo
         robot: the robot.
         reference: the hands' reference.
         q0: the initial configuration (as :func:`~dualarm.ik.tvgdd.solve_tvgdd`).
-        settings: the gain and the bands to record.
+        settings: the gain, the task space and the bands to record.
     """
-    stack = reference_stack(robot, reference, q0, settings.free_waist)
+    stack = reference_stack(robot, reference, q0, settings.free_waist, settings.task_space)
     tau = reference.period_s
-    r, rdot = cs.SX.sym("r", stack.m), cs.SX.sym("rdot", stack.m)
+    r, rdot = stack.target, cs.SX.sym("rdot", stack.m)
     J = stack.jacobian
-    rhs = rdot + settings.feedback_gain * (r - stack.position)
+    rhs = rdot + settings.feedback_gain * stack.error  # eqs (2)-(3): rdot + K (r - f(theta)), and (pose) omega_d + K log(R_d R^T) under it
     velocity = J.T @ cs.solve(J @ J.T, rhs)  # J^+ rhs for a full-row-rank J, eqs (2)-(3) with w = 0
     step = cs.Function("pinv_step", [stack.theta, r, rdot], [velocity], ["theta", "r", "rdot"], ["thetadot"])
     R, V = stacked_reference(stack, reference)

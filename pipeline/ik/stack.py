@@ -16,35 +16,61 @@ import casadi as cs
 import numpy as np
 
 from dualarm.arrays import frozen
-from dualarm.errors import StageError
+from dualarm.errors import InvalidArgumentError, StageError
+from dualarm.ik.orientation import angular_jacobian, orientation_error, orientation_errors
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference
 
+#: The task spaces of the velocity-level methods: the hands' whole pose, or their positions only.
+TASK_SPACES = ("pose", "position")
+
 
 @dataclass(frozen=True)
 class HandStack:
-    """Stacked hand kinematics.
+    """Stacked hand kinematics and the task the velocity-level methods solve on them.
+
+    The task rows are the hands' positions (3 per hand) and, in ``pose`` task space, under them
+    their orientations (3 per hand): the equality of TV-GDD eq (24) and of the pseudoinverse's
+    eqs (2)-(3) reads J thetadot = rdot + K e with
+
+        J = [J_p; J_omega],  rdot = [v_d; omega_d],  e = [r_d - f(theta); log(R_d R(theta)^T)],
+
+    the angular velocities and the orientation errors (rotation vectors) in the stack's frame.
 
     Attributes:
         joint_names: the active joints, the order of the vector theta.
         hands: the hands, the order of the stacked rows.
         fixed: values of the locked joints [rad].
         initial: the task's initial values of the active joints [rad], (n,).
+        task_space: ``pose`` (positions and orientations) or ``position`` (positions only, the
+            TV-GDD paper's m = 3 per hand, eq 13).
         theta: the CasADi symbol of the active joints, (n, 1).
+        target: the CasADi symbol of one reference sample, (:attr:`reference_size`, 1): the hands'
+            positions [m], then (pose) their rotation matrices, row by row.
         position: SX expression of the stacked hand positions, (3 h, 1) [m].
-        jacobian: SX expression of d position / d theta, (3 h, n).
+        rotation: SX expression of the stacked hand rotation matrices, (3 h, 3).
+        error: SX expression of the task error e(theta, target), (m, 1) [m; rad].
+        jacobian: SX expression of the task Jacobian [J_p; J_omega], (m, n).
         positions: Function ``theta -> position``.
+        rotations: Function ``theta -> rotation``.
+        errors: Function ``(theta, target) -> error``.
     """
 
     joint_names: tuple[str, ...]
     hands: tuple[str, ...]
     fixed: Mapping[str, float]
     initial: np.ndarray
+    task_space: str
     theta: cs.SX
+    target: cs.SX
     position: cs.SX
+    rotation: cs.SX
+    error: cs.SX
     jacobian: cs.SX
     positions: cs.Function
+    rotations: cs.Function
+    errors: cs.Function
 
     @property
     def n(self) -> int:
@@ -53,8 +79,13 @@ class HandStack:
 
     @property
     def m(self) -> int:
-        """Number of stacked task rows (3 per hand)."""
-        return 3 * len(self.hands)
+        """Number of stacked task rows: 3 per hand, 6 per hand in pose task space."""
+        return (6 if self.task_space == "pose" else 3) * len(self.hands)
+
+    @property
+    def reference_size(self) -> int:
+        """Length of one reference sample (:attr:`target`): 3 per hand, 12 per hand in pose task space."""
+        return (12 if self.task_space == "pose" else 3) * len(self.hands)
 
 
 def active_joints(robot: Robot, hands: Sequence[str], frame: str, free_waist: bool) -> tuple[str, ...]:
@@ -68,74 +99,119 @@ def active_joints(robot: Robot, hands: Sequence[str], frame: str, free_waist: bo
     return tuple(names)
 
 
-def hand_stack(robot: Robot, hands: Sequence[str], q0: Mapping[str, float], *, frame: str | None = None, free_waist: bool = False) -> HandStack:
-    """The stacked position kinematics of ``hands`` in ``frame`` (default the robot's root link), the joints that are not active at their values in ``q0`` [rad]."""
+def hand_stack(robot: Robot, hands: Sequence[str], q0: Mapping[str, float], *, frame: str | None = None, free_waist: bool = False, task_space: str = "position") -> HandStack:
+    """The stacked kinematics of ``hands`` in ``frame`` (default the robot's root link), the joints that are not active at their values in ``q0`` [rad], with the task rows of ``task_space`` (``position`` or ``pose``).
+
+    Raises:
+        InvalidArgumentError: an unknown task space.
+    """
+    if task_space not in TASK_SPACES:
+        raise InvalidArgumentError("task_space", f"unknown task space '{str(task_space)[:80]}' (task spaces: {', '.join(TASK_SPACES)})")
     frame = frame or robot.urdf.root
     names = active_joints(robot, hands, frame, free_waist)
     fixed = {n: v for n, v in q0.items() if n not in names}
     theta = cs.SX.sym("theta", len(names))
     index = {n: i for i, n in enumerate(names)}
-    rows = []
+    poses = []
     for hand in hands:
         chain = robot.chain_between(frame, robot.hand_chain(hand).tip)
         q = cs.vertcat(*[theta[index[n]] if n in index else fixed[n] for n in chain.joint_names])
-        rows.append(ChainKinematics.of(chain).fk(q)[:3, 3])
-    position = cs.vertcat(*rows)
+        poses.append(ChainKinematics.of(chain).fk(q))
+    h = len(hands)
+    position = cs.vertcat(*[T[:3, 3] for T in poses])
+    rotations = [T[:3, :3] for T in poses]
+    pose = task_space == "pose"
+    target = cs.SX.sym("target", (12 if pose else 3) * h)
+    error = target[: 3 * h] - position  # eq (16)
     jacobian = cs.jacobian(position, theta)
+    if pose:
+        asked = [cs.reshape(target[3 * h + 9 * j : 3 * h + 9 * (j + 1)], 3, 3).T for j in range(h)]  # row by row
+        error = cs.vertcat(error, *[orientation_error(Rd, R) for Rd, R in zip(asked, rotations)])
+        jacobian = cs.vertcat(jacobian, *[angular_jacobian(R, theta) for R in rotations])
+    rotation = cs.vertcat(*rotations)
     return HandStack(
         joint_names=names,
         hands=tuple(hands),
         fixed=MappingProxyType(fixed),
         initial=frozen([q0[n] for n in names], (len(names),), "initial"),
+        task_space=task_space,
         theta=theta,
+        target=target,
         position=position,
+        rotation=rotation,
+        error=error,
         jacobian=jacobian,
         positions=cs.Function("hand_positions", [theta], [position], ["theta"], ["r"]),
+        rotations=cs.Function("hand_rotations", [theta], [rotation], ["theta"], ["R"]),
+        errors=cs.Function("task_errors", [theta, target], [error], ["theta", "target"], ["e"]),
     )
 
 
-def reference_stack(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None, free_waist: bool) -> HandStack:
-    """The stack of the reference's hands in its frame, ``q0`` resolved by :meth:`Robot.configuration`."""
-    return hand_stack(robot, tuple(reference.hands), robot.configuration(q0, "q0"), frame=reference.frame_in(robot), free_waist=free_waist)
+def reference_stack(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None, free_waist: bool, task_space: str = "position") -> HandStack:
+    """The stack of the reference's hands in its frame, ``q0`` resolved by :meth:`Robot.configuration`, with the task rows of ``task_space``."""
+    return hand_stack(robot, tuple(reference.hands), robot.configuration(q0, "q0"), frame=reference.frame_in(robot), free_waist=free_waist, task_space=task_space)
 
 
 def stacked_reference(stack: HandStack, reference: CartesianReference) -> tuple[np.ndarray, np.ndarray]:
-    """Stacked hand positions (N, 3 h) [m] and velocities (N, 3 h) [m/s] of a CartesianReference."""
-    position = np.hstack([reference.hands[h].position for h in stack.hands])
-    velocity = np.hstack([reference.hands[h].linear_velocity for h in stack.hands])
-    return position, velocity
+    """A CartesianReference as the stack's targets (N, reference_size) and task velocities (N, m).
+
+    Targets: the hands' positions [m], then (pose) their rotation matrices row by row.
+    Velocities: the hands' linear velocities [m/s], then (pose) their angular velocities [rad/s].
+    """
+    hands = [reference.hands[h] for h in stack.hands]
+    N = len(reference)
+    target = [h.position for h in hands]
+    velocity = [h.linear_velocity for h in hands]
+    if stack.task_space == "pose":
+        target += [h.rotation.reshape(N, 9) for h in hands]
+        velocity += [h.angular_velocity for h in hands]
+    return np.hstack(target), np.hstack(velocity)
 
 
 #: Largest hand-position gap [m] between the initial configuration and the path start left as is.
 START_TOLERANCE_M = 1e-9
+#: Largest hand-orientation gap [rad] left as is (pose task space).
+START_TOLERANCE_RAD = 1e-9
 
 
 def start_configuration(stack: HandStack, reference: CartesianReference, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """Where a velocity-level method starts [rad], (n,): the task's initial values if they put the hands on the reference's first sample (within :data:`START_TOLERANCE_M`), otherwise the configuration nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares problem min |theta - initial|^2 s.t. f(theta) = r_0 solved by IPOPT through CasADi.
+    """Where a velocity-level method starts [rad], (n,): the task's initial values if they put the hands on the reference's first sample (within :data:`START_TOLERANCE_M`, and :data:`START_TOLERANCE_RAD` in pose task space), otherwise the configuration nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares problem min |theta - initial|^2 s.t. e(theta) = 0 (the stack's task error at the first sample) solved by IPOPT through CasADi.
 
     Raises:
         StageError: IPOPT finds no such configuration.
     """
     r0 = stacked_reference(stack, reference)[0][0]
-    if np.abs(np.asarray(stack.positions(stack.initial)).ravel() - r0).max() <= START_TOLERANCE_M:
+    if _on_start(stack, stack.initial, r0):
         return stack.initial
-    nlp = {"x": stack.theta, "f": cs.sumsqr(stack.theta - stack.initial), "g": stack.position - r0}
+    nlp = {"x": stack.theta, "f": cs.sumsqr(stack.theta - stack.initial), "g": stack.errors(stack.theta, r0)}
     options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "constr_viol_tol": 1e-12}}
     solver = cs.nlpsol("start_configuration", "ipopt", nlp, options)
     theta = np.asarray(solver(x0=stack.initial, lbx=lower, ubx=upper, lbg=0, ubg=0)["x"]).ravel()
-    gap = np.abs(np.asarray(stack.positions(theta)).ravel() - r0).max()
-    if not solver.stats()["success"] or gap > START_TOLERANCE_M:
-        raise StageError(f"no configuration within the joint limits puts the hands on the path start (IPOPT: {solver.stats()['return_status']}, gap {gap:.3g} m)", stage="ik", sample=0, t_s=0.0)
+    if not solver.stats()["success"] or not _on_start(stack, theta, r0):
+        e = np.abs(np.asarray(stack.errors(theta, r0)).ravel())
+        p = 3 * len(stack.hands)
+        gap = f"gap {e[:p].max():.3g} m" + (f", {e[p:].max():.3g} rad" if len(e) > p else "")
+        what = "the hands on the path start" + (" in position and orientation" if stack.task_space == "pose" else "")
+        raise StageError(f"no configuration within the joint limits puts {what} (IPOPT: {solver.stats()['return_status']}, {gap})", stage="ik", sample=0, t_s=0.0)
     return frozen(theta, (stack.n,), "start")
 
 
+def _on_start(stack: HandStack, theta: np.ndarray, target: np.ndarray) -> bool:
+    """Whether the task error at ``theta`` is within :data:`START_TOLERANCE_M` (positions) and :data:`START_TOLERANCE_RAD` (orientations)."""
+    e = np.abs(np.asarray(stack.errors(theta, target)).ravel())
+    p = 3 * len(stack.hands)
+    return bool(e[:p].max() <= START_TOLERANCE_M and e[p:].max(initial=0.0) <= START_TOLERANCE_RAD)
+
+
 def stack_joint_path(method: str, stack: HandStack, reference: CartesianReference, q: np.ndarray, qd: np.ndarray, solve_time_s: np.ndarray, extras=None):
-    """The JointPath of a velocity-level method on ``stack``: hand errors |r - f(q)| from q (N, n)."""
+    """The JointPath of a velocity-level method on ``stack``: hand errors |r - f(q)| [m] and orientation errors (:func:`~dualarm.ik.orientation.orientation_errors`, [rad]) from q (N, n) by the stack's forward kinematics."""
     from dualarm.ik.joint_path import JointPath
 
-    R, _ = stacked_reference(stack, reference)
-    N = len(reference)
+    N, h = len(reference), len(stack.hands)
+    asked = np.hstack([reference.hands[hand].position for hand in stack.hands])
     positions = np.asarray(stack.positions.map(N)(q.T)).T
+    rotations = np.asarray(stack.rotations.map(N)(q.T)).reshape(3 * h, N, 3).transpose(1, 0, 2).reshape(N, h, 3, 3)
+    asked_rotations = np.stack([reference.hands[hand].rotation for hand in stack.hands], axis=1)
     return JointPath(
         method=method,
         joint_names=stack.joint_names,
@@ -145,7 +221,9 @@ def stack_joint_path(method: str, stack: HandStack, reference: CartesianReferenc
         qd=qd,
         status=np.zeros(N, int),
         solve_time_s=solve_time_s,
-        hand_error_m=np.linalg.norm((R - positions).reshape(N, -1, 3), axis=2),
+        hand_error_m=np.linalg.norm((asked - positions).reshape(N, -1, 3), axis=2),
+        hand_orientation_error_rad=orientation_errors(asked_rotations, rotations),
+        task_space=stack.task_space,
         hands=stack.hands,
         fixed=stack.fixed,
         extras=extras or {},

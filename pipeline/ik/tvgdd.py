@@ -9,6 +9,12 @@ At every control step the joint velocity is the solution of
 
 (eq 24 as corrected in the seeds' README: the feedback is K(r - f(theta)) of eq 16, and the linear
 term acts on the velocity) and theta is integrated by Euler, theta_{k+1} = theta_k + tau thetadot_k.
+
+The paper's task is the hands' positions (m = 3 per hand, eq 13): ``task_space = "position"``. In
+``pose`` task space (the default of a task) the hands' orientations are stacked under the positions
+in (24): J_omega(theta) thetadot = omega_d + K log(R_d R(theta)^T), with the same gain K (see
+:class:`~dualarm.ik.stack.HandStack`), so m = 6 per hand.
+
 Schemes (section 2): MVN M = I, b = 0; RMP M = I, b = lambda (theta - theta(0)); MKE M = the
 joint-space inertia matrix from the URDF, b = 0.
 
@@ -29,7 +35,7 @@ import numpy as np
 from dualarm.errors import InvalidArgumentError, StageError
 from dualarm.ik.gesture import position_bounds, velocity_bounds
 from dualarm.ik.joint_path import JointPath
-from dualarm.ik.stack import HandStack, reference_stack, stack_joint_path, stacked_reference, start_configuration
+from dualarm.ik.stack import TASK_SPACES, HandStack, reference_stack, stack_joint_path, stacked_reference, start_configuration
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference
 from dualarm.settings import with_overrides
@@ -72,6 +78,8 @@ class TvgddSettings:
             (Li-Liang's 17-DOF model); otherwise they hold their ``q0`` values.
         qp_plugin: CasADi conic plugin of the ``casadi`` backend.
         lvi_tolerance: the ``lvi`` backend's stop on ||epsilon(u)||_2 (the paper's 1e-5).
+        task_space: ``pose`` (positions and orientations of the hands in eq 24) or ``position``
+            (positions only, as in the paper).
     """
 
     scheme: str = "mvn"
@@ -87,8 +95,11 @@ class TvgddSettings:
     free_waist: bool = False
     qp_plugin: str = "daqp"
     lvi_tolerance: float = LVI_TOLERANCE
+    task_space: str = "pose"
 
     def __post_init__(self) -> None:
+        if self.task_space not in TASK_SPACES:
+            raise InvalidArgumentError("task_space", f"unknown task space '{str(self.task_space)[:80]}' (task spaces: {', '.join(TASK_SPACES)})")
         if self.scheme not in SCHEMES:
             raise InvalidArgumentError("scheme", f"unknown TV-GDD scheme '{self.scheme}' (schemes: {', '.join(SCHEMES)})")
         if self.backend not in BACKENDS:
@@ -138,7 +149,8 @@ class TvgddProblem:
         stack: the stacked hands.
         settings: the settings it was built with.
         period_s: the Euler step tau [s].
-        data: Function ``(theta, t, r, rdot, theta0) -> (M, b, J, rhs, zeta_lo, zeta_hi, lower_t, upper_t)``.
+        data: Function ``(theta, t, r, rdot, theta0) -> (M, b, J, rhs, zeta_lo, zeta_hi, lower_t, upper_t)``,
+            r the stack's target (:attr:`HandStack.target`) and rdot its task velocity (m).
         step: Function ``(theta, t, r, rdot, theta0) -> (thetadot, violation)``: data and the conic
             solve in one graph; ``violation`` is the solution's largest breach of (24) or (25),
             above :data:`FEASIBILITY_TOLERANCE` when the QP is infeasible.
@@ -174,10 +186,10 @@ class TvgddProblem:
         return step
 
     def rollout(self, samples: int) -> cs.Function:
-        """The whole Euler integration as one CasADi call (``mapaccum``): ``(theta0 (n), U (1 + 2m, N), theta_ref0 (n)) -> (theta (n, N), thetadot (n, N))`` where column k of U is [t_k; r_k; rdot_k] and theta[:, k] is the state after step k."""
-        n, m = self.stack.n, self.stack.m
-        theta, u, theta0 = cs.MX.sym("theta", n), cs.MX.sym("u", 1 + 2 * m), cs.MX.sym("theta0", n)
-        velocity, _ = self.step(theta, u[0], u[1 : 1 + m], u[1 + m :], theta0)
+        """The whole Euler integration as one CasADi call (``mapaccum``): ``(theta0 (n), U (1 + r + m, N), theta_ref0 (n)) -> (theta (n, N), thetadot (n, N))`` where column k of U is [t_k; r_k; rdot_k] (r the stack's reference size) and theta[:, k] is the state after step k."""
+        n, size = self.stack.n, self.stack.reference_size
+        theta, u, theta0 = cs.MX.sym("theta", n), cs.MX.sym("u", 1 + size + self.stack.m), cs.MX.sym("theta0", n)
+        velocity, _ = self.step(theta, u[0], u[1 : 1 + size], u[1 + size :], theta0)
         one = cs.Function("tvgdd_euler", [theta, u, theta0], [theta + self.period_s * velocity, velocity])
         return one.mapaccum("tvgdd_rollout", samples, [0], [0])
 
@@ -198,12 +210,12 @@ def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings, period_s: flo
 
 
 def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings, period_s: float, urdf_xml: str = "", all_joints: tuple[str, ...] = ()) -> TvgddProblem:
-    """Formulate the TV-GDD QP for ``stack`` with Euler step ``period_s`` [s] (``urdf_xml`` and ``all_joints`` are needed for MKE)."""
-    n, m = stack.n, stack.m
+    """Formulate the TV-GDD QP for ``stack`` with Euler step ``period_s`` [s] (``urdf_xml`` and ``all_joints`` are needed for MKE); the task rows of (24) are the stack's (its ``task_space``)."""
+    n, m, size = stack.n, stack.m, stack.reference_size
     theta = stack.theta
     t = cs.SX.sym("t")
-    r = cs.SX.sym("r", m)
-    rdot = cs.SX.sym("rdot", m)
+    r = stack.target  # positions, then (pose) rotation matrices
+    rdot = cs.SX.sym("rdot", m)  # linear, then (pose) angular velocities
     theta0 = cs.SX.sym("theta0", n)
     if settings.scheme == "mke":
         M = _inertia(stack, urdf_xml, all_joints)
@@ -211,7 +223,7 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
         M = cs.SX.eye(n)
     b = settings.rmp_lambda * (theta - theta0) if settings.scheme == "rmp" else cs.SX.zeros(n)
     J = stack.jacobian
-    rhs = rdot + settings.feedback_gain * (r - stack.position)  # eq (16)/(24)
+    rhs = rdot + settings.feedback_gain * stack.error  # eq (16)/(24): K (r - f(theta)), and (pose) K log(R_d R^T) under it
     lower_t, upper_t, zeta_lo, zeta_hi = _bands(theta, t, bounds, settings, period_s)
     inputs, names = [theta, t, r, rdot, theta0], ["theta", "t", "r", "rdot", "theta0"]
     data = cs.Function(
@@ -233,8 +245,8 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
     x = qp(h=M_, g=b_, a=J_, lba=rhs_, uba=rhs_, lbx=lo_, ubx=cs.fmax(lo_, hi_))["x"]
     violation = cs.mmax(cs.vertcat(cs.fabs(cs.mtimes(J_, x) - rhs_), lo_ - x, x - hi_))
     step = cs.Function("tvgdd_step", sym, [x, violation], names, ["thetadot", "violation"])
-    packed = cs.MX.sym("inputs", 2 * n + 1 + 2 * m)
-    pieces = cs.vertsplit(packed, [0, n, n + 1, n + 1 + m, n + 1 + 2 * m, 2 * n + 1 + 2 * m])
+    packed = cs.MX.sym("inputs", 2 * n + 1 + size + m)
+    pieces = cs.vertsplit(packed, [0, n, n + 1, n + 1 + size, n + 1 + size + m, 2 * n + 1 + size + m])
     packed_step = cs.Function("tvgdd_packed_step", [packed], step(*pieces), ["inputs"], ["thetadot", "violation"])
     return TvgddProblem(stack=stack, settings=settings, period_s=period_s, data=data, step=step, packed_step=packed_step)
 
@@ -324,32 +336,51 @@ def joint_bounds(robot: Robot, stack: HandStack, settings: TvgddSettings) -> Joi
 
 
 def settings_for(task: "Task", **overrides: object) -> TvgddSettings:
-    """TV-GDD settings from a task's ``[gesture]`` table and ``waist`` (defaults where it has none), with ``overrides`` (fields of :class:`TvgddSettings`) on top."""
+    """TV-GDD settings from a task's ``[gesture]`` table, ``waist`` and ``[ik] task_space`` (defaults where it has none), with ``overrides`` (fields of :class:`TvgddSettings`) on top."""
     g = task.spec.gesture
     base = TvgddSettings()
-    values: dict[str, object] = {"free_waist": task.spec.waist == "free"}
+    values: dict[str, object] = {"free_waist": task.spec.waist == "free", "task_space": task.spec.ik.task_space}
     if g is not None:
         values.update(feedback_gain=g.feedback_gain, nu=g.nu, t_sp_s=g.t_sp_s, c_tuning=g.c_tuning, bound_feedforward=g.bound_feedforward, goal_lower=g.goal_lower, goal_upper=g.goal_upper)
     return with_overrides(base, {**values, **overrides})
 
 
 def _infeasible(problem: TvgddProblem, args, k: int, t: float) -> StageError:
-    """A StageError naming the step, the time and the joints whose bounds collapsed."""
-    _, _, _, _, lo, hi, _, _ = (np.asarray(x).ravel() for x in problem.data(*args))
+    """A StageError naming the step, the time and the joints whose bounds collapsed, or else the joints whose bounds hold back the velocity nearest to meeting (24)."""
+    _, _, J, rhs, lo, hi, lower_t, upper_t = (np.asarray(x) for x in problem.data(*args))
+    lo, hi, lower_t, upper_t, rhs = (x.ravel() for x in (lo, hi, lower_t, upper_t, rhs))
     names = problem.stack.joint_names
     collapsed = [f"{names[i]} [{lo[i]:.4g}, {hi[i]:.4g}] rad/s" for i in np.flatnonzero(lo > hi)]
     if collapsed:
         why = "the velocity bounds of " + ", ".join(collapsed) + " collapsed (zeta- > zeta+)"
     else:
-        at_bound = [names[i] for i in np.flatnonzero(np.isclose(lo, hi, atol=1e-9))]
-        why = "no joint velocity within the bounds meets the hand-velocity equality (24)" + (f"; pinned joints: {', '.join(at_bound)}" if at_bound else "")
+        rows = f"{problem.stack.m} task rows ({problem.stack.task_space}) on {len(names)} joints"
+        why = f"no joint velocity within the bounds (25) meets the hand-velocity equality (24) ({rows}); " + _nearest(J, rhs, lo, hi, np.asarray(args[0], float), lower_t, upper_t, names)
     return StageError(f"TV-GDD step {k} (t = {t:.3f} s) is infeasible: {why}", stage="ik", sample=k, t_s=t)
+
+
+def _nearest(J: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray, theta: np.ndarray, lower_t: np.ndarray, upper_t: np.ndarray, names: tuple[str, ...]) -> str:
+    """What holds back the joint velocity within [lo, hi] nearest to J thetadot = rhs (bounded least squares, scipy's ``lsq_linear``): its miss and the joints at a bound, each with its distance to theta_new-+(t) [rad]."""
+    from scipy.optimize import lsq_linear
+
+    free = lo < hi
+    x = lo.copy()  # pinned joints (lo == hi) stay there
+    if free.any():
+        x[free] = lsq_linear(J[:, free], rhs - J[:, ~free] @ x[~free], bounds=(lo[free], hi[free]), tol=1e-12).x
+    held = []
+    for i in np.flatnonzero((x <= lo + FEASIBILITY_TOLERANCE) | (x >= hi - FEASIBILITY_TOLERANCE)):
+        side, bound, gap = ("zeta-", lo[i], theta[i] - lower_t[i]) if x[i] <= lo[i] + FEASIBILITY_TOLERANCE else ("zeta+", hi[i], upper_t[i] - theta[i])
+        held.append(f"{names[i]} at {side} = {bound:.3g} rad/s ({gap:.3g} rad from theta_new{side[-1]})")
+    miss = float(np.abs(J @ x - rhs).max())
+    sigma = float(np.linalg.svd(J, compute_uv=False).min())  # near 0: a singular configuration, where no bound is needed to miss
+    return f"the nearest velocity within them misses it by {miss:.3g} m/s or rad/s, held by {', '.join(held) if held else 'no bound'} (smallest singular value of J {sigma:.3g})"
 
 
 def solve_tvgdd(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: TvgddSettings = TvgddSettings()) -> JointPath:
     """Run TV-GDD along ``reference``: one QP per sample, Euler integration at the reference's period.
 
-    TV-GDD solves for the hands' positions only (the paper's eq 24); their orientation follows.
+    In ``position`` task space TV-GDD solves for the hands' positions only (the paper's eq 24) and
+    their orientation follows; in ``pose`` task space the orientation rows are stacked under them.
 
     Args:
         robot: the robot (its position and velocity limits bound the joints).
@@ -363,9 +394,9 @@ def solve_tvgdd(robot: Robot, reference: CartesianReference, q0: Mapping[str, fl
         ``zeta_lower``/``zeta_upper`` (eq 22) at every sample.
 
     Raises:
-        StageError: an infeasible step (names the step, the time and the collapsed joints).
+        StageError: an infeasible step (names the step, the time, and the collapsed joints or those whose bounds hold back the velocity nearest to meeting eq 24).
     """
-    stack = reference_stack(robot, reference, q0, settings.free_waist)
+    stack = reference_stack(robot, reference, q0, settings.free_waist, settings.task_space)
     bounds = joint_bounds(robot, stack, settings)
     problem = build_problem(stack, bounds, settings, reference.period_s, robot.urdf.kinematic_xml, robot.joint_names)
     R, V = stacked_reference(stack, reference)

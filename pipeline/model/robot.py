@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -11,8 +12,14 @@ from typing import Any
 
 import numpy as np
 
-from dualarm.errors import InvalidArgumentError, RobotModelError
+from dualarm.errors import InvalidArgumentError, RobotModelError, excerpt
+from dualarm.files import listing, read_text
 from dualarm.model.urdf import JointSpec, UrdfModel, load_urdf
+
+#: The range robot.toml's ``[limits]`` accept, per kind: (lowest, highest) [rad/s^2] and [rad/s^3].
+#: The lowest keeps a retimed motion's duration (path length / limit) bounded, the highest is
+#: beyond any actuator; both are far from the humanoid's (acceleration 4-12, jerk 40-150).
+LIMIT_RANGES = {"acceleration": (1e-2, 1e4), "jerk": (1e-1, 1e6)}
 
 
 @dataclass(frozen=True)
@@ -95,7 +102,7 @@ class Robot:
     def chain(self, name: str) -> Chain:
         """The chain called ``name``; RobotModelError listing the valid names otherwise."""
         if name not in self.chains:
-            raise RobotModelError(f"robot '{self.name}' has no chain '{name}' (chains: {', '.join(self.chains)})")
+            raise RobotModelError(f"robot '{excerpt(self.name, 40)}' has no chain '{excerpt(name, 40)}' (chains: {listing(self.chains)})")
         return self.chains[name]
 
     def chain_between(self, base: str, tip: str) -> Chain:
@@ -108,7 +115,7 @@ class Robot:
             if chain.hand == hand:
                 return chain
         hands = [c.hand for c in self.chains.values() if c.hand]
-        raise RobotModelError(f"robot '{self.name}' has no hand '{hand}' (hands: {', '.join(hands)})")
+        raise RobotModelError(f"robot '{excerpt(self.name, 40)}' has no hand '{excerpt(hand, 40)}' (hands: {listing(hands)})")
 
     @property
     def hands(self) -> tuple[str, ...]:
@@ -118,7 +125,7 @@ class Robot:
     def home(self, name: str) -> Mapping[str, float]:
         """Home pose ``name`` as joint -> value [rad]."""
         if name not in self.homes:
-            raise RobotModelError(f"robot '{self.name}' has no home pose '{name}' (homes: {', '.join(self.homes)})")
+            raise RobotModelError(f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(name, 40)}' (homes: {listing(self.homes)})")
         return self.homes[name]
 
     def lower_upper(self, joint_names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -138,7 +145,7 @@ class Robot:
         A task's ``[limits]`` table is applied so.
 
         Raises:
-            InvalidArgumentError: an unknown kind or joint.
+            InvalidArgumentError: an unknown kind or joint, or a value that is not a positive finite number.
         """
         limits = dict(self.limits)
         for kind, value in overrides.items():
@@ -149,8 +156,11 @@ class Robot:
             table = value if isinstance(value, Mapping) else dict.fromkeys(limits, value)
             for name, v in table.items():
                 if name not in limits:
-                    raise InvalidArgumentError(f"{kind}.{name}", f"no such joint in robot '{self.name}'")
-                limits[name] = replace(limits[name], **{kind: float(v)})
+                    raise InvalidArgumentError(f"{kind}.{excerpt(name, 40)}", f"no such joint in robot '{excerpt(self.name, 40)}'")
+                v = _number(v, f"{kind}.{name}")
+                if v <= 0:
+                    raise InvalidArgumentError(f"{kind}.{name}", f"must be positive, got {v:g}")
+                limits[name] = replace(limits[name], **{kind: v})
         return replace(self, limits=MappingProxyType(limits))
 
     def configuration(self, q: "Mapping[str, float] | str | None" = None, name: str = "q") -> Mapping[str, float]:
@@ -164,27 +174,28 @@ class Robot:
             return MappingProxyType(dict.fromkeys(self.joint_names, 0.0))
         if isinstance(q, str):
             if q not in self.homes:
-                raise InvalidArgumentError(name, f"robot '{self.name}' has no home pose '{q}' (homes: {', '.join(self.homes) or 'none'})")
+                raise InvalidArgumentError(name, f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(q, 40)}' (homes: {listing(self.homes)})")
             return self.homes[q]
         if not isinstance(q, Mapping):
             raise InvalidArgumentError(name, f"expected a home pose's name or a mapping joint name -> value, got {type(q).__name__}")
         values = dict.fromkeys(self.joint_names, 0.0)
         for joint, value in q.items():
             if joint not in self.limits:
-                raise InvalidArgumentError(f"{name}.{joint}", f"no such joint in robot '{self.name}'")
+                raise InvalidArgumentError(f"{name}.{excerpt(joint, 40)}", f"no such joint in robot '{excerpt(self.name, 40)}'")
             value = _number(value, f"{name}.{joint}")
             lim = self.limits[joint]
             if not lim.lower <= value <= lim.upper:
-                raise InvalidArgumentError(f"{name}.{joint}", f"{value} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]")
+                raise InvalidArgumentError(f"{name}.{joint}", f"{value:g} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]")
             values[joint] = value
         return MappingProxyType(values)
 
 
 def _number(value: Any, name: str) -> float:
     """``value`` as a finite float; InvalidArgumentError naming ``name`` otherwise."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) or not np.isfinite(value):
-        raise InvalidArgumentError(name, f"expected a finite number, got {value!r}")
-    return float(value)
+    number = _finite_float(value.item() if isinstance(value, (np.floating, np.integer)) else value)
+    if number is None:
+        raise InvalidArgumentError(name, f"expected a finite number, got {excerpt(repr(value))}")
+    return number
 
 
 def _limits_from_urdf(urdf: UrdfModel, acceleration: Mapping[str, float], jerk: Mapping[str, float]) -> dict[str, JointLimits]:
@@ -203,7 +214,12 @@ def _limits_from_urdf(urdf: UrdfModel, acceleration: Mapping[str, float], jerk: 
 
 
 def robot_from_urdf(urdf_path: str | Path, base: str, tip: str) -> Robot:
-    """A robot made of one chain of a bare URDF (no robot.toml): ``robot check --urdf``."""
+    """A robot made of one chain of a bare URDF (no robot.toml): ``robot check --urdf``, ``ik srs --urdf``.
+
+    Raises:
+        RobotModelError: one line naming the file and the cause when ``urdf_path`` cannot be read
+            (missing, a directory, a FIFO, ...) or is no valid URDF, or a link is not in it.
+    """
     urdf = load_urdf(urdf_path)
     chain = Chain(name="chain", base=base, tip=tip, joints=urdf.chain(base, tip))
     return Robot(
@@ -226,83 +242,118 @@ def _table(data: object, where: str) -> dict:
     return data
 
 
+def _string(value: object, at: str) -> str:
+    """``value`` if it is a non-empty string; RobotModelError naming the key ``at`` otherwise."""
+    if not isinstance(value, str) or not value:
+        raise RobotModelError(f"{at}: expected a non-empty string, got {excerpt(repr(value))}")
+    return value
+
+
 def _unknown(data: dict, allowed: set[str], where: str) -> None:
     extra = sorted(set(data) - allowed)
     if extra:
-        raise RobotModelError(f"{where}.{extra[0]}: unknown key (allowed: {', '.join(sorted(allowed))})")
+        raise RobotModelError(f"{where}{'' if where.endswith(':') else '.'}{excerpt(extra[0], 40)}: unknown key (allowed: {', '.join(sorted(allowed))})")
 
 
 def _joint_values(data: object, where: str, joints: tuple[str, ...]) -> dict[str, float]:
     values = {}
     for name, value in _table(data, where).items():
         if name not in joints:
-            raise RobotModelError(f"{where}.{name}: no such joint (joints: {', '.join(joints)})")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise RobotModelError(f"{where}.{name}: expected a number, got {value!r}")
-        values[name] = float(value)
+            raise RobotModelError(f"{where}.{excerpt(name, 40)}: no such joint (joints: {listing(joints)})")
+        number = _finite_float(value)
+        if number is None:
+            raise RobotModelError(f"{where}.{name}: expected a finite number, got {excerpt(repr(value))}")
+        values[name] = number
     return values
+
+
+def _finite_float(value: object) -> float | None:
+    """``value`` as a float if it is a finite number (a TOML integer too large for a float is not), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if np.isfinite(number) else None
+
+
+def _robot_toml(directory: Path) -> tuple[Path, dict]:
+    """``directory/robot.toml`` parsed; RobotModelError naming it and the cause otherwise."""
+    toml_path = directory / "robot.toml"
+    try:
+        os.stat(toml_path)
+    except FileNotFoundError:
+        raise RobotModelError(f"{excerpt(directory)}: no robot.toml (a robot directory holds robot.toml and its URDF)") from None
+    except (OSError, ValueError):
+        pass  # read_text names the cause
+    text = read_text(toml_path, "robot description", RobotModelError)
+    try:
+        return toml_path, tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RobotModelError(f"{excerpt(toml_path)}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise RobotModelError(f"{excerpt(toml_path)}: not valid TOML: tables or arrays nested too deeply") from None
 
 
 def load_robot(directory: str | Path) -> Robot:
     """Load ``directory/robot.toml`` and the URDF it names; a bare name that is no directory here (``humanoid``) is a shipped robot (see :mod:`dualarm.data`).
 
+    robot.toml's keys: ``name``, ``urdf`` (a file name relative to the directory), ``description``,
+    ``[chains.<name>]`` (``base``, ``tip`` links, optional ``hand``), ``[limits.acceleration]`` and
+    ``[limits.jerk]`` (joint -> value, each within :data:`LIMIT_RANGES`), ``[home.<name>]`` (joint ->
+    value within the joint's position limits [rad]).
+
     Raises:
-        RobotModelError: naming ``robot.toml:key`` for anything missing or malformed.
+        RobotModelError: one line naming ``robot.toml:key`` for anything missing or malformed, or the
+            file and the cause when robot.toml or the URDF cannot be read (see :func:`dualarm.files.read_text`).
     """
     from dualarm.data import find_robot
 
     directory = find_robot(directory)
-    toml_path = directory / "robot.toml"
-    if not toml_path.is_file():
-        raise RobotModelError(f"{directory}: no robot.toml (a robot directory holds robot.toml and its URDF)")
-    try:
-        data = tomllib.loads(toml_path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise RobotModelError(f"{toml_path}: {exc}") from None
-    where = str(toml_path)
-    _unknown(data, _TOP_KEYS, where)
+    toml_path, data = _robot_toml(directory)
+    where = excerpt(toml_path)
+    _unknown(data, _TOP_KEYS, f"{where}:")
     for key in ("name", "urdf", "chains"):
         if key not in data:
             raise RobotModelError(f"{where}:{key}: missing")
-    urdf = load_urdf(directory / str(data["urdf"]))
+    name = _string(data["name"], f"{where}:name")
+    urdf = load_urdf(directory / _string(data["urdf"], f"{where}:urdf"))
     movable = tuple(j.name for j in urdf.joints if j.movable)
 
     chains: dict[str, Chain] = {}
-    for name, spec in _table(data["chains"], f"{where}:chains").items():
-        spec = _table(spec, f"{where}:chains.{name}")
-        _unknown(spec, _CHAIN_KEYS, f"{where}:chains.{name}")
+    for chain, spec in _table(data["chains"], f"{where}:chains").items():
+        at = f"{where}:chains.{excerpt(chain, 40)}"
+        spec = _table(spec, at)
+        _unknown(spec, _CHAIN_KEYS, at)
         for key in ("base", "tip"):
             if key not in spec:
-                raise RobotModelError(f"{where}:chains.{name}.{key}: missing")
-        chains[name] = Chain(
-            name=name,
-            base=spec["base"],
-            tip=spec["tip"],
-            joints=urdf.chain(spec["base"], spec["tip"]),
-            hand=spec.get("hand"),
-        )
+                raise RobotModelError(f"{at}.{key}: missing")
+        base, tip = _string(spec["base"], f"{at}.base"), _string(spec["tip"], f"{at}.tip")
+        chains[chain] = Chain(name=chain, base=base, tip=tip, joints=urdf.chain(base, tip), hand=_string(spec["hand"], f"{at}.hand") if "hand" in spec else None)
 
     limits_data = _table(data.get("limits", {}), f"{where}:limits")
-    _unknown(limits_data, {"acceleration", "jerk"}, f"{where}:limits")
-    acceleration = _joint_values(limits_data.get("acceleration", {}), f"{where}:limits.acceleration", movable)
-    jerk = _joint_values(limits_data.get("jerk", {}), f"{where}:limits.jerk", movable)
-    for key, values in (("acceleration", acceleration), ("jerk", jerk)):
+    _unknown(limits_data, set(LIMIT_RANGES), f"{where}:limits")
+    given = {kind: _joint_values(limits_data.get(kind, {}), f"{where}:limits.{kind}", movable) for kind in LIMIT_RANGES}
+    for kind, values in given.items():
+        low, high = LIMIT_RANGES[kind]
         for joint, value in values.items():
-            if value <= 0:
-                raise RobotModelError(f"{where}:limits.{key}.{joint}: must be positive, got {value}")
-    limits = _limits_from_urdf(urdf, acceleration, jerk)
+            if not low <= value <= high:
+                raise RobotModelError(f"{where}:limits.{kind}.{joint}: {value:g} is outside the allowed range [{low:g}, {high:g}]")
+    limits = _limits_from_urdf(urdf, given["acceleration"], given["jerk"])
 
     homes: dict[str, Mapping[str, float]] = {}
-    for name, values in _table(data.get("home", {}), f"{where}:home").items():
-        given = _joint_values(values, f"{where}:home.{name}", movable)
-        for joint, value in given.items():
+    for home, values in _table(data.get("home", {}), f"{where}:home").items():
+        at = f"{where}:home.{excerpt(home, 40)}"
+        pose = _joint_values(values, at, movable)
+        for joint, value in pose.items():
             lim = limits[joint]
             if not lim.lower <= value <= lim.upper:
-                raise RobotModelError(f"{where}:home.{name}.{joint}: {value} outside the joint limits [{lim.lower}, {lim.upper}]")
-        homes[name] = MappingProxyType({n: given.get(n, 0.0) for n in movable})
+                raise RobotModelError(f"{at}.{joint}: {value:g} outside the joint limits [{lim.lower:g}, {lim.upper:g}]")
+        homes[home] = MappingProxyType({n: pose.get(n, 0.0) for n in movable})
 
     return Robot(
-        name=str(data["name"]),
+        name=name,
         directory=directory,
         urdf=urdf,
         chains=MappingProxyType(chains),

@@ -7,6 +7,7 @@ collision geometry PyBullet and Rerun understand, and kinematics needs no collis
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,7 +15,8 @@ from pathlib import Path
 import numpy as np
 from urdf_parser_py.urdf import URDF
 
-from dualarm.errors import RobotModelError
+from dualarm.errors import RobotModelError, excerpt
+from dualarm.files import listing, read_text
 
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
 
@@ -81,7 +83,7 @@ class UrdfModel:
         for j in self.joints:
             if j.name == name:
                 return j
-        raise RobotModelError(f"{self.path}: no joint '{name}' (joints: {', '.join(j.name for j in self.joints)})")
+        raise RobotModelError(f"{excerpt(self.path)}: no joint '{excerpt(name, 40)}' (joints: {listing(j.name for j in self.joints)})")
 
     def chain(self, base: str, tip: str) -> tuple[JointSpec, ...]:
         """The joints from link ``base`` down to link ``tip``, fixed joints included.
@@ -91,21 +93,23 @@ class UrdfModel:
         """
         for link in (base, tip):
             if link not in self.links:
-                raise RobotModelError(f"{self.path}: no link '{link}' (links: {', '.join(self.links)})")
+                raise RobotModelError(f"{excerpt(self.path)}: no link '{excerpt(link, 40)}' (links: {listing(self.links)})")
         by_child = {j.child: j for j in self.joints}
         path: list[JointSpec] = []
         link = tip
         while link != base:
             if link not in by_child:
-                raise RobotModelError(f"{self.path}: link '{tip}' is not below link '{base}'")
+                raise RobotModelError(f"{excerpt(self.path)}: link '{excerpt(tip, 40)}' is not below link '{excerpt(base, 40)}'")
             path.append(by_child[link])
             link = path[-1].parent
         return tuple(reversed(path))
 
 
-def _vector3(values) -> tuple[float, float, float]:
-    """Three numbers as a tuple of floats."""
+def _vector3(values, what: str) -> tuple[float, float, float]:
+    """Three finite numbers as a tuple of floats; RobotModelError naming ``what`` otherwise."""
     x, y, z = (float(v) for v in values)
+    if not all(np.isfinite((x, y, z))):
+        raise RobotModelError(f"{what}: expected finite numbers, got [{x:g}, {y:g}, {z:g}]")
     return x, y, z
 
 
@@ -113,50 +117,64 @@ def _finite(value: float | None, default: float) -> float:
     return default if value is None else float(value)
 
 
+def _parse(path: Path, text: str) -> tuple[URDF, str]:
+    """The URDF of ``text`` and its XML without <collision> elements; RobotModelError naming ``path`` for anything urdf_parser_py or the XML parser refuse."""
+    try:
+        root = ET.fromstring(text)
+        if root.tag != "robot":
+            raise RobotModelError(f"{excerpt(path)}: root element is <{excerpt(root.tag, 40)}>, a URDF needs <robot>")
+        for link in root.iter("link"):
+            for collision in link.findall("collision"):
+                link.remove(collision)
+        kinematic_xml = ET.tostring(root, encoding="unicode")
+    except ET.ParseError as exc:
+        raise RobotModelError(f"{excerpt(path)}: not valid XML ({exc})") from None
+    except RecursionError:
+        raise RobotModelError(f"{excerpt(path)}: not a valid URDF (elements nested too deeply)") from None
+    try:
+        return URDF.from_xml_string(kinematic_xml), kinematic_xml
+    except Exception as exc:  # urdf_parser_py raises bare Exception on schema errors
+        raise RobotModelError(f"{excerpt(path)}: not a valid URDF ({excerpt(exc, 200)})") from None
+
+
 def load_urdf(path: str | Path) -> UrdfModel:
     """Parse a URDF file.
 
+    Every number the kinematics use must be finite: joint origins and axes; position limits may
+    be absent (unbounded) but not NaN, and the lower not above the upper.
+
     Args:
-        path: URDF file.
+        path: URDF file (a regular file of UTF-8 text).
 
     Raises:
-        RobotModelError: the file is missing or is not a valid URDF.
+        RobotModelError: one line naming the file and the cause: it cannot be read (missing, a
+            directory, a FIFO, ... see :func:`dualarm.files.read_text`), or is not a valid URDF.
     """
     path = Path(path)
-    try:
-        tree = ET.parse(path)
-    except FileNotFoundError:
-        raise RobotModelError(f"{path}: URDF file not found") from None
-    except ET.ParseError as exc:
-        raise RobotModelError(f"{path}: not valid XML ({exc})") from None
-    root = tree.getroot()
-    if root.tag != "robot":
-        raise RobotModelError(f"{path}: root element is <{root.tag}>, a URDF needs <robot>")
-    for link in root.iter("link"):
-        for collision in link.findall("collision"):
-            link.remove(collision)
-    kinematic_xml = ET.tostring(root, encoding="unicode")
-    try:
-        robot = URDF.from_xml_string(kinematic_xml)
-    except Exception as exc:  # urdf_parser_py raises bare Exception on schema errors
-        raise RobotModelError(f"{path}: not a valid URDF ({exc})") from None
+    robot, kinematic_xml = _parse(path, read_text(path, "URDF", RobotModelError))
+    where = excerpt(path)
 
     joints = []
     for j in robot.joints:
         origin = j.origin
-        xyz = _vector3(origin.xyz if origin is not None and origin.xyz is not None else (0, 0, 0))
-        rpy = _vector3(origin.rpy if origin is not None and origin.rpy is not None else (0, 0, 0))
-        axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+        joint = f"{where}: joint '{excerpt(j.name, 40)}'"
+        xyz = _vector3(origin.xyz if origin is not None and origin.xyz is not None else (0, 0, 0), f"{joint} origin xyz")
+        rpy = _vector3(origin.rpy if origin is not None and origin.rpy is not None else (0, 0, 0), f"{joint} origin rpy")
+        axis = np.asarray(_vector3(j.axis if j.axis is not None else (1.0, 0.0, 0.0), f"{joint} axis"))
         if j.type in MOVABLE_TYPES and not np.isclose(np.linalg.norm(axis), 1.0, atol=1e-9):
-            norm = np.linalg.norm(axis)
-            if norm == 0:
-                raise RobotModelError(f"{path}: joint '{j.name}' has a zero axis")
+            norm = math.hypot(*axis)  # no overflow for huge entries
+            if norm == 0 or not math.isfinite(norm):
+                raise RobotModelError(f"{joint} has a zero axis")
             axis = axis / norm
         limit = j.limit
         lower = -np.inf if j.type == "continuous" or limit is None else _finite(limit.lower, -np.inf)
         upper = np.inf if j.type == "continuous" or limit is None else _finite(limit.upper, np.inf)
+        velocity = _finite(limit.velocity if limit is not None else None, np.inf)
+        effort = _finite(limit.effort if limit is not None else None, np.inf)
+        if np.isnan([lower, upper, velocity, effort]).any():
+            raise RobotModelError(f"{joint} has a NaN limit")
         if lower > upper:
-            raise RobotModelError(f"{path}: joint '{j.name}' has lower limit {lower} above upper limit {upper}")
+            raise RobotModelError(f"{joint} has lower limit {lower:g} above upper limit {upper:g}")
         joints.append(
             JointSpec(
                 name=j.name,
@@ -165,17 +183,21 @@ def load_urdf(path: str | Path) -> UrdfModel:
                 child=j.child,
                 origin_xyz=xyz,
                 origin_rpy=rpy,
-                axis=_vector3(axis),
+                axis=(float(axis[0]), float(axis[1]), float(axis[2])),
                 lower=lower,
                 upper=upper,
-                velocity=_finite(limit.velocity if limit is not None else None, np.inf),
-                effort=_finite(limit.effort if limit is not None else None, np.inf),
+                velocity=velocity,
+                effort=effort,
             )
         )
+    try:
+        root = robot.get_root()
+    except Exception as exc:  # urdf_parser_py asserts there is exactly one root link
+        raise RobotModelError(f"{where}: not a valid URDF ({excerpt(exc, 200) or 'no single root link'})") from None
     return UrdfModel(
         path=path,
-        name=robot.name,
-        root=robot.get_root(),
+        name=str(robot.name),
+        root=root,
         links=tuple(link.name for link in robot.links),
         joints=tuple(joints),
         kinematic_xml=kinematic_xml,

@@ -54,9 +54,9 @@ def _segment(move: HandMove | None, T0: np.ndarray, task: Task, tau: np.ndarray,
         rotation = R0 @ Rotation.from_rotvec(s[:, None] * phi).as_matrix()
         omega = sdot[:, None] * (R0 @ phi)  # R0 exp(s phi) turns about R0 phi at rate s'
         return position, rotation, velocity, omega
-    arc_axis, arc_center, arc_angle = move.arc_axis, move.arc_center, move.arc_angle_rad
-    assert arc_axis is not None and arc_center is not None and arc_angle is not None  # HandMove validates an arc whole
-    axis = np.asarray(arc_axis) / np.linalg.norm(arc_axis)
+    arc_center, arc_angle = move.arc_center, move.arc_angle_rad
+    assert arc_center is not None and arc_angle is not None  # HandMove validates an arc whole
+    axis = np.asarray(move.arc_unit_axis)  # normalised without overflow, whatever the axis's length
     centre = np.asarray(arc_center)
     turn = Rotation.from_rotvec((s * arc_angle)[:, None] * axis)
     position = centre + turn.apply(p0 - centre)

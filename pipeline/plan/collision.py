@@ -10,12 +10,8 @@ One check teleports the joints (``resetJointStatesMultiDof``), runs
 ``performCollisionDetection`` (the broad phase prefilters the pairs by their bounding boxes) and
 reads the contact points with a negative distance.
 
-Pairs not checked: a link and its parent link (PyBullet's own rule for self-collision), and two
-links joined only through links without collision geometry that are within :data:`TOUCHING_M` of each other at the zero
-configuration, margin aside (the pelvis and the torso through the waist's yaw and pitch links; the forearm and the palm through
-the wrist links), which touch by construction. Unlike the execute stage, which skips every pair
-joined through links without geometry, the upper arms are checked against the torso: they keep
-45 mm from it at rest, and an arm swung across the chest does hit it.
+Pairs not checked: those that touch by construction, one list shared with the execute stage
+(:func:`~dualarm.execute.world.disable_touching_pairs`), and the task's expected contacts.
 
 Segments are checked at configurations spaced at most ``resolution_rad`` apart in every joint
 (the max-norm), end points excluded (a tree's nodes are checked when they are made).
@@ -33,12 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from dualarm.errors import StageError
-from dualarm.execute.world import PyBulletRobot, add_environment, load_pybullet_robot, pb
+from dualarm.execute.world import add_environment, disable_touching_pairs, load_pybullet_robot, pb
 from dualarm.model.robot import Robot
-
-#: Two links joined through links without geometry and closer than this at the zero
-#: configuration (before the margin) touch by construction and are not checked [m].
-TOUCHING_M = 1e-3
 
 
 def inflated_urdf(text: str, margin_m: float) -> str:
@@ -138,7 +130,7 @@ class CollisionChecker:
         if missing:
             raise StageError(f"collision checking: the robot has no joint {missing[0]}")
         self._index = [sim.joint_index[n] for n in self.joint_names]
-        self.unchecked_pairs = self._filter_pairs(sim, self.margin_m)
+        self.unchecked_pairs = disable_touching_pairs(sim, self.margin_m)
         sim.set_positions(list(fixed), list(fixed.values()))
         self._objects = add_environment(sim, environment)
         self._link_name = {i: n for n, i in sim.link_index.items()}
@@ -153,22 +145,6 @@ class CollisionChecker:
                 pb.setCollisionFilterPair(sim.body, sim.body, sim.link_index[link], sim.link_index[other], enableCollision=0, physicsClientId=sim.client)
             else:
                 raise StageError(f"collision checking: allowed contact ({a}, {b}): '{other}' is neither a robot link nor an object of the task")
-
-    @staticmethod
-    def _filter_pairs(sim: PyBulletRobot, margin_m: float) -> frozenset[tuple[str, str]]:
-        """Disable the pairs that are not checked (module docstring); returns them by name. The robot must be at the zero configuration (as loaded)."""
-        body, client = sim.body, sim.client
-        name = {i: n for n, i in sim.link_index.items()}
-        skipped: set[tuple[str, str]] = set()
-        for link, (up, through_bare) in sim.solid_parents().items():
-            points = pb.getClosestPoints(body, body, 1.0, link, up, physicsClientId=client)  # inflated shapes:
-            touching = bool(points) and min(p[8] for p in points) + 2 * margin_m < TOUCHING_M  # distance before the margin
-            if through_bare and not touching:
-                continue
-            pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
-            first, second = sorted((name[link], name[up]))
-            skipped.add((first, second))
-        return frozenset(skipped)
 
     def _contact_points(self, q: np.ndarray) -> list:
         """PyBullet's contact points of the robot at ``q`` [rad] (timed and counted as a check)."""

@@ -38,7 +38,7 @@ def _seed_once(seed: int) -> None:
     global _seeded
     if not _seeded:
         ou.setLogLevel(ou.LOG_ERROR)
-        ou.RNG.setSeed(int(seed) + 1)  # OMPL rejects seed 0
+        ou.RNG.setSeed(int(seed) % (2**64 - 1) + 1)  # OMPL takes 1 .. 2**64 - 1; a seed may be any integer >= 0
         _seeded = True
 
 

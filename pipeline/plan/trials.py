@@ -5,11 +5,14 @@ trials). ``DIR/plan_trials.csv`` has a row per trial; ``DIR/plan_summary.json`` 
 the planning time's median, 95th percentile and mean, the medians of nodes, goals, collision
 checks and path length, the mean time of one collision check, the paper's figure, and the run
 directory of the recorded plan. Both files are written whole or not at all (written beside, then
-renamed).
+renamed). ``DIR`` is a plan directory and the recordings directory a recordings one, both claimed
+before the first trial (:func:`~dualarm.record.run_dir.claim_output_dir`): a directory holding
+files dualarm did not write is refused, and ``DIR`` stays locked until the command ends.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -18,10 +21,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from dualarm.errors import StageError
 from dualarm.plan.problem import PlanningProblem, PlanningSettings
-from dualarm.record.run_dir import write_whole
+from dualarm.record.run_dir import claim_output_dir, write_whole
 from dualarm.settings import as_record
-from dualarm.tasks import load_task
+from dualarm.tasks import Task, load_task
+from dualarm.verdict import Verdict
 
 #: Li & Liang's average planning time for their bowl grasp [s].
 PAPER_PLANNING_TIME_S = 4.21088
@@ -36,12 +41,14 @@ class TrialsResult:
         summary: the JSON summary's contents.
         directory: where the CSV and the JSON are.
         run: the recorded run of the first successful plan (None when no trial succeeded).
+        verdict: that run's verdict (None when no trial succeeded).
     """
 
     table: pd.DataFrame
     summary: dict
     directory: Path
     run: Path | None
+    verdict: Verdict | None = None
 
 
 def run_trials(
@@ -58,11 +65,23 @@ def run_trials(
     """Plan ``trials`` times with ``planner``, write the CSV and the summary into ``out_dir``, and record the first successful plan through retime, smooth and execute under ``recordings``.
 
     ``progress`` is told the trials done and the total after each trial.
+
+    Raises:
+        OutputError: ``out_dir`` or ``recordings`` cannot be used (before any trial).
     """
+    task = load_task(task_file)
+    with contextlib.ExitStack() as claims:
+        claims.enter_context(claim_output_dir(out_dir, "plan"))
+        claims.enter_context(claim_output_dir(recordings, "recordings"))
+        return _run_trials(task, planner, trials, seed, Path(out_dir), settings, recordings, command, progress)
+
+
+def _run_trials(
+    task: Task, planner: str, trials: int, seed: int, out_dir: Path, settings: PlanningSettings, recordings: Path, command: list[str] | None, progress: Callable[[int, int], None]
+) -> TrialsResult:
     from dualarm.run import build_stages, record_stages
     from dualarm.stages import PlanStage
 
-    task = load_task(task_file)
     rows, first = [], None
     with PlanningProblem(task, settings) as problem:
         for i in range(trials):
@@ -115,9 +134,16 @@ def run_trials(
         trial_seed, result = first
         stages = build_stages(task, planner, settings=settings, seed=trial_seed)
         stages = tuple(replace(s, planned=result) if isinstance(s, PlanStage) else s for s in stages)
-        run = record_stages(task, stages, out_dir=recordings, seed=trial_seed, command=command).directory
+        try:
+            recorded = record_stages(task, stages, out_dir=recordings, seed=trial_seed, command=command)
+            run, verdict = recorded.directory, recorded.verdict
+        except StageError as exc:  # the plan could not be played (refused before execution, ...): a failed run, kept
+            verdict = Verdict.failure(str(exc), exc.violations)
+            run = exc.run_directory
         summary["run"] = str(run)
         summary["run_seed"] = trial_seed
+        summary["run_status"] = verdict.status
+        summary["run_first_violation"] = verdict.first
     write_whole(out_dir / "plan_trials.csv", table.to_csv(index=False))
     write_whole(out_dir / "plan_summary.json", json.dumps(summary, indent=2) + "\n")
-    return TrialsResult(table, summary, out_dir, run)
+    return TrialsResult(table, summary, out_dir, run, verdict if first is not None else None)

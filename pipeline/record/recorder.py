@@ -36,7 +36,7 @@ if TYPE_CHECKING:  # pybullet is imported only by runs that execute
     from dualarm.execute.simulate import ExecutionLog
 
 #: MCAP topic family of each stage.
-STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "execute": "/execute"}
+STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "approach": "/approach", "execute": "/execute"}
 TIMELINE = "time"
 HAND_COLORS = {"left": (40, 120, 230), "right": (230, 90, 40)}
 #: Period of the robot's animation (/tf and the Rerun URDF) for stages sampled faster [s].
@@ -154,12 +154,14 @@ class Recorder(NullSink):
         self._rerun_motion(stage, np.array([t]), {n: np.array([v]) for n, v in q.items()})
 
     def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
-        """The IK (or plan) stage's product, under ``stage``'s topics: ``/ik/limits`` once (the robot's position limits and ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` (with each hand's ``arm_angles`` [rad], (N,) per hand) and (TV-GDD) ``/ik/bounds`` per sample, the robot on ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's position, velocity and bounds and the arm angles as time series."""
+        """The IK (or plan) stage's product, under ``stage``'s topics: ``/ik/limits`` once (the robot's position limits and ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` (with each hand's position error [m], orientation error [rad] when measured, and ``arm_angles`` [rad], (N,) per hand) and (TV-GDD) ``/ik/bounds`` per sample, the robot on ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's position, velocity and bounds, the hand errors and the arm angles as time series."""
         family = STAGE_TOPICS[stage]
         names = path.joint_names
         self._limits(stage, names, {"velocity": velocity_limits})
         sample = self._json(f"{family}/sample", schemas.IK_SAMPLE)
         bounds = self._json(f"{family}/bounds", schemas.JOINT_BOUNDS) if path.extras else None
+        angle = path.hand_orientation_error_rad
+        measured = bool(np.isfinite(angle).all())  # a planner's path measures no orientation: the field is left out
         for k in range(len(path)):
             t, rep = float(path.t[k]), int(path.rep[k])
             sample.log(
@@ -172,6 +174,7 @@ class Recorder(NullSink):
                     "position": dict(zip(names, path.q[k].tolist())),
                     "velocity": dict(zip(names, path.qd[k].tolist())),
                     "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist())),
+                    **({"hand_orientation_error_rad": dict(zip(path.hands, angle[k].tolist())), "task_space": path.task_space} if measured else {}),
                     "arm_angle_rad": {hand: float(psi[k]) for hand, psi in arm_angles.items()},
                 },
                 log_time=_ns(t),
@@ -184,6 +187,8 @@ class Recorder(NullSink):
         for key, v in path.extras.items():
             self._series(f"{stage}/{key}", path.t, dict(zip(names, v.T)))
         self._series(f"{stage}/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T)))
+        if measured:
+            self._series(f"{stage}/hand_orientation_error_rad", path.t, dict(zip(path.hands, angle.T)))
         self._series(f"{stage}/solve_time_s", path.t, {"all": path.solve_time_s})
         self._series(f"{stage}/arm_angle_rad", path.t, arm_angles)
 
@@ -212,7 +217,7 @@ class Recorder(NullSink):
         hand_positions: Mapping[str, np.ndarray],
         extras: Mapping[str, np.ndarray] = {},
     ) -> None:
-        """A retime or smooth stage's product (``traj.stage``).
+        """A retime, smooth or approach stage's product (``traj.stage``; the approach on its own clock).
 
         MCAP: ``/<stage>/limits`` once (position limits and ``limits``: kind -> (n,) values, kinds
         ``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3]), ``/<stage>/sample``
@@ -247,18 +252,29 @@ class Recorder(NullSink):
         if "deviation_rad" in extras:
             self._series(f"{stage}/deviation_rad", traj.t, dict(zip(names, extras["deviation_rad"].T)))
 
-    def execution(self, log: "ExecutionLog", hand_error_m: Mapping[str, np.ndarray], expected: set[tuple[str, str]]) -> None:
+    def execution(self, log: "ExecutionLog") -> None:
         """The execute stage's product.
 
         MCAP: ``/execute/sample`` per physics step (measured joints, the command, hand positions,
-        ``hand_error_m``: hand -> (K,) [m], contact counts), ``/execute/contacts`` once per pair
-        that touched (``expected``: sorted pairs the task expects), the robot on ``/tf`` as
-        ``execute/<link>``. Rerun: the robot under ``/execute``, the measured hand traces under
-        ``/world/execute``, and under ``/plots/execute`` the hand errors, contacts and the joints'
-        tracking error.
+        ``hand_error_m``: hand -> [m], contact counts), ``/execute/contacts`` per step and pair
+        that touched (both names, the depth, whether the task expects it), the robot on ``/tf`` as
+        ``execute/<link>``; the approach played before, on its own clock, as
+        ``/approach/executed`` and ``/approach/contacts``. Rerun: the robot under ``/execute``,
+        the measured hand traces under ``/world/execute``, and under ``/plots/execute`` the hand
+        errors, contacts and the joints' tracking error (``/plots/approach/executed_*`` for the
+        approach).
         """
+        self._executed(log, f"{STAGE_TOPICS['execute']}/sample", f"{STAGE_TOPICS['execute']}/contacts", "execute")
+        if len(log.t):
+            self._animation("execute", log.t, log.joint_names, log.q, log.fixed)
+        self._hand_traces("execute", {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()})
+        if log.approach is not None:
+            self._executed(log.approach, f"{STAGE_TOPICS['approach']}/executed", f"{STAGE_TOPICS['approach']}/contacts", "approach/executed_")
+
+    def _executed(self, log: "ExecutionLog", samples: str, contacts: str, plots: str) -> None:
+        """One played trajectory's steps on topic ``samples``, its contacts on ``contacts``, its plots under ``plots/<plots>...``."""
         names = log.joint_names
-        channel = self._json(f"{STAGE_TOPICS['execute']}/sample", schemas.EXECUTED_SAMPLE)
+        channel = self._json(samples, schemas.EXECUTED_SAMPLE)
         positions = {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()}
         for k in range(len(log.t)):
             t = float(log.t[k])
@@ -270,23 +286,20 @@ class Recorder(NullSink):
                     "velocity": dict(zip(names, log.qd[k].tolist())),
                     "command": dict(zip(names, log.q_command[k].tolist())),
                     "hand_position": {hand: _vec(p[k]) for hand, p in positions.items()},
-                    "hand_error_m": {hand: float(e[k]) for hand, e in hand_error_m.items()},
+                    "hand_error_m": {hand: float(e[k]) for hand, e in log.hand_error_m.items()},
                     "self_contacts": int(log.self_contacts[k]),
                     "environment_contacts": int(log.environment_contacts[k]),
                     "expected_contacts": int(log.expected_contacts[k]),
                 },
                 log_time=_ns(t),
             )
-        end = float(log.t[-1]) if len(log.t) else 0.0
-        contacts = self._json(f"{STAGE_TOPICS['execute']}/contacts", schemas.CONTACT_PAIR)
-        for (first, second), steps in log.contact_pairs.items():
-            contacts.log({"t": end, "rep": 0, "first": first, "second": second, "expected": (first, second) in expected, "steps": int(steps)}, log_time=_ns(end))
-        if len(log.t):
-            self._animation("execute", log.t, names, log.q, log.fixed)
-        self._hand_traces("execute", positions)
-        self._series("execute/hand_error_m", log.t, hand_error_m)
-        self._series("execute/tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
-        self._series("execute/contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
+        touching = self._json(contacts, schemas.CONTACT)
+        for e in log.contact_events:
+            touching.log({"t": e.t_s, "rep": e.rep, "first": e.first, "second": e.second, "depth_m": e.depth_m, "expected": e.expected}, log_time=_ns(e.t_s))
+        sep = "" if plots.endswith("_") else "/"
+        self._series(f"{plots}{sep}hand_error_m", log.t, dict(log.hand_error_m))
+        self._series(f"{plots}{sep}tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
+        self._series(f"{plots}{sep}contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
 
     def environment(self, objects) -> None:
         """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate) and in Rerun under ``/world/environment/<name>``."""

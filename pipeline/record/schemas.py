@@ -56,6 +56,8 @@ JOINT_STATE = {
 }
 
 _JOINT_MAP = {"type": "object", "additionalProperties": _NUMBER}
+#: hand -> number; the usual hands named, so that Foxglove offers them in its plot paths.
+_HAND_MAP = {"type": "object", "properties": {"left": _NUMBER, "right": _NUMBER}, "additionalProperties": _NUMBER}
 
 IK_SAMPLE = {
     "title": "dualarm.IkSample",
@@ -69,7 +71,12 @@ IK_SAMPLE = {
         "solve_time_s": {**_NUMBER, "description": "solver time of this sample [s]"},
         "position": {**_JOINT_MAP, "description": "joint -> position [rad]"},
         "velocity": {**_JOINT_MAP, "description": "joint -> commanded velocity [rad/s]"},
-        "hand_error_m": {**_JOINT_MAP, "description": "hand -> |r - f(q)| [m]"},
+        "hand_error_m": {**_HAND_MAP, "description": "hand -> |r - f(q)| [m]"},
+        "hand_orientation_error_rad": {
+            **_HAND_MAP,
+            "description": "hand -> angle of R_asked^T R_reached [rad] (IK stages; measured even where the method solved positions only)",
+        },
+        "task_space": {"type": "string", "enum": ["pose", "position"], "description": "what the method solved: the hands' poses, or their positions only"},
         "arm_angle_rad": {**_JOINT_MAP, "description": "hand -> arm angle psi of MC-Inverse eq (1) [rad]"},
     },
     "required": ["t", "rep", "method", "status", "solve_time_s", "position", "velocity", "hand_error_m", "arm_angle_rad"],
@@ -142,17 +149,17 @@ EXECUTED_SAMPLE = {
     "required": ["t", "rep", "position", "velocity", "command", "hand_position", "hand_error_m", "self_contacts", "environment_contacts", "expected_contacts"],
 }
 
-CONTACT_PAIR = {
-    "title": "dualarm.ContactPair",
-    "description": "A pair of bodies that touched during execution (logged once per pair, at the end).",
+CONTACT = {
+    "title": "dualarm.Contact",
+    "description": "A pair of bodies touching in one physics step of the execution.",
     "type": "object",
     "properties": {
         "t": _NUMBER,
         "rep": {"type": "integer"},
         "first": {"type": "string", "description": "robot link or object"},
         "second": {"type": "string", "description": "robot link or object"},
+        "depth_m": {"type": "number", "description": "deepest penetration in the step [m]"},
         "expected": {"type": "boolean", "description": "named in the task's expected_contacts"},
-        "steps": {"type": "integer", "description": "physics steps in which they touched"},
     },
-    "required": ["t", "rep", "first", "second", "expected", "steps"],
+    "required": ["t", "rep", "first", "second", "depth_m", "expected"],
 }

@@ -44,8 +44,8 @@ class Sink(Protocol):
     def trajectory(self, traj: "JointTrajectory", limits: Mapping[str, np.ndarray], hand_positions: Mapping[str, np.ndarray], extras: Mapping[str, np.ndarray] = ...) -> None:
         """A retime or smooth stage's product, its limits (kind -> (n,)), the hands' positions (M, 3) [m] and extra per-sample arrays."""
 
-    def execution(self, log: "ExecutionLog", hand_error_m: Mapping[str, np.ndarray], expected: set[tuple[str, str]]) -> None:
-        """The execute stage's product, each hand's tracking error (K,) [m], and the expected contact pairs."""
+    def execution(self, log: "ExecutionLog") -> None:
+        """The execute stage's product (with its approach's log, when the approach was played)."""
 
     def metrics(self, values: Mapping[str, float], t: float) -> None:
         """The run's metrics, at motion time ``t`` [s]."""
@@ -96,7 +96,7 @@ class NullSink:
     def trajectory(self, traj: "JointTrajectory", limits: Mapping[str, np.ndarray], hand_positions: Mapping[str, np.ndarray], extras: Mapping[str, np.ndarray] = {}) -> None:
         """Ignored."""
 
-    def execution(self, log: "ExecutionLog", hand_error_m: Mapping[str, np.ndarray], expected: set[tuple[str, str]]) -> None:
+    def execution(self, log: "ExecutionLog") -> None:
         """Ignored."""
 
     def metrics(self, values: Mapping[str, float], t: float) -> None:

@@ -7,23 +7,32 @@ field the largest absolute difference over the aligned rows is reported, with wh
 and where the difference first exceeds the tolerance. Rows present in one run only, fields or
 topics present in one run only and differing text count as beyond any tolerance.
 
-Wall-clock measurements (solve, planning and collision-check times) differ on every run; they are
-reported but never judged.
+The runs' files are judged too: the manifest's ``status`` (rows of topic ``manifest.json``: two
+runs of different verdicts are never identical) and every key of ``metrics.json`` (rows of topic
+``metrics.json``, a number's absolute difference; a key in one run only, or null in one run only,
+is beyond any tolerance).
+
+Wall-clock measurements (solve, planning, check and wall times, in topics and metrics alike)
+differ on every run; they are reported but never judged.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from dualarm.errors import excerpt
 from dualarm.record.readback import RunData, read_run
 
-#: Fields that are wall-clock measurements: listed, never judged.
-WALL_CLOCK = re.compile(r"(solve|planning|check)_time")
+#: Fields and metrics that are wall-clock measurements: listed, never judged.
+WALL_CLOCK = re.compile(r"(solve|planning|check|wall)_time")
+#: The ``topic`` of the rows judging the runs' files rather than a topic of their recordings.
+MANIFEST_ROWS, METRICS_ROWS = "manifest.json", "metrics.json"
 _KEYS = ["rep", "t_ns", "k"]
 #: Columns of :attr:`Comparison.table`.
 COLUMNS = ("topic", "field", "max_difference", "t", "rep", "first_beyond_t", "first_beyond_rep", "rows_a", "rows_b", "aligned", "wall_clock", "note")
@@ -150,15 +159,47 @@ def compare_topic(topic: str, a: pd.DataFrame, b: pd.DataFrame, tolerance: float
     return rows
 
 
+def compare_status(a: RunData, b: RunData) -> list[dict[str, object]]:
+    """The row of :attr:`Comparison.table` judging the runs' statuses (``complete``, ``violated``, ``failed``...): 0 when equal, inf otherwise."""
+    if a.status == b.status:
+        return [_row(MANIFEST_ROWS, "status", 1, 1, 1, max_difference=0.0)]
+    return [_row(MANIFEST_ROWS, "status", 1, 1, 1, note=f"{excerpt(repr(a.status))} vs {excerpt(repr(b.status))}")]
+
+
+def compare_metrics(a: Mapping[str, float | None], b: Mapping[str, float | None]) -> list[dict[str, object]]:
+    """Rows of :attr:`Comparison.table` for every key of two runs' ``metrics.json``: the absolute difference; inf for a key of one run only or a value null in one run only (0 when null in both)."""
+    rows = []
+    for key in sorted(set(a) | set(b)):
+        counts = (int(key in a), int(key in b), int(key in a and key in b))
+        if key not in a or key not in b:
+            rows.append(_row(METRICS_ROWS, key, *counts, note=f"only in {'A' if key in a else 'B'}"))
+            continue
+        x, y = a[key], b[key]
+        if x is None or y is None:
+            same = x is None and y is None
+            rows.append(_row(METRICS_ROWS, key, *counts, max_difference=0.0 if same else np.inf, note="" if same else f"null in {'A' if x is None else 'B'} only"))
+        else:
+            rows.append(_row(METRICS_ROWS, key, *counts, max_difference=_difference(float(x), float(y))))
+    return rows
+
+
+def _difference(x: float, y: float) -> float:
+    """|x - y|: 0 when equal (infinities included) or both NaN, inf when NaN in one only."""
+    if x == y or (np.isnan(x) and np.isnan(y)):
+        return 0.0
+    gap = abs(x - y)
+    return np.inf if np.isnan(gap) else gap
+
+
 def compare_runs(run_a: str | Path | RunData, run_b: str | Path | RunData, tolerance: float = 0.0) -> Comparison:
-    """Compare every topic and field of two runs (see the module's docstring).
+    """Compare two runs' statuses, metrics and every topic and field (see the module's docstring).
 
     Raises:
         RecordingError: a run directory is missing or its recording unreadable.
     """
     a = run_a if isinstance(run_a, RunData) else read_run(run_a)
     b = run_b if isinstance(run_b, RunData) else read_run(run_b)
-    rows: list[dict[str, object]] = []
+    rows = compare_status(a, b) + compare_metrics(a.metrics, b.metrics)
     for topic in dict.fromkeys([*a.topics, *b.topics]):
         if topic not in a.topics or topic not in b.topics:
             present = a.topics if topic in a.topics else b.topics

@@ -4,7 +4,11 @@ The MC-Inverse paper's experiments (section V.B-V.D): the same task is repeated 
 is judged by whether its joints and arm angles repeat. Every method is run as a normal recorded
 run (``DIR/runs/<task>/<run-id>``); the comparison reads the runs back like any report and writes
 ``DIR/consistency.csv`` (a row per method), ``DIR/consistency.md`` and the figures. A method that
-fails is a row with its error, not the end of the comparison.
+fails is a row with its error, not the end of the comparison; each row carries its run's verdict
+and first violation (a baseline failing a repetition is the paper's point, not an error). Beside the joint deviations stands
+the largest hand orientation error; a method that solved the hands' positions only (TV-GDD and pinv
+in ``position`` task space, ``ik.orientation_solved`` 0) is marked "position only", since its
+repeatability is not bought at the same price as a full-pose method's.
 """
 
 from __future__ import annotations
@@ -18,13 +22,14 @@ import pandas as pd
 
 from dualarm.errors import DualarmError
 from dualarm.record.readback import RunData, read_run
-from dualarm.record.run_dir import write_whole
+from dualarm.record.run_dir import claim_output_dir, write_whole
 from dualarm.report import figures
 
 #: Columns of consistency.csv after ``method``: DESIGN.md's ``ik.*`` metric names without the prefix.
 COLUMNS = (
     "rep_joint_deviation_max_rad",
     "rep_arm_angle_deviation_max_rad",
+    "orientation_error_max_rad",
     "closure_error_max_rad",
     "failed_reps",
     "failures",
@@ -33,7 +38,10 @@ COLUMNS = (
     "solve_time_mean_s",
     "solve_time_median_s",
     "solve_time_total_s",
+    "orientation_solved",
 )
+#: The mark of a method that solved the hands' positions only (``ik.orientation_solved`` 0).
+POSITION_ONLY = "position only"
 #: Methods compared by default: MC-Inverse and the paper's baselines, the other pose-level solvers,
 #: then the velocity-level ones of TV-GDD.
 DEFAULT_METHODS = ("mc-inverse", "trac-ik", "ikfast-style", "pybullet", "dls-svd", "tvgdd", "pinv")
@@ -46,7 +54,9 @@ class Consistency:
     """What :func:`run_consistency` wrote.
 
     Attributes:
-        table: a row per method: ``method``, ``status``, ``error``, ``run`` and :data:`COLUMNS`.
+        table: a row per method: ``method``, ``status`` (the run's verdict: complete, violated or
+            failed), ``error`` (a failed run's), ``violation`` (a violated run's first, with the
+            count of the others), ``run`` and :data:`COLUMNS`.
         csv: consistency.csv.
         markdown: consistency.md.
         figures: the PNG files.
@@ -84,6 +94,7 @@ def run_consistency(
         raise DualarmError(f"unknown IK method '{(unknown or [''])[0]}' (methods: {', '.join(IK_METHODS)})")
     task = load_task(task_file, repetitions)
     out_dir = Path(out_dir)
+    _claim = claim_output_dir(out_dir, "consistency")  # refuses a directory holding files dualarm did not write; locked until this returns
     runs_dir = out_dir / "runs"
     rows: list[dict[str, object]] = []
     samples: dict[str, pd.DataFrame] = {}
@@ -97,20 +108,22 @@ def run_consistency(
             run = read_run(recorded.directory)
         except DualarmError as exc:
             failed = sorted(set((runs_dir / task.name).glob("*")) - before)
-            rows.append({"method": method, "status": "failed", "error": str(exc), "run": str(failed[-1]) if failed else ""})
+            rows.append({"method": method, "status": "failed", "error": str(exc), "violation": "", "run": str(failed[-1]) if failed else ""})
             continue
         rows.append(_row(method, run))
         samples[method] = run["/ik/sample"]
-    table = pd.DataFrame(rows, columns=["method", "status", "error", "run", *COLUMNS])
+    table = pd.DataFrame(rows, columns=["method", "status", "error", "violation", "run", *COLUMNS])
     written = _figures(task, samples, out_dir)
-    csv = write_whole(out_dir / "consistency.csv", table[["method", *COLUMNS, "status", "error", "run"]].to_csv(index=False))
+    csv = write_whole(out_dir / "consistency.csv", table[["method", *COLUMNS, "status", "violation", "error", "run"]].to_csv(index=False))
     markdown = write_whole(out_dir / "consistency.md", _markdown(task, table, written, repetitions))
     return Consistency(table=table, csv=csv, markdown=markdown, figures=written)
 
 
 def _row(method: str, run: RunData) -> dict[str, object]:
     metrics = {k.removeprefix("ik."): v for k, v in run.metrics.items() if k.startswith("ik.")}
-    return {"method": method, "status": run.status, "error": "", "run": str(run.directory), **{c: metrics.get(c, np.nan) for c in COLUMNS}}
+    violations = run.violations or [""]
+    first = violations[0] + (f" (and {len(violations) - 1} more)" if len(violations) > 1 else "")
+    return {"method": method, "status": run.status, "error": "", "violation": first, "run": str(run.directory), **{c: metrics.get(c, np.nan) for c in COLUMNS}}
 
 
 def _figures(task, samples: dict[str, pd.DataFrame], out_dir: Path) -> tuple[Path, ...]:
@@ -134,19 +147,25 @@ def _markdown(task, table: pd.DataFrame, written: tuple[Path, ...], repetitions:
         f"# Consistency: {task.name}, {reps} repetitions",
         "",
         f"Task file `{task.file}`. Rep 0 is the reference; deviations compare samples at the same place of every repetition where both succeeded.",
+        f"orientation_error_max_rad is the largest angle between an asked and a reached hand orientation; a method marked ({POSITION_ONLY}) solved the hands' positions only, its orientation followed.",
         "",
     ]
-    header = ["method", *COLUMNS]
+    header = ["method", "verdict", *COLUMNS, "first violation"]
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for _, row in table.iterrows():
-        if row["status"] != "complete":
-            lines.append(f"| {row['method']} | failed: {row['error']} |" + " |" * (len(COLUMNS) - 1))
+        if row["status"] == "failed":
+            lines.append(f"| {row['method']} | failed: {row['error']} |" + " |" * len(COLUMNS))
             continue
-        lines.append("| " + " | ".join([row["method"], *(_cell(row[c]) for c in COLUMNS)]) + " |")
+        lines.append("| " + " | ".join([method_label(row), str(row["status"]), *(_cell(row[c]) for c in COLUMNS), str(row["violation"])]) + " |")
     lines += ["", "Runs:", ""] + [f"- {row['method']}: `{row['run']}`" for _, row in table.iterrows() if row["run"]]
     if written:
         lines += ["", "Figures:", ""] + [f"![{p.stem}]({p.name})" for p in written]
     return "\n".join(lines) + "\n"
+
+
+def method_label(row: pd.Series) -> str:
+    """A table row's method, marked "(position only)" when it did not solve the asked orientation (``orientation_solved`` 0)."""
+    return f"{row['method']} ({POSITION_ONLY})" if row.get("orientation_solved") == 0 else str(row["method"])
 
 
 def _cell(value: float) -> str:

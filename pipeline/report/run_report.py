@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from dualarm.record.readback import RunData, read_run
+from dualarm.record.readback import RunData, path_name, read_run
+from dualarm.record.run_dir import claim_output_dir
 from dualarm.report import figures
 
 
@@ -64,9 +65,14 @@ def write_report(run_dir: str | Path | RunData, out_dir: str | Path | None = Non
     Figures by content: with ``/ik/bounds``, joints against theta_new+- and velocities against
     zeta_new+- (TV-GDD Figs 5-6, or 3-4 for pinv) and the bound profiles of eq (19) (Fig. 2); with
     ``/ik/sample``, the hand position errors (Fig. 8).
+
+    Raises:
+        RecordingError: the run cannot be read, or (without ``out_dir``) its task or run id
+            cannot name a directory (:func:`~dualarm.record.readback.path_name`).
     """
     data = run_dir if isinstance(run_dir, RunData) else read_run(run_dir)
-    out = Path(out_dir) if out_dir is not None else Path("reports") / str(data.manifest.get("task")) / data.run_id
+    out = Path(out_dir) if out_dir is not None else Path("reports") / path_name(data.task, "task", data.directory) / path_name(data.run_id, "run_id", data.directory)
+    _claim = claim_output_dir(out, "report")  # refuses a directory holding files dualarm did not write; locked until this returns
     out.mkdir(parents=True, exist_ok=True)
     m = data.manifest
     lines = [f"# Run {data.run_id}", "", f"- task: `{m.get('task')}` ({m.get('task_file')})", f"- status: {data.status}", f"- stages: {', '.join(data.stages)}"]
@@ -234,7 +240,11 @@ def write_runs_report(run_dirs: Sequence[str | Path], out_dir: str | Path | None
     runs = [read_run(d) for d in run_dirs]
     table = runs_table(runs)
     tasks = sorted(set(table["task"].astype(str)))
-    out = Path(out_dir) if out_dir is not None else Path("reports") / (tasks[0] if len(tasks) == 1 else "runs") / f"{runs[0].run_id}+{len(runs) - 1}"
+    if out_dir is None:  # named after the recordings' fields only once they are checked to be plain names
+        first = runs[0]
+        out_dir = Path("reports") / (path_name(first.task, "task", first.directory) if len(tasks) == 1 else "runs") / f"{path_name(first.run_id, 'run_id', first.directory)}+{len(runs) - 1}"
+    out = Path(out_dir)
+    _claim = claim_output_dir(out, "report")  # refuses a directory holding files dualarm did not write; locked until this returns
     out.mkdir(parents=True, exist_ok=True)
     names = _unique([f"{run.manifest.get('task')}-{run.run_id}" for run in runs])
     summaries = [write_report(run, out / _slug(name)) for run, name in zip(runs, names)]

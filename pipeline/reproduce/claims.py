@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +39,10 @@ class Claim:
         comparison: ours against theirs (a ratio, a difference), or what decides the verdict.
         agrees: whether ours bears the claim out (None where there is nothing to judge).
         part: the reproduction part that measured it (:data:`dualarm.reproduce.experiments.PARTS`).
+        verdict: the verdicts of the runs it reads (``method: status`` and a violated run's first
+            violation), "" where it reads none.
+        contradicted: a run the claim needs ``complete`` (MC-Inverse's, TV-GDD's executed ball game,
+            the carried box, the planner's executed plan) is not: the claim cannot stand on it.
     """
 
     paper: str
@@ -49,6 +53,24 @@ class Claim:
     comparison: str
     agrees: bool | None
     part: str
+    verdict: str = ""
+    contradicted: bool = False
+
+
+def run_verdict(label: str, run: RunData) -> str:
+    """``label: status``, with a violated or failed run's first violation or error and how many more."""
+    violations = run.violations
+    first = run.error or (violations[0] if violations else "")
+    more = f"; {len(violations) - 1} more" if len(violations) > 1 else ""
+    return f"{label}: {run.status}" + (f" ({first}{more})" if first else "")
+
+
+def _needing(claim: Claim, label: str, run: RunData | None) -> Claim:
+    """``claim`` carrying ``run``'s verdict, contradicted (and not agreeing) unless that run is complete."""
+    if run is None:
+        return claim
+    contradicted = run.status != "complete"
+    return replace(claim, verdict=run_verdict(label, run), contradicted=contradicted, agrees=False if contradicted else claim.agrees)
 
 
 def _g(value: float, unit: str = "", digits: int = 3) -> str:
@@ -76,7 +98,9 @@ def pinv_claims(pinv: RunData) -> list[Claim]:
         ("velocity", "rad/s", "Fig. 4", "pinv's joint velocities exceed their bounds ζ_new±"),
     ):
         value, ours = _largest(excursions(pinv["/ik/sample"], pinv["/ik/bounds"], kind), unit)
-        claims.append(Claim("TV-GDD", where, text, "yes (drawn, no figure given)", ours, "outside by more than 0" if value > ZERO else "stays inside", value > ZERO, "ball-game-pinv"))
+        claims.append(
+            Claim("TV-GDD", where, text, "yes (drawn, no figure given)", ours, "outside by more than 0" if value > ZERO else "stays inside", value > ZERO, "ball-game-pinv", run_verdict("pinv", pinv))
+        )
     return claims
 
 
@@ -146,19 +170,18 @@ def tvgdd_claims(tvgdd: RunData) -> list[Claim]:
     executed = tvgdd["/execute/sample"]
     tracking = float(hand_errors(executed).to_numpy().max())
     contacts = _unexpected_contact_steps(tvgdd)
-    claims.append(
-        Claim(
-            "TV-GDD",
-            "Fig. 7",
-            "the motion runs on the robot and keeps the hand gesture",
-            "done on the physical robot",
-            f"executed in PyBullet: tracking error {tracking * 1e6:.2f} µm, {contacts} steps with unexpected contacts",
-            "",
-            contacts == 0 and tracking < 1e-3,
-            "ball-game-tvgdd",
-        )
+    claims = [replace(c, verdict=run_verdict("tvgdd", tvgdd)) for c in claims]
+    executed_claim = Claim(
+        "TV-GDD",
+        "Fig. 7",
+        "the motion runs on the robot and keeps the hand gesture",
+        "done on the physical robot",
+        f"executed in PyBullet: tracking error {tracking * 1e6:.2f} µm, {contacts} steps with unexpected contacts",
+        "",
+        contacts == 0 and tracking < 1e-3,
+        "ball-game-tvgdd",
     )
-    return claims
+    return [*claims, _needing(executed_claim, "tvgdd", tvgdd)]
 
 
 #: The paper's Table I, solutions 1-4 (columns), joints 1-7 (rows) [rad].
@@ -236,9 +259,9 @@ def table_i_claims(table: Mapping) -> list[Claim]:
     return claims
 
 
-def _by_method(runs: list[RunData]) -> dict[str, Mapping[str, float]]:
-    """Method -> metrics of the consistency runs (IK only) of one task."""
-    return {str(r.setting("ik", "method")): r.metrics for r in runs if r.status == "complete" and "retime" not in r.stages}
+def _by_method(runs: list[RunData]) -> dict[str, RunData]:
+    """Method -> the finished (complete or violated) consistency runs (IK only) of one task."""
+    return {str(r.setting("ik", "method")): r for r in runs if r.status in ("complete", "violated") and "retime" not in r.stages}
 
 
 def _deviation(metrics: Mapping[str, float]) -> str:
@@ -250,7 +273,8 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
 
     A claim about a method whose run failed says so and is not judged.
     """
-    m = _by_method(runs)
+    finished = _by_method(runs)
+    m = {method: run.metrics for method, run in finished.items()}
     where = {"triangle": "V.B, Figs 9-10", "circle": "V.C, Figs 12-13", "carry_box": "V.D, Fig. 16"}[task]
     part = {"carry_box": "carry-box"}.get(task, task)
     dq = {k: v["ik.rep_joint_deviation_max_rad"] for k, v in m.items()}
@@ -259,8 +283,10 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
     def claim(text: str, theirs: str, methods: tuple[str, ...], ours: Callable[[], str], agrees: Callable[[], bool], comparison: Callable[[], str] = lambda: "") -> Claim:
         failed = [method for method in methods if method not in m]
         if failed:
-            return Claim("MC-Inverse", where, text, theirs, f"not available: the {', '.join(failed)} run failed (see its manifest)", "", None, part)
-        return Claim("MC-Inverse", where, text, theirs, ours(), comparison(), agrees(), part)
+            made = Claim("MC-Inverse", where, text, theirs, f"not available: the {', '.join(failed)} run failed (see its manifest)", "", None, part)
+            return _needing(made, "mc-inverse", next((r for r in runs if r.setting("ik", "method") == "mc-inverse"), None)) if "mc-inverse" in failed else made
+        made = Claim("MC-Inverse", where, text, theirs, ours(), comparison(), agrees(), part, "; ".join(run_verdict(method, finished[method]) for method in methods))
+        return _needing(made, "mc-inverse", finished["mc-inverse"]) if methods == ("mc-inverse",) else made
 
     claims = [
         claim(
@@ -329,7 +355,7 @@ def carry_box_claims(executed: RunData) -> list[Claim]:
     distance = np.linalg.norm(left - right, axis=1)
     drift = float(np.abs(distance - distance[0]).max())
     ratios = executed.metrics
-    return [
+    claims = [
         Claim(
             "MC-Inverse",
             "eq (11), Fig. 14",
@@ -351,6 +377,7 @@ def carry_box_claims(executed: RunData) -> list[Claim]:
             "carry-box",
         ),
     ]
+    return [_needing(c, "mc-inverse, executed", executed) for c in claims]
 
 
 def plan_claims(trials: pd.DataFrame, run: RunData | None) -> list[Claim]:
@@ -396,6 +423,7 @@ def plan_claims(trials: pd.DataFrame, run: RunData | None) -> list[Claim]:
                 "bowl-grasp",
             )
         )
+        claims[-1] = _needing(claims[-1], "mcikrrt, executed", run)
     return claims
 
 

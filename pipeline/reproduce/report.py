@@ -13,7 +13,7 @@ from dualarm.record.readback import read_run
 from dualarm.record.run_dir import write_whole
 from dualarm.report import figures
 from dualarm.report.run_report import write_report
-from dualarm.reproduce.claims import PAPER_TABLE_I, Claim, all_claims
+from dualarm.reproduce.claims import PAPER_TABLE_I, Claim, all_claims, run_verdict
 from dualarm.reproduce.experiments import BY_NAME, PARTS
 from dualarm.reproduce.runner import PARTS_FILE
 
@@ -36,8 +36,8 @@ def command_of(name: str, out: Path, parts: Mapping[str, Mapping]) -> str:
 
 
 def _claims_table(claims: list[Claim], out: Path, parts: Mapping[str, Mapping]) -> list[str]:
-    lines = ["| where | claim | paper | ours | ours against the paper | verdict | reproduce alone |", "|---|---|---|---|---|---|---|"]
-    cells = [(c.where, c.claim, c.theirs, c.ours, c.comparison, VERDICT[c.agrees], f"`{command_of(c.part, out, parts)}`") for c in claims]
+    lines = ["| where | claim | paper | ours | ours against the paper | verdict | runs' verdicts | reproduce alone |", "|---|---|---|---|---|---|---|---|"]
+    cells = [(c.where, c.claim, c.theirs, c.ours, c.comparison, VERDICT[c.agrees], ("**contradicted:** " if c.contradicted else "") + c.verdict, f"`{command_of(c.part, out, parts)}`") for c in claims]
     return lines + ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in cells]
 
 
@@ -90,25 +90,42 @@ def _figures(out: Path, parts: Mapping[str, Mapping]) -> list[tuple[str, str]]:
     return made
 
 
-def write_reproduction_report(out: str | Path) -> Path:
-    """Write ``out/report.md`` from ``out/parts.json`` and the recordings it lists; returns it.
+def _index(out: Path) -> dict:
+    try:
+        return json.loads((out / PARTS_FILE).read_text())
+    except (FileNotFoundError, json.JSONDecodeError) as exc:
+        raise RecordingError(f"{out / PARTS_FILE}: not a reproduction's index ({exc})") from None
+
+
+def reproduction_claims(out: str | Path) -> list[Claim]:
+    """Every claim of the reproduction in ``out``, read back from its files.
 
     Raises:
         RecordingError: ``out`` holds no reproduction, or a recording it lists is unreadable.
     """
     out = Path(out)
-    try:
-        index = json.loads((out / PARTS_FILE).read_text())
-    except (FileNotFoundError, json.JSONDecodeError) as exc:
-        raise RecordingError(f"{out / PARTS_FILE}: not a reproduction's index ({exc})") from None
+    return all_claims(out, {p["name"]: p for p in _index(out)["parts"]})
+
+
+def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None) -> Path:
+    """Write ``out/report.md`` from ``out/parts.json`` and the recordings it lists (``claims``: :func:`reproduction_claims`, read when not given); returns it.
+
+    Raises:
+        RecordingError: ``out`` holds no reproduction, or a recording it lists is unreadable.
+    """
+    out = Path(out)
+    index = _index(out)
     parts = {p["name"]: p for p in index["parts"]}
     (out / "figures").mkdir(exist_ok=True)
-    claims = all_claims(out, parts)
+    claims = all_claims(out, parts) if claims is None else claims
     judged = [c for c in claims if c.agrees is not None]
+    contradicted = [c for c in claims if c.contradicted]
     lines = [
         "# dualarm: the three papers reproduced",
         "",
-        f'{sum(bool(c.agrees) for c in judged)} of {len(judged)} claims agree. Every figure under "ours" is read back from the recordings in this directory; the papers\' figures are quoted from their text. '
+        f"{sum(bool(c.agrees) for c in judged)} of {len(judged)} claims agree"
+        + (f"; {len(contradicted)} rest on a run whose verdict is not complete (marked **contradicted**)" if contradicted else "")
+        + f'. Every figure under "ours" is read back from the recordings in this directory; the papers\' figures are quoted from their text. '
         f"The parts ran {index['jobs']} at a time on a {index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s"
         + (", so computing times were measured with another part running (`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)." if index["jobs"] > 1 else "."),
         "",
@@ -123,7 +140,7 @@ def write_reproduction_report(out: str | Path) -> Path:
     if parts.get("table-i", {}).get("status") == "complete":
         lines += _table_i(out, parts)
     lines += ["## Figures", ""] + [f"{caption}:\n\n![{Path(path).stem}]({path})\n" for caption, path in _figures(out, parts)]
-    lines += ["## Runs", "", "| part | run | status | stages |", "|---|---|---|---|"]
+    lines += ["## Runs", "", "| part | run | verdict | stages |", "|---|---|---|---|"]
     for p in index["parts"]:
         for run in p["outputs"].get("runs", []):
             try:
@@ -131,7 +148,8 @@ def write_reproduction_report(out: str | Path) -> Path:
             except RecordingError as exc:
                 lines.append(f"| {p['name']} | {run} | unreadable: {exc} | |")
                 continue
-            lines.append(f"| {p['name']} | [{run}]({run}) | {recorded.manifest.get('status')} | {', '.join(recorded.stages)} |")
+            verdict = run_verdict(str(recorded.setting("ik", "method") or recorded.setting("plan", "method") or "run"), recorded).replace("|", "\\|")
+            lines.append(f"| {p['name']} | [{run}]({run}) | {verdict} | {', '.join(recorded.stages)} |")
     lines += ["", "## Time of each part", "", "| part | what | status | time [s] |", "|---|---|---|---:|"]
     lines += [f"| {p['name']} | {BY_NAME[p['name']].title} | {p['status']} | {p['seconds']:.1f} |" for p in index["parts"]]
     lines += [f"| all | {index['jobs']} at a time | | {index['wall_time_s']:.1f} |", ""]

@@ -24,6 +24,8 @@ class JointTrajectory:
         qdd: joint accelerations (M, n) [rad/s^2].
         rep: repetition index of each sample (M,) (that of the joint-path sample it came from).
         fixed: values of the robot's locked joints [rad].
+        approach: the move from the task's initial configuration to ``q[0]``, played before this
+            trajectory on its own clock (:mod:`dualarm.smooth.approach`); None when there is none.
     """
 
     stage: str
@@ -34,6 +36,7 @@ class JointTrajectory:
     qdd: np.ndarray
     rep: np.ndarray
     fixed: Mapping[str, float] = field(default_factory=dict)
+    approach: "JointTrajectory | None" = None
 
     def __post_init__(self) -> None:
         M, n = len(self.t), len(self.joint_names)
@@ -45,6 +48,13 @@ class JointTrajectory:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def mean_jerk(self) -> np.ndarray:
+        """The mean jerk over each sample period, diff(qdd) / diff(t), at the period's end (0 at the first sample) (M, n) [rad/s^3]."""
+        jerk = np.zeros_like(self.qdd)
+        if len(self) > 1:
+            jerk[1:] = np.diff(self.qdd, axis=0) / np.diff(self.t)[:, None]
+        return jerk
 
     def interpolate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """q, qd, qdd (K, n) linearly interpolated at ``times`` (K,) [s] (held at the ends), and the repetition index of the last sample at or before each time (K,)."""

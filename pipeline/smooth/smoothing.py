@@ -110,10 +110,9 @@ def smooth_trajectory(
     q_out, qd_out, qdd_out, ahead = tracker.run()
 
     t = np.arange(len(q_out)) * dt
-    jerk_out = np.zeros_like(qdd_out)
-    jerk_out[1:] = np.diff(qdd_out, axis=0) / dt
     q_ref, _, _, rep = reference.interpolate(t)
     traj = JointTrajectory(stage=STAGE, joint_names=names, t=t, q=q_out, qd=qd_out, qdd=qdd_out, rep=rep, fixed=dict(reference.fixed))
+    jerk_out = traj.mean_jerk()
     deviation = np.abs(q_out - q_ref)
     lookahead = ahead * dt
     return Smoothed(

@@ -19,17 +19,21 @@ import numpy as np
 from pydantic import ValidationError
 from pydantic_core import ErrorDetails
 
-from dualarm.errors import InvalidArgumentError, RobotModelError, TaskFileError, UnreachablePoseError
+from dualarm.errors import InvalidArgumentError, RobotModelError, TaskFileError, UnreachablePoseError, excerpt
+from dualarm.files import listing, read_text
 from dualarm.model.kinematics import ChainKinematics, hand_pose, origin_matrix
 from dualarm.model.poses import pose_matrix
 from dualarm.model.robot import Chain, Robot, load_robot
 from dualarm.model.srs import SrsGeometry, srs_geometry
-from dualarm.tasks.schema import TaskSpec
+from dualarm.tasks.schema import MAX_REPETITIONS, TaskSpec
 
 #: Margin kept from the fully stretched or fully folded arm when checking reach [m].
 REACH_MARGIN_M = 1e-3
-#: Most samples a task's reference may have (a guard against a mistyped control period).
-MAX_SAMPLES = 5_000_000
+#: Most samples a task's path may have, all repetitions together: the budget that bounds every
+#: stage's work. The shipped tasks use at most 3,001 (triangle: 5 repetitions of 6 s at 0.01 s);
+#: at 100,000 (1,000 s of motion at 0.01 s) ``dualarm run --stages path`` took 6.3 s and wrote
+#: 14 MB, at 10^6 38 s, 0.9 GB of memory and 127 MB (measured on the humanoid).
+MAX_SAMPLES = 100_000
 
 
 @dataclass(frozen=True)
@@ -67,7 +71,7 @@ class Task:
 
     def where(self, key: str) -> str:
         """``file:key`` for error messages (``<dict>:key`` for a task made from a dict)."""
-        return f"{self.file if self.file is not None else '<dict>'}:{key}"
+        return f"{excerpt(self.file) if self.file is not None else '<dict>'}:{key}"
 
     def hand_chain_from_root(self, hand: str) -> Chain:
         """The chain from the robot's root link to ``hand``'s tip (waist included)."""
@@ -111,7 +115,8 @@ def _key_path(error: ErrorDetails, data: object) -> str:
     ``str`` or ``constrained-float``) are dropped by walking the input alongside; a missing key is
     the one part kept that the input lacks.
     """
-    out, node = "", data
+    out: str = ""
+    node = data
     loc = error["loc"]
     for i, part in enumerate(loc):
         if isinstance(node, list) and isinstance(part, int) and part < len(node):
@@ -119,37 +124,46 @@ def _key_path(error: ErrorDetails, data: object) -> str:
         elif isinstance(node, dict) and part in node:
             out, node = (f"{out}.{part}" if out else str(part)), node[part]
         elif error["type"] == "missing" and i == len(loc) - 1:
-            out = f"{out}.{part}" if out else str(part)
-    return out or "(top level)"
+            out = f"{out}[{part}]" if isinstance(part, int) else f"{out}.{part}" if out else str(part)
+    return excerpt(out) if out else "(top level)"
+
+
+def _quoted(value: object) -> str:
+    """``repr(value)``, quoted with :func:`~dualarm.errors.excerpt` (a value nested too deeply for repr is described)."""
+    try:
+        return excerpt(repr(value))
+    except RecursionError:
+        return f"a {type(value).__name__} nested too deeply"
 
 
 def _validation_message(file: object, exc: ValidationError, data: object) -> str:
     errors = [(_key_path(e, data), e) for e in exc.errors()]
     key, first = max(errors, key=lambda ke: ke[0].count(".") + ke[0].count("["))  # the most specific
-    alternatives = [e["msg"] for k, e in errors if k == key]
+    alternatives = [e for k, e in errors if k == key]
+    fitting = [e for e in alternatives if not e["type"].endswith("_type")]  # those whose type the value has
     if first["type"] == "extra_forbidden":
         message = "unknown key"
     elif first["type"] == "missing":
         message = "missing"
+    elif len(alternatives) > 1 and len(fitting) == 1:  # a union, and the value has the type of one member
+        message = fitting[0]["msg"].removeprefix("Value error, ")
     elif len(alternatives) > 1:  # a union: say what each alternative wanted
-        message = f"wrong type or value {first['input']!r} ({'; or '.join(alternatives)})"
+        message = f"wrong type or value {_quoted(first['input'])} ({'; or '.join(e['msg'].removeprefix('Value error, ') for e in alternatives)})"
     else:
-        message = first["msg"]
+        message = first["msg"].removeprefix("Value error, ")
     others = len({k for k, _ in errors}) - 1
-    return f"{file}:{key}: {message}" + (f" (and {others} more problems)" if others else "")
+    return f"{excerpt(file)}:{key}: {message}" + (f" (and {others} more problem{'s' if others > 1 else ''})" if others else "")
 
 
 def _read(file: Path) -> tuple[str, dict]:
-    try:
-        text = file.read_text()
-    except FileNotFoundError:
-        raise TaskFileError(f"{file}: task file not found") from None
-    except (IsADirectoryError, UnicodeDecodeError) as exc:
-        raise TaskFileError(f"{file}: cannot read a task file ({exc.__class__.__name__})") from None
+    """The text of a task file and its TOML; one-line TaskFileError naming the file and the cause otherwise (see :func:`dualarm.files.read_text`)."""
+    text = read_text(file, "task file", TaskFileError)
     try:
         return text, tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise TaskFileError(f"{file}: not valid TOML: {exc}") from None
+        raise TaskFileError(f"{excerpt(file)}: not valid TOML: {exc}") from None
+    except (RecursionError, ValueError) as exc:  # nesting beyond Python's stack, an integer beyond int()'s digits
+        raise TaskFileError(f"{excerpt(file)}: not valid TOML: {excerpt(exc) if isinstance(exc, ValueError) else 'tables or arrays nested too deeply'}") from None
 
 
 def _validate(where: str, data: object) -> TaskSpec:
@@ -157,13 +171,15 @@ def _validate(where: str, data: object) -> TaskSpec:
         return TaskSpec.model_validate(data)
     except ValidationError as exc:
         raise TaskFileError(_validation_message(where, exc, data)) from None
+    except RecursionError:
+        raise TaskFileError(f"{excerpt(where)}: values nested too deeply") from None
 
 
 def _check_joint_names(location: str, names, robot: Robot) -> None:
     """Refuse a joint name the robot lacks, as ``location.name``."""
     for name in names:
         if name not in robot.limits:
-            raise TaskFileError(f"{location}.{name}: no such joint in robot '{robot.name}'")
+            raise TaskFileError(f"{location}.{excerpt(name, 40)}: no such joint in robot '{excerpt(robot.name, 40)}'")
 
 
 def _initial_configuration(source: str, spec: TaskSpec, robot: Robot) -> Mapping[str, float]:
@@ -181,18 +197,18 @@ def _check_structure(task: Task) -> None:
         if start is None:
             continue
         if hand not in robot.hands:
-            raise TaskFileError(f"{where('start.' + hand)}: robot '{robot.name}' has no hand '{hand}' (hands: {', '.join(robot.hands)})")
+            raise TaskFileError(f"{where('start.' + hand)}: robot '{excerpt(robot.name, 40)}' has no hand '{hand}' (hands: {listing(robot.hands)})")
         if start != "initial" and start not in spec.waypoints:
-            raise TaskFileError(f"{where('start.' + hand)}: no waypoint '{start}' (waypoints: {', '.join(spec.waypoints) or 'none'}; or \"initial\")")
+            raise TaskFileError(f"{where('start.' + hand)}: no waypoint '{excerpt(start, 40)}' (waypoints: {listing(spec.waypoints)}; or \"initial\")")
     started = {h for h in ("left", "right") if getattr(spec.start, h) is not None}
-    total = 0.0
+    per_repetition = 0
     for i, move in enumerate(spec.moves):
-        steps = move.duration_s / spec.control_period_s
+        steps = move.duration_s / spec.control_period_s  # at most 8.64e8 within the schema's ranges
         if steps < 1 - 1e-6:
-            raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s} s is shorter than one control period ({spec.control_period_s} s)")
+            raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is shorter than one control period ({spec.control_period_s:g} s)")
         if abs(steps - round(steps)) > 1e-6:
-            raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s} s is not a whole number of control periods ({spec.control_period_s} s)")
-        total += steps * spec.repetitions
+            raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is not a whole number of control periods ({spec.control_period_s:g} s)")
+        per_repetition += round(steps)
         for hand in ("left", "right"):
             hand_move = move.for_hand(hand)
             if hand_move is None:
@@ -200,16 +216,26 @@ def _check_structure(task: Task) -> None:
             if hand not in started:
                 raise TaskFileError(f"{where(f'moves[{i}].{hand}')}: hand '{hand}' has no start pose (add start.{hand})")
             if hand_move.to is not None and hand_move.to not in spec.waypoints:
-                raise TaskFileError(f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{hand_move.to}' (waypoints: {', '.join(spec.waypoints) or 'none'})")
-    if total > MAX_SAMPLES:
-        raise TaskFileError(f"{where('control_period_s')}: {spec.control_period_s} s makes {total:.3g} samples (at most {MAX_SAMPLES:,}); use a longer period")
+                raise TaskFileError(f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{excerpt(hand_move.to, 40)}' (waypoints: {listing(spec.waypoints)})")
+    samples = 1 + spec.repetitions * per_repetition
+    if samples > MAX_SAMPLES:
+        raise TaskFileError(
+            f"{where('moves')}: the path has {samples:,} samples ({spec.repetitions} repetitions of {per_repetition:,} control periods of {spec.control_period_s:g} s), "
+            f"more than the {MAX_SAMPLES:,} allowed; use a longer control_period_s, shorter moves or fewer repetitions"
+        )
+    _check_margin(task)
     if spec.gesture is not None:
         _check_joint_names(where("gesture.goal_lower"), spec.gesture.goal_lower, robot)
         _check_joint_names(where("gesture.goal_upper"), spec.gesture.goal_upper, robot)
+        for key, goals in (("goal_lower", spec.gesture.goal_lower), ("goal_upper", spec.gesture.goal_upper)):
+            for name, value in goals.items():
+                lim = robot.limits[name]
+                if not lim.lower <= value <= lim.upper:
+                    raise TaskFileError(f"{where(f'gesture.{key}')}.{name}: {value:g} rad is outside the joint's limits [{lim.lower:g}, {lim.upper:g}]")
         for name, lo in spec.gesture.goal_lower.items():
             hi = spec.gesture.goal_upper.get(name)
             if hi is not None and lo > hi:
-                raise TaskFileError(f"{where('gesture.goal_lower')}.{name}: {lo} above goal_upper {hi}")
+                raise TaskFileError(f"{where('gesture.goal_lower')}.{name}: {lo:g} above goal_upper {hi:g}")
     if spec.object is not None:
         obj = spec.object
         if obj.master not in started:
@@ -218,12 +244,26 @@ def _check_structure(task: Task) -> None:
             raise TaskFileError(f"{where('object.slave')}: the slave hand '{obj.slave}' follows the master by eq (11); give it no start or moves")
     for i, wta in enumerate(spec.wta):
         if wta.hand not in robot.hands:
-            raise TaskFileError(f"{where(f'wta[{i}].hand')}: robot '{robot.name}' has no hand '{wta.hand}'")
+            raise TaskFileError(f"{where(f'wta[{i}].hand')}: robot '{excerpt(robot.name, 40)}' has no hand '{wta.hand}'")
     names = set(robot.urdf.links) | {o.name for o in spec.environment} | ({spec.object.name} if spec.object else set())
     for i, pair in enumerate(spec.expected_contacts):
         for name in pair:
             if name not in names:
-                raise TaskFileError(f"{where(f'expected_contacts[{i}]')}: '{name}' is neither a robot link nor an object of the task")
+                raise TaskFileError(f"{where(f'expected_contacts[{i}]')}: '{excerpt(name, 40)}' is neither a robot link nor an object of the task")
+
+
+def _check_margin(task: Task) -> None:
+    """Refuse an ``arm_angle.margin_rad`` of half the narrowest position range of a driven arm's joints or more: no configuration keeps it from both limits of that joint."""
+    robot, margin = task.robot, task.spec.arm_angle.margin_rad
+    ranges = {name: robot.limits[name].upper - robot.limits[name].lower for hand in task.spec.hands if hand in robot.hands for name in robot.hand_chain(hand).joint_names}
+    if not ranges:
+        return
+    joint = min(ranges, key=lambda n: ranges[n])
+    half = ranges[joint] / 2
+    if not margin < half:
+        raise TaskFileError(
+            f"{task.where('arm_angle.margin_rad')}: {margin:g} rad is outside the allowed range [0, {half:.4g}) rad (below half the range of joint '{excerpt(joint, 40)}', the narrowest of the driven arms)"
+        )
 
 
 @dataclass(frozen=True)
@@ -318,7 +358,9 @@ def _check_environment(task: Task) -> None:
                 points = pb.getClosestPoints(sim.body, body, 0.0, linkIndexA=link, physicsClientId=client)
                 if points:
                     depth = -min(p[8] for p in points)
-                    raise TaskFileError(f"{task.where(f'environment[{index}]')}: '{obj}' overlaps the robot's base link '{name[link]}' ({depth * 1e3:.1f} mm deep); move it away from the robot")
+                    raise TaskFileError(
+                        f"{task.where(f'environment[{index}]')}: '{excerpt(obj, 40)}' overlaps the robot's base link '{name[link]}' ({depth * 1e3:.1f} mm deep); move it away from the robot"
+                    )
 
 
 def load_task(path: str | Path, repetitions: int | None = None) -> Task:
@@ -328,8 +370,11 @@ def load_task(path: str | Path, repetitions: int | None = None) -> Task:
     file's ``robot`` a directory relative to it or a shipped robot's name (see :mod:`dualarm.data`).
 
     Raises:
-        TaskFileError: with ``file:key`` and the cause, for any malformed or impossible content,
-            or a ``repetitions`` override below 1.
+        TaskFileError: one line: ``file:key`` and the cause, for any malformed or impossible content
+            (every number has a range, see :mod:`dualarm.tasks.schema`; the path at most
+            :data:`MAX_SAMPLES` samples), or a ``repetitions`` override outside 1 to
+            :data:`~dualarm.tasks.schema.MAX_REPETITIONS`; the file and the OS's reason when the
+            file cannot be read (only a regular file is opened).
     """
     from dualarm.data import find_task
 
@@ -361,18 +406,26 @@ def task_from_dict(data: Mapping[str, Any] | None = None, /, *, robot: Robot | s
     return _resolve(_validate("<dict>", merged), None, text, Path(base_dir), given, None)
 
 
+def _resolved(path: Path) -> Path:
+    """``path`` made absolute with symbolic links resolved, or as given when the OS cannot (loading it then says why)."""
+    try:
+        return path.resolve()
+    except (OSError, ValueError, RuntimeError):  # RuntimeError: a symlink loop, before Python 3.13
+        return path
+
+
 def _resolve(spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Robot | None, repetitions: int | None) -> Task:
     """The validated task: the robot loaded (unless given) with the task's limits, the initial configuration resolved, and every check run."""
-    source = str(file) if file is not None else "<dict>"
+    source = excerpt(file) if file is not None else "<dict>"
     if repetitions is not None:
-        if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
-            raise TaskFileError(f"{source}:repetitions: the override must be a positive integer, not {repetitions!r}")
+        if isinstance(repetitions, bool) or not isinstance(repetitions, int) or not 1 <= repetitions <= MAX_REPETITIONS:
+            raise TaskFileError(f"{source}:repetitions: the override must be an integer in [1, {MAX_REPETITIONS}], not {excerpt(repr(repetitions), 24)}")
         spec = spec.model_copy(update={"repetitions": repetitions})
     if robot is None:
         from dualarm.data import find_robot
 
         try:
-            robot = load_robot(find_robot(spec.robot, base).resolve())
+            robot = load_robot(_resolved(find_robot(spec.robot, base)))
         except RobotModelError as exc:
             raise TaskFileError(f"{source}:robot: {exc}") from None
     for kind in ("velocity", "acceleration"):

@@ -6,6 +6,7 @@ from scipy.interpolate import CubicSpline
 
 from dualarm.errors import StageError
 from dualarm.execute.simulate import ExecutionSettings, execute_trajectory
+from dualarm.execute.world import add_environment, load_pybullet_robot, pb
 from dualarm.ik.mc_path import settings_for, solve_mc_inverse
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.paths import build_reference
@@ -49,8 +50,24 @@ def test_a_box_in_the_way_is_a_named_environment_contact(triangle):
     box = EnvironmentObject(name="obstacle", shape="box", pose={"position": tuple(hand[:3, 3]), "rpy": (0.0, 0.0, 0.0)}, size_m=(0.05, 0.05, 0.05))
     log = execute_trajectory(trajectory, task.robot, ("left",), environment=(box,))
     assert log.environment_contacts.sum() > 0 and log.expected_contacts.sum() == 0
-    touched = [pair for pair in log.contact_pairs if "obstacle" in pair]
-    assert touched and all(log.contact_pairs[pair] > 0 for pair in touched)
+    touched = [(c.first, c.second) for c in log.contacts if "obstacle" in (c.first, c.second)]
+    assert touched and all(c.steps > 0 and not c.expected for c in log.contacts)
+    # at the first contact, a fresh PyBullet client given the measured joints finds the link within
+    # a millimetre of the box, and closer than one step before
+    first = min(log.contacts, key=lambda c: c.first_t_s)
+    link = first.first if first.second == "obstacle" else first.second
+    k = int(np.flatnonzero(log.t == first.first_t_s)[0])
+    assert 0 < k and log.t[k] < 1.0
+    with load_pybullet_robot(task.robot.urdf.path) as sim:
+        (body,) = add_environment(sim, (box,))
+        distances = []
+        for step in (k - 1, k):
+            sim.set_positions([*trajectory.joint_names, *trajectory.fixed], [*log.q[step], *trajectory.fixed.values()])
+            pb.performCollisionDetection(physicsClientId=sim.client)
+            points = pb.getClosestPoints(sim.body, body, 0.01, sim.link_index[link], -1, physicsClientId=sim.client)
+            distances.append(min((p[8] for p in points), default=np.inf))
+    assert distances[1] < min(distances[0], 1e-3)  # PyBullet reports a contact within its threshold, under a millimetre
+    assert first.depth_max_m >= 0 and len([e for e in log.contact_events if e.second == "obstacle" or e.first == "obstacle"]) >= first.steps
     # named as expected (in the other order), the same contacts are counted apart
     expected = execute_trajectory(trajectory, task.robot, ("left",), environment=(box,), expected_contacts=[pair[::-1] for pair in touched])
     assert expected.environment_contacts.sum() == 0

@@ -69,3 +69,25 @@ def test_single_repetition_has_no_consistency_metrics():
     ref = build_reference(task)
     path = solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
     assert consistency_metrics(path, ref, arm_angles(path, task.robot, task.spec.arm_angle.vertical)) == {}
+
+
+def test_orientation_metrics_of_a_pose_level_method_and_of_an_unmeasured_path(carry):
+    """MC-Inverse reaches every asked orientation (PyBullet agrees to 1e-6 rad at every 50th sample), so its orientation error is ~0 and it counts as solving the orientation; a path that measured no orientation (a planner's, NaN) gets no orientation error keys rather than NaN in metrics.json."""
+    from scipy.spatial.transform import Rotation
+
+    from dualarm.execute.world import load_pybullet_robot
+    from dualarm.ik.metrics import ik_metrics
+
+    task, ref, path = carry
+    with load_pybullet_robot(task.robot.urdf.path) as sim:
+        for k in range(0, len(path), 50):
+            q = path.configuration(k)
+            sim.set_positions(list(q), list(q.values()))
+            for j, hand in enumerate(path.hands):
+                reached = Rotation.from_matrix(sim.link_pose(f"{hand}_hand")[:3, :3])
+                assert (Rotation.from_matrix(ref.hands[hand].rotation[k]).inv() * reached).magnitude() < 1e-6
+                assert abs(path.hand_orientation_error_rad[k, j]) < 1e-6
+    m = ik_metrics(path, task.robot)
+    assert m["ik.orientation_solved"] == 1.0 and m["ik.orientation_error_max_rad"] < 1e-6
+    unmeasured = ik_metrics(_with(path, path.q), task.robot)
+    assert "ik.orientation_error_max_rad" not in unmeasured and "ik.orientation_error_mean_rad" not in unmeasured

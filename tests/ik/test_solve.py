@@ -150,12 +150,22 @@ def test_rollout_in_one_call_equals_the_step_loop(ball_game, tvgdd_path):
     np.testing.assert_allclose(np.asarray(velocity).T, tvgdd_path.qd, atol=1e-12)
 
 
-def test_one_hand_off_the_path_start_begins_on_it():
-    """triangle: one hand (7 DOF), whose initial configuration is 0.16 m off the path start. The
-    IK starts from the nearest configuration that puts the hand there (checked with PyBullet)."""
+def _triangle_from_ready(tmp_path):
+    """triangle.toml with its ``[initial]`` table (MC-Inverse's configuration on the path start) replaced by ``initial = "ready"``."""
+    text = (TASKS / "triangle.toml").read_text()
+    text, count = re.subn(r"^\[initial\][^\n]*\n(?:\w+ = [^\n]*\n)+", 'initial = "ready"\n', text, flags=re.MULTILINE)
+    assert count == 1
+    return _variant(tmp_path, text)
+
+
+def test_one_hand_off_the_path_start_begins_on_it(tmp_path):
+    """triangle, started from robot.toml's ``ready``: one hand (7 DOF), whose initial configuration is
+    then 0.16 m off the path start. The IK (position task space here; pose in tests/ik/test_pose.py)
+    starts from the nearest configuration that puts the hand there (checked with PyBullet)."""
     from dualarm.ik.stack import hand_stack, start_configuration
 
-    task = load_task(TASKS / "triangle.toml")
+    task = load_task(_triangle_from_ready(tmp_path))
+    assert task.initial_q == task.robot.home("ready")
     ref = build_reference(task)
     stack = hand_stack(task.robot, task.spec.hands, task.initial_q)
     lower, upper = task.robot.lower_upper(stack.joint_names)
@@ -167,7 +177,7 @@ def test_one_hand_off_the_path_start_begins_on_it():
         assert np.linalg.norm(sim.link_pose("left_hand")[:3, 3] - ref.hands["left"].position[0]) < 1e-6
         sim.set_positions(list(task.initial_q), list(task.initial_q.values()))
         assert np.linalg.norm(sim.link_pose("left_hand")[:3, 3] - ref.hands["left"].position[0]) > 0.1
-    path = solve_tvgdd(task.robot, ref, task.initial_q, settings_for(task))
+    path = solve_tvgdd(task.robot, ref, task.initial_q, settings_for(task, task_space="position"))
     np.testing.assert_allclose(path.q[0], start, atol=1e-12)
     assert ik_metrics(path, task.robot)["ik.joint_limit_violations"] == 0
 

@@ -59,14 +59,11 @@ def test_casadi_step_solves_the_qp_along_the_ball_game(ball_game, scheme):
     assert worst < 1e-8
 
 
-@pytest.fixture(scope="module")
-def instances(ball_game):
-    """Every QP instance along the ball game (MVN, the casadi path): the step arguments, the QP
-    data (M, b, J, rhs, lo, hi) batched over steps, and quadprog's solutions."""
-    task, stack, bounds, ref = ball_game
-    problem = build_problem(stack, bounds, TvgddSettings(feedback_gain=task.spec.gesture.feedback_gain), ref.period_s)
-    R, V = stacked_reference(stack, ref)
-    theta = theta0 = stack.initial
+def along(problem, ref, theta0):
+    """Every QP instance along ``ref`` from ``theta0``, following quadprog's solutions: the step
+    arguments, the QP data (M, b, J, rhs, lo, hi) batched over steps, and the solutions."""
+    R, V = stacked_reference(problem.stack, ref)
+    theta = theta0
     steps, data, expected = [], [], []
     for k in range(len(ref)):
         args = (theta, ref.t[k], R[k], V[k], theta0)
@@ -76,6 +73,29 @@ def instances(ball_game):
         expected.append(quadprog_solve(*qp))
         theta = theta + problem.period_s * expected[-1]
     return problem, steps, [np.array(column) for column in zip(*data)], np.array(expected)
+
+
+@pytest.fixture(scope="module")
+def instances(ball_game):
+    """Every QP instance along the ball game (MVN, position task space as the paper's, the casadi path)."""
+    task, stack, bounds, ref = ball_game
+    return along(build_problem(stack, bounds, TvgddSettings(feedback_gain=task.spec.gesture.feedback_gain), ref.period_s), ref, stack.initial)
+
+
+@pytest.fixture(scope="module")
+def pose_instances():
+    """Every QP instance along one triangle repetition in pose task space (6 rows on 7 joints;
+    RMP, nu = 10, from MC-Inverse's start, as in tests/ik/test_pose.py): the upper-arm roll presses
+    on its bound on 268 of the 601 steps."""
+    from dualarm.ik.mc_path import settings_for as mc_settings_for
+    from dualarm.ik.mc_path import solve_mc_inverse
+
+    task = load_task(TASKS / "triangle.toml", 1)
+    ref = build_reference(task)
+    start = solve_mc_inverse(task.robot, ref, task.initial_q, mc_settings_for(task)).configuration(0)
+    settings = settings_for(task, scheme="rmp", nu=10.0)
+    stack = hand_stack(task.robot, task.spec.hands, start, task_space=settings.task_space)
+    return along(build_problem(stack, joint_bounds(task.robot, stack, settings), settings, ref.period_s), ref, stack.initial)
 
 
 def kkt_violation(M, b, J, rhs, lo, hi, x, lam):
@@ -88,11 +108,15 @@ def kkt_violation(M, b, J, rhs, lo, hi, x, lam):
     return max(np.abs(J @ x - rhs).max(), np.maximum(lo - x, x - hi).max(), stationarity.max())
 
 
-def test_backends_agree_and_satisfy_kkt_on_every_ball_game_step(instances):
-    """All 1801 instances: casadi and lvi (stopped at ||eps|| <= 1e-6) agree to 1e-4 rad/s, both
-    meet the KKT conditions to 1e-6, and both equal quadprog's solution."""
-    problem, steps, data, expected = instances
-    assert len(steps) >= 1000
+@pytest.mark.parametrize("case", ["instances", "pose_instances"])
+def test_backends_agree_and_satisfy_kkt_on_every_step(request, case):
+    """Every instance of the ball game (1801, position task space) and of the pose triangle (601):
+    casadi and lvi (stopped at ||eps|| <= 1e-6) agree to 1e-4 rad/s, both meet the KKT conditions
+    to 1e-6, and both equal quadprog's solution; the pose QPs do have bounds at work."""
+    problem, steps, data, expected = request.getfixturevalue(case)
+    assert len(steps) >= 600
+    lo_all, hi_all = data[4], data[5]
+    assert ((expected <= lo_all + 1e-9) | (expected >= hi_all - 1e-9)).any(axis=1).sum() >= 50
     lvi, u, _ = lvi_solve(*data, tol=1e-6)
     n = lvi.shape[1]
     for k, args in enumerate(steps):
@@ -126,3 +150,29 @@ def test_lvi_at_the_published_stop_errs_by_at_most_its_linear_bound(instances):
         assert np.linalg.norm(lvi[row] - expected[k]) <= bounds[-1] * 1.01, k
     assert max(bounds) <= 1e-4
     assert np.abs(lvi - expected[picks]).max() <= 1e-4
+
+
+def test_lvi_backend_follows_the_casadi_one_in_pose_mode():
+    """The whole solve loop in pose task space with either backend, over the triangle's first 320
+    samples (the upper-arm roll presses on its bound from step 278 on): the same joint path."""
+    from dataclasses import replace
+
+    from dualarm.ik.mc_path import settings_for as mc_settings_for
+    from dualarm.ik.mc_path import solve_mc_inverse
+    from dualarm.ik.tvgdd import solve_tvgdd
+    from dualarm.paths.reference import CartesianReference, HandReference
+
+    task = load_task(TASKS / "triangle.toml", 1)
+    full = build_reference(task)
+    hand = full.hands["left"]
+    ref = CartesianReference(full.period_s, {"left": HandReference(hand.position[:320], hand.rotation[:320], hand.linear_velocity[:320], hand.angular_velocity[:320])})
+    start = solve_mc_inverse(task.robot, full, task.initial_q, mc_settings_for(task)).configuration(0)
+    settings = settings_for(task, scheme="rmp", nu=10.0)
+    casadi = solve_tvgdd(task.robot, ref, start, settings)
+    lvi = solve_tvgdd(task.robot, ref, start, replace(settings, backend="lvi"))
+    assert casadi.task_space == lvi.task_space == "pose"
+    active = (casadi.qd <= casadi.extras["zeta_lower"] + 1e-9) | (casadi.qd >= casadi.extras["zeta_upper"] - 1e-9)
+    assert active.any(axis=1).sum() >= 30
+    assert np.abs(lvi.qd - casadi.qd).max() <= 1e-3
+    assert np.abs(lvi.q - casadi.q).max() <= 1e-5
+    assert np.abs(lvi.hand_orientation_error_rad - casadi.hand_orientation_error_rad).max() <= 1e-5

@@ -69,7 +69,7 @@ def variant(tmp_path: Path, task: str, *edits: tuple[str, str]) -> Path:
     for old, new in edits:
         assert text.count(old) == 1, f"edit target not unique/absent: {old!r}"
         text = text.replace(old, new)
-    path = tmp_path / f"{task}_variant.toml"
+    path = tmp_path / f"{task}.toml"  # a short name: messages quote at most ~80 characters of a path
     path.write_text(text)
     return path
 

@@ -79,7 +79,7 @@ def test_plan_command_writes_trials_summary_and_a_collision_free_run(tmp_path, b
     assert summary["planning_time_median_s"] == pytest.approx(np.median(table.planning_time_s))
     assert summary["planning_time_p95_s"] == pytest.approx(np.percentile(table.planning_time_s, 95))
     run = read_run(summary["run"])
-    assert run.manifest["stages"] == ["path", "plan", "retime", "smooth", "execute"]
+    assert run.manifest["stages"] == ["path", "plan", "retime", "smooth", "approach", "execute"]
     m = run.metrics
     assert m["plan.planning_time_s"] == pytest.approx(table.planning_time_s[0])
     assert m["plan.collision_checks"] == table.collision_checks[0]
@@ -101,9 +101,10 @@ def test_unreachable_wta_is_named_at_the_timeout(tmp_path):
     )
     (tmp_path / "far.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
     result = runner.invoke(app, ["run", str(tmp_path / "far.toml"), "--timeout", "0.5", "--out", str(tmp_path / "rec")])
-    assert result.exit_code == 2
-    line = result.output.strip()
-    assert len(line.splitlines()) == 1
+    assert result.exit_code == 1  # the planner failed: the run is kept as failed
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 3 and lines[0] == "verdict: failed" and lines[2].startswith("the run is kept as failed in ")
+    line = lines[1]
     assert re.search(r"no IK sample reached WTA 'bowl_right' \(\d+ samples, nearest [0-9.]+ m\)", line), line
     assert "bowl_left" not in line
 

@@ -12,8 +12,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dualarm.errors import StageError
-from dualarm.execute.world import add_environment, load_pybullet_robot, pb
-from dualarm.plan.collision import TOUCHING_M, CollisionChecker, bisection_order, inflated_urdf
+from dualarm.execute.world import TOUCHING_M, add_environment, load_pybullet_robot, pb
+from dualarm.plan.collision import CollisionChecker, bisection_order, inflated_urdf
 from dualarm.tasks import load_task
 from tests.conftest import TASKS
 

@@ -59,11 +59,11 @@ RUNS = {
     "triangle": RunSpec(
         TASKS / "triangle.toml",
         "mc-inverse",
-        {"stages": ("path", "ik", "retime", "smooth", "execute")},
-        ("path", "ik", "retime", "smooth", "execute"),
+        {"stages": ("path", "ik", "retime", "smooth", "approach", "execute")},
+        ("path", "ik", "retime", "smooth", "approach", "execute"),
         repetitions=1,
     ),
-    "bowl_grasp": RunSpec(TASKS / "bowl_grasp.toml", "mcikrrt", {}, ("path", "plan", "retime", "smooth", "execute")),
+    "bowl_grasp": RunSpec(TASKS / "bowl_grasp.toml", "mcikrrt", {}, ("path", "plan", "retime", "smooth", "approach", "execute")),
 }
 
 
@@ -357,7 +357,8 @@ def test_tf_is_a_tree_of_every_link_rooted_at_world_per_stage(run, mcap_file, ur
                 frame = parent[frame]
     assert set(per_stage) == set(spec.stages)
     assert per_stage["path"] == 1
-    assert all(per_stage[s] > 1 for s in spec.stages if s != "path"), per_stage
+    assert all(per_stage[s] > 1 for s in spec.stages if s not in ("path", "approach")), per_stage  # a plan starts where the robot is: its approach is one sample
+    assert all(per_stage[s] >= 1 for s in spec.stages), per_stage
 
 
 def test_tf_robot_moves_and_puts_the_hands_where_the_stage_samples_do(run, mcap_file):

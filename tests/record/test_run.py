@@ -125,7 +125,9 @@ def test_readback_reference_equals_the_task_waypoints(triangle_run):
 
 
 def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
-    """Composing /tf from world to path/left_hand gives PyBullet's hand pose at the initial configuration."""
+    """Composing /tf from world to path/left_hand gives PyBullet's hand pose at the initial configuration
+    (triangle.toml's ``[initial]`` table read with tomllib, the joints it does not name at 0), which
+    puts the hand on waypoint A."""
     tf = read_run(triangle_run)["/tf"]
     assert set(tf["child_frame_id"]) == {f"path/{link}" for link in humanoid.urdf.links}
     parent = dict(zip(tf["child_frame_id"], tf["parent_frame_id"]))
@@ -139,11 +141,13 @@ def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
         step[:3, 3] = [r["translation.x"], r["translation.y"], r["translation.z"]]
         T = step @ T
         link = parent[link]
-    home = humanoid.home("ready")
+    data = tomllib.loads(TRIANGLE.read_text())
+    initial = {name: data["initial"].get(name, 0.0) for name in humanoid.home("ready")}
     with load_pybullet_robot(humanoid.urdf.path) as sim:
-        sim.set_positions(list(home), list(home.values()))
+        sim.set_positions(list(initial), list(initial.values()))
         expected = sim.link_pose("left_hand")
     np.testing.assert_allclose(T, expected, atol=1e-6)
+    assert np.linalg.norm(T[:3, 3] - data["waypoints"]["A"]["position"]) < 1e-6
 
 
 def test_rerun_file_verifies_with_the_rerun_cli(triangle_run):

@@ -1,9 +1,11 @@
 """``dualarm compare``: every number it reports is checked against one computed independently
 (from the solvers' own arrays, or with numpy on the two runs' DataFrames)."""
 
+import json
 import re
 import shutil
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,7 @@ from mcap.reader import make_reader
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from dualarm.errors import RecordingError
+from dualarm.errors import RecordingError, excerpt
 from dualarm.ik.pinv import settings_for as pinv_settings_for
 from dualarm.ik.pinv import solve_pinv
 from dualarm.ik.tvgdd import settings_for, solve_tvgdd
@@ -47,8 +49,8 @@ def triangle_reruns(runs_dir) -> tuple[Path, Path]:
 
 @pytest.fixture(scope="module")
 def full_reruns(runs_dir) -> tuple[Path, Path]:
-    """The same command twice through every stage (pinv, 1 repetition: the cheapest full run)."""
-    return tuple(record_run(load_task(TRIANGLE, 1), "pinv", out_dir=runs_dir / "full").directory for _ in range(2))
+    """The same command twice through every stage (MC-Inverse, 1 repetition: a cheap full run whose trajectory passes validation)."""
+    return tuple(record_run(load_task(TRIANGLE, 1), "mc-inverse", out_dir=runs_dir / "full").directory for _ in range(2))
 
 
 @pytest.fixture(scope="module")
@@ -126,6 +128,25 @@ def judged(differences) -> dict:
     return {key: value for key, value in differences.items() if WALL_CLOCK_WORD not in key[1]}
 
 
+def _metrics_json(run: Path) -> dict:
+    path = run / "metrics.json"
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def file_differences(run_a: Path, run_b: Path) -> dict[tuple[str, str], float]:
+    """(``manifest.json``, ``status``) and (``metrics.json``, key) -> |A - B|, read from the runs' files
+    with json: inf for differing statuses, a key of one run only, or a value null in one run only."""
+    status_a, status_b = (json.loads((run / "manifest.json").read_text())["status"] for run in (run_a, run_b))
+    out = {("manifest.json", "status"): 0.0 if status_a == status_b else np.inf}
+    a, b = _metrics_json(run_a), _metrics_json(run_b)
+    for key in set(a) | set(b):
+        if key not in a or key not in b or (a[key] is None) != (b[key] is None):
+            out[("metrics.json", key)] = np.inf
+        else:
+            out[("metrics.json", key)] = 0.0 if a[key] is None else abs(float(a[key]) - float(b[key]))
+    return out
+
+
 def table_of(comparison) -> dict[tuple[str, str], pd.Series]:
     return {(row["topic"], row["field"]): row for _, row in comparison.table.iterrows()}
 
@@ -150,9 +171,10 @@ COUNT_BEYOND = re.compile(r"^(\d+) fields beyond ", re.MULTILINE)
 def test_a_rerun_is_identical_in_every_judged_field(pair, request):
     a, b = request.getfixturevalue(pair)
     differences = paired_differences(a, b)
-    expected = largest(differences)
+    expected = largest(differences) | file_differences(a, b)
     wall_clock = {key for key in expected if WALL_CLOCK_WORD in key[1]}
     assert wall_clock, "IK runs record solve times"
+    assert ("metrics.json", "ik.solve_time_total_s") in wall_clock and ("manifest.json", "status") in expected
     # the product itself is deterministic: only wall-clock fields differ between the runs' DataFrames
     assert {key for key, value in expected.items() if value > 0} <= wall_clock
 
@@ -160,7 +182,7 @@ def test_a_rerun_is_identical_in_every_judged_field(pair, request):
     table = comparison.table
     assert list(table.columns) == list(COLUMNS)
     rows = table_of(comparison)
-    assert set(rows) == set(expected)  # a row per topic and field, no (rows) or (topic) rows
+    assert set(rows) == set(expected)  # a row per topic and field, the status and each metric; no (rows) or (topic) rows
     assert {key for key, row in rows.items() if row["wall_clock"]} == wall_clock
     for key, row in rows.items():
         assert row["rows_a"] == row["rows_b"] == row["aligned"], key
@@ -229,8 +251,10 @@ def test_different_methods_exit_1_naming_the_earliest_difference(ball_game_metho
     assert float(t) == pytest.approx(earliest, abs=1e-4)
     assert first_t[(topic, field)] == pytest.approx(earliest, abs=1e-9), (topic, field)  # that field does differ there
     assert int(rep) == 0
+    metrics_beyond = {key for key, value in judged(file_differences(a, b)).items() if value > 0}
+    assert metrics_beyond and ("manifest.json", "status") not in metrics_beyond  # both complete; their metrics differ
     count = COUNT_BEYOND.search(result.stdout)
-    assert count and int(count.group(1)) == len(first_t), result.stdout
+    assert count and int(count.group(1)) == len(first_t) + len(metrics_beyond), result.stdout
     assert "/ik/sample method" in result.stdout and "/ik/sample velocity." in result.stdout
 
 
@@ -240,7 +264,7 @@ def test_different_methods_exit_1_naming_the_earliest_difference(ball_game_metho
 def test_tolerance_just_above_the_largest_difference_passes_and_just_below_fails(gain_pair):
     a, b = gain_pair
     differences = judged(paired_differences(a, b))
-    maxima = largest(differences)
+    maxima = largest(differences) | judged(file_differences(a, b))
     assert all(np.isfinite(v) for v in maxima.values()), "only numbers differ between the two gains"
     worst = max(maxima.values())
     assert worst > 0
@@ -263,17 +287,23 @@ def test_tolerance_just_above_the_largest_difference_passes_and_just_below_fails
 def test_beyond_lists_the_fields_over_the_tolerance_with_where_they_first_exceed_it(gain_pair, fraction):
     a, b = gain_pair
     differences = judged(paired_differences(a, b))
-    tol = max(largest(differences).values()) * fraction
+    files = judged(file_differences(a, b))
+    tol = max([*largest(differences).values(), *files.values()]) * fraction
     comparison = compare_runs(run_data(a), run_data(b), tol)
     beyond = comparison.beyond
-    expected = {key for key, (_, gap) in differences.items() if (gap > tol).any()}
+    expected = {key for key, (_, gap) in differences.items() if (gap > tol).any()} | {key for key, value in files.items() if value > tol}
     assert set(zip(beyond["topic"], beyond["field"])) == expected
     assert comparison.within == (not expected)
     for _, row in beyond.iterrows():
+        if (row["topic"], row["field"]) in files:  # a metric: no time
+            assert np.isnan(row["first_beyond_t"])
+            continue
         t, gap = differences[(row["topic"], row["field"])]
         assert row["first_beyond_t"] == pytest.approx(t[np.argmax(gap > tol)], abs=1e-9)
-    # earliest divergence first
-    assert list(beyond["first_beyond_t"]) == sorted(beyond["first_beyond_t"])
+    # earliest divergence first, the metrics (no time) last
+    times = beyond["first_beyond_t"].to_numpy()
+    timed = times[~np.isnan(times)]
+    assert list(timed) == sorted(timed) and not np.isnan(times[: len(timed)]).any()
 
 
 # --- 4. rows present in one run only -------------------------------------------------------------
@@ -298,6 +328,7 @@ def test_rows_in_one_run_only_are_counted_and_beyond_any_tolerance(repetitions_p
         columns_a, columns_b = set(da[topic].columns), set(db[topic].columns)
         expected_beyond |= {(topic, column) for column in columns_a ^ columns_b if WALL_CLOCK_WORD not in column}
     assert any(only_a for only_a, _, _ in expected_rows.values()), "2 repetitions have rows 1 has not"
+    expected_beyond |= {key for key, value in judged(file_differences(a, b)).items() if value == np.inf}
 
     for swapped in (False, True):
         first, second = (b, a) if swapped else (a, b)
@@ -364,7 +395,7 @@ def _remove(run: Path) -> Path:
 def _empty(run: Path) -> Path:
     shutil.rmtree(run)
     run.mkdir()
-    return run
+    return run / "manifest.json"
 
 
 @pytest.mark.parametrize("damage", [_remove, _empty, _truncate_mcap, _corrupt_chunk, _corrupt_manifest], ids=["missing", "not-a-run", "truncated-mcap", "corrupt-chunk", "corrupt-manifest"])
@@ -376,7 +407,7 @@ def test_a_missing_or_corrupt_run_is_one_line_and_exit_2(triangle_reruns, tmp_pa
     named = damage(bad)
     args = [str(bad), str(good)] if side == "A" else [str(good), str(bad)]
     line = one_error_line(runner.invoke(app, ["compare", *args]))
-    assert str(named) in line or str(bad) in line, line
+    assert f"{excerpt(named)}: " in line, line  # the path, quoted with at most 80 characters
     with pytest.raises(RecordingError):
         compare_runs(*args)
 
@@ -414,3 +445,69 @@ def test_csv_into_a_missing_directory_is_written_or_one_line_exit_2(triangle_rer
         assert csv.exists()
     else:
         assert str(csv.parent) in one_error_line(result)
+
+
+# --- 7. status and metrics.json ------------------------------------------------------------------
+
+
+def test_runs_of_different_status_are_never_identical(triangle_reruns):
+    a = run_data(triangle_reruns[0])
+    failed = replace(a, manifest={**a.manifest, "status": "failed"})
+    for first, second in ((a, failed), (failed, a)):
+        comparison = compare_runs(first, second, 1e300)
+        row = table_of(comparison)[("manifest.json", "status")]
+        assert row["max_difference"] == np.inf and not row["wall_clock"]
+        assert "'complete'" in row["note"] and "'failed'" in row["note"]
+        assert not comparison.within
+        assert [(r.topic, r.field) for r in comparison.beyond.itertuples()] == [("manifest.json", "status")]  # the topics are the same run's
+    assert table_of(compare_runs(a, a))[("manifest.json", "status")]["max_difference"] == 0.0
+
+
+def test_metrics_are_judged_with_the_tolerance_and_wall_clock_metrics_listed(triangle_reruns):
+    a = run_data(triangle_reruns[0])
+    metrics = json.loads((triangle_reruns[0] / "metrics.json").read_text())
+    judged_key, clock_key = "path.length_max_m", "ik.solve_time_total_s"
+    changed = {**metrics, judged_key: metrics[judged_key] + 1e-3, clock_key: metrics[clock_key] + 1.0}
+    gap = abs(np.float64(changed[judged_key]) - np.float64(metrics[judged_key]))
+    b = replace(a, metrics=changed)
+
+    rows = table_of(compare_runs(a, b))
+    assert rows[("metrics.json", judged_key)]["max_difference"] == gap and not rows[("metrics.json", judged_key)]["wall_clock"]
+    assert rows[("metrics.json", clock_key)]["wall_clock"]
+    assert rows[("metrics.json", clock_key)]["max_difference"] == pytest.approx(1.0, abs=1e-9)
+    unchanged = [key for key in metrics if key not in (judged_key, clock_key)]
+    assert unchanged and all(rows[("metrics.json", key)]["max_difference"] == 0.0 for key in unchanged)
+
+    assert compare_runs(a, b, gap * 1.01).within  # the wall-clock second is not judged
+    below = compare_runs(a, b, gap * 0.99)
+    assert [(r.topic, r.field) for r in below.beyond.itertuples()] == [("metrics.json", judged_key)]
+
+
+def test_a_metric_in_one_run_only_or_null_in_one_only_is_beyond_any_tolerance(triangle_reruns):
+    a = run_data(triangle_reruns[0])
+    metrics = json.loads((triangle_reruns[0] / "metrics.json").read_text())
+    removed, nulled = sorted(k for k in metrics if "solve_time" not in k)[:2]
+    b = replace(a, metrics={**{k: v for k, v in metrics.items() if k != removed}, nulled: None})
+    comparison = compare_runs(a, b, 1e300)
+    rows = table_of(comparison)
+    assert rows[("metrics.json", removed)]["max_difference"] == np.inf and rows[("metrics.json", removed)]["note"] == "only in A"
+    assert rows[("metrics.json", nulled)]["max_difference"] == np.inf and rows[("metrics.json", nulled)]["note"] == "null in B only"
+    assert {(r.topic, r.field) for r in comparison.beyond.itertuples()} == {("metrics.json", removed), ("metrics.json", nulled)}
+
+
+@pytest.mark.parametrize("edit", ["swapped metrics.json", "failed status"])
+def test_a_swapped_metrics_json_or_an_edited_status_is_not_identical_but_refused(triangle_reruns, repetitions_pair, tmp_path, edit):
+    """The issue's cases: ``compare`` said "identical" for a run whose metrics.json came from another
+    run, or whose manifest was set to failed. The run is not one run's files: one line, exit 2."""
+    good = triangle_reruns[0]
+    bad = tmp_path / "copied" / good.name
+    shutil.copytree(triangle_reruns[1], bad)
+    if edit == "swapped metrics.json":
+        shutil.copy(repetitions_pair[1] / "metrics.json", bad / "metrics.json")
+        named = "metrics.json"
+    else:
+        manifest = json.loads((bad / "manifest.json").read_text())
+        (bad / "manifest.json").write_text(json.dumps({**manifest, "status": "failed"}))
+        named = "run.mcap"
+    line = one_error_line(runner.invoke(app, ["compare", str(good), str(bad)]))
+    assert f"{named}: " in line

@@ -48,8 +48,8 @@ def ik_runs(runs_dir) -> list[Path]:
 
 @pytest.fixture(scope="module")
 def full_run(runs_dir) -> Path:
-    """The one run through every stage: pinv on the triangle, 1 repetition."""
-    return record_run(load_task(TRIANGLE, 1), "pinv", out_dir=runs_dir).directory
+    """The one run through every stage: MC-Inverse on the triangle, 1 repetition."""
+    return record_run(load_task(TRIANGLE, 1), "mc-inverse", out_dir=runs_dir).directory
 
 
 def _report(run_dirs: list[Path], out: Path) -> Path:
@@ -103,7 +103,7 @@ def test_runs_csv_has_a_row_per_run_with_its_metrics_json(report):
         assert row["run"] == manifest["run_id"] == run.name
         assert row["task"] == manifest["task"]
         assert row["method"] == manifest["settings"]["ik"]["method"]
-        assert row["status"] == manifest["status"] == "complete"
+        assert row["status"] == manifest["status"] in ("complete", "violated")  # pinv in pose mode leaves the joint limits on the triangle
         assert row["stages"] == ",".join(manifest["stages"])
         assert row["repetitions"] == manifest["settings"]["path"]["repetitions"] == metric["path.repetitions"]
         assert Path(row["directory"]) == run
@@ -249,4 +249,4 @@ def test_a_bad_directory_among_several_is_one_line_and_exit_2(ik_runs, tmp_path,
     assert isinstance(result.exception, SystemExit), result.exception
     assert "Traceback" not in result.output
     lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error: ") and str(broken) in lines[0], result.stderr
+    assert len(lines) == 1 and lines[0].startswith("error: ") and broken.name in lines[0], result.stderr  # paths are quoted to ~80 characters

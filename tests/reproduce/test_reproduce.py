@@ -90,13 +90,13 @@ def sections(report: str) -> dict[str, list[str]]:
 
 def claim_rows(report: str) -> dict[str, list[dict[str, str]]]:
     """Paper -> the rows of its claim table, as dicts."""
-    keys = ("where", "claim", "paper", "ours", "comparison", "verdict", "command")
+    keys = ("where", "claim", "paper", "ours", "comparison", "verdict", "runs", "command")
     rows = {}
     for paper, lines in sections(report).items():
         if paper not in PAPERS:
             continue
         table = [_cells(line) for line in lines if line.startswith("|")]
-        assert not table or table[0] == ["where", "claim", "paper", "ours", "ours against the paper", "verdict", "reproduce alone"], table[:1]
+        assert not table or table[0] == ["where", "claim", "paper", "ours", "ours against the paper", "verdict", "runs' verdicts", "reproduce alone"], table[:1]
         rows[paper] = [dict(zip(keys, cells, strict=True)) for cells in table[2:]]
     return rows
 
@@ -191,7 +191,7 @@ def test_exit_0_report_path_last_parts_json_and_time_table(repro):
         for path in paths:
             assert not Path(path).is_absolute() and (out / path).exists(), path
     assert set(repro.parts["table-i"]["outputs"]) == {"table"}
-    for part, stages in (("ball-game-tvgdd", ["path", "ik", "retime", "smooth", "execute"]), ("ball-game-pinv", ["path", "ik"])):
+    for part, stages in (("ball-game-tvgdd", ["path", "ik", "retime", "smooth", "approach", "execute"]), ("ball-game-pinv", ["path", "ik"])):
         (run,) = repro.parts[part]["outputs"]["runs"]
         manifest = json.loads((out / run / "manifest.json").read_text())
         assert manifest["status"] == "complete" and manifest["stages"] == stages
@@ -260,7 +260,9 @@ def test_report_sections_not_available_commands_and_links(repro):
     runs = sorted(r for p in repro.parts.values() for r in p["outputs"].get("runs", []))
     run_rows = [_cells(line) for line in body["Runs"] if line.startswith("| ") and "](" in line]
     assert sorted(re.search(r"\]\(([^)]+)\)", row[1]).group(1) for row in run_rows) == runs
-    assert all(row[2] == "complete" for row in run_rows)
+    for row in run_rows:  # each run's verdict, as its manifest holds it
+        manifest = json.loads((out / re.search(r"\]\(([^)]+)\)", row[1]).group(1) / "manifest.json").read_text())
+        assert row[2].split(": ", 1)[1].split(" ")[0] == manifest["status"], row
     time_rows = {c[0]: c for c in (_cells(line) for line in body["Time of each part"] if line.startswith("| "))}
     for name, p in repro.parts.items():
         assert time_rows[name][2] == "complete" and time_rows[name][3] == f"{p['seconds']:.1f}"
@@ -672,7 +674,9 @@ def test_consistency_claims_show_the_deviations_of_the_recordings(carry_box_runs
     found = {}
     for run in carry_box_runs:
         method = run.manifest["settings"]["ik"]["method"]
-        assert run.status == "complete" and sorted(run["/ik/sample"]["rep"].unique()) == [0, 1]
+        # TRAC-IK may fail a sample now and then (its timeout is wall-clock): a violated run, still judged
+        assert run.status == ("complete" if method != "trac-ik" else run.status) and run.status in ("complete", "violated")
+        assert sorted(run["/ik/sample"]["rep"].unique()) == [0, 1]
         dq, dpsi = _deviations(run, TASKS / "carry_box.toml")
         assert run.metrics["ik.rep_joint_deviation_max_rad"] == pytest.approx(dq, rel=1e-12, abs=1e-15), method
         assert run.metrics["ik.rep_arm_angle_deviation_max_rad"] == pytest.approx(dpsi, rel=1e-9, abs=1e-15), method
@@ -749,11 +753,37 @@ def test_plan_claims_count_successes_and_average_their_times():
 def test_an_interrupted_reproduction_is_recognised_and_emptied(tmp_path):
     """A reproduction stopped before parts.json and report.md (Ctrl-C) is still recognised as one
     by the marker written first, so the next run empties it instead of refusing it."""
+    from dualarm.record.run_dir import RunDirectory
     from dualarm.reproduce.runner import MARKER, prepare
 
     out = tmp_path / "repro"
     prepare(out)
-    (out / "runs" / "triangle").mkdir(parents=True)
-    (out / "runs" / "triangle" / "partial.mcap").write_bytes(b"half")
+    staging = RunDirectory.create(out / "runs", "triangle", {}).staging  # a run stopped before it was renamed into place
+    (staging / "run.mcap").write_bytes(b"half")
     prepare(out)
     assert [p.name for p in out.iterdir()] == [MARKER]
+
+
+def test_a_claim_resting_on_a_violated_mc_inverse_run_is_contradicted(carry_box_runs, tmp_path):
+    """The box lifted in 0.2 s instead of 2 s: MC-Inverse still repeats, but at the task's timing
+    its joints outrun their velocity limits (finite differences of the recorded joints), so the
+    run is violated and the claim that rests on it is contradicted, not agreed."""
+    from dualarm.model.robot import load_robot
+    from dualarm.reproduce.claims import consistency_claims
+    from dualarm.run import record_run
+    from dualarm.tasks import load_task
+
+    task = tmp_path / "carry_box.toml"
+    text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    task.write_text(text.replace("duration_s = 2.0", "duration_s = 0.2"))
+    fast = read_run(record_run(load_task(task, 2), "mc-inverse", stages=("path", "ik"), out_dir=tmp_path / "runs").directory)
+    sample = fast["/ik/sample"]
+    joints = [c.split(".", 1)[1] for c in sample.columns if c.startswith("position.")]
+    speed = np.abs(np.diff(sample[[f"position.{j}" for j in joints]].to_numpy(), axis=0)).max(axis=0) / 0.01
+    assert (speed > load_robot(HUMANOID).limit_array("velocity", tuple(joints))).any()
+    assert fast.status == "violated" and fast.violations[0].startswith("ik: velocity of ")
+    others = [r for r in carry_box_runs if r.manifest["settings"]["ik"]["method"] != "mc-inverse"]
+    mc = next(c for c in consistency_claims("carry_box", [fast, *others]) if "MC-Inverse repeats" in c.claim)
+    assert mc.contradicted and mc.agrees is False and mc.verdict.startswith("mc-inverse: violated (ik: velocity of ")
+    box = next(c for c in consistency_claims("carry_box", carry_box_runs) if "MC-Inverse repeats" in c.claim)
+    assert not box.contradicted and box.verdict == "mc-inverse: complete"

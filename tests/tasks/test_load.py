@@ -47,6 +47,24 @@ def triangle_text() -> str:
     return text.replace(old, f'robot = "{ROBOT_DIR.as_posix()}"')
 
 
+def initial_table() -> str:
+    """triangle.toml's ``[initial]`` table (its header line and joint lines): the place where the variants below put an ``initial`` of their own.
+
+    It follows the top-level keys, so an ``initial = ...`` line written in its place is a top-level key again.
+    """
+    found = re.findall(r"^\[initial\][^\n]*\n(?:\w+ = [^\n]*\n)+", TRIANGLE.read_text(), flags=re.MULTILINE)
+    assert len(found) == 1, found
+    return found[0]
+
+
+INITIAL = initial_table()
+
+
+def initial_is(value: str) -> tuple[str, str]:
+    """The edit that replaces triangle.toml's ``[initial]`` table by the top-level line ``initial = value``."""
+    return (INITIAL, f"initial = {value}\n")
+
+
 def variant(tmp_path: Path, *edits: tuple[str, str], name: str = "bad.toml") -> Path:
     """Write triangle.toml with each (old, new) edit applied to exactly one occurrence of old."""
     text = triangle_text()
@@ -84,6 +102,9 @@ def test_unmodified_copy_loads(tmp_path: Path):
     for name, wp in data["waypoints"].items():
         assert np.allclose(task.waypoint_pose(name)[:3, 3], wp["position"], atol=1e-15)
         assert np.allclose(task.waypoint_pose(name)[:3, :3], Rotation.from_euler("xyz", wp["rpy"]).as_matrix(), atol=1e-12)
+    # the [initial] table as tomllib reads it; the joints it does not name start at zero
+    assert data["initial"] and all(task.initial_q[joint] == value for joint, value in data["initial"].items())
+    assert all(value == 0.0 for joint, value in task.initial_q.items() if joint not in data["initial"])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -113,10 +134,12 @@ MALFORMED = [
     ("hold_and_to", [('left = { to = "B" }', 'left = { to = "B", hold = true }')], "moves[0].left"),
     ("partial_arc", [('left = { to = "B" }', "left = { arc_center = [0.3, 0.1, 1.1] }")], "moves[0].left"),
     ("duration_not_whole_periods", [(FIRST_MOVE, 'duration_s = 2.005\nleft = { to = "B" }')], "moves[0].duration_s"),
-    ("initial_home_missing", [('initial = "ready"', 'initial = "sitting"')], "initial"),
-    ("initial_unknown_joint", [('initial = "ready"', "initial = { left_knee = 0.1 }")], "initial.left_knee"),
-    ("initial_joint_above_limit", [('initial = "ready"', "initial = { left_elbow = 5.0 }")], "initial.left_elbow"),
-    ("initial_joint_below_limit", [('initial = "ready"', "initial = { left_elbow = -5.0 }")], "initial.left_elbow"),
+    ("initial_home_missing", [initial_is('"sitting"')], "initial"),
+    ("initial_unknown_joint", [initial_is("{ left_knee = 0.1 }")], "initial.left_knee"),
+    ("initial_joint_above_limit", [initial_is("{ left_elbow = 5.0 }")], "initial.left_elbow"),
+    ("initial_joint_below_limit", [initial_is("{ left_elbow = -5.0 }")], "initial.left_elbow"),
+    ("initial_table_joint_above_limit", [(INITIAL, re.sub(r"^left_elbow = .*$", "left_elbow = 5.0", INITIAL, flags=re.MULTILINE))], "initial.left_elbow"),
+    ("initial_table_unknown_joint", [(INITIAL, INITIAL + "left_knee = 0.1\n")], "initial.left_knee"),
 ]
 
 
@@ -146,12 +169,12 @@ def test_elbow_limits_used_above_are_outside_the_urdf_range():
 def test_initial_joint_just_inside_its_limit_loads(tmp_path: Path):
     lower, upper = urdf_limits("left_elbow")
     value = upper - 1e-3
-    task = load_task(variant(tmp_path, ('initial = "ready"', f"initial = {{ left_elbow = {value!r} }}")))
+    task = load_task(variant(tmp_path, initial_is(f"{{ left_elbow = {value!r} }}")))
     assert task.initial_q["left_elbow"] == value
     # joints not named start at zero
     assert task.initial_q["right_elbow"] == 0.0
     value = lower + 1e-3
-    task = load_task(variant(tmp_path, ('initial = "ready"', f"initial = {{ left_elbow = {value!r} }}"), name="ok2.toml"))
+    task = load_task(variant(tmp_path, initial_is(f"{{ left_elbow = {value!r} }}"), name="ok2.toml"))
     assert task.initial_q["left_elbow"] == value
 
 
@@ -206,7 +229,7 @@ def test_infinite_duration_is_a_task_file_error(tmp_path: Path):
 
 
 def test_wrong_type_for_union_key_names_the_key(tmp_path: Path):
-    path = variant(tmp_path, ('initial = "ready"', "initial = 5"))
+    path = variant(tmp_path, initial_is("5"))
     with pytest.raises(TaskFileError) as info:
         load_task(path)
     assert str(info.value).startswith(f"{path}:initial:"), str(info.value)
@@ -217,8 +240,9 @@ def test_wrong_type_for_union_key_names_the_key(tmp_path: Path):
     [
         (("control_period_s = 0.01", "control_period_s = inf"), "control_period_s"),
         (("control_period_s = 0.01", "control_period_s = 1e-300"), "control_period_s"),
-        (("control_period_s = 0.01", "control_period_s = 5.0"), "moves[0].duration_s"),
-        (('initial = "ready"', 'initial = { left_elbow = "bent" }'), "initial.left_elbow"),
+        (("control_period_s = 0.01", "control_period_s = 5.0"), "control_period_s"),
+        (("control_period_s = 0.01", "control_period_s = 0.3"), "moves[0].duration_s"),
+        (initial_is('{ left_elbow = "bent" }'), "initial.left_elbow"),
     ],
 )
 def test_extreme_or_mistyped_values_name_their_key(tmp_path: Path, edit, key):

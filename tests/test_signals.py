@@ -1,0 +1,115 @@
+"""Ctrl-C (SIGINT) and SIGTERM on real ``dualarm`` processes: one line, exit 130 or 143, the run kept as failed, nothing hidden left, workers stopped and reaped.
+
+Each process is stopped (SIGSTOP) as soon as the state to interrupt is on disk, signalled, then
+continued (SIGCONT): the signal lands there whatever the machine's speed.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+CLI = [sys.executable, "-c", "import sys; sys.argv[0] = 'dualarm'; from dualarm.cli import app; app()"]
+#: Longest wait for a process to reach the state the test interrupts [s] (a bound against hanging, not a measurement).
+PATIENCE_S = 300
+
+
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT as a terminal's foreground job has it (a shell may start background jobs with it ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _wait_for(condition, process: subprocess.Popen) -> None:
+    deadline = time.monotonic() + PATIENCE_S
+    while not condition():
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline, "the state to interrupt never came"
+        time.sleep(0.01)
+
+
+def _stagings(recordings: Path) -> list[Path]:
+    """The run directories being written in ``recordings`` (``<task>/.<run-id>.partial``)."""
+    return [p for p in recordings.glob("*/.*.partial") if p.is_dir()]
+
+
+def _partials(directory: Path) -> list[Path]:
+    """Anything under ``directory`` left half-written: a run's staging, a file's ``.<name>.partial``."""
+    return list(directory.rglob("*.partial"))
+
+
+def _error_lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.strip()]
+
+
+@pytest.mark.parametrize(("signum", "code", "line", "error"), [(signal.SIGINT, 130, "interrupted (SIGINT)", "KeyboardInterrupt"), (signal.SIGTERM, 143, "terminated (SIGTERM)", "Terminated: SIGTERM")])
+def test_a_signalled_run_is_kept_as_failed(tmp_path, signum, code, line, error):
+    out = tmp_path / "out"
+    process = subprocess.Popen([*CLI, "run", "triangle", "--ik", "mc-inverse", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
+    _wait_for(lambda: bool(_stagings(out)), process)
+    process.send_signal(signal.SIGSTOP)
+    assert _stagings(out), "the run ended before it could be interrupted"
+    process.send_signal(signum)
+    process.send_signal(signal.SIGCONT)
+    stdout, stderr = process.communicate(timeout=PATIENCE_S)
+
+    assert process.returncode == code, stderr
+    assert _error_lines(stderr) == [line] and "Traceback" not in stderr + stdout
+    (run,) = (out / "triangle").iterdir()
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["status"] == "failed" and manifest["error"].startswith(error) and manifest["run_id"] == run.name
+    assert not (run / "metrics.json").exists()
+    assert not _partials(out)
+
+
+def _workers(pid: int) -> dict[int, str]:
+    """The reproduction's worker processes (spawned children of ``pid``): pid -> its start time, which tells a pid's later owner apart."""
+    found = {}
+    for child in Path(f"/proc/{pid}/task/{pid}/children").read_text().split():
+        cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
+        if b"multiprocessing.spawn" in cmdline:
+            found[int(child)] = Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    return found
+
+
+def _alive(pid: int, started: str) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19] == started
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="finds the workers in /proc (Linux)")
+@pytest.mark.parametrize(("signum", "group", "code", "line"), [(signal.SIGINT, True, 130, "interrupted (SIGINT)"), (signal.SIGTERM, False, 143, "terminated (SIGTERM)")])
+def test_an_interrupted_reproduction_stops_its_workers(tmp_path, signum, group, code, line):
+    """Ctrl-C reaches the whole process group (as from a terminal); SIGTERM the main process alone."""
+    out = tmp_path / "repro"
+    process = subprocess.Popen(
+        [*CLI, "reproduce", "--only", "ball-game-tvgdd,ball-game-pinv", "--jobs", "2", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=_default_sigint,
+    )
+    _wait_for(lambda: bool(_stagings(out / "runs")), process)
+    os.killpg(process.pid, signal.SIGSTOP)
+    workers = _workers(process.pid)
+    assert len(workers) == 2 and _stagings(out / "runs")
+    if group:
+        os.killpg(process.pid, signum)
+    else:
+        process.send_signal(signum)
+    os.killpg(process.pid, signal.SIGCONT)
+    stdout, stderr = process.communicate(timeout=PATIENCE_S)
+
+    assert process.returncode == code, stderr
+    assert _error_lines(stderr) == [line] and "Traceback" not in stderr + stdout
+    assert not [pid for pid, started in workers.items() if _alive(pid, started)]
+    assert not _partials(out)
+    runs = list((out / "runs" / "ball_game").iterdir())
+    assert runs and all(json.loads((run / "manifest.json").read_text())["status"] == "failed" for run in runs)
