@@ -42,3 +42,22 @@ def wheel_env(tmp_path_factory) -> Path:
     site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], check=True, capture_output=True, text=True).stdout.strip()
     (Path(site) / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     return venv
+
+
+def still_path_fields(n: int, *, joint: str = "a", hand: str = "left", method: str = "x", period_s: float = 0.01, **fields) -> dict:
+    """The fields of a one-joint, one-hand :class:`~dualarm.ik.joint_path.JointPath` of ``n`` samples at rest at 0, every sample solved; ``fields`` replace any of them."""
+    import numpy as np
+
+    return {
+        "method": method,
+        "joint_names": (joint,),
+        "t": np.arange(n) * period_s,
+        "rep": np.zeros(n, int),
+        "q": np.zeros((n, 1)),
+        "qd": np.zeros((n, 1)),
+        "status": np.zeros(n, int),
+        "solve_time_s": np.zeros(n),
+        "hand_error_m": np.zeros((n, 1)),
+        "hands": (hand,),
+        **fields,
+    }

@@ -25,6 +25,7 @@ from dualarm.stages import ExecuteStage
 from dualarm.tasks import load_task
 from dualarm.tasks.load import task_from_dict
 from dualarm.verdict import EXIT_CODES, Checks, Verdict, Violation, ik_violations
+from tests.conftest import still_path_fields
 
 #: The right hand draws a square across the chest; DLS-SVD swings the right upper arm into the
 #: torso (found with `dualarm run ... --ik dls-svd --execute-anyway`).
@@ -196,19 +197,7 @@ def test_crossing_hands_played_anyway_name_the_arms_that_touch():
 
 def _path(status, error_m) -> JointPath:
     n = len(status)
-    names = ("a",)
-    return JointPath(
-        method="m",
-        joint_names=names,
-        t=np.arange(n) * 0.01,
-        rep=np.zeros(n, int),
-        q=np.zeros((n, 1)),
-        qd=np.zeros((n, 1)),
-        status=np.array(status),
-        solve_time_s=np.zeros(n),
-        hand_error_m=np.array(error_m, dtype=float).reshape(n, 1),
-        hands=("left",),
-    )
+    return JointPath(**still_path_fields(n, method="m", status=np.array(status), hand_error_m=np.array(error_m, dtype=float).reshape(n, 1)))
 
 
 class _Limits:

@@ -25,6 +25,7 @@ from dualarm.ik.pointwise import solve_pybullet
 from dualarm.ik.stack import hand_stack, reference_stack, stacked_reference, start_configuration
 from dualarm.ik.tvgdd import FEASIBILITY_TOLERANCE, TvgddSettings, build_problem, joint_bounds, settings_for, solve_tvgdd
 from dualarm.paths import build_reference
+from tests.conftest import still_path_fields
 
 #: Sample stride of the PyBullet checks along a path.
 STRIDE = 25
@@ -225,18 +226,7 @@ def test_task_space_is_checked():
     with pytest.raises(InvalidArgumentError, match="task_space"):
         PinvSettings(task_space="6d")
     N = 3
-    fields = dict(
-        method="x",
-        joint_names=("a",),
-        t=np.arange(N) * 0.1,
-        rep=np.zeros(N, int),
-        q=np.zeros((N, 1)),
-        qd=np.zeros((N, 1)),
-        status=np.zeros(N, int),
-        solve_time_s=np.zeros(N),
-        hand_error_m=np.zeros((N, 1)),
-        hands=("left",),
-    )
+    fields = still_path_fields(N, period_s=0.1)
     with pytest.raises(InvalidArgumentError, match="task_space"):
         JointPath(**fields, task_space="full")
     with pytest.raises(InvalidArgumentError, match="hand_orientation_error_rad"):

@@ -20,7 +20,7 @@ from dualarm.ik.pinv import settings_for
 from dualarm.record.recorder import Recorder
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import TASKS
+from tests.conftest import TASKS, still_path_fields
 
 
 def read_topics(path, prefix: str) -> tuple[dict[str, dict], dict[str, list[dict]]]:
@@ -81,18 +81,7 @@ def test_ik_sample_schema_describes_the_field_and_every_message_matches(recorded
 def test_a_path_without_orientation_records_none(tmp_path, humanoid):
     """A planner's path measures no orientation (NaN): its samples leave the field out instead of writing NaN, which is not JSON."""
     N = 4
-    path = JointPath(
-        method="mcikrrt",
-        joint_names=("left_elbow",),
-        t=np.arange(N) * 0.01,
-        rep=np.zeros(N, int),
-        q=np.zeros((N, 1)),
-        qd=np.zeros((N, 1)),
-        status=np.zeros(N, int),
-        solve_time_s=np.zeros(N),
-        hand_error_m=np.zeros((N, 1)),
-        hands=("left",),
-    )
+    path = JointPath(**still_path_fields(N, joint="left_elbow", method="mcikrrt"))
     recorder = Recorder(tmp_path, "test", humanoid, {})
     recorder.joint_path(path, np.ones(1), {}, stage="plan")
     recorder.close({})
