@@ -178,7 +178,7 @@ def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: boo
                     float(path.t[k]),
                 )
             )
-    out += position_limit_violations(stage, path.t, path.joint_names, path.q[ok], robot) if ok.any() else []
+    out += position_limit_violations(stage, path.t[ok], path.joint_names, path.q[ok], robot)  # a failed sample holds its last solution
     if not retimed and len(path) > 1:
         out += ratio_violations(stage, path.t, path.joint_names, {"velocity": path.qd}, {"velocity": robot.limit_array("velocity", path.joint_names)})
     return out

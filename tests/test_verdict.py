@@ -224,3 +224,10 @@ def test_verdict_lines_and_exit_codes():
     assert Verdict.of([v, v]).violations == (v,)  # one message once
     assert Verdict.of([v]).lines() == ["verdict: violated (1 violation)", f"  {v.message}"]
     assert Verdict.failure("boom").exit_code == 1 and Verdict.failure("boom").first == "boom"
+
+
+def test_a_position_limit_is_timed_at_its_own_sample_after_a_failed_one():
+    """Samples 0 failed, 2 beyond the [-1, 1] rad limit by 0.5 rad: the violation is at t = 0.02 s."""
+    path = JointPath(**still_path_fields(3, method="m", status=np.array([1, 0, 0]), q=np.array([[0.0], [0.0], [1.5]])))
+    limit = [v for v in ik_violations(path, _Limits(), Checks(), retimed=True) if v.check == "limit"]
+    assert len(limit) == 1 and limit[0].t_s == pytest.approx(0.02) and "position of a 0.5 rad beyond its limits [-1, 1]" in limit[0].message
