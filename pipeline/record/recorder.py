@@ -39,6 +39,20 @@ if TYPE_CHECKING:  # pybullet is imported only by runs that execute
 STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "approach": "/approach", "execute": "/execute"}
 TIMELINE = "time"
 HAND_COLORS = {"left": (40, 120, 230), "right": (230, 90, 40)}
+#: The Rerun layout every run opens on: the robots and hand paths in 3D, the camera framing the whole
+#: 1.6 m humanoid from the front left, beside the time series. Sent before any data.
+BLUEPRINT = rrb.Blueprint(
+    rrb.Horizontal(
+        rrb.Spatial3DView(
+            origin="/",
+            name="robot and hand paths",
+            eye_controls=rrb.EyeControls3D(position=[2.4, -1.5, 1.5], look_target=[0.2, 0.0, 0.8], eye_up=[0.0, 0.0, 1.0]),
+        ),
+        rrb.TimeSeriesView(origin="/plots", name="time series"),
+        column_shares=[3, 2],
+    ),
+    collapse_panels=True,
+)
 #: Period of the robot's animation (/tf and the Rerun URDF) for stages sampled faster [s].
 ANIMATION_PERIOD_S = 0.01
 
@@ -77,6 +91,7 @@ class Recorder(NullSink):
         self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
         self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
         self._rr.save(directory / "run.rrd")
+        self._rr.send_blueprint(BLUEPRINT)  # first, so that a viewer loading the file opens on it
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
         self._closed = False
         for name, text in attachments.items():
@@ -94,7 +109,8 @@ class Recorder(NullSink):
     def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
         """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world (logged on first use)."""
         if stage not in self._robot_trees:
-            tree = rr.urdf.UrdfTree.from_file_path(self.robot.urdf.path, entity_path_prefix=stage, frame_prefix=f"{stage}/")
+            # one static entity per stage robot: static data logged twice to one entity replaces the first
+            tree = rr.urdf.UrdfTree.from_file_path(self.robot.urdf.path, entity_path_prefix=stage, frame_prefix=f"{stage}/", static_transform_entity_path=f"/{stage}/tf_static")
             tree.log_urdf_to_recording(self._rr)
             self._rr.log(
                 f"{stage}/root",
@@ -373,22 +389,12 @@ class Recorder(NullSink):
         self._json("/metrics", schemas.METRICS).log({"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t))
 
     def close(self, manifest: Mapping[str, object]) -> None:
-        """Write the manifest as MCAP metadata, the Rerun blueprint, and finish both files."""
+        """Write the manifest as MCAP metadata and finish both files."""
         if self._closed:
             return
         self._closed = True
         self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})
         self._mcap.close()
-        self._rr.send_blueprint(
-            rrb.Blueprint(
-                rrb.Horizontal(
-                    rrb.Spatial3DView(origin="/", name="robot and hand paths"),
-                    rrb.TimeSeriesView(origin="/plots", name="time series"),
-                    column_shares=[3, 2],
-                ),
-                collapse_panels=True,
-            )
-        )
         self._rr.flush()
         self._rr.disconnect()
         self.finish()

@@ -568,13 +568,15 @@ def test_blueprint_check_fails_on_an_rrd_without_blueprint(tmp_path):
 
 def test_rrd_has_every_stage_robot(run, rrd, mcap_file, urdf):
     """Each stage's URDF under /<stage>/<robot>, hung from the world by /<stage>/root, its fixed
-    frames in /tf_static and each moving joint animated once per /tf message of the stage."""
+    frames in its own /<stage>/tf_static (static data logged twice to one entity replaces the
+    first in the viewer, so one shared entity would keep one stage's) and each moving joint
+    animated once per /tf message of the stage."""
     spec, _ = run
     path, listing = rrd
     entities = listing.entities("Recording")
     tf_messages = Counter(m.child_frame_id.split("/", 1)[0] for _, message in _transforms(mcap_file) for m in message.transforms[:1])
-    static = rrd_rows(path, "/tf_static")
     for stage in spec.stages:
+        static = rrd_rows(path, f"/{stage}/tf_static")
         robot = f"/{stage}/{urdf.name}"
         assert robot in entities, f"no {robot}"
         for link in urdf.element.findall("link"):
@@ -583,7 +585,7 @@ def test_rrd_has_every_stage_robot(run, rrd, mcap_file, urdf):
                     pattern = rf"{re.escape(robot)}/{kind}_geometries/(\w+/)?{link.get('name')}/{kind}_{i}"
                     assert any(re.fullmatch(pattern, e) for e in entities), f"{stage}: no {kind} {i} of {link.get('name')}"
         for joint, (kind, child) in urdf.joints.items():
-            assert f"[{stage}/{child}]" in static, f"/tf_static has no {stage}/{child}"
+            assert f"[{stage}/{child}]" in static, f"/{stage}/tf_static has no {stage}/{child}"
             if kind == "fixed":
                 continue
             rows, columns = entities.get(f"/{stage}/transforms/{joint}", (0, set()))

@@ -1,0 +1,155 @@
+"""``run.rrd`` opened in Rerun's own native viewer, headless (``rerun.experimental.ViewerClient``).
+
+The viewer renders with Mesa's software Vulkan (``apt-get install mesa-vulkan-drivers``); without a
+Vulkan driver the tests are skipped, saying what to install. What is asserted is what the viewer
+itself reports: its views' errors, its transform graph, and the pixels of its 3D view.
+"""
+
+import io
+import json
+import shutil
+import socket
+import sys
+import time
+import xml.etree.ElementTree as ET
+from collections import defaultdict, deque
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from dualarm.run import record_run
+from dualarm.tasks import load_task
+from tests.conftest import HUMANOID
+
+RERUN = str(Path(sys.executable).with_name("rerun"))
+#: The 3D view's target frame (the blueprint's origin "/").
+TARGET = "tf#/"
+#: Robot pixels must stay this far from the 3D view's edges (the whole robot in frame) [px].
+MARGIN_PX = 4
+
+pytestmark = pytest.mark.skipif(
+    not any(Path(d).is_dir() and any(Path(d).glob("*.json")) for d in ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d")) or shutil.which(RERUN) is None,
+    reason="the Rerun viewer tests need a Vulkan driver: apt-get install mesa-vulkan-drivers",
+)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _until(check, what: str, timeout_s: float = 120.0, period_s: float = 0.1):
+    """Poll ``check()`` until it returns something other than None."""
+    started = time.monotonic()
+    while time.monotonic() - started < timeout_s:
+        try:
+            found = check()
+        except Exception:  # noqa: BLE001 - the viewer is not listening yet
+            found = None
+        if found is not None:
+            return found
+        time.sleep(period_s)
+    raise TimeoutError(f"the viewer: {what} after {timeout_s} s")
+
+
+@pytest.fixture(scope="module")
+def opened(tmp_path_factory):
+    """A triangle run through every stage, opened in a headless viewer; (client, manifest stages, end time [s])."""
+    from rerun.experimental import ViewerClient
+
+    run = record_run(load_task("triangle", 1), "mc-inverse", out_dir=tmp_path_factory.mktemp("runs"))
+    client = ViewerClient.spawn(headless=True, port=_free_port(), hide_welcome_screen=True, executable_path=RERUN)
+    try:
+        _until(client.get_state, "no answer")
+        (store,) = client.open(str(run.directory / "run.rrd")).store_ids
+
+        def loaded():
+            state = client.get_state()
+            recording = next((r for r in state.recordings if r.store_id == store), None)
+            return True if recording is not None and recording.timelines and not state.loading else None
+
+        _until(loaded, "the recording is still loading")
+        counts: list[tuple[int, int]] = []
+
+        def settled():  # open returns before every chunk is in the transform graph: wait until it stops growing
+            graph = client.get_transform_graph()
+            counts.append((len(graph["frames"]), len(graph["edges"])))
+            return True if len(counts) >= 4 and len(set(counts[-4:])) == 1 and not graph.get("missing_chunks") else None
+
+        _until(settled, "the transform graph is still growing", period_s=0.5)
+        stages = json.loads((run.directory / "manifest.json").read_text())["stages"]
+        assert run.smoothed is not None
+        yield client, stages, run.smoothed.duration_s
+    finally:
+        client.quit()
+
+
+def _show(client, t_s: float) -> None:
+    """Pause at motion time ``t_s`` and wait for a painted frame (so the views' reports are current)."""
+    client.set_time("time", duration=t_s, play_state="paused")
+    client.take_screenshot(max_size=64)
+
+
+def _joined(graph: dict) -> set[str]:
+    """The frames joined to :data:`TARGET` by some chain of edges."""
+    adjacent: dict[str, set[str]] = defaultdict(set)
+    for edge in graph["edges"]:
+        adjacent[edge["parent"]].add(edge["child"])
+        adjacent[edge["child"]].add(edge["parent"])
+    seen, todo = {TARGET}, deque([TARGET])
+    while todo:
+        for frame in adjacent[todo.popleft()] - seen:
+            seen.add(frame)
+            todo.append(frame)
+    return seen
+
+
+def test_every_view_reports_nothing_at_start_middle_and_end(opened):
+    client, _, end = opened
+    for t in (0.0, end / 2, end):
+        _show(client, t)
+        errors = {f"{v.name} [{v.view_class}]": sorted({r.summary for r in v.reports})[:3] for v in client.get_state().views if v.reports}
+        assert not errors, f"t = {t:g} s: {errors}"
+
+
+def test_every_stage_robot_is_joined_to_the_3d_views_frame(opened):
+    """Every link of the URDF (read with ElementTree), for every stage the manifest lists."""
+    client, stages, end = opened
+    links = {link.get("name") for link in ET.parse(HUMANOID / "humanoid.urdf").getroot().iter("link")}
+    for t in (0.0, end / 2):
+        _show(client, t)
+        joined = _joined(client.get_transform_graph())
+        for stage in stages:
+            missing = sorted(f"{stage}/{link}" for link in links if f"{stage}/{link}" not in joined)
+            assert not missing, f"t = {t:g} s: {len(missing)} frames of the {stage} robot are not joined to {TARGET}, e.g. {missing[:3]}"
+
+
+def test_the_3d_view_draws_the_whole_robot(opened):
+    """Hiding the stage robots changes at least 1 % of the 3D view's pixels, none near its edges."""
+    client, stages, end = opened
+    view = next(v.view_id for v in client.get_state().views if v.view_class == "3D")
+
+    def shot() -> np.ndarray:
+        _show(client, end / 2)
+        return np.asarray(Image.open(io.BytesIO(client.take_screenshot(view))).convert("RGB")).astype(int)
+
+    shown = shot()
+    blueprint = client.get_blueprint()
+    key = f"/view/{view}/ViewContents"
+    before = blueprint.blueprint.get(key)
+    blueprint.blueprint[key] = {"ViewContents": {"query": ["$origin/**", *(f"- /{stage}/**" for stage in stages)]}}
+    client.set_blueprint(blueprint.blueprint, store_id=blueprint.store_id)
+    try:
+        hidden = shot()
+    finally:
+        if before is not None:
+            blueprint.blueprint[key] = before
+            client.set_blueprint(blueprint.blueprint, store_id=blueprint.store_id)
+    robot = np.abs(shown - hidden).max(axis=2) > 30
+    h, w = robot.shape
+    assert robot.sum() >= 0.01 * h * w, f"only {robot.sum()} of {h * w} pixels are the robots'"
+    ys, xs = np.nonzero(robot)
+    assert MARGIN_PX <= xs.min() and MARGIN_PX <= ys.min() and xs.max() < w - MARGIN_PX and ys.max() < h - MARGIN_PX, "the robot reaches the view's edge: cut off"
