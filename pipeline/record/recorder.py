@@ -40,7 +40,8 @@ STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retim
 TIMELINE = "time"
 HAND_COLORS = {"left": (40, 120, 230), "right": (230, 90, 40)}
 #: The Rerun layout every run opens on: the robots and hand paths in 3D, the camera framing the whole
-#: 1.6 m humanoid from the front left, beside the time series. Sent before any data.
+#: 1.6 m humanoid from the front left, beside the time series. (Sent when the run closes: sent first,
+#: a SIGTERM during the send left Rerun's warning "Dropping data in MemorySink" on stderr.)
 BLUEPRINT = rrb.Blueprint(
     rrb.Horizontal(
         rrb.Spatial3DView(
@@ -91,7 +92,6 @@ class Recorder(NullSink):
         self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
         self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
         self._rr.save(directory / "run.rrd")
-        self._rr.send_blueprint(BLUEPRINT)  # first, so that a viewer loading the file opens on it
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
         self._closed = False
         for name, text in attachments.items():
@@ -389,12 +389,13 @@ class Recorder(NullSink):
         self._json("/metrics", schemas.METRICS).log({"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t))
 
     def close(self, manifest: Mapping[str, object]) -> None:
-        """Write the manifest as MCAP metadata and finish both files."""
+        """Write the manifest as MCAP metadata, the Rerun blueprint, and finish both files."""
         if self._closed:
             return
         self._closed = True
         self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})
         self._mcap.close()
+        self._rr.send_blueprint(BLUEPRINT)
         self._rr.flush()
         self._rr.disconnect()
         self.finish()
