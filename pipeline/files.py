@@ -20,9 +20,6 @@ from dualarm.errors import DualarmError, excerpt
 #: the humanoid's URDF below 20 kB).
 MAX_FILE_BYTES = 16 * 1024 * 1024
 
-#: A user's string quoted for a message (at most about 80 characters, one line): :func:`dualarm.errors.excerpt`, here too.
-shown = excerpt
-
 #: What :func:`kind` says of a regular file and of a directory.
 REGULAR_FILE, DIRECTORY = "a regular file", "a directory"
 _KINDS = ((stat.S_ISDIR, DIRECTORY), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))

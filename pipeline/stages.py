@@ -13,7 +13,7 @@ Heavy libraries (toppra, ruckig, pybullet) are imported only by the stages that 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
@@ -29,7 +29,7 @@ from dualarm.retime.trajectory import JointTrajectory
 from dualarm.settings import as_record
 from dualarm.tasks import Task
 from dualarm.tasks.schema import Retime
-from dualarm.verdict import Checks, Violation, ik_violations, position_limit_violations, trajectory_violations
+from dualarm.verdict import Checks, Violation, execution_violations, ik_violations, position_limit_violations, trajectory_violations
 
 if TYPE_CHECKING:
     from dualarm.execute.simulate import ExecutionLog, ExecutionSettings
@@ -275,8 +275,6 @@ class ApproachStage:
 
     def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
         """Plan the approach: JointTrajectory -> the same JointTrajectory with its ``approach``."""
-        from dataclasses import replace
-
         from dualarm.smooth.approach import approach_trajectory
 
         sink.begin(self.name)
@@ -318,14 +316,12 @@ class ExecuteStage:
 
     def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple["ExecutionLog", dict[str, float]]:
         """Validate and play the trajectory in PyBullet: JointTrajectory -> ExecutionLog."""
-        from dataclasses import replace
-
         from dualarm.execute.preflight import preflight
         from dualarm.execute.simulate import execute_trajectory
 
         sink.begin(self.name)
         task = self.task
-        found = [*(preflight(traj.approach, task) if traj.approach is not None else []), *preflight(traj, task)]
+        found = preflight(traj, task)
         if found and not self.settings.execute_anyway:
             more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
             raise StageError(f"execute: refused to play the trajectory: {found[0].message}{more}; --execute-anyway plays it for diagnosis", stage=self.name, t_s=found[0].t_s, violations=tuple(found))
@@ -349,8 +345,6 @@ class ExecuteStage:
 
     def violations(self, log: "ExecutionLog") -> list[Violation]:
         """What the preflight found (a trajectory played anyway), unexpected contacts and hands beyond the tracking bound."""
-        from dualarm.verdict import execution_violations
-
         approach = execution_violations(log.approach, self.checks, "approach") if log.approach is not None else []
         return [*log.preflight, *approach, *execution_violations(log, self.checks)]
 

@@ -9,11 +9,16 @@ refuses a trajectory that fails, unless it is told to play it anyway.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from dualarm.retime.trajectory import JointTrajectory
 from dualarm.tasks import Task
 from dualarm.verdict import Violation, trajectory_violations
+
+if TYPE_CHECKING:
+    from dualarm.plan.collision import CollisionChecker
 
 #: Largest joint step between the configurations checked for collision [rad] (the planners' default).
 RESOLUTION_RAD = 0.02
@@ -37,17 +42,13 @@ def checked_samples(q: np.ndarray, resolution_rad: float) -> np.ndarray:
     return np.array(kept)
 
 
-def collision_violations(traj: JointTrajectory, task: Task, resolution_rad: float = RESOLUTION_RAD) -> list[Violation]:
-    """Each pair of bodies in collision along ``traj`` (no margin), with the first time and the deepest overlap found."""
-    from dualarm.plan.collision import CollisionChecker
-
-    spec = task.spec
+def collision_violations(checker: "CollisionChecker", traj: JointTrajectory, resolution_rad: float = RESOLUTION_RAD) -> list[Violation]:
+    """Each pair of bodies ``checker`` finds in collision along ``traj``, with the first time and the deepest overlap found."""
     first: dict[tuple[str, str], tuple[float, float, int]] = {}
-    with CollisionChecker(task.robot, traj.joint_names, traj.fixed, spec.environment, spec.expected_contacts, margin_m=0.0, resolution_rad=resolution_rad) as checker:
-        for k in checked_samples(traj.q, resolution_rad):
-            for c in checker.contacts(traj.q[k]):
-                t, depth, count = first.get((c.a, c.b), (float(traj.t[k]), 0.0, 0))
-                first[(c.a, c.b)] = (t, max(depth, c.depth_m), count + 1)
+    for k in checked_samples(traj.q, resolution_rad):
+        for c in checker.contacts(traj.q[k]):
+            t, depth, count = first.get((c.a, c.b), (float(traj.t[k]), 0.0, 0))
+            first[(c.a, c.b)] = (t, max(depth, c.depth_m), count + 1)
     return [
         Violation("contact", traj.stage, f"{traj.stage}: {a} collides with {b} at t = {t:.3f} s, {depth * 1e3:.3g} mm deep at most, at {count} checked configurations", t)
         for (a, b), (t, depth, count) in sorted(first.items(), key=lambda item: item[1][0])
@@ -55,5 +56,15 @@ def collision_violations(traj: JointTrajectory, task: Task, resolution_rad: floa
 
 
 def preflight(traj: JointTrajectory, task: Task, resolution_rad: float = RESOLUTION_RAD) -> list[Violation]:
-    """Every limit (jerk included) and collision the trajectory breaks, earliest first within each kind."""
-    return trajectory_violations(traj, task.robot, jerk=True) + collision_violations(traj, task, resolution_rad)
+    """Every limit (jerk included) and collision (no margin) ``traj`` breaks, its ``approach``'s first when it has one; earliest first within each kind.
+
+    One checker serves both: the approach and the trajectory move the same joints.
+    """
+    from dualarm.plan.collision import CollisionChecker
+
+    spec, found = task.spec, []
+    with CollisionChecker(task.robot, traj.joint_names, traj.fixed, spec.environment, spec.expected_contacts, margin_m=0.0, resolution_rad=resolution_rad) as checker:
+        for played in (traj.approach, traj):
+            if played is not None:
+                found += trajectory_violations(played, task.robot, jerk=True) + collision_violations(checker, played, resolution_rad)
+    return found

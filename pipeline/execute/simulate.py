@@ -26,6 +26,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from types import MappingProxyType
 
 import numpy as np
@@ -159,9 +160,9 @@ class ExecutionLog:
         object.__setattr__(self, "hand_error_m", MappingProxyType({h: frozen(e, (K,), f"hand_error_m[{h}]") for h, e in self.hand_error_m.items()}))
         object.__setattr__(self, "contact_events", tuple(self.contact_events))
 
-    @property
+    @cached_property
     def contacts(self) -> tuple[PairContact, ...]:
-        """Each pair that touched, in the order of its first contact."""
+        """Each pair that touched, in the order of its first contact (summed up from :attr:`contact_events` once)."""
         pairs: dict[tuple[str, str], PairContact] = {}
         for e in self.contact_events:
             seen = pairs.get((e.first, e.second))

@@ -9,10 +9,20 @@ from types import MappingProxyType
 import numpy as np
 
 from dualarm.arrays import frozen
-from dualarm.errors import InvalidArgumentError
+from dualarm.errors import InvalidArgumentError, excerpt
 
 #: Per-sample solver status codes.
 OK, FAILED = 0, 1
+
+#: What an IK method solves: the hands' whole ``pose``, or their ``position`` only.
+TASK_SPACES = ("pose", "position")
+
+
+def check_task_space(task_space: object) -> None:
+    """Refuse a task space not in :data:`TASK_SPACES` (an InvalidArgumentError naming ``task_space``)."""
+    if task_space not in TASK_SPACES:
+        raise InvalidArgumentError("task_space", f"unknown task space '{excerpt(task_space)}' (task spaces: {', '.join(TASK_SPACES)})")
+
 
 #: The default of ``hand_orientation_error_rad``: not measured (NaN), e.g. a planner's path, which follows no reference.
 _NOT_MEASURED = np.empty(0)
@@ -60,8 +70,7 @@ class JointPath:
         N, n = len(self.t), len(self.joint_names)
         if self.hand_orientation_error_rad is _NOT_MEASURED:
             object.__setattr__(self, "hand_orientation_error_rad", np.full((N, len(self.hands)), np.nan))
-        if self.task_space not in ("pose", "position"):
-            raise InvalidArgumentError("task_space", f"must be 'pose' or 'position', not {str(self.task_space)[:80]!r}")
+        check_task_space(self.task_space)
         for name, shape, dtype in (
             ("t", (N,), float),
             ("rep", (N,), int),

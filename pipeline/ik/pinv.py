@@ -18,8 +18,8 @@ import casadi as cs
 import numpy as np
 
 from dualarm.errors import InvalidArgumentError
-from dualarm.ik.joint_path import JointPath
-from dualarm.ik.stack import TASK_SPACES, reference_stack, stack_joint_path, stacked_reference, start_configuration
+from dualarm.ik.joint_path import JointPath, check_task_space
+from dualarm.ik.stack import reference_stack, stack_joint_path, stacked_reference, start_configuration
 from dualarm.ik.tvgdd import TvgddSettings, gesture_band, joint_bounds
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference
@@ -48,8 +48,7 @@ class PinvSettings:
     task_space: str = "pose"
 
     def __post_init__(self) -> None:
-        if self.task_space not in TASK_SPACES:
-            raise InvalidArgumentError("task_space", f"unknown task space '{str(self.task_space)[:80]}' (task spaces: {', '.join(TASK_SPACES)})")
+        check_task_space(self.task_space)
         if isinstance(self.feedback_gain, bool) or not isinstance(self.feedback_gain, (int, float)) or not (np.isfinite(self.feedback_gain) and self.feedback_gain > 0):
             raise InvalidArgumentError("feedback_gain", f"must be a positive number, not {self.feedback_gain!r}")
 

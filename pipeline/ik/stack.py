@@ -16,14 +16,12 @@ import casadi as cs
 import numpy as np
 
 from dualarm.arrays import frozen
-from dualarm.errors import InvalidArgumentError, StageError
+from dualarm.errors import StageError
+from dualarm.ik.joint_path import JointPath, check_task_space
 from dualarm.ik.orientation import angular_jacobian, orientation_error, orientation_errors
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference
-
-#: The task spaces of the velocity-level methods: the hands' whole pose, or their positions only.
-TASK_SPACES = ("pose", "position")
 
 
 @dataclass(frozen=True)
@@ -105,8 +103,7 @@ def hand_stack(robot: Robot, hands: Sequence[str], q0: Mapping[str, float], *, f
     Raises:
         InvalidArgumentError: an unknown task space.
     """
-    if task_space not in TASK_SPACES:
-        raise InvalidArgumentError("task_space", f"unknown task space '{str(task_space)[:80]}' (task spaces: {', '.join(TASK_SPACES)})")
+    check_task_space(task_space)
     frame = frame or robot.urdf.root
     names = active_joints(robot, hands, frame, free_waist)
     fixed = {n: v for n, v in q0.items() if n not in names}
@@ -205,8 +202,6 @@ def _on_start(stack: HandStack, theta: np.ndarray, target: np.ndarray) -> bool:
 
 def stack_joint_path(method: str, stack: HandStack, reference: CartesianReference, q: np.ndarray, qd: np.ndarray, solve_time_s: np.ndarray, extras=None):
     """The JointPath of a velocity-level method on ``stack``: hand errors |r - f(q)| [m] and orientation errors (:func:`~dualarm.ik.orientation.orientation_errors`, [rad]) from q (N, n) by the stack's forward kinematics."""
-    from dualarm.ik.joint_path import JointPath
-
     N, h = len(reference), len(stack.hands)
     asked = np.hstack([reference.hands[hand].position for hand in stack.hands])
     positions = np.asarray(stack.positions.map(N)(q.T)).T

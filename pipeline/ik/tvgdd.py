@@ -34,8 +34,8 @@ import numpy as np
 
 from dualarm.errors import InvalidArgumentError, StageError
 from dualarm.ik.gesture import position_bounds, velocity_bounds
-from dualarm.ik.joint_path import JointPath
-from dualarm.ik.stack import TASK_SPACES, HandStack, reference_stack, stack_joint_path, stacked_reference, start_configuration
+from dualarm.ik.joint_path import JointPath, check_task_space
+from dualarm.ik.stack import HandStack, reference_stack, stack_joint_path, stacked_reference, start_configuration
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference
 from dualarm.settings import with_overrides
@@ -98,8 +98,7 @@ class TvgddSettings:
     task_space: str = "pose"
 
     def __post_init__(self) -> None:
-        if self.task_space not in TASK_SPACES:
-            raise InvalidArgumentError("task_space", f"unknown task space '{str(self.task_space)[:80]}' (task spaces: {', '.join(TASK_SPACES)})")
+        check_task_space(self.task_space)
         if self.scheme not in SCHEMES:
             raise InvalidArgumentError("scheme", f"unknown TV-GDD scheme '{self.scheme}' (schemes: {', '.join(SCHEMES)})")
         if self.backend not in BACKENDS:

@@ -280,7 +280,7 @@ class Recorder(NullSink):
         errors, contacts and the joints' tracking error (``/plots/approach/executed_*`` for the
         approach).
         """
-        self._executed(log, f"{STAGE_TOPICS['execute']}/sample", f"{STAGE_TOPICS['execute']}/contacts", "execute")
+        self._executed(log, f"{STAGE_TOPICS['execute']}/sample", f"{STAGE_TOPICS['execute']}/contacts", "execute/")
         if len(log.t):
             self._animation("execute", log.t, log.joint_names, log.q, log.fixed)
         self._hand_traces("execute", {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()})
@@ -288,7 +288,7 @@ class Recorder(NullSink):
             self._executed(log.approach, f"{STAGE_TOPICS['approach']}/executed", f"{STAGE_TOPICS['approach']}/contacts", "approach/executed_")
 
     def _executed(self, log: "ExecutionLog", samples: str, contacts: str, plots: str) -> None:
-        """One played trajectory's steps on topic ``samples``, its contacts on ``contacts``, its plots under ``plots/<plots>...``."""
+        """One played trajectory's steps on topic ``samples``, its contacts on ``contacts``, its plots named ``plots/<plots><quantity>``."""
         names = log.joint_names
         channel = self._json(samples, schemas.EXECUTED_SAMPLE)
         positions = {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()}
@@ -312,10 +312,9 @@ class Recorder(NullSink):
         touching = self._json(contacts, schemas.CONTACT)
         for e in log.contact_events:
             touching.log({"t": e.t_s, "rep": e.rep, "first": e.first, "second": e.second, "depth_m": e.depth_m, "expected": e.expected}, log_time=_ns(e.t_s))
-        sep = "" if plots.endswith("_") else "/"
-        self._series(f"{plots}{sep}hand_error_m", log.t, dict(log.hand_error_m))
-        self._series(f"{plots}{sep}tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
-        self._series(f"{plots}{sep}contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
+        self._series(f"{plots}hand_error_m", log.t, dict(log.hand_error_m))
+        self._series(f"{plots}tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
+        self._series(f"{plots}contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
 
     def environment(self, objects) -> None:
         """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate) and in Rerun under ``/world/environment/<name>``."""

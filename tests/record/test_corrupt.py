@@ -93,6 +93,13 @@ def _one_line(exc: pytest.ExceptionInfo) -> str:
     return message
 
 
+def _read_error(run: Path) -> str:
+    """The one-line RecordingError ``read_run(run)`` raises."""
+    with pytest.raises(RecordingError) as exc:
+        read_run(run)
+    return _one_line(exc)
+
+
 # --- the pristine runs read, and the rules accept what the writer makes ----------------------------
 
 
@@ -295,9 +302,7 @@ def test_a_damaged_file_is_a_recording_error_naming_it(triangle, tmp_path, case)
     file, damage = case
     run = _copy(triangle, tmp_path)
     fault = damage(run / file)
-    with pytest.raises(RecordingError) as exc:
-        read_run(run)
-    message = _one_line(exc)
+    message = _read_error(run)
     assert f"{file}: " in message and fault in message, message
 
 
@@ -330,9 +335,7 @@ def test_metrics_json_of_another_run_of_the_same_task_is_refused(triangle, trian
     run = _copy(triangle, tmp_path)
     shutil.copy(triangle_twice / "metrics.json", run / "metrics.json")
     assert _json(run / "metrics.json") != _json(triangle / "metrics.json")
-    with pytest.raises(RecordingError) as exc:
-        read_run(run)
-    message = _one_line(exc)
+    message = _read_error(run)
     assert "metrics.json: " in message and "not this run's metrics" in message
 
 
@@ -342,9 +345,8 @@ def test_metrics_json_differing_in_one_value_is_refused(triangle, tmp_path):
     key = "path.samples"
     metrics[key] += 1
     (run / "metrics.json").write_text(json.dumps(metrics))
-    with pytest.raises(RecordingError) as exc:
-        read_run(run)
-    assert "metrics.json: " in _one_line(exc) and key in str(exc.value)
+    message = _read_error(run)
+    assert "metrics.json: " in message and key in message
 
 
 def test_a_deleted_metrics_json_of_a_complete_or_violated_run_is_refused(triangle, pinv, tmp_path):
@@ -354,35 +356,29 @@ def test_a_deleted_metrics_json_of_a_complete_or_violated_run_is_refused(triangl
         statuses.add(status)
         copy = _copy(run, tmp_path / status)
         (copy / "metrics.json").unlink()
-        with pytest.raises(RecordingError) as exc:
-            read_run(copy)
-        assert "metrics.json: " in _one_line(exc) and f"missing, but the run's status is '{status}'" in str(exc.value)
+        message = _read_error(copy)
+        assert "metrics.json: " in message and f"missing, but the run's status is '{status}'" in message
     assert statuses == {"complete", "violated"}
 
 
 def test_metrics_json_beside_a_failed_run_is_refused(failed, triangle, tmp_path):
     run = _copy(failed, tmp_path)
     shutil.copy(triangle / "metrics.json", run / "metrics.json")
-    with pytest.raises(RecordingError) as exc:
-        read_run(run)
-    assert "metrics.json: " in _one_line(exc) and "records no metrics" in str(exc.value)
+    message = _read_error(run)
+    assert "metrics.json: " in message and "records no metrics" in message
 
 
 def test_run_mcap_of_another_task_is_refused(triangle, circle, tmp_path):
     run = _copy(triangle, tmp_path)
     shutil.copy(circle / "run.mcap", run / "run.mcap")
-    with pytest.raises(RecordingError) as exc:
-        read_run(run)
-    message = _one_line(exc)
+    message = _read_error(run)
     assert "run.mcap: " in message and "task 'circle'" in message and "'triangle'" in message
 
 
 def test_manifest_json_of_another_run_is_refused(triangle, triangle_twice, tmp_path):
     run = _copy(triangle, tmp_path)
     shutil.copy(triangle_twice / "manifest.json", run / "manifest.json")
-    with pytest.raises(RecordingError) as exc:
-        read_run(run)
-    message = _one_line(exc)
+    message = _read_error(run)
     assert "run.mcap: " in message and triangle.name in message and triangle_twice.name in message
 
 
@@ -392,9 +388,7 @@ def test_a_status_the_recording_does_not_hold_is_refused(triangle, tmp_path, sta
     manifest = _json(run / "manifest.json")
     manifest["status"] = status
     (run / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(RecordingError) as exc:
-        read_run(run)
-    message = _one_line(exc)
+    message = _read_error(run)
     assert "run.mcap: " in message and "status 'complete'" in message and repr(status) in message
 
 
@@ -415,6 +409,5 @@ def test_a_mixed_run_through_the_cli_is_one_line_and_exit_2(triangle, triangle_t
 def test_a_run_directory_that_is_a_file_or_missing_is_one_line(tmp_path):
     (tmp_path / "file").write_text("x")
     for path, fault in ((tmp_path / "file", "not a directory"), (tmp_path / "none", "no such run directory")):
-        with pytest.raises(RecordingError) as exc:
-            read_run(path)
-        assert fault in _one_line(exc)
+        message = _read_error(path)
+        assert fault in message
