@@ -113,3 +113,22 @@ def test_an_interrupted_reproduction_stops_its_workers(tmp_path, signum, group, 
     assert not _partials(out)
     runs = list((out / "runs" / "ball_game").iterdir())
     assert runs and all(json.loads((run / "manifest.json").read_text())["status"] == "failed" for run in runs)
+
+
+def test_a_signal_while_the_rerun_stream_is_built_is_raised_after_it():
+    """The signal arrives inside the block (as it did inside ``rr.RecordingStream()``): the block completes, then the handler raises."""
+    from dualarm.record.recorder import _signals_held
+
+    def handler(signum, frame):
+        raise RuntimeError(signum)
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    finished = []
+    try:
+        with pytest.raises(RuntimeError, match=str(int(signal.SIGTERM))):
+            with _signals_held():
+                signal.raise_signal(signal.SIGTERM)
+                finished.append(True)
+        assert finished == [True] and signal.getsignal(signal.SIGTERM) is handler
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -11,8 +11,11 @@ Rerun: the URDF per stage under ``/<stage>/<robot>``, reference paths and traces
 
 from __future__ import annotations
 
+import contextlib
 import json
-from collections.abc import Callable, Mapping
+import signal
+import threading
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -34,6 +37,23 @@ from dualarm.retime.trajectory import JointTrajectory
 
 if TYPE_CHECKING:  # pybullet is imported only by runs that execute
     from dualarm.execute.simulate import ExecutionLog
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM held back until the block ends, then raised again: a signal's exception raised inside ``rr.RecordingStream()`` leaves a half-built stream whose ``__del__`` prints a traceback."""
+    if threading.current_thread() is not threading.main_thread():  # signal handlers run in the main thread only
+        yield
+        return
+    held: list[int] = []
+    previous = {signum: signal.signal(signum, lambda signum, frame: held.append(signum)) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        for signum in dict.fromkeys(held):
+            signal.raise_signal(signum)
+
 
 #: MCAP topic family of each stage.
 STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "approach": "/approach", "execute": "/execute"}
@@ -90,8 +110,9 @@ class Recorder(NullSink):
         self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
         self._channels: dict[str, foxglove.Channel] = {}
         self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
-        self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
-        self._rr.save(directory / "run.rrd")
+        with _signals_held():
+            self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
+            self._rr.save(directory / "run.rrd")
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
         self._closed = False
         for name, text in attachments.items():
