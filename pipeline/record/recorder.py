@@ -38,6 +38,7 @@ from dualarm.retime.trajectory import JointTrajectory
 if TYPE_CHECKING:  # pybullet is imported only by runs that execute
     from dualarm.execute.simulate import ExecutionLog
 
+
 @contextlib.contextmanager
 def _signals_held() -> Iterator[None]:
     """SIGINT and SIGTERM held back until the block ends, then raised again: a signal's exception raised inside ``rr.RecordingStream()`` leaves a half-built stream whose ``__del__`` prints a traceback."""
