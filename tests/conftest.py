@@ -61,3 +61,17 @@ def still_path_fields(n: int, *, joint: str = "a", hand: str = "left", method: s
         "hands": (hand,),
         **fields,
     }
+
+
+#: Each shipped task and the method it is reproduced with, for the tests that open runs in the viewers.
+SHIPPED = {"triangle": "mc-inverse", "circle": "mc-inverse", "ball_game": "tvgdd", "carry_box": "mc-inverse", "bowl_grasp": "mcikrrt"}
+
+
+@pytest.fixture(scope="session")
+def shipped_runs(tmp_path_factory) -> dict[str, Path]:
+    """Task name -> the run directory of a one-repetition run of that shipped task through every stage."""
+    from dualarm.run import record_run
+    from dualarm.tasks import load_task
+
+    out = tmp_path_factory.mktemp("shipped")
+    return {name: record_run(load_task(name, 1), method, out_dir=out).directory for name, method in SHIPPED.items()}

@@ -59,9 +59,7 @@ def test_every_stage_runs_by_default_and_is_recorded(triangle):
     assert manifest["status"] == "complete" and manifest["stages"] == ["path", "ik", "retime", "smooth", "approach", "execute"]
     for topic in ("/retime/sample", "/retime/limits", "/smooth/sample", "/smooth/limits", "/execute/sample"):
         assert len(data[topic]) > 0, topic
-    frames = set(data["/tf"]["child_frame_id"])
-    for stage in ("ik", "retime", "smooth", "approach", "execute"):
-        assert f"{stage}/left_hand" in frames
+    assert "left_hand" in set(data["/tf"]["child_frame_id"])  # the executed robot
 
 
 def test_the_approach_moves_from_the_initial_configuration_to_the_motion_start_within_the_limits(carry_box):

@@ -109,7 +109,7 @@ class ExecutionLog:
 
     Attributes:
         joint_names: the driven joints, the columns of ``q``.
-        t: step end times (K,) [s].
+        t: 0, where the motion starts (measured before any step), then each step's end time (K,) [s].
         q: measured joint positions (K, n) [rad].
         qd: measured joint velocities (K, n) [rad/s].
         q_command: the trajectory's positions at ``t`` (K, n) [rad].
@@ -226,16 +226,16 @@ class _Player:
     settings: ExecutionSettings
 
     def play(self, trajectory: JointTrajectory) -> ExecutionLog:
-        """Drive the joints along ``trajectory`` from where they are, step by step; its log (times from the end of the first step)."""
+        """Drive the joints along ``trajectory`` from where they are, step by step; its log: the state it starts from at t = 0, then the state at the end of each step."""
         sim, settings, client, body = self.sim, self.settings, self.sim.client, self.sim.body
         names = list(trajectory.joint_names) + list(trajectory.fixed)
         index = [sim.joint_index[n] for n in names]
         effort = [self.robot.limits[n].effort for n in names]
-        t_end = np.arange(1, int(np.ceil(trajectory.duration_s / settings.step_s - 1e-9)) + 1) * settings.step_s
-        command, command_velocity, _, _ = trajectory.interpolate(t_end - settings.step_s)
-        expected, _, _, rep = trajectory.interpolate(t_end)
+        t = np.arange(0, int(np.ceil(trajectory.duration_s / settings.step_s - 1e-9)) + 1) * settings.step_s
+        command, command_velocity, _, _ = trajectory.interpolate(np.maximum(t - settings.step_s, 0.0))  # row k's step starts at t[k] - step
+        expected, _, _, rep = trajectory.interpolate(t)
         held = np.array(list(trajectory.fixed.values()))
-        K, n = len(t_end), len(trajectory.joint_names)
+        K, n = len(t), len(trajectory.joint_names)
         q, qd = np.empty((K, n)), np.empty((K, n))
         hand_links = {h: self.robot.hand_chain(h).tip for h in self.hands}
         hand_poses = {h: np.empty((K, 4, 4)) for h in self.hands}
@@ -244,18 +244,21 @@ class _Player:
         link_name = {i: n for n, i in sim.link_index.items()}
         start = time.monotonic()
         for k in range(K):
-            pb.setJointMotorControlArray(
-                body,
-                index,
-                pb.POSITION_CONTROL,
-                targetPositions=[*command[k], *held],
-                targetVelocities=[*command_velocity[k], *np.zeros(len(held))],
-                forces=effort,
-                positionGains=[settings.position_gain] * len(index),
-                velocityGains=[settings.velocity_gain] * len(index),
-                physicsClientId=client,
-            )
-            pb.stepSimulation(physicsClientId=client)
+            if k == 0:  # the state the motion starts from: measured, with its contacts, before any step
+                pb.performCollisionDetection(physicsClientId=client)
+            else:
+                pb.setJointMotorControlArray(
+                    body,
+                    index,
+                    pb.POSITION_CONTROL,
+                    targetPositions=[*command[k], *held],
+                    targetVelocities=[*command_velocity[k], *np.zeros(len(held))],
+                    forces=effort,
+                    positionGains=[settings.position_gain] * len(index),
+                    velocityGains=[settings.velocity_gain] * len(index),
+                    physicsClientId=client,
+                )
+                pb.stepSimulation(physicsClientId=client)
             states = pb.getJointStates(body, index[:n], physicsClientId=client)
             q[k] = [s[0] for s in states]
             qd[k] = [s[1] for s in states]
@@ -269,12 +272,12 @@ class _Player:
                 depth[key] = max(depth.get(key, 0.0), -float(contact[8]))
                 counter = expected_contacts if key in self.expected_pairs else self_contacts if other == body else environment_contacts
                 counter[k] += 1
-            events += [ContactEvent(float(t_end[k]), int(rep[k]), a, b, d, (a, b) in self.expected_pairs) for (a, b), d in sorted(depth.items())]
+            events += [ContactEvent(float(t[k]), int(rep[k]), a, b, d, (a, b) in self.expected_pairs) for (a, b), d in sorted(depth.items())]
             if settings.gui:
-                time.sleep(max(0.0, start + t_end[k] - time.monotonic()))
+                time.sleep(max(0.0, start + t[k] - time.monotonic()))
         return ExecutionLog(
             joint_names=trajectory.joint_names,
-            t=t_end,
+            t=t,
             q=q,
             qd=qd,
             q_command=expected,

@@ -202,3 +202,39 @@ def load_urdf(path: str | Path) -> UrdfModel:
         joints=tuple(joints),
         kinematic_xml=kinematic_xml,
     )
+
+
+def viewer_urdf(text: str) -> str:
+    """The URDF ``text`` as URDF 1.0 viewers read it: each ``<capsule>`` (a PyBullet and Gazebo extension, which Foxglove's URDF parser refuses) as a cylinder and a sphere at each end.
+
+    The capsule's axis is the z axis of its ``<origin>``; the three shapes keep its tag (visual or
+    collision), its origin's orientation and its material. Everything else is left as it is.
+    """
+    from dualarm.model.poses import pose_matrix
+
+    root = ET.fromstring(text)
+    for link in root.iter("link"):
+        for index, element in enumerate(list(link)):
+            capsule = element.find("geometry/capsule")
+            if capsule is None:
+                continue
+            radius, length = capsule.get("radius", "0"), float(capsule.get("length", "0"))
+            origin = element.find("origin")
+            xyz = [float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()]
+            rpy = origin.get("rpy", "0 0 0") if origin is not None else "0 0 0"
+            axis = pose_matrix(xyz, [float(v) for v in rpy.split()])[:3, 2]
+            shapes = []
+            for shape, centre in (("cylinder", xyz), ("sphere", xyz + axis * length / 2), ("sphere", xyz - axis * length / 2)):
+                copy = ET.fromstring(ET.tostring(element))
+                ET.SubElement(copy.find("geometry"), shape, {"radius": radius, **({"length": f"{length:g}"} if shape == "cylinder" else {})})
+                copy.find("geometry").remove(copy.find("geometry/capsule"))
+                new_origin = copy.find("origin")
+                if new_origin is None:
+                    new_origin = ET.SubElement(copy, "origin")
+                new_origin.set("xyz", " ".join(f"{v:.9g}" for v in centre))
+                new_origin.set("rpy", rpy)
+                shapes.append(copy)
+            link.remove(element)
+            for offset, copy in enumerate(shapes):
+                link.insert(index + offset, copy)
+    return ET.tostring(root, encoding="unicode")

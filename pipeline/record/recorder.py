@@ -1,12 +1,15 @@
 """The recorder: each stage hands it its product once; it writes ``run.mcap`` and ``run.rrd``.
 
 MCAP (written with foxglove-sdk, one Context per run so nothing is global): one topic family per
-stage (``/task/...`` for the path stage), ``/tf`` Foxglove FrameTransforms of every robot link,
-``/robot_description`` with the URDF for Foxglove's URDF layer, ``/metrics``; the manifest as
-metadata; the task file, robot.toml and URDF as attachments. Log time is motion time.
+stage (``/task/...`` for the path stage), ``/robot_description`` with the URDF as URDF 1.0 viewers
+read it, ``/tf`` with the link frames of one robot, the run's :func:`shown_stage`, under the URDF's
+own link names (Foxglove's URDF layer places links by those names, so it can animate one robot),
+``/metrics``; the manifest as metadata; the task file, robot.toml and URDF as attachments. Log
+time is motion time (each stage from 0), not the wall clock: repetitions and runs line up.
 
-Rerun: the URDF per stage under ``/<stage>/<robot>``, reference paths and traces in 3D under
-``/world``, time series under ``/plots``, and a blueprint with a 3D view beside the plots.
+Rerun: the URDF per stage under ``/<stage>/<robot>``, reference paths and each stage's hand traces
+in 3D under ``/world``, time series under ``/plots``, and the :func:`blueprint` the run opens on,
+sent before any data.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import contextlib
 import json
 import signal
 import threading
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,17 +26,35 @@ import foxglove
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
-from foxglove.channels import FrameTransformsChannel, PosesInFrameChannel, SceneUpdateChannel
-from foxglove.messages import Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, Pose, PosesInFrame, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3
+from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
+from foxglove.messages import (
+    Color,
+    CubePrimitive,
+    CylinderPrimitive,
+    FrameTransform,
+    FrameTransforms,
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Point3,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    SpherePrimitive,
+    Timestamp,
+    Vector3,
+)
 
 from dualarm.ik.joint_path import JointPath
 from dualarm.model.kinematics import joint_transforms
 from dualarm.model.poses import pose_matrix, quaternion_xyzw
 from dualarm.model.robot import Robot
+from dualarm.model.urdf import viewer_urdf
 from dualarm.paths.reference import CartesianReference
 from dualarm.record import schemas
 from dualarm.record.sink import NullSink
 from dualarm.retime.trajectory import JointTrajectory
+from dualarm.tasks.load import hand_poses
 
 if TYPE_CHECKING:  # pybullet is imported only by runs that execute
     from dualarm.execute.simulate import ExecutionLog
@@ -59,22 +80,62 @@ def _signals_held() -> Iterator[None]:
 #: MCAP topic family of each stage.
 STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "approach": "/approach", "execute": "/execute"}
 TIMELINE = "time"
+#: Colour of each hand's reference path.
 HAND_COLORS = {"left": (40, 120, 230), "right": (230, 90, 40)}
-#: The Rerun layout every run opens on: the robots and hand paths in 3D, the camera framing the whole
-#: 1.6 m humanoid from the front left, beside the time series. (Sent when the run closes: sent first,
-#: a SIGTERM during the send left Rerun's warning "Dropping data in MemorySink" on stderr.)
-BLUEPRINT = rrb.Blueprint(
-    rrb.Horizontal(
-        rrb.Spatial3DView(
-            origin="/",
-            name="robot and hand paths",
-            eye_controls=rrb.EyeControls3D(position=[2.4, -1.5, 1.5], look_target=[0.2, 0.0, 0.8], eye_up=[0.0, 0.0, 1.0]),
+#: Colour of each stage's hand traces, one per stage so that the traces tell apart where they part.
+STAGE_COLORS = {"ik": (60, 170, 80), "plan": (60, 170, 80), "retime": (150, 90, 200), "smooth": (0, 170, 170), "approach": (150, 150, 150), "execute": (220, 40, 40)}
+#: The stages whose robot moves, in pipeline order (the approach has its own clock).
+MOTION_STAGES = ("path", "ik", "plan", "retime", "smooth", "execute")
+#: Where the 3D views look from: the whole 1.6 m humanoid from the front left.
+EYE = rrb.EyeControls3D(position=[2.4, -1.5, 1.5], look_target=[0.2, 0.0, 0.8], eye_up=[0.0, 0.0, 1.0])
+#: The limit line of the ratio plots.
+LIMIT_LINE = rr.SeriesLines(colors=[(200, 0, 0)], widths=[2.0], names=["limit"])
+
+
+def shown_stage(stages: Sequence[str]) -> str:
+    """The stage a run is shown by: its last stage whose robot moves (``execute`` when it ran)."""
+    return [s for s in MOTION_STAGES if s in stages][-1] if any(s in stages for s in MOTION_STAGES) else "path"
+
+
+def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> rrb.Blueprint:
+    """The Rerun layout a run of ``stages`` opens on, centred on the stage ``focus`` (default :func:`shown_stage`).
+
+    Tab "run": the ``focus`` robot with the reference and its hand paths in one 3D view, beside
+    plots grouped by quantity: hand errors; velocity, acceleration and jerk over their limits
+    (the limit is the line at 1); joint positions, arm angles and contacts. Tab "stages": one 3D
+    view per stage, each with its robot and hand traces on its own clock. The URDF's collision
+    shapes are logged but hidden.
+    """
+    focus = focus or shown_stage(stages)
+    hidden = [f"- /{stage}/{robot.urdf.name}/collision_geometries/**" for stage in stages]
+    scene = ["+ /world/reference/**", "+ /world/environment/**"]
+
+    def view3d(stage: str, name: str) -> rrb.Spatial3DView:
+        return rrb.Spatial3DView(origin="/", name=name, contents=[*scene, f"+ /{stage}/**", f"+ /world/{stage}/**", *hidden], eye_controls=EYE)
+
+    def plot(name: str, *paths: str, legend: bool = True) -> rrb.TimeSeriesView:
+        return rrb.TimeSeriesView(origin="/plots", name=name, contents=[f"+ /plots/{p}/**" for p in paths], plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=legend))
+
+    driven = next((s for s in ("smooth", "retime") if s in stages), focus) if focus == "execute" else focus
+    solved = next((s for s in ("ik", "plan") if s in stages), None)
+    plots = [
+        plot("hand error [m]", *[f"{s}/hand_error_m" for s in (solved, focus) if s]),
+        rrb.Tabs(*[plot(f"{kind} / limit", f"{driven}/{kind}_ratio") for kind in ("velocity", "acceleration", "jerk")]),
+        rrb.Tabs(
+            plot(f"joint positions [rad] ({driven})", f"{driven}/position", legend=False),
+            *([plot("arm angle [rad]", f"{solved}/arm_angle_rad")] if solved == "ik" else []),
+            *([plot("contacts", "execute/contacts"), plot("tracking error [rad]", "execute/tracking_error_rad", legend=False)] if focus == "execute" else []),
         ),
-        rrb.TimeSeriesView(origin="/plots", name="time series"),
-        column_shares=[3, 2],
-    ),
-    collapse_panels=True,
-)
+    ]
+    return rrb.Blueprint(
+        rrb.Tabs(
+            rrb.Horizontal(view3d(focus, f"{focus}: robot and hand paths"), rrb.Vertical(*plots), column_shares=[3, 2], name="run"),
+            rrb.Grid(*[view3d(stage, stage) for stage in stages if stage != "approach"], name="stages"),
+        ),
+        collapse_panels=True,
+    )
+
+
 #: Period of the robot's animation (/tf and the Rerun URDF) for stages sampled faster [s].
 ANIMATION_PERIOD_S = 0.01
 
@@ -100,32 +161,38 @@ class Recorder(NullSink):
         run_id: the run's id (also the Rerun recording id).
         robot: the robot, for /tf and the URDF.
         attachments: file name -> text, stored in the MCAP (task file, robot.toml, URDF).
+        stages: the stages of the run (for the layout it opens on and the robot on ``/tf``).
         on_begin: called with each stage's name as it begins.
     """
 
-    def __init__(self, directory: Path, run_id: str, robot: Robot, attachments: Mapping[str, str], on_begin: Callable[[str], None] | None = None) -> None:
+    def __init__(self, directory: Path, run_id: str, robot: Robot, attachments: Mapping[str, str], stages: Sequence[str] = tuple(STAGE_TOPICS), on_begin: Callable[[str], None] | None = None) -> None:
         super().__init__(on_begin)
+        self.stages = tuple(stages)
+        self.shown = shown_stage(self.stages)
         self.directory = directory
         self.robot = robot
+        self._keys = {"joints": robot.joint_names, "hands": robot.hands}
         self._context = foxglove.Context()
         self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
         self._channels: dict[str, foxglove.Channel] = {}
         self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
-        with _signals_held():
+        with _signals_held():  # the layout first, so that the viewer never shows a default one while loading
             self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
             self._rr.save(directory / "run.rrd")
+            self._rr.send_blueprint(blueprint(robot, self.stages), make_active=True, make_default=True)
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
         self._closed = False
         for name, text in attachments.items():
             media = "application/xml" if name.endswith(".urdf") else "application/toml"
             self._mcap.attach(log_time=0, create_time=0, name=name, media_type=media, data=text.encode())
-        self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log({"data": robot.urdf.path.read_text()}, log_time=0)
+        self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log({"data": viewer_urdf(robot.urdf.path.read_text())}, log_time=0)
         self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     # -- low level -------------------------------------------------------------------------------
-    def _json(self, topic: str, schema: dict) -> foxglove.Channel:
+    def _json(self, topic: str, schema: dict, **keys: Sequence[str]) -> foxglove.Channel:
+        """The JSON channel ``topic``, opened on first use with ``schema``, its maps keyed by the robot's joints and hands (and ``keys``: kind -> names)."""
         if topic not in self._channels:
-            self._channels[topic] = foxglove.Channel(topic, schema=schema, context=self._context)
+            self._channels[topic] = foxglove.Channel(topic, schema=schemas.named(schema, {**self._keys, **keys}), context=self._context)
         return self._channels[topic]
 
     def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
@@ -144,12 +211,13 @@ class Recorder(NullSink):
 
     # -- products ----------------------------------------------------------------------------------
     def _tf(self, stage: str, t: np.ndarray | float, q: Mapping[str, np.ndarray | float]) -> None:
-        """The robot's link frames on ``/tf`` at times ``t`` (K,) [s] (joint name -> (K,) positions [rad]), prefixed ``<stage>/`` and hung from ``world``."""
+        """The robot's link frames on ``/tf`` at times ``t`` (K,) [s] (joint name -> (K,) positions [rad]), root hung from ``world``: the shown stage's only."""
+        if stage != self.shown:
+            return
         t = np.atleast_1d(np.asarray(t, dtype=float))
         q = {name: np.broadcast_to(np.asarray(v, dtype=float), t.shape) for name, v in q.items()}
-        root = self.robot.urdf.root
-        links = [("world", root, np.broadcast_to(np.eye(4), (len(t), 4, 4)))] + joint_transforms(self.robot.urdf.joints, q)
-        frames = [(parent if parent == "world" else f"{stage}/{parent}", f"{stage}/{child}", T[:, :3, 3].tolist(), quaternion_xyzw(T[:, :3, :3]).tolist()) for parent, child, T in links]
+        links = [("world", self.robot.urdf.root, np.broadcast_to(np.eye(4), (len(t), 4, 4)))] + joint_transforms(self.robot.urdf.joints, q)
+        frames = [(parent, child, T[:, :3, 3].tolist(), quaternion_xyzw(T[:, :3, :3]).tolist()) for parent, child, T in links]
         for k, time in enumerate(t.tolist()):
             stamp = Timestamp(sec=_ns(time) // 10**9, nsec=_ns(time) % 10**9)  # the log time, to the nanosecond
             self._tf_channel.log(
@@ -229,6 +297,7 @@ class Recorder(NullSink):
             self._series(f"{stage}/hand_orientation_error_rad", path.t, dict(zip(path.hands, angle.T)))
         self._series(f"{stage}/solve_time_s", path.t, {"all": path.solve_time_s})
         self._series(f"{stage}/arm_angle_rad", path.t, arm_angles)
+        self._hand_traces(stage, {hand: T[:, :3, 3] for hand, T in hand_poses(self.robot, path.hands, path.joint_names, path.q, {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed}).items()})
 
     def _animation(self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> None:
         """The robot of ``stage`` on ``/tf`` and in Rerun, every :data:`ANIMATION_PERIOD_S` and at the last sample."""
@@ -245,8 +314,28 @@ class Recorder(NullSink):
         )
 
     def _hand_traces(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
+        """Each hand's path (M, 3) [m] in ``stage``: in Rerun under ``/world/<stage>/<hand>``, in the stage's colour; the shown stage's also on ``/<stage>/hand_path`` (Foxglove lines)."""
+        color = STAGE_COLORS.get(stage, (200, 200, 200))
         for hand, p in positions.items():
-            self._rr.log(f"world/{stage}/{hand}", rr.LineStrips3D([p], colors=[HAND_COLORS.get(hand, (200, 200, 200))], radii=0.0015), static=True)
+            self._rr.log(f"world/{stage}/{hand}", rr.LineStrips3D([p], colors=[color], radii=0.0015), static=True)
+        if stage == self.shown:
+            self._lines(f"{STAGE_TOPICS[stage]}/hand_path", "world", positions, Color(r=color[0] / 255, g=color[1] / 255, b=color[2] / 255, a=1.0))
+
+    def _lines(self, topic: str, frame: str, positions: Mapping[str, np.ndarray], color: Color | None = None) -> None:
+        """Paths (name -> (M, 3) [m]) as Foxglove line strips in ``frame``, once at t = 0 on ``topic`` (each hand in its colour unless ``color``)."""
+        entities = []
+        for name, p in positions.items():
+            r, g, b = HAND_COLORS.get(name, (200, 200, 200))
+            line = LinePrimitive(
+                type=LinePrimitiveLineType.LineStrip,
+                pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                thickness=3.0,
+                scale_invariant=True,
+                points=[Point3(x=float(x), y=float(y), z=float(z)) for x, y, z in np.asarray(p, dtype=float)],
+                color=color or Color(r=r / 255, g=g / 255, b=b / 255, a=1.0),
+            )
+            entities.append(SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id=frame, id=name, lines=[line]))
+        SceneUpdateChannel(topic, context=self._context).log(SceneUpdate(entities=entities), log_time=0)
 
     def trajectory(
         self,
@@ -287,6 +376,7 @@ class Recorder(NullSink):
         for kind, limit in limits.items():
             ratio = np.abs(series[kind]) / np.asarray(limit, dtype=float)
             self._series(f"{stage}/{kind}_ratio", traj.t, {**dict(zip(names, ratio.T)), "limit": np.ones(len(traj))})
+            self._rr.log(f"plots/{stage}/{kind}_ratio/limit", LIMIT_LINE, static=True)
         if "deviation_rad" in extras:
             self._series(f"{stage}/deviation_rad", traj.t, dict(zip(names, extras["deviation_rad"].T)))
 
@@ -369,13 +459,12 @@ class Recorder(NullSink):
             SceneUpdateChannel(f"{STAGE_TOPICS['path']}/environment", context=self._context).log(SceneUpdate(entities=entities), log_time=0)
 
     def reference(self, ref: CartesianReference) -> None:
-        """The path stage's product: one ``/task/reference/<hand>`` message per sample, the whole path once on ``/task/reference_path/<hand>`` (Foxglove PosesInFrame), and in Rerun the path as a 3D line strip and the position components as time series."""
+        """The path stage's product: one ``/task/reference/<hand>`` message per sample, the hands' whole paths once on ``/task/reference_path`` (Foxglove line strips in the reference's frame), and in Rerun the paths as 3D line strips and the position components as time series."""
         family = STAGE_TOPICS["path"]
         frame = ref.frame_in(self.robot)
         for hand, hr in ref.hands.items():
             channel = self._json(f"{family}/reference/{hand}", schemas.HAND_REFERENCE)
             quats = quaternion_xyzw(hr.rotation)
-            stride = max(1, len(ref) // 400)  # at most ~400 poses in the whole-path message
             for k in range(len(ref)):
                 channel.log(
                     {
@@ -390,33 +479,25 @@ class Recorder(NullSink):
                     },
                     log_time=_ns(ref.t[k]),
                 )
-            PosesInFrameChannel(f"{family}/reference_path/{hand}", context=self._context).log(
-                PosesInFrame(
-                    timestamp=Timestamp.from_epoch_secs(0.0),
-                    frame_id=frame,
-                    poses=[Pose(position=Vector3(**_vec(p)), orientation=Quaternion(**_quat(q))) for p, q in zip(hr.position[::stride], quats[::stride])],
-                ),
-                log_time=0,
-            )
             self._rr.log(
                 f"world/reference/{hand}",
                 rr.LineStrips3D([hr.position], colors=[HAND_COLORS.get(hand, (200, 200, 200))], radii=0.003),
                 static=True,
             )
             self._series(f"reference/{hand}", ref.t, {**{f"position/{a}": hr.position[:, i] for i, a in enumerate("xyz")}, "rep": ref.rep})
+        self._lines(f"{family}/reference_path", frame, {hand: hr.position for hand, hr in ref.hands.items()})
 
     def metrics(self, values: Mapping[str, float], t: float) -> None:
         """The run's metrics on ``/metrics`` at motion time ``t`` [s]."""
-        self._json("/metrics", schemas.METRICS).log({"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t))
+        self._json("/metrics", schemas.METRICS, metrics=list(values)).log({"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t))
 
     def close(self, manifest: Mapping[str, object]) -> None:
-        """Write the manifest as MCAP metadata, the Rerun blueprint, and finish both files."""
+        """Write the manifest as MCAP metadata and finish both files."""
         if self._closed:
             return
         self._closed = True
         self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})
         self._mcap.close()
-        self._rr.send_blueprint(BLUEPRINT)
         self._rr.flush()
         self._rr.disconnect()
         self.finish()

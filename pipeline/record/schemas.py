@@ -2,13 +2,34 @@
 
 Every message carries the motion time ``t`` [s] and the repetition index ``rep``, which the
 pandas read-back turns into columns.
+
+Maps (joint name -> value, hand -> value, metric -> value) are written here with the kind of their
+keys; :func:`named` lists the run's keys as the map's ``properties`` before a schema is written.
+Foxglove's JSON-schema parser reads an object's fields from ``properties`` alone: a map without
+them breaks the whole topic ("Cannot convert undefined or null to object").
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
+#: Internal key of a map object: the kind of its keys ("joints", "hands" or "metrics"), replaced by ``properties`` in :func:`named`.
+_KEYS = "x-dualarm-keys"
 _NUMBER = {"type": "number"}
 _VECTOR3 = {"type": "object", "properties": {k: _NUMBER for k in "xyz"}, "required": list("xyz")}
 _QUATERNION = {"type": "object", "properties": {k: _NUMBER for k in "xyzw"}, "required": list("xyzw")}
+_JOINT_MAP = {"type": "object", "additionalProperties": _NUMBER, _KEYS: "joints"}
+_HAND_MAP = {"type": "object", "additionalProperties": _NUMBER, _KEYS: "hands"}
+_HAND_VECTORS = {"type": "object", "additionalProperties": _VECTOR3, _KEYS: "hands"}
+
+
+def named(schema: Mapping, keys: Mapping[str, Sequence[str]]) -> dict:
+    """``schema`` with each map's keys (kind -> names; kinds ``joints``, ``hands``, ``metrics``) listed as its ``properties``."""
+    filled = {key: named(value, keys) if isinstance(value, Mapping) else value for key, value in schema.items() if key != _KEYS}
+    if _KEYS in schema:
+        filled["properties"] = {name: filled["additionalProperties"] for name in keys.get(schema[_KEYS], ())}
+    return filled
+
 
 HAND_REFERENCE = {
     "title": "dualarm.HandReference",
@@ -31,7 +52,7 @@ METRICS = {
     "title": "dualarm.Metrics",
     "description": "The run's metrics, keys <stage>.<name> with the unit as suffix (as in metrics.json).",
     "type": "object",
-    "properties": {"t": _NUMBER, "rep": {"type": "integer"}, "values": {"type": "object", "additionalProperties": _NUMBER}},
+    "properties": {"t": _NUMBER, "rep": {"type": "integer"}, "values": {"type": "object", "additionalProperties": _NUMBER, _KEYS: "metrics"}},
     "required": ["t", "rep", "values"],
 }
 
@@ -50,14 +71,11 @@ JOINT_STATE = {
     "properties": {
         "t": {**_NUMBER, "description": "motion time [s]"},
         "rep": {"type": "integer"},
-        "position": {"type": "object", "additionalProperties": _NUMBER, "description": "joint name -> position [rad]"},
+        "position": {**_JOINT_MAP, "description": "joint name -> position [rad]"},
     },
     "required": ["t", "rep", "position"],
 }
 
-_JOINT_MAP = {"type": "object", "additionalProperties": _NUMBER}
-#: hand -> number; the usual hands named, so that Foxglove offers them in its plot paths.
-_HAND_MAP = {"type": "object", "properties": {"left": _NUMBER, "right": _NUMBER}, "additionalProperties": _NUMBER}
 
 IK_SAMPLE = {
     "title": "dualarm.IkSample",
@@ -77,7 +95,7 @@ IK_SAMPLE = {
             "description": "hand -> angle of R_asked^T R_reached [rad] (IK stages; measured even where the method solved positions only)",
         },
         "task_space": {"type": "string", "enum": ["pose", "position"], "description": "what the method solved: the hands' poses, or their positions only"},
-        "arm_angle_rad": {**_JOINT_MAP, "description": "hand -> arm angle psi of MC-Inverse eq (1) [rad]"},
+        "arm_angle_rad": {**_HAND_MAP, "description": "hand -> arm angle psi of MC-Inverse eq (1) [rad]"},
     },
     "required": ["t", "rep", "method", "status", "solve_time_s", "position", "velocity", "hand_error_m", "arm_angle_rad"],
 }
@@ -125,14 +143,14 @@ TRAJECTORY_SAMPLE = {
         "acceleration": {**_JOINT_MAP, "description": "joint -> acceleration [rad/s^2]"},
         "jerk": {**_JOINT_MAP, "description": "joint -> mean jerk over the period ending here [rad/s^3] (smooth)"},
         "deviation_rad": {**_JOINT_MAP, "description": "joint -> |q - q_retimed| at the same time [rad] (smooth)"},
-        "hand_position": {"type": "object", "additionalProperties": _VECTOR3, "description": "hand -> position by forward kinematics [m]"},
+        "hand_position": {**_HAND_VECTORS, "description": "hand -> position by forward kinematics [m]"},
     },
     "required": ["t", "rep", "position", "velocity", "acceleration", "hand_position"],
 }
 
 EXECUTED_SAMPLE = {
     "title": "dualarm.ExecutedSample",
-    "description": "One physics step of the execute stage, measured at its end.",
+    "description": "The state the execution starts from (t = 0), then each physics step of it, measured at its end.",
     "type": "object",
     "properties": {
         "t": {**_NUMBER, "description": "simulation time [s]"},
@@ -140,8 +158,8 @@ EXECUTED_SAMPLE = {
         "position": {**_JOINT_MAP, "description": "joint -> measured position [rad]"},
         "velocity": {**_JOINT_MAP, "description": "joint -> measured velocity [rad/s]"},
         "command": {**_JOINT_MAP, "description": "joint -> the trajectory's position at t [rad]"},
-        "hand_position": {"type": "object", "additionalProperties": _VECTOR3, "description": "hand -> measured position (PyBullet) [m]"},
-        "hand_error_m": {**_JOINT_MAP, "description": "hand -> |measured - forward kinematics of the command| [m]"},
+        "hand_position": {**_HAND_VECTORS, "description": "hand -> measured position (PyBullet) [m]"},
+        "hand_error_m": {**_HAND_MAP, "description": "hand -> |measured - forward kinematics of the command| [m]"},
         "self_contacts": {"type": "integer", "description": "unexpected robot-robot contact points"},
         "environment_contacts": {"type": "integer", "description": "unexpected robot-environment contact points"},
         "expected_contacts": {"type": "integer", "description": "contact points of pairs the task expects"},

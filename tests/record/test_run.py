@@ -89,7 +89,7 @@ def test_mcap_schemas_metadata_and_attachments(triangle_run):
             else:
                 assert (channel.message_encoding, schema.encoding) == ("protobuf", "protobuf")
         assert schemas[topics["/tf"].schema_id].name == "foxglove.FrameTransforms"
-        assert schemas[topics["/task/reference_path/left"].schema_id].name == "foxglove.PosesInFrame"
+        assert schemas[topics["/task/reference_path"].schema_id].name == "foxglove.SceneUpdate"
         validators = {t: jsonschema.Draft202012Validator(json.loads(schemas[c.schema_id].data)) for t, c in topics.items() if c.message_encoding == "json"}
         for _, channel, message in reader.iter_messages():
             if channel.topic in validators:
@@ -125,15 +125,15 @@ def test_readback_reference_equals_the_task_waypoints(triangle_run):
 
 
 def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
-    """Composing /tf from world to path/left_hand gives PyBullet's hand pose at the initial configuration
+    """Composing /tf from world to left_hand (a run of the path stage alone shows the path robot) gives PyBullet's hand pose at the initial configuration
     (triangle.toml's ``[initial]`` table read with tomllib, the joints it does not name at 0), which
     puts the hand on waypoint A."""
     tf = read_run(triangle_run)["/tf"]
-    assert set(tf["child_frame_id"]) == {f"path/{link}" for link in humanoid.urdf.links}
+    assert set(tf["child_frame_id"]) == set(humanoid.urdf.links)
     parent = dict(zip(tf["child_frame_id"], tf["parent_frame_id"]))
     rows = tf.set_index("child_frame_id")
     T = np.eye(4)
-    link = "path/left_hand"
+    link = "left_hand"
     while link != "world":
         r = rows.loc[link]
         step = np.eye(4)
@@ -235,6 +235,6 @@ def test_ik_run_records_joints_bounds_and_robot(tmp_path, humanoid):
         assert np.all(qd >= bounds[f"zeta_lower.{joint}"].to_numpy() - 1e-9) and np.all(qd <= bounds[f"zeta_upper.{joint}"].to_numpy() + 1e-9)
     errors = sample[["hand_error_m.left", "hand_error_m.right"]].to_numpy()
     assert data.metrics["ik.position_error_max_m"] == pytest.approx(errors.max(), rel=1e-12)
-    tf = data["/tf"]
-    assert {f"ik/{link}" for link in humanoid.urdf.links} <= set(tf["child_frame_id"])
+    tf = data["/tf"]  # a run that stops after IK shows the IK robot
+    assert set(tf["child_frame_id"]) == set(humanoid.urdf.links) and np.isclose(tf["t"].max(), sample["t"].max())
     assert json.loads((run / "manifest.json").read_text())["settings"]["ik"]["qp_plugin"] == "daqp"

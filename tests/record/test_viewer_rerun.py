@@ -19,9 +19,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from dualarm.run import record_run
-from dualarm.tasks import load_task
-from tests.conftest import HUMANOID
+from tests.conftest import HUMANOID, SHIPPED
 
 RERUN = str(Path(sys.executable).with_name("rerun"))
 #: The 3D view's target frame (the blueprint's origin "/").
@@ -55,16 +53,16 @@ def _until(check, what: str, timeout_s: float = 120.0, period_s: float = 0.1):
     raise TimeoutError(f"the viewer: {what} after {timeout_s} s")
 
 
-@pytest.fixture(scope="module")
-def opened(tmp_path_factory):
-    """A triangle run through every stage, opened in a headless viewer; (client, manifest stages, end time [s])."""
+@pytest.fixture(scope="module", params=sorted(SHIPPED))
+def opened(request, shipped_runs):
+    """Each shipped task's run through every stage, opened in a headless viewer; (client, manifest stages, end of the execution [s])."""
     from rerun.experimental import ViewerClient
 
-    run = record_run(load_task("triangle", 1), "mc-inverse", out_dir=tmp_path_factory.mktemp("runs"))
+    run = shipped_runs[request.param]
     client = ViewerClient.spawn(headless=True, port=_free_port(), hide_welcome_screen=True, executable_path=RERUN)
     try:
         _until(client.get_state, "no answer")
-        (store,) = client.open(str(run.directory / "run.rrd")).store_ids
+        (store,) = client.open(str(run / "run.rrd")).store_ids
 
         def loaded():
             state = client.get_state()
@@ -80,9 +78,8 @@ def opened(tmp_path_factory):
             return True if len(counts) >= 4 and len(set(counts[-4:])) == 1 and not graph.get("missing_chunks") else None
 
         _until(settled, "the transform graph is still growing", period_s=0.5)
-        stages = json.loads((run.directory / "manifest.json").read_text())["stages"]
-        assert run.smoothed is not None
-        yield client, stages, run.smoothed.duration_s
+        stages = json.loads((run / "manifest.json").read_text())["stages"]
+        yield client, stages, json.loads((run / "metrics.json").read_text())["execute.duration_s"]
     finally:
         client.quit()
 
@@ -128,9 +125,9 @@ def test_every_stage_robot_is_joined_to_the_3d_views_frame(opened):
 
 
 def test_the_3d_view_draws_the_whole_robot(opened):
-    """Hiding the stage robots changes at least 1 % of the 3D view's pixels, none near its edges."""
+    """In the view the run opens on, hiding the executed robot changes at least 1 % of the pixels, none near the edges."""
     client, stages, end = opened
-    view = next(v.view_id for v in client.get_state().views if v.view_class == "3D")
+    view = next(v.view_id for v in client.get_state().views if v.name == "execute: robot and hand paths")
 
     def shot() -> np.ndarray:
         _show(client, end / 2)
@@ -140,7 +137,7 @@ def test_the_3d_view_draws_the_whole_robot(opened):
     blueprint = client.get_blueprint()
     key = f"/view/{view}/ViewContents"
     before = blueprint.blueprint.get(key)
-    blueprint.blueprint[key] = {"ViewContents": {"query": ["$origin/**", *(f"- /{stage}/**" for stage in stages)]}}
+    blueprint.blueprint[key] = {"ViewContents": {"query": [*before["ViewContents"]["query"], "- /execute/**"]}}
     client.set_blueprint(blueprint.blueprint, store_id=blueprint.store_id)
     try:
         hidden = shot()
@@ -150,6 +147,14 @@ def test_the_3d_view_draws_the_whole_robot(opened):
             client.set_blueprint(blueprint.blueprint, store_id=blueprint.store_id)
     robot = np.abs(shown - hidden).max(axis=2) > 30
     h, w = robot.shape
-    assert robot.sum() >= 0.01 * h * w, f"only {robot.sum()} of {h * w} pixels are the robots'"
+    assert robot.sum() >= 0.01 * h * w, f"only {robot.sum()} of {h * w} pixels are the robot's"
     ys, xs = np.nonzero(robot)
     assert MARGIN_PX <= xs.min() and MARGIN_PX <= ys.min() and xs.max() < w - MARGIN_PX and ys.max() < h - MARGIN_PX, "the robot reaches the view's edge: cut off"
+
+
+def test_the_run_opens_on_its_own_layout(opened):
+    """The views the viewer shows are the run's blueprint (sent before the data), not a layout the viewer made up."""
+    client, stages, _ = opened
+    names = {v.name for v in client.get_state().views}
+    assert {"execute: robot and hand paths", "hand error [m]", "velocity / limit", "acceleration / limit", "jerk / limit", "contacts"} <= names, names
+    assert {stage for stage in stages if stage != "approach"} <= names, names  # the "stages" tab: a 3D view per stage
