@@ -185,6 +185,23 @@ def _stages(stages: str | None) -> list[str] | None:
     return chosen
 
 
+def _record(level: str) -> str:
+    """The recording level of ``--record``; another value is refused, naming the levels."""
+    from dualarm.record.sink import RECORD_LEVELS
+
+    if level not in RECORD_LEVELS:
+        raise DualarmError(f"--record '{excerpt(level)}': unknown recording level (levels: {', '.join(RECORD_LEVELS)})")
+    return level
+
+
+#: Help of ``--record``, with the sizes measured on ``dualarm run triangle --ik mc-inverse --reps 5``.
+RECORD_HELP = (
+    "How much to record: full (run.mcap and run.rrd hold every stage; 74 MB), ik (they hold the path and ik/plan stages only; 4.9 MB) "
+    "or metrics (no run.mcap, no run.rrd: manifest.json and metrics.json only; 9 kB). Every stage runs and is judged whatever the level "
+    "(sizes of dualarm run triangle --ik mc-inverse --reps 5)."
+)
+
+
 @app.command()
 @user_errors
 def run(
@@ -209,6 +226,7 @@ def run(
     ] = False,
     planner: Annotated[Optional[str], typer.Option(help="Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no --ik: mcikrrt).")] = None,
     timeout: Annotated[Optional[float], typer.Option(help="Planning timeout [s] (default 5).")] = None,
+    record: Annotated[str, typer.Option("--record", metavar="LEVEL", help=RECORD_HELP)] = "full",
 ) -> None:
     """Run a task through the pipeline and record it; prints the run directory as the last line.
 
@@ -225,6 +243,7 @@ def run(
     if timeout is not None:
         _within(timeout, "--timeout", 0.0, MAX_TIMEOUT_S, above_low=True)
     chosen = _stages(stages)
+    _record(record)
     if ik is not None:
         _method(ik, "ik", "--ik")
     if planner is not None:
@@ -253,6 +272,7 @@ def run(
             out_dir=out_dir,
             command=["dualarm", *sys.argv[1:]],
             progress=lambda stage: _update(status, f"running {task}: {stage} ..."),
+            record=record,
         )
     for line in result.verdict.lines():
         err.print(line, markup=False, soft_wrap=True)
@@ -392,6 +412,8 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
     out.print(f"run      {data.run_id}  ({data.status})", markup=False)
     out.print(f"task     {m.get('task')}  ({m.get('task_file')})", markup=False)
     out.print(f"stages   {', '.join(data.stages)}", markup=False)
+    if data.record != "full":
+        out.print(f"record   {data.record} ({data.lacks()})", markup=False, soft_wrap=True)
     if m.get("error"):
         out.print(f"error    {m['error']}", markup=False, soft_wrap=True)
     for violation in data.violations:
@@ -401,13 +423,50 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
         table.add_column(column, justify="left" if column in ("topic", "stage") else "right")
     for topic, df in data.topics.items():
         table.add_row(topic, str(df["stage"].iloc[0]), str(len(df)), f"{df['t'].min():.3f}", f"{df['t'].max():.3f}")
-    out.print(table)
+    if data.topics:
+        out.print(table)
     metrics = Table(title="metrics", title_justify="left")
     metrics.add_column("key")
     metrics.add_column("value", justify="right")
     for key, value in sorted(data.metrics.items()):
         metrics.add_row(key, "null" if value is None else f"{value:.6g}")
     out.print(metrics)
+
+
+@app.command()
+@user_errors
+def view(
+    run_dir: Annotated[Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>), recorded with --record full or ik.")],
+    web: Annotated[bool, typer.Option("--web", help="Serve the run with Rerun's web viewer on 127.0.0.1 and print the URL to open (no browser is started); serves until Ctrl-C.")] = False,
+    stage: Annotated[Optional[str], typer.Option(metavar="STAGE", help="Open Rerun on this stage's robot and plots (one the run recorded: path, ik or plan, retime, smooth, execute).")] = None,
+) -> None:
+    """Open a recorded run in Rerun's viewer (a window, or with --web the web viewer) and print how to open its run.mcap in Foxglove, with the run's layout.
+
+    The viewer is the rerun command installed with rerun-sdk (beside this Python, or on PATH).
+    """
+    import tempfile
+
+    from dualarm.record.view import blueprint_file, check_display, check_stage, open_native, rerun_executable, serve_web, viewable
+
+    run = viewable(run_dir)
+    if stage is not None:
+        check_stage(run, stage)
+    if not web:
+        check_display()
+    executable = rerun_executable()
+    with tempfile.TemporaryDirectory(prefix="dualarm-view-") as scratch:
+        files = [run.rrd, *([blueprint_file(run, stage, Path(scratch))] if stage is not None else [])]
+        for line in run.foxglove:
+            out.print(line, markup=False, soft_wrap=True)
+        if not web:
+            out.print(f"Rerun: opening {run.rrd} (close its window to end)", markup=False, soft_wrap=True)
+            sys.stdout.flush()
+            open_native(executable, files)
+            return
+        with serve_web(executable, files) as (url, process):
+            out.print(f"Rerun web viewer: {url}  (serving until Ctrl-C)", markup=False, soft_wrap=True)
+            sys.stdout.flush()
+            process.wait()
 
 
 @app.command()

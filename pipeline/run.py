@@ -24,7 +24,7 @@ from dualarm.methods import IK_METHODS, PLANNERS
 from dualarm.methods import method as registered
 from dualarm.paths import CartesianReference
 from dualarm.record.run_dir import RunDirectory, package_versions, sha256_file
-from dualarm.record.sink import NullSink, Sink
+from dualarm.record.sink import NullSink, Sink, record_level, recorded_stages
 from dualarm.retime.trajectory import JointTrajectory
 from dualarm.stages import ApproachStage, ExecuteStage, IkStage, PathStage, PlanStage, RetimeStage, SmoothStage, Stage
 from dualarm.tasks import Task, load_task
@@ -236,34 +236,49 @@ def record_run(
     out_dir: str | Path = "recordings",
     command: Sequence[str] | None = None,
     progress: Callable[[str], None] | None = None,
+    record: str = "full",
     **options: Any,
 ) -> RunResult:
     """Run ``task`` as :func:`run_task` does (``options``: its keyword arguments) and record it in ``out_dir/<task>/<run-id>/`` (run.mcap, run.rrd, manifest.json, metrics.json); the result's ``directory`` is the run directory.
 
     ``command`` is recorded in the manifest (default ``sys.argv``); ``progress`` is told each
-    stage's name as it starts, and ``record`` when the files are being closed.
+    stage's name as it starts, and ``record`` when the files are being closed. ``record`` is how
+    much is recorded (:data:`~dualarm.record.sink.RECORD_LEVELS`): ``full``; ``ik``, run.mcap and
+    run.rrd holding the path and ik (or plan) stages' products only; ``metrics``, no run.mcap and
+    no run.rrd. Every stage runs and is judged whatever the level: the metrics and the verdict are
+    the same.
 
     The task and the options are validated before anything is written: a malformed task leaves no
-    run behind. The manifest holds the verdict (``status``, ``violations``); a stage that fails
-    leaves a run marked ``failed`` and re-raises.
+    run behind. The manifest holds the verdict (``status``, ``violations``) and the level
+    (``record``); a stage that fails leaves a run marked ``failed`` and re-raises.
+
+    Raises:
+        InvalidArgumentError: an unknown ``record`` level (before anything runs).
     """
+    record_level(record)
     task = _as_task(task)
-    return record_stages(task, build_stages(task, method, **options), out_dir=out_dir, seed=options.get("seed", 0), command=command, progress=progress)
+    return record_stages(task, build_stages(task, method, **options), out_dir=out_dir, seed=options.get("seed", 0), command=command, progress=progress, record=record)
 
 
 def record_stages(
-    task: Task, stages: Sequence[Stage], *, out_dir: str | Path = "recordings", seed: int = 0, command: Sequence[str] | None = None, progress: Callable[[str], None] | None = None
+    task: Task,
+    stages: Sequence[Stage],
+    *,
+    out_dir: str | Path = "recordings",
+    seed: int = 0,
+    command: Sequence[str] | None = None,
+    progress: Callable[[str], None] | None = None,
+    record: str = "full",
 ) -> RunResult:
-    """Run ``stages`` on ``task`` into a new recorded run (see :func:`record_run`)."""
-    from dualarm.record.recorder import Recorder
-
+    """Run ``stages`` on ``task`` into a new recorded run, at recording level ``record`` (see :func:`record_run`)."""
     try:
-        run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, stages, seed, command or sys.argv))
+        record_level(record)
+        run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, stages, seed, command or sys.argv, record))
     except BaseException:
         _close(stages)
         raise
     try:
-        recorder = Recorder(run.staging, run.run_id, task.robot, _attachments(task), on_begin=progress)
+        recorder = _recorder(task, run, stages, record, progress)
     except BaseException as exc:  # stopped (Ctrl-C, SIGTERM) before any stage ran: kept as failed, without the recorder's unfinished files
         _close(stages)
         for unfinished in run.staging.iterdir():
@@ -289,6 +304,16 @@ def record_stages(
     return replace(result, directory=run.finish(result.metrics), stage_seconds=recorder.stage_seconds)
 
 
+def _recorder(task: Task, run: RunDirectory, stages: Sequence[Stage], record: str, progress: Callable[[str], None] | None) -> NullSink:
+    """The sink that writes the run's files at level ``record``: a Recorder of the recorded stages (it drops the others' products), or (``metrics``) a sink that writes nothing."""
+    kept = recorded_stages(record, [s.name for s in stages])
+    if record == "metrics":
+        return NullSink(on_begin=progress)
+    from dualarm.record.recorder import Recorder
+
+    return Recorder(run.staging, run.run_id, task.robot, _attachments(task), stages=kept, on_begin=progress)
+
+
 def _close(stages: Sequence[Stage]) -> None:
     for stage in stages:
         close = getattr(stage, "close", None)
@@ -304,7 +329,7 @@ def _attachments(task: Task) -> dict[str, str]:
     return attachments
 
 
-def _manifest(task: Task, stages: Sequence[Stage], seed: int, command: Sequence[str]) -> dict[str, object]:
+def _manifest(task: Task, stages: Sequence[Stage], seed: int, command: Sequence[str], record: str = "full") -> dict[str, object]:
     robot = task.robot
     robot_files = {robot.urdf.path.name: sha256_file(robot.urdf.path)}
     if robot.directory is not None:
@@ -321,6 +346,7 @@ def _manifest(task: Task, stages: Sequence[Stage], seed: int, command: Sequence[
         "robot_sha256": robot_files,
         "seed": seed,
         "stages": [s.name for s in ordered],
+        "record": record,
         "settings": {s.name: s.settings_record() for s in ordered},
         "packages": package_versions(),
     }

@@ -220,21 +220,15 @@ def viewer_urdf(text: str) -> str:
                 continue
             radius, length = capsule.get("radius", "0"), float(capsule.get("length", "0"))
             origin = element.find("origin")
-            xyz = [float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()]
+            xyz = np.array([float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()])
             rpy = origin.get("rpy", "0 0 0") if origin is not None else "0 0 0"
             axis = pose_matrix(xyz, [float(v) for v in rpy.split()])[:3, 2]
-            shapes = []
-            for shape, centre in (("cylinder", xyz), ("sphere", xyz + axis * length / 2), ("sphere", xyz - axis * length / 2)):
-                copy = ET.fromstring(ET.tostring(element))
-                ET.SubElement(copy.find("geometry"), shape, {"radius": radius, **({"length": f"{length:g}"} if shape == "cylinder" else {})})
-                copy.find("geometry").remove(copy.find("geometry/capsule"))
-                new_origin = copy.find("origin")
-                if new_origin is None:
-                    new_origin = ET.SubElement(copy, "origin")
-                new_origin.set("xyz", " ".join(f"{v:.9g}" for v in centre))
-                new_origin.set("rpy", rpy)
-                shapes.append(copy)
             link.remove(element)
-            for offset, copy in enumerate(shapes):
+            shapes = (("cylinder", xyz, {"radius": radius, "length": f"{length:g}"}), ("sphere", xyz + axis * length / 2, {"radius": radius}), ("sphere", xyz - axis * length / 2, {"radius": radius}))
+            for offset, (shape, centre, size) in enumerate(shapes):
+                copy = ET.Element(element.tag, element.attrib)
+                ET.SubElement(copy, "origin", {"xyz": " ".join(f"{v:.9g}" for v in centre), "rpy": rpy})
+                ET.SubElement(ET.SubElement(copy, "geometry"), shape, size)
+                copy.extend(child for child in element if child.tag not in ("origin", "geometry"))  # material, ...
                 link.insert(index + offset, copy)
     return ET.tostring(root, encoding="unicode")

@@ -20,9 +20,14 @@ the file and the fault, never a partial or silently different result:
   (:data:`RUN_ID`, the form of :func:`~dualarm.record.run_dir.new_run_id`), so neither can
   carry a path (``..``, ``/``) into the file names reports build from them.
 - The files belong to one run: the manifest stored in ``run.mcap`` (MCAP metadata ``manifest``)
-  agrees with ``manifest.json`` on task, run id, status and stages; ``metrics.json`` equals the
+  agrees with ``manifest.json`` on task, run id, status, stages and recording level; ``metrics.json`` equals the
   metrics recorded on ``/metrics`` in ``run.mcap``, and exists whenever the status is
   ``complete`` or ``violated``; ``run.rrd`` is a regular file and not empty (its content is Rerun's to check).
+- A run recorded below ``full`` (the manifest's ``record``, :data:`~dualarm.record.sink.RECORD_LEVELS`;
+  a run without it is ``full``) is as valid: an ``ik`` run's files are checked as a full run's,
+  its ``run.mcap`` holding the topics of the path and ik (or plan) stages only; a ``metrics`` run
+  has no ``run.mcap`` and no ``run.rrd`` (one present beside it is refused) and no topics. Asking
+  for a topic the run did not record names the level (:meth:`RunData.__getitem__`).
 """
 
 from __future__ import annotations
@@ -56,6 +61,7 @@ from dualarm.errors import RecordingError, excerpt
 from dualarm.files import cause, kind, read_text
 from dualarm.record.recorder import STAGE_TOPICS
 from dualarm.record.run_dir import MANIFEST, METRICS
+from dualarm.record.sink import RecordLevel, recorded_stages
 
 #: The recording files of a run directory.
 MCAP_FILE, RRD_FILE = "run.mcap", "run.rrd"
@@ -116,12 +122,15 @@ def _flatten(data: Mapping, prefix: str = "") -> dict:
 
 
 def _protobuf_frame(schema_name: str, times: list[float], messages: list) -> pd.DataFrame:
-    """Other protobuf messages -> flat rows; a message holding a list of poses or entities gives a row per item."""
-    rows = []
+    """Other protobuf messages -> flat rows; a message holding a list of poses gives a row per pose, one of line entities (paths) a row per point."""
+    rows: list[dict] = []
     for t, message in zip(times, messages):
         data = MessageToDict(message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True)
         items = data.pop("poses", None) if schema_name == "foxglove.PosesInFrame" else None
-        if items is None:
+        entities = data.get("entities") if schema_name == "foxglove.SceneUpdate" else None
+        if entities and all(e.get("lines") for e in entities):  # paths drawn as lines: a row per point
+            rows.extend({"t": t, "id": e["id"], "frame_id": e["frame_id"], "line": i, **_flatten(p)} for e in entities for i, line in enumerate(e["lines"]) for p in line["points"])
+        elif items is None:
             rows.append({"t": t, **_flatten(data)})
         else:
             data.pop("timestamp", None)
@@ -197,6 +206,7 @@ class Manifest(BaseModel):
     settings: dict[str, dict[str, Any]]
     error: str | None = None
     task_file: str | None = None
+    record: RecordLevel = "full"
 
 
 _METRICS = TypeAdapter(dict[Annotated[str, StringConstraints(pattern=f"^{METRIC_KEY}$")], Annotated[float, Field(strict=True, allow_inf_nan=False)] | None])
@@ -363,11 +373,11 @@ def verify_mcap(path: Path) -> VerifiedMcap:
 
 
 def _check_one_run(manifest: Mapping[str, object], mcap: VerifiedMcap) -> None:
-    """``manifest.json`` and the manifest stored in ``run.mcap`` agree on task, run id, status and stages."""
-    for key in ("task", "run_id", "status", "stages"):
+    """``manifest.json`` and the manifest stored in ``run.mcap`` agree on task, run id, status, stages and recording level."""
+    for key in ("task", "run_id", "status", "stages", "record"):
         stored = mcap.manifest.get(key)
-        if stored != manifest[key]:
-            raise RecordingError(f"{excerpt(mcap.path)}: records {key} {_quote(stored)}, but {MANIFEST} says {_quote(manifest[key])}: the files are not of one run")
+        if stored != manifest.get(key):
+            raise RecordingError(f"{excerpt(mcap.path)}: records {key} {_quote(stored)}, but {MANIFEST} says {_quote(manifest.get(key))}: the files are not of one run")
 
 
 def _same_metric(value: float | None, recorded: object) -> bool:
@@ -376,11 +386,13 @@ def _same_metric(value: float | None, recorded: object) -> bool:
     return (value is None and not math.isfinite(recorded)) or value == recorded
 
 
-def _check_metrics(path: Path, status: str, metrics: Mapping[str, float | None] | None, recorded: Mapping[str, object] | None) -> None:
-    """``metrics.json`` exists if the run finished and equals the metrics recorded in ``run.mcap``."""
+def _check_metrics(path: Path, status: str, metrics: Mapping[str, float | None] | None, recorded: Mapping[str, object] | None, *, in_mcap: bool = True) -> None:
+    """``metrics.json`` exists if the run finished and (``in_mcap``: the run has a ``run.mcap``) equals the metrics recorded in ``run.mcap``."""
     if metrics is None:
         if status in FINISHED:
             raise RecordingError(f"{excerpt(path)}: missing, but the run's status is '{status}' (a finished run has its metrics)")
+        return
+    if not in_mcap:
         return
     if recorded is None:
         raise RecordingError(f"{excerpt(path)}: {MCAP_FILE} records no metrics for this run (status '{status}'): not this run's metrics")
@@ -505,6 +517,24 @@ class RunData:
         """A failed run's error ("" otherwise)."""
         return str(self.manifest.get("error") or "")
 
+    @property
+    def record(self) -> str:
+        """How much of the run was recorded: ``full``, ``ik`` or ``metrics`` (:data:`~dualarm.record.sink.RECORD_LEVELS`; ``full`` for a run recorded before levels)."""
+        return str(self.manifest.get("record", "full"))
+
+    @property
+    def recorded_stages(self) -> list[str]:
+        """The stages whose products the run's recordings hold (:attr:`stages` for a ``full`` run, none for a ``metrics`` run)."""
+        return list(recorded_stages(self.record, self.stages))
+
+    def lacks(self) -> str:
+        """What the run's files lack at its recording level, for a message ("" for a ``full`` run)."""
+        if self.record == "metrics":
+            return f"no {MCAP_FILE}, no {RRD_FILE}, no topics: only {MANIFEST} and {METRICS}"
+        if self.record != "full":
+            return f"{MCAP_FILE} and {RRD_FILE} hold the stages {', '.join(self.recorded_stages) or '(none)'} only, not {', '.join(s for s in self.stages if s not in self.recorded_stages)}"
+        return ""
+
     def setting(self, stage: str, key: str) -> object:
         """The manifest's ``settings[stage][key]`` (None where the run has none)."""
         settings = self.manifest.get("settings")
@@ -512,7 +542,15 @@ class RunData:
         return of_stage.get(key) if isinstance(of_stage, Mapping) else None
 
     def __getitem__(self, topic: str) -> pd.DataFrame:
+        """The DataFrame of ``topic``.
+
+        Raises:
+            RecordingError: the run has no such topic (naming its topics, or the recording level
+                that left the topic out: a ``metrics`` run, or an ``ik`` run asked for a later stage).
+        """
         if topic not in self.topics:
+            if self.record == "metrics" or (self.record != "full" and stage_of(topic) in self.stages and stage_of(topic) not in self.recorded_stages):
+                raise RecordingError(f"{excerpt(self.directory)}: no topic {_quote(topic)}: the run was recorded with --record {self.record} ({self.lacks()})")
             raise RecordingError(f"{excerpt(self.directory)}: no topic {_quote(topic)} (topics: {', '.join(self.topics)})")
         return self.topics[topic]
 
@@ -535,6 +573,8 @@ def read_run(directory: str | Path) -> RunData:
     if not is_directory:
         raise RecordingError(f"{excerpt(directory)}: not a directory (a run directory holds {MANIFEST}, {METRICS}, {MCAP_FILE} and {RRD_FILE})")
     manifest = _manifest(directory / MANIFEST)
+    if manifest.get("record") == "metrics":
+        return _metrics_run(directory, manifest)
     mcap = verify_mcap(directory / MCAP_FILE)
     _check_one_run(manifest, mcap)
     metrics = _metrics(directory / METRICS)
@@ -542,6 +582,16 @@ def read_run(directory: str | Path) -> RunData:
     if _regular_file(directory / RRD_FILE, "Rerun recording").st_size == 0:
         raise RecordingError(f"{excerpt(directory / RRD_FILE)}: empty (not a Rerun recording)")
     return RunData(directory=directory, manifest=MappingProxyType(manifest), metrics=MappingProxyType(cast(dict[str, float], metrics or {})), topics=McapTopics(mcap))
+
+
+def _metrics_run(directory: Path, manifest: dict[str, Any]) -> RunData:
+    """A run recorded with ``--record metrics``: its manifest and metrics, no topics; a recording beside it is refused."""
+    for name in (MCAP_FILE, RRD_FILE):
+        if os.path.lexists(directory / name):
+            raise RecordingError(f"{excerpt(directory / name)}: present, but {MANIFEST} says the run was recorded with --record metrics (no {MCAP_FILE}, no {RRD_FILE}): the files are not of one run")
+    metrics = _metrics(directory / METRICS)
+    _check_metrics(directory / METRICS, str(manifest["status"]), metrics, None, in_mcap=False)
+    return RunData(directory=directory, manifest=MappingProxyType(manifest), metrics=MappingProxyType(cast(dict[str, float], metrics or {})), topics=MappingProxyType({}))
 
 
 def read_runs(directories: Iterable[str | Path], topics: Iterable[str] | None = None) -> dict[str, pd.DataFrame]:

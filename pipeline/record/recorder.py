@@ -73,8 +73,8 @@ def _signals_held() -> Iterator[None]:
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-        for signum in dict.fromkeys(held):
-            signal.raise_signal(signum)
+        for held_signal in dict.fromkeys(held):
+            signal.raise_signal(held_signal)
 
 
 #: MCAP topic family of each stage.
@@ -118,7 +118,7 @@ def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> 
 
     driven = next((s for s in ("smooth", "retime") if s in stages), focus) if focus == "execute" else focus
     solved = next((s for s in ("ik", "plan") if s in stages), None)
-    plots = [
+    plots: list[rrb.Container | rrb.View] = [
         plot("hand error [m]", *[f"{s}/hand_error_m" for s in (solved, focus) if s]),
         rrb.Tabs(*[plot(f"{kind} / limit", f"{driven}/{kind}_ratio") for kind in ("velocity", "acceleration", "jerk")]),
         rrb.Tabs(
@@ -161,7 +161,7 @@ class Recorder(NullSink):
         run_id: the run's id (also the Rerun recording id).
         robot: the robot, for /tf and the URDF.
         attachments: file name -> text, stored in the MCAP (task file, robot.toml, URDF).
-        stages: the stages of the run (for the layout it opens on and the robot on ``/tf``).
+        stages: the stages recorded (the others' products are dropped; for the layout the run opens on and the robot on ``/tf``).
         on_begin: called with each stage's name as it begins.
     """
 
@@ -254,6 +254,8 @@ class Recorder(NullSink):
     # -- products ----------------------------------------------------------------------------------
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
         """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: ``/tf`` (frames ``<stage>/<link>``) and ``<family>/joint_state`` in the MCAP, the URDF under ``/<stage>`` in Rerun."""
+        if stage not in self.stages:
+            return
         self._tf(stage, t, q)
         family = STAGE_TOPICS.get(stage, f"/{stage}")
         self._json(f"{family}/joint_state", schemas.JOINT_STATE).log({"t": t, "rep": rep, "position": {n: float(v) for n, v in q.items()}}, log_time=_ns(t))
@@ -261,6 +263,8 @@ class Recorder(NullSink):
 
     def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
         """The IK (or plan) stage's product, under ``stage``'s topics: ``/ik/limits`` once (the robot's position limits and ``velocity_limits`` [rad/s] of the path's joints), ``/ik/sample`` (with each hand's position error [m], orientation error [rad] when measured, and ``arm_angles`` [rad], (N,) per hand) and (TV-GDD) ``/ik/bounds`` per sample, the robot on ``/tf`` as ``ik/<link>``; in Rerun the animated robot under ``/ik`` and every joint's position, velocity and bounds, the hand errors and the arm angles as time series."""
+        if stage not in self.stages:
+            return
         family = STAGE_TOPICS[stage]
         names = path.joint_names
         self._limits(stage, names, {"velocity": velocity_limits})
@@ -355,6 +359,8 @@ class Recorder(NullSink):
         with the limit as the line ``limit`` at 1).
         """
         stage, names = traj.stage, traj.joint_names
+        if stage not in self.stages:
+            return
         self._limits(stage, names, limits)
         channel = self._json(f"{STAGE_TOPICS[stage]}/sample", schemas.TRAJECTORY_SAMPLE)
         series = {"velocity": traj.qd, "acceleration": traj.qdd, **extras}
@@ -392,6 +398,8 @@ class Recorder(NullSink):
         errors, contacts and the joints' tracking error (``/plots/approach/executed_*`` for the
         approach).
         """
+        if "execute" not in self.stages:
+            return
         self._executed(log, f"{STAGE_TOPICS['execute']}/sample", f"{STAGE_TOPICS['execute']}/contacts", "execute/")
         if len(log.t):
             self._animation("execute", log.t, log.joint_names, log.q, log.fixed)
@@ -430,6 +438,8 @@ class Recorder(NullSink):
 
     def environment(self, objects) -> None:
         """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate) and in Rerun under ``/world/environment/<name>``."""
+        if "path" not in self.stages:
+            return
         entities = []
         for obj in objects:
             T = pose_matrix(obj.pose.position, obj.pose.rpy)
@@ -460,6 +470,8 @@ class Recorder(NullSink):
 
     def reference(self, ref: CartesianReference) -> None:
         """The path stage's product: one ``/task/reference/<hand>`` message per sample, the hands' whole paths once on ``/task/reference_path`` (Foxglove line strips in the reference's frame), and in Rerun the paths as 3D line strips and the position components as time series."""
+        if "path" not in self.stages:
+            return
         family = STAGE_TOPICS["path"]
         frame = ref.frame_in(self.robot)
         for hand, hr in ref.hands.items():

@@ -1,4 +1,7 @@
-"""Run directories: ``<out>/<task>/<run-id>/{run.mcap, run.rrd, manifest.json, metrics.json}``; and every output directory.
+"""Run directories: ``<out>/<task>/<run-id>/{run.mcap, run.rrd, foxglove-layout.json, manifest.json, metrics.json}``; and every output directory.
+
+A run recorded with ``--record metrics`` holds only ``manifest.json`` and ``metrics.json``
+(:data:`~dualarm.record.sink.RECORD_LEVELS`).
 
 A run is written into a hidden temporary directory beside its final place and renamed into place
 once finished, so a directory named by a run id is never half-written. A failed run is renamed
@@ -92,8 +95,10 @@ def write_whole(path: Path, text: str) -> Path:
 MARKER = ".dualarm"
 #: Markers of earlier versions: name -> kind.
 LEGACY_MARKERS = {".dualarm-reproduction": "reproduction"}
-#: The files of a run directory.
-RUN_FILES = ("run.mcap", "run.rrd", MANIFEST, METRICS)
+#: Foxglove's layout of a run, written beside its ``run.mcap``.
+FOXGLOVE_LAYOUT = "foxglove-layout.json"
+#: The files of a run directory (a run recorded below ``full`` holds some of them).
+RUN_FILES = ("run.mcap", "run.rrd", FOXGLOVE_LAYOUT, MANIFEST, METRICS)
 #: What a write interrupted half-way leaves beside ``name`` (:func:`write_whole`, a run's staging directory).
 PARTIAL = ".{}.partial"
 

@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args, runtime_checkable
 
 import numpy as np
+
+from dualarm.errors import InvalidArgumentError, excerpt
 
 if TYPE_CHECKING:
     from dualarm.execute.simulate import ExecutionLog
@@ -102,6 +104,10 @@ class NullSink:
     def metrics(self, values: Mapping[str, float], t: float) -> None:
         """Ignored."""
 
+    def close(self, manifest: Mapping[str, object]) -> None:
+        """Note the end of the last stage (a sink that writes files finishes them here)."""
+        self.finish()
+
 
 class MetricsSink(NullSink):
     """A sink that keeps only the run's metrics (:attr:`values`) and the stages' wall times."""
@@ -113,3 +119,36 @@ class MetricsSink(NullSink):
     def metrics(self, values: Mapping[str, float], t: float) -> None:
         """Keep ``values``."""
         self.values.update(values)
+
+
+#: How much of a run is recorded (``dualarm run --record``), besides ``manifest.json`` and
+#: ``metrics.json``, which every run has (every stage runs and is judged whatever the level):
+#:
+#: - ``full``: ``run.mcap`` and ``run.rrd`` hold every stage's products.
+#: - ``ik``: they hold the path stage's and the ik (or plan) stage's products only.
+#: - ``metrics``: no ``run.mcap``, no ``run.rrd``.
+RecordLevel = Literal["full", "ik", "metrics"]
+RECORD_LEVELS: tuple[str, ...] = get_args(RecordLevel)
+#: The stages whose products each level records (None: every stage).
+_RECORDED: Mapping[str, tuple[str, ...] | None] = {"full": None, "ik": ("path", "ik", "plan"), "metrics": ()}
+
+
+def record_level(level: str) -> str:
+    """``level`` if it is one of :data:`RECORD_LEVELS`.
+
+    Raises:
+        InvalidArgumentError: another value (naming the levels).
+    """
+    if level not in _RECORDED:
+        raise InvalidArgumentError("record", f"unknown recording level '{excerpt(level)}' (levels: {', '.join(RECORD_LEVELS)})")
+    return level
+
+
+def recorded_stages(level: str, stages: Sequence[str]) -> tuple[str, ...]:
+    """The stages of ``stages`` whose products a run recorded at ``level`` writes, in the order given.
+
+    Raises:
+        InvalidArgumentError: an unknown level.
+    """
+    kept = _RECORDED[record_level(level)]
+    return tuple(s for s in stages if kept is None or s in kept)
