@@ -32,4 +32,4 @@ typecheck: install
 	$(BIN)/mypy
 
 clean:
-	rm -rf $(VENV) build recordings/*/ reports/*/ .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) build recordings/*/ reports/*/ .pytest_cache .mypy_cache .ruff_cache viewers/foxglove/node_modules

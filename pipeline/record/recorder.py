@@ -1,4 +1,4 @@
-"""The recorder: each stage hands it its product once; it writes ``run.mcap`` and ``run.rrd``.
+"""The recorder: each stage hands it its product once; it writes ``run.mcap``, ``run.rrd`` and ``foxglove-layout.json``.
 
 MCAP (written with foxglove-sdk, one Context per run so nothing is global): one topic family per
 stage (``/task/...`` for the path stage), ``/robot_description`` with the URDF as URDF 1.0 viewers
@@ -52,7 +52,9 @@ from dualarm.model.robot import Robot
 from dualarm.model.urdf import viewer_urdf
 from dualarm.paths.reference import CartesianReference
 from dualarm.record import schemas
-from dualarm.record.sink import NullSink
+from dualarm.record.foxglove_layout import foxglove_layout
+from dualarm.record.run_dir import FOXGLOVE_LAYOUT
+from dualarm.record.sink import NullSink, shown_stage
 from dualarm.retime.trajectory import JointTrajectory
 from dualarm.tasks.load import hand_poses
 
@@ -84,17 +86,10 @@ TIMELINE = "time"
 HAND_COLORS = {"left": (40, 120, 230), "right": (230, 90, 40)}
 #: Colour of each stage's hand traces, one per stage so that the traces tell apart where they part.
 STAGE_COLORS = {"ik": (60, 170, 80), "plan": (60, 170, 80), "retime": (150, 90, 200), "smooth": (0, 170, 170), "approach": (150, 150, 150), "execute": (220, 40, 40)}
-#: The stages whose robot moves, in pipeline order (the approach has its own clock).
-MOTION_STAGES = ("path", "ik", "plan", "retime", "smooth", "execute")
-#: Where the 3D views look from: the whole 1.6 m humanoid from the front left.
+#: Where the 3D views look from: the whole 1.6 m humanoid from its front right.
 EYE = rrb.EyeControls3D(position=[2.4, -1.5, 1.5], look_target=[0.2, 0.0, 0.8], eye_up=[0.0, 0.0, 1.0])
 #: The limit line of the ratio plots.
 LIMIT_LINE = rr.SeriesLines(colors=[(200, 0, 0)], widths=[2.0], names=["limit"])
-
-
-def shown_stage(stages: Sequence[str]) -> str:
-    """The stage a run is shown by: its last stage whose robot moves (``execute`` when it ran)."""
-    return [s for s in MOTION_STAGES if s in stages][-1] if any(s in stages for s in MOTION_STAGES) else "path"
 
 
 def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> rrb.Blueprint:
@@ -172,6 +167,8 @@ class Recorder(NullSink):
         self.directory = directory
         self.robot = robot
         self._keys = {"joints": robot.joint_names, "hands": robot.hands}
+        self._hands: tuple[str, ...] = robot.hands  # the task's, once the reference is recorded
+        self._joint_names: tuple[str, ...] | None = None  # the moving joints, once a stage hands them
         self._context = foxglove.Context()
         self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
         self._channels: dict[str, foxglove.Channel] = {}
@@ -266,7 +263,7 @@ class Recorder(NullSink):
         if stage not in self.stages:
             return
         family = STAGE_TOPICS[stage]
-        names = path.joint_names
+        names = self._joint_names = path.joint_names
         self._limits(stage, names, {"velocity": velocity_limits})
         sample = self._json(f"{family}/sample", schemas.IK_SAMPLE)
         bounds = self._json(f"{family}/bounds", schemas.JOINT_BOUNDS) if path.extras else None
@@ -474,6 +471,7 @@ class Recorder(NullSink):
             return
         family = STAGE_TOPICS["path"]
         frame = ref.frame_in(self.robot)
+        self._hands = tuple(ref.hands)
         for hand, hr in ref.hands.items():
             channel = self._json(f"{family}/reference/{hand}", schemas.HAND_REFERENCE)
             quats = quaternion_xyzw(hr.rotation)
@@ -504,10 +502,12 @@ class Recorder(NullSink):
         self._json("/metrics", schemas.METRICS, metrics=list(values)).log({"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t))
 
     def close(self, manifest: Mapping[str, object]) -> None:
-        """Write the manifest as MCAP metadata and finish both files."""
+        """Write the manifest as MCAP metadata, finish both files, and write the Foxglove layout (``foxglove-layout.json``)."""
         if self._closed:
             return
         self._closed = True
+        layout = foxglove_layout(self.robot, self.stages, self._hands, self._joint_names)
+        (self.directory / FOXGLOVE_LAYOUT).write_text(json.dumps(layout, indent=1) + "\n")
         self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})
         self._mcap.close()
         self._rr.flush()

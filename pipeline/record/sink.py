@@ -144,6 +144,15 @@ def record_level(level: str) -> str:
     return level
 
 
+#: The stages whose robot moves, in pipeline order (the approach, on its own clock, is not one).
+MOTION_STAGES = ("path", "ik", "plan", "retime", "smooth", "execute")
+
+
+def shown_stage(stages: Sequence[str]) -> str:
+    """The stage a recording of ``stages`` is shown by: the last whose robot moves (``execute`` when it ran); its robot is the one on ``/tf``."""
+    return [s for s in MOTION_STAGES if s in stages][-1] if any(s in stages for s in MOTION_STAGES) else "path"
+
+
 def recorded_stages(level: str, stages: Sequence[str]) -> tuple[str, ...]:
     """The stages of ``stages`` whose products a run recorded at ``level`` writes, in the order given.
 

@@ -44,7 +44,7 @@ def _messages(run: Path) -> dict[str, list[bytes]]:
 
 def test_run_directory_contract(triangle_run, out_dir):
     assert triangle_run.parent == out_dir / "triangle"
-    assert sorted(p.name for p in triangle_run.iterdir()) == ["manifest.json", "metrics.json", "run.mcap", "run.rrd"]
+    assert sorted(p.name for p in triangle_run.iterdir()) == ["foxglove-layout.json", "manifest.json", "metrics.json", "run.mcap", "run.rrd"]
     assert not [p for p in triangle_run.parent.iterdir() if p.name.startswith(".")]
 
 

@@ -1,0 +1,184 @@
+"""``run.mcap`` of every shipped task opened with Foxglove Studio 1.48.0's own code (``viewers/foxglove``).
+
+Two checks, both running the code of ``@foxglove/studio-base`` 1.48.0 from npm (the last open-source
+Foxglove Studio; Lichtblick continues it with the same parsers):
+
+- in Node (``check-mcap.cjs``, seconds): Studio's channel parser, data source and message decoding on
+  every channel, its URDF parser on ``/robot_description``, and its message path code on every plot
+  path of the run's layout;
+- in headless Chromium (``open-in-studio.cjs``, ~25 s a run): the whole Studio app opens the run with
+  the run's layout; what it shows is read back: its Problems tab, the URDF layer's parse error, the 3D
+  panel's layer errors, and screenshots of the 3D panel with the URDF layer on and off.
+
+Without Node, the npm install or Chromium the tests are skipped, saying what to run.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from dualarm.record.foxglove_layout import _path
+from tests.conftest import HUMANOID, REPO, SHIPPED
+
+FOXGLOVE = REPO / "viewers" / "foxglove"
+NODE = shutil.which("node")
+CHROMIUM = Path(os.environ.get("CHROMIUM", "/usr/bin/chromium"))
+LAYOUT_FILE = "foxglove-layout.json"
+#: Robot pixels must stay this far from the 3D panel's edges (the whole robot in view) [px].
+MARGIN_PX = 4
+#: Two screenshots' pixels match when every RGB channel is this close, allowing a shift of one pixel.
+TOLERANCE = 24
+#: The 3D panels' screenshots are compared without their outermost pixels [px].
+BORDER_PX = 2
+
+pytestmark = pytest.mark.skipif(
+    NODE is None or not (FOXGLOVE / "node_modules" / "@foxglove" / "studio-base" / "package.json").is_file(),
+    reason="the Foxglove tests need Node.js >= 20 and its packages: npm ci --prefix viewers/foxglove",
+)
+needs_chromium = pytest.mark.skipif(not CHROMIUM.is_file(), reason=f"the Foxglove browser tests need Chromium at {CHROMIUM}: apt-get install chromium")
+
+
+def _node(script: str, *args: str, timeout_s: float) -> list[dict]:
+    """Run a harness script; its JSON lines. Exit code 1 means findings (asserted by the tests), 2 the harness failed."""
+    done = subprocess.run([str(NODE), str(FOXGLOVE / script), *args], capture_output=True, text=True, timeout=timeout_s, check=False)
+    assert done.returncode in (0, 1), f"{script} failed:\n{done.stderr[-3000:]}"
+    return [json.loads(line) for line in done.stdout.splitlines()]
+
+
+def _layout_args(run: Path) -> list[str]:
+    return ["--layout", str(run / LAYOUT_FILE)] if (run / LAYOUT_FILE).is_file() else []
+
+
+@pytest.fixture(scope="module")
+def bad_run(tmp_path_factory, shipped_runs) -> Path:
+    """A negative control: the triangle run (linked) with a layout whose plot path names a joint the run has not and whose 3D panel follows a frame it lacks."""
+    run = tmp_path_factory.mktemp("bad-layout")
+    (run / "run.mcap").symlink_to(shipped_runs["triangle"] / "run.mcap")
+    layout = {
+        "configById": {
+            "Plot!bad": {"paths": [{"value": "/execute/sample.position.no_such_joint", "enabled": True, "timestampMethod": "receiveTime"}]},
+            "3D!bad": {"followTf": "no_such_frame", "topics": {}},
+        },
+        "layout": "Plot!bad",
+    }
+    (run / LAYOUT_FILE).write_text(json.dumps(layout))
+    return run
+
+
+@pytest.fixture(scope="module")
+def parsed(shipped_runs, bad_run) -> dict[str, list[dict]]:
+    """Task name (and "bad layout": :func:`bad_run`) -> the Node check's lines for its run: its channels, then its layout's panels."""
+    runs = {**shipped_runs, "bad layout": bad_run}
+    lines = _node("check-mcap.cjs", *[arg for run in runs.values() for arg in (*_layout_args(run), str(run / "run.mcap"))], timeout_s=600)
+    return {name: [line for line in lines if line["mcap"] == str(run / "run.mcap")] for name, run in runs.items()}
+
+
+@pytest.mark.parametrize("task", list(SHIPPED))
+def test_every_channel_parses_and_decodes_in_studio(parsed, task):
+    channels = [line for line in parsed[task] if "panel" not in line]
+    failing = {line["topic"]: line.get("parse_error") or line["problems"] or line.get("urdf") or f"{line['decoded']} of {line['messages']} decoded" for line in channels if not line["ok"]}
+    assert failing == {}
+    assert channels and all(line["decoded"] == line["messages"] > 0 for line in channels)
+
+
+@pytest.mark.parametrize("task", list(SHIPPED))
+def test_robot_description_parses_with_studios_urdf_parser(parsed, task):
+    """Studio's URDF parser reads every link of the robot's URDF (counted here with ElementTree)."""
+    (urdf,) = [line["urdf"] for line in parsed[task] if line.get("topic") == "/robot_description"]
+    assert urdf["ok"], urdf.get("error")
+    assert urdf["links"] == len(ET.parse(HUMANOID / "humanoid.urdf").getroot().findall("link"))
+
+
+@pytest.mark.parametrize("task", list(SHIPPED))
+def test_studio_can_plot_every_path_of_the_runs_layout(parsed, shipped_runs, task):
+    """Each plot path is a plottable field by Studio's message path code and holds values; the 3D panel's frame is on /tf and joins its scene topics' frames."""
+    assert (shipped_runs[task] / LAYOUT_FILE).is_file(), f"the run has no {LAYOUT_FILE}"
+    panels = [line for line in parsed[task] if "panel" in line]
+    assert {line["panel"] for line in panels} == set(json.loads((shipped_runs[task] / LAYOUT_FILE).read_text())["configById"])
+    assert [line for line in panels if not line["ok"]] == []
+
+
+def test_the_node_check_reports_what_studio_cannot_show(parsed):
+    """The negative control: a path to a field the schema has not, and a frame /tf has not."""
+    by_kind = {line["kind"]: line for line in parsed["bad layout"] if "panel" in line}
+    assert not by_kind["Plot"]["ok"] and by_kind["Plot"]["paths"][0]["error"] is not None
+    assert not by_kind["3D"]["ok"] and not by_kind["3D"]["follow_on_tf"]
+
+
+def test_quoted_field_names_parse_in_studio():
+    """Joint names outside Studio's plain field grammar are quoted so that its parser gives them back whole."""
+    names = ["left_elbow", "joint 1", 'a"b.c']
+    script = (
+        f"const {{ loadMessagePathSupport }} = require({json.dumps(str(FOXGLOVE / 'lib' / 'studioBundle.cjs'))});"
+        f"const {{ parseRosPath }} = loadMessagePathSupport();"
+        f"for (const p of {json.dumps([_path('/execute/sample', 'position', n) for n in names])}) console.log(JSON.stringify(parseRosPath(p)));"
+    )
+    done = subprocess.run([str(NODE), "-e", script], capture_output=True, text=True, timeout=120, check=True, cwd=FOXGLOVE)
+    parsed_paths = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [(p["topicName"], [part["name"] for part in p["messagePath"]]) for p in parsed_paths] == [("/execute/sample", ["position", n]) for n in names]
+
+
+# -- the whole Studio app, in headless Chromium ------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def opened(shipped_runs, tmp_path_factory) -> dict[str, dict]:
+    """Task name -> what Studio showed for its run opened with the run's layout (one browser, the runs one after the other)."""
+    missing = [task for task in SHIPPED if not (shipped_runs[task] / LAYOUT_FILE).is_file()]
+    assert not missing, f"runs without {LAYOUT_FILE}: {missing}"
+    out = tmp_path_factory.mktemp("studio")
+    args = [arg for task in SHIPPED for arg in ("--layout", str(shipped_runs[task] / LAYOUT_FILE), str(shipped_runs[task] / "run.mcap"))]
+    results = _node("open-in-studio.cjs", "--out", str(out), *args, timeout_s=300 * len(SHIPPED))
+    return {task: result for task, result in zip(SHIPPED, results, strict=True)}
+
+
+@needs_chromium
+@pytest.mark.parametrize("task", list(SHIPPED))
+def test_studio_reports_no_problem(opened, task):
+    assert opened[task]["problems"] == [] and opened[task]["problems_tab"] == "No problems found"
+
+
+@needs_chromium
+@pytest.mark.parametrize("task", list(SHIPPED))
+def test_studios_3d_panel_reports_no_layer_error(opened, task):
+    """No "Missing transform" (the reference path's base_link joined to world), nor any other layer error."""
+    assert opened[task]["urdf_parsed"], opened[task]["urdf_error"]
+    assert opened[task]["layer_errors"] == []
+
+
+def _robot_mask(with_urdf: Path, without: Path) -> np.ndarray:
+    """Pixels of the first screenshot that no pixel within one pixel of the second matches: where the URDF layer drew.
+
+    The two 3D panels may differ by a pixel in size (their split), so they project the same scene up to
+    a pixel apart; their outermost :data:`BORDER_PX` rows and columns are left out.
+    """
+    a = np.asarray(Image.open(with_urdf).convert("RGB"), dtype=np.int16)
+    b = np.asarray(Image.open(without).convert("RGB"), dtype=np.int16)
+    h, w = min(a.shape[0], b.shape[0]) - 2 * BORDER_PX, min(a.shape[1], b.shape[1]) - 2 * BORDER_PX
+    a = a[BORDER_PX : BORDER_PX + h, BORDER_PX : BORDER_PX + w]
+    b = b[BORDER_PX - 1 : BORDER_PX + h + 1, BORDER_PX - 1 : BORDER_PX + w + 1]
+    matched = np.zeros((h, w), bool)
+    for dy in range(3):
+        for dx in range(3):
+            matched |= (np.abs(a - b[dy : dy + h, dx : dx + w]) <= TOLERANCE).all(axis=2)
+    return ~matched
+
+
+@needs_chromium
+@pytest.mark.parametrize("task", list(SHIPPED))
+def test_studio_draws_the_whole_robot(opened, task):
+    """The 3D panel with the URDF layer differs from its twin without it over a robot-sized area, clear of the panel's edges."""
+    shots = Path(opened[task]["screenshots"])
+    mask = _robot_mask(shots / "3d-urdf.png", shots / "3d-bare.png")
+    rows, cols = np.nonzero(mask)
+    assert mask.mean() > 0.01, f"{mask.sum()} robot pixels of {mask.size}"
+    height, width = mask.shape
+    assert rows.min() >= MARGIN_PX and cols.min() >= MARGIN_PX and rows.max() < height - MARGIN_PX and cols.max() < width - MARGIN_PX
+    assert rows.max() - rows.min() > 0.3 * height  # a 1.6 m robot, not a speck
