@@ -48,6 +48,8 @@ bench_app = typer.Typer(help="Measure speed as ratios against peers run in the s
 app.add_typer(bench_app, name="bench")
 ik_app = typer.Typer(help="Inverse kinematics of single poses.", no_args_is_help=True)
 app.add_typer(ik_app, name="ik")
+task_app = typer.Typer(help="Author and validate task files.", no_args_is_help=True)
+app.add_typer(task_app, name="task")
 
 # Text is printed as it is: no markup, no emoji codes (":robot:" stays), in messages and table cells.
 out = Console(highlight=False, markup=False, emoji=False, width=None if sys.stdout.isatty() else 120)  # tables unwrapped in pipes and files
@@ -227,6 +229,7 @@ def run(
     planner: Annotated[Optional[str], typer.Option(help="Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no --ik: mcikrrt).")] = None,
     timeout: Annotated[Optional[float], typer.Option(help="Planning timeout [s] (default 5).")] = None,
     record: Annotated[str, typer.Option("--record", metavar="LEVEL", help=RECORD_HELP)] = "full",
+    robot_dir: Annotated[Optional[Path], typer.Option("--robot", help="Robot directory (or shipped robot's name) to run the task on instead of the one it names.")] = None,
 ) -> None:
     """Run a task through the pipeline and record it; prints the run directory as the last line.
 
@@ -252,7 +255,7 @@ def run(
         raise DualarmError("give either --ik METHOD or --planner PLANNER: both make the joint path")
     if timing is not None and timing not in TIMINGS:
         raise DualarmError(f"unknown timing '{excerpt(timing)}' (timings: {', '.join(TIMINGS)})")
-    loaded = load_task(task, reps)
+    loaded = load_task(task, reps, robot_dir)
     method = default_method(loaded, ik or planner, chosen)
     settings = None
     if method == "tvgdd":
@@ -274,11 +277,22 @@ def run(
             progress=lambda stage: _update(status, f"running {task}: {stage} ..."),
             record=record,
         )
+    _print_arm_angles(result)
     for line in result.verdict.lines():
         err.print(line, markup=False, soft_wrap=True)
     out.print(str(result.directory), markup=False, soft_wrap=True)
     if result.verdict.exit_code:
         raise typer.Exit(result.verdict.exit_code)
+
+
+def _print_arm_angles(result) -> None:
+    """MC-Inverse's arm-angle profile of a run, one line per hand on stderr (as its manifest records it)."""
+    from dualarm.ik.mc_path import arm_angle_profiles, settings_for
+
+    path = result.joint_path
+    if path is not None and path.method == "mc-inverse":
+        for profile in arm_angle_profiles(path, result.task.robot, settings_for(result.task)):
+            err.print(profile.line(), markup=False, soft_wrap=True)
 
 
 def _method(name: str, kind=None, option: str = "method"):
@@ -573,7 +587,9 @@ def _missing(value) -> bool:
 @user_errors
 def consistency(
     task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
-    methods: Annotated[Optional[str], typer.Option(help="Comma-separated IK methods to compare (default: mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd,tvgdd,pinv).")] = None,
+    methods: Annotated[
+        Optional[str], typer.Option(help="Comma-separated IK methods to compare (default: mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd,tvgdd,pinv, those that run on the task's robot).")
+    ] = None,
     reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
     out_text: Annotated[Optional[str], typer.Option("--out", help="Output directory (default consistency/<task>).")] = None,
     seed: Annotated[int, typer.Option(help="Random seed (an integer >= 0), recorded in each run's manifest.")] = 0,
@@ -582,11 +598,11 @@ def consistency(
 
     Exits 0 when every run is complete, 3 when one is violated (its first violation is printed), 1 when one failed.
     """
-    from dualarm.report.consistency import DEFAULT_METHODS, method_label, run_consistency
+    from dualarm.report.consistency import method_label, run_consistency
 
     out_dir = _out_path(out_text, "--out") if out_text is not None else None
     _seed(seed)
-    chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else list(DEFAULT_METHODS)
+    chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else None  # None: DEFAULT_METHODS that run on the task's robot
     directory = out_dir or Path("consistency") / task.stem
     with err.status("consistency ...") as status:
         result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: _update(status, text))
@@ -600,6 +616,7 @@ def consistency(
         "max_joint_step_rad": "max step rad",
         "solve_time_mean_s": "solve ms/sample",
     }
+    shown = {c: label for c, label in shown.items() if c in result.table.columns}  # no arm angle on a non-S-R-S robot
     table = Table(title=f"{task}: consistency over repetitions (all columns in {result.csv})", title_justify="left")
     for column in ("method", "verdict", *shown.values()):
         table.add_column(column, justify="left" if column in ("method", "verdict") else "right", no_wrap=column in ("method", "verdict"))
@@ -667,24 +684,36 @@ def _robot(robot_dir: Optional[Path], urdf: Optional[Path], base: Optional[str],
 @ik_app.command("srs")
 @user_errors
 def ik_srs(
-    pose: Annotated[tuple[float, float, float, float, float, float], typer.Option(help="Hand pose in the chain base frame: X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z, as in task files).")],
-    arm_angle: Annotated[float, typer.Option(help="Arm angle psi of MC-Inverse eq (1) [rad].")],
+    pose: Annotated[tuple[float, float, float, float, float, float], typer.Option(help="Hand pose: X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z, as in task files), in the frame of --frame.")],
+    arm_angle: Annotated[Optional[float], typer.Option(help="Arm angle psi of MC-Inverse eq (1) [rad] (not with --sweep).")] = None,
     robot_dir: Annotated[Optional[Path], typer.Argument(help="Robot directory holding robot.toml (with --arm).")] = None,
     arm: Annotated[Optional[str], typer.Option(help="Which arm of ROBOT_DIR: left or right.")] = None,
     urdf: Annotated[Optional[Path], typer.Option(help="A bare URDF instead (needs --base and --tip).")] = None,
     base: Annotated[Optional[str], typer.Option(help="Base link of the arm chain (with --urdf).")] = None,
     tip: Annotated[Optional[str], typer.Option(help="Tip link of the arm chain (with --urdf).")] = None,
     vertical: Annotated[tuple[float, float, float], typer.Option(help="Vertical vector V of the arm angle's reference plane, in the chain base frame.")] = (0.0, 0.0, 1.0),
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON: {chain, pose, arm_angle, candidates: [{q, valid, reason, position_error_m, orientation_error_rad}]}.")] = False,
+    frame: Annotated[str, typer.Option(help="Frame of --pose: robot (the URDF's root link, waist at 0; as task files) or chain (the arm chain's base).")] = "robot",
+    sweep: Annotated[bool, typer.Option("--sweep", help="Instead of one arm angle: the feasible psi intervals (within the joint limits) of each of the 8 branches.")] = False,
+    step: Annotated[float, typer.Option(help="Grid step of --sweep [deg], in [0.01, 30].")] = 1.0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON: {chain, frame, pose, arm_angle, candidates}; with --sweep {chain, frame, pose, step_rad, branches}.")] = False,
 ) -> None:
-    """The 8 MC-Inverse candidates of one hand pose at one arm angle, with validity and the error of each candidate's forward kinematics (the analogue of the paper's Table I)."""
+    """The 8 MC-Inverse candidates of one hand pose at one arm angle, with validity and the error of each candidate's forward kinematics (the analogue of the paper's Table I); with --sweep, the arm angles at which each branch reaches the pose within the joint limits."""
     import json
 
-    from dualarm.ik.mc_inverse import candidate_table
+    from dualarm.ik.mc_inverse import PoseFrame, candidate_table
 
     for name, value, bound in zip(("X", "Y", "Z", "ROLL", "PITCH", "YAW"), pose, (MAX_POSITION_M,) * 3 + (MAX_ANGLE_RAD,) * 3):
         _within(value, f"--pose {name}", -bound, bound)
-    _within(arm_angle, "--arm-angle", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
+    if frame not in ("robot", "chain"):
+        raise DualarmError(f"--frame '{excerpt(frame)}': give robot or chain")
+    if sweep:
+        if arm_angle is not None:
+            raise DualarmError("give either --arm-angle PSI or --sweep")
+        _within(step, "--step", 0.01, 30.0)
+    elif arm_angle is None:
+        raise DualarmError("give --arm-angle PSI (or --sweep for every arm angle)")
+    else:
+        _within(arm_angle, "--arm-angle", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
     for value in vertical:
         _within(value, "--vertical", -MAX_POSITION_M, MAX_POSITION_M)
     robot = _robot(robot_dir, urdf, base, tip)
@@ -696,18 +725,67 @@ def ik_srs(
         chain = robot.hand_chain(arm)
     if not np.linalg.norm(vertical) > 0:
         raise DualarmError("--vertical must not be zero")
-    data = candidate_table(chain, pose, arm_angle, vertical)
+    where = PoseFrame.robot_base(robot, chain) if frame == "robot" else PoseFrame.chain_base(chain)
+    if sweep:
+        _ik_srs_sweep(chain, pose, vertical, where, math.radians(step), as_json)
+        return
+    assert arm_angle is not None
+    data = candidate_table(chain, pose, arm_angle, vertical, where)
     candidates = data["candidates"]
     if as_json:
         typer.echo(json.dumps(data, indent=2))
         return
-    table = Table(title=f"MC-Inverse, {chain.base} -> {chain.tip}, psi = {arm_angle:g} rad", title_justify="left")
+    table = Table(title=f"MC-Inverse, {chain.base} -> {chain.tip}, pose in the {frame} frame ({where.link}), psi = {arm_angle:g} rad", title_justify="left")
     for column in ("#", *[f"θ{i}" for i in range(1, 8)], "validity", "pos. err [m]", "rot. err [rad]", "ψ of q [rad]"):
         table.add_column(column, justify="left" if column == "validity" else "right", no_wrap=True)
     for i, c in enumerate(candidates):
         table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}", f"{c['arm_angle_rad']:.4f}")
     out.print(table)
     out.print(f"joints: {', '.join(chain.joint_names)}; {sum(c['valid'] for c in candidates)} of 8 valid", markup=False)
+
+
+def _ik_srs_sweep(chain, pose: tuple[float, ...], vertical: tuple[float, float, float], frame, step_rad: float, as_json: bool) -> None:
+    """``ik srs --sweep``: each branch's feasible arm-angle intervals at ``pose`` (in ``frame``), as a table or JSON."""
+    import json
+
+    from dualarm.ik.mc_inverse import McInverse, branch_label, sweep_arm_angle, sweep_table
+
+    length = float(np.linalg.norm(vertical))
+    result = sweep_arm_angle(McInverse.of(chain, (vertical[0] / length, vertical[1] / length, vertical[2] / length)), frame.to_chain(pose), step_rad)
+    rows = sweep_table(result)
+    if as_json:
+        data = {"chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)}, "frame": frame.record(), "pose": list(pose), "step_rad": step_rad, "branches": rows}
+        typer.echo(json.dumps(data, indent=2))
+        return
+    table = Table(title=f"MC-Inverse arm-angle sweep, {chain.base} -> {chain.tip}, pose in the {frame.kind} frame ({frame.link}), step {math.degrees(step_rad):g} deg", title_justify="left")
+    for column in ("branch", "feasible psi [rad]", "samples"):
+        table.add_column(column, justify="right" if column == "samples" else "left", no_wrap=column == "branch")
+    for b, row in enumerate(rows):
+        spans = ", ".join(f"[{lo:.4f}, {hi:.4f}]" if hi <= math.pi else f"[{lo:.4f}, {hi - 2 * math.pi:.4f}] across ±pi" for lo, hi in row["intervals_rad"]) or f"none ({row['blocked_by']})"
+        table.add_row(branch_label(b), spans, str(row["valid_samples"]))
+    out.print(table)
+    feasible = sum(bool(r["intervals_rad"]) for r in rows)
+    out.print(f"{feasible} of 8 branches reach the pose within the joint limits; interval ends are grid samples (the true ends lie within one step outside)", markup=False)
+
+
+@task_app.command("check")
+@user_errors
+def task_check(
+    task: Annotated[str, typer.Argument(help="Task file (TOML), or a shipped task's name.")],
+    robot_dir: Annotated[Optional[Path], typer.Option("--robot", help="Robot directory to check the task on instead of the one it names.")] = None,
+) -> None:
+    """Validate a task without running it: schema, robot, and every waypoint's reach within the joint limits (per waypoint the hand pose and, for an S-R-S arm, the MC-Inverse branches and psi intervals that reach it); exits 3 when a waypoint is unreachable, 2 for a malformed task."""
+    from dualarm.tasks.check import check_task, report_lines, unreachable_lines
+
+    result = check_task(task, robot_dir)
+    if not result.waypoints:
+        out.print(f"{result.source}: valid; no waypoints to check (the hands start at the initial configuration and move by displacements or arcs)", markup=False, soft_wrap=True)
+    for line in report_lines(result):
+        out.print(line, markup=False, soft_wrap=True)
+    for line in unreachable_lines(result):
+        err.print(line, markup=False, soft_wrap=True)
+    if result.unreachable:
+        raise typer.Exit(EXIT_CODES["violated"])
 
 
 @bench_app.command("ik")
@@ -813,12 +891,13 @@ def robot_check(
     seed: Annotated[int, typer.Option(help="Seed of the random configurations (an integer >= 0).")] = 0,
 ) -> None:
     """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics, PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
-    from dualarm.model.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain
+    from dualarm.model.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain, require_limits
     from dualarm.model.srs import srs_geometry
 
     _seed(seed)
     _within(samples, "--samples", 1, MAX_SAMPLES)
     robot = _robot(robot_dir, urdf, base, tip)
+    require_limits(robot)
     out.print(f"robot {robot.name}: {robot.urdf.path}  ({len(robot.joint_names)} movable joints)", markup=False)
     results = []
     for chain in robot.chains.values():
@@ -863,3 +942,56 @@ def robot_check(
     )
     if not all(r.passed for r in results):
         raise typer.Exit(1)
+
+
+@robot_app.command("init")
+@user_errors
+def robot_init(
+    urdf: Annotated[Path, typer.Argument(help="The robot's URDF (mesh paths: package:// through ROS_PACKAGE_PATH or the URDF's own folders, file://, absolute or relative).")],
+    out_dir: Annotated[str, typer.Option("--out", help="The robot directory to write (new or empty): robot.toml, a copy of the URDF and its meshes.")],
+    left_tip: Annotated[Optional[str], typer.Option(help="Tip link (hand frame) of the left arm; default: proposed from the tree.")] = None,
+    right_tip: Annotated[Optional[str], typer.Option(help="Tip link of the right arm; default: proposed from the tree.")] = None,
+    left_base: Annotated[Optional[str], typer.Option(help="Base link of the left arm's chain; default: the torso.")] = None,
+    right_base: Annotated[Optional[str], typer.Option(help="Base link of the right arm's chain; default: the torso.")] = None,
+    torso: Annotated[Optional[str], typer.Option(help="The link the arms hang from; default: their common root. The waist is the movable joints above it.")] = None,
+    acceleration: Annotated[Optional[float], typer.Option(help="Acceleration limit of every chain joint [rad/s^2]; default: an assumed 5, marked so in robot.toml.")] = None,
+    jerk: Annotated[Optional[float], typer.Option(help="Jerk limit of every chain joint [rad/s^3]; default: an assumed 50, marked so in robot.toml.")] = None,
+) -> None:
+    """Write a robot directory from a URDF: arm chains, waist, locked joints, S-R-S verdicts, limits, home poses zero and ready; print every choice (robots/README.md)."""
+    from dualarm.model.init import init_robot
+
+    for value, option in ((acceleration, "--acceleration"), (jerk, "--jerk")):
+        if value is not None:
+            _within(value, option, 0.0, above_low=True)
+    with err.status("robot init: sampling configurations ..."):
+        result = init_robot(urdf, _out_path(out_dir, "--out"), left_tip=left_tip, right_tip=right_tip, left_base=left_base, right_base=right_base, torso=torso, acceleration=acceleration, jerk=jerk)
+    for line in result.notes:
+        out.print(line, markup=False, soft_wrap=True)
+    out.print(f"wrote {result.directory / 'robot.toml'}; next: dualarm robot check {result.directory}, dualarm robot poses {result.directory}", markup=False, soft_wrap=True)
+
+
+@robot_app.command("poses")
+@user_errors
+def robot_poses(
+    robot_dir: Annotated[Path, typer.Argument(help="Robot directory holding robot.toml (or a shipped robot's name).")],
+    pose: Annotated[Optional[str], typer.Option(help="Only this home pose (default: every one).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON: [{home, hand, position_m, rpy_rad, arm_angle_rad}].")] = False,
+) -> None:
+    """Each hand's pose at each home pose: position [m] and roll, pitch, yaw (extrinsic x-y-z, as task files) [rad] in the robot base frame, and the arm angle psi [rad] where the arm is S-R-S."""
+    import dataclasses
+    import json
+
+    from dualarm.model.init import hand_poses
+    from dualarm.model.robot import load_robot
+
+    poses = hand_poses(load_robot(robot_dir), pose)
+    if as_json:
+        typer.echo(json.dumps([dataclasses.asdict(p) for p in poses], indent=2))
+        return
+    table = Table(title="hand poses in the robot base frame", title_justify="left")
+    for column in ("home", "hand", "x [m]", "y [m]", "z [m]", "roll [rad]", "pitch [rad]", "yaw [rad]", "ψ [rad]"):
+        table.add_column(column, justify="left" if column in ("home", "hand") else "right", no_wrap=True)
+    for p in poses:
+        table.add_row(p.home, p.hand, *(f"{v:.4f}" for v in (*p.position_m, *p.rpy_rad)), "-" if p.arm_angle_rad is None else f"{p.arm_angle_rad:.4f}")
+    out.print(table)
+    out.print("ψ: the arm angle of MC-Inverse eq (1) (V = +z of the arm's base frame); '-' where the arm is not S-R-S or ψ is undefined (shoulder-wrist line vertical)", markup=False)

@@ -1,5 +1,9 @@
 """The IK methods and planners, in one registry: name -> what it is, what it needs, its settings class and its solve function.
 
+What a method needs is stated here and nowhere else: :func:`refuse_unsuited` refuses a method
+that needs S-R-S arms (``needs_srs``) on a robot whose driven arm is not one, naming the method,
+the chain and the joints whose axes miss; :func:`suited_methods` lists those that run.
+
 An IK method's solve function has one signature, ``solve(robot, reference, q0=None, settings=None)
 -> JointPath``; its settings default from a task with ``settings_for(task, **overrides)``. A
 planner is run by the plan stage (:func:`dualarm.plan.problem.plan_task`), on a task's Workspace
@@ -14,14 +18,15 @@ Target Areas. Nothing heavy is imported until a method is used.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Literal
 
-from dualarm.errors import InvalidArgumentError
+from dualarm.errors import InvalidArgumentError, NotSRSError, excerpt
 
 if TYPE_CHECKING:
+    from dualarm.model.robot import Robot
     from dualarm.tasks import Task
 
 
@@ -139,3 +144,40 @@ def method(name: str, kind: Literal["ik", "planner"] | None = None, argument: st
         plural = {"ik": "methods", "planner": "planners", None: "methods"}[kind]
         raise InvalidArgumentError(argument, f"unknown {what} '{name}' ({plural}: {', '.join(names)})")
     return METHODS[name]
+
+
+def not_srs(robot: "Robot", hands: Sequence[str]) -> dict[str, NotSRSError]:
+    """The arms of ``hands`` (``left``/``right``) that are not S-R-S: hand -> why not (the chain and the joints whose axes miss, as :func:`dualarm.model.srs.srs_geometry` says)."""
+    from dualarm.model.srs import srs_geometry
+
+    reasons = {}
+    for hand in hands:
+        try:
+            srs_geometry(robot.hand_chain(hand))
+        except NotSRSError as exc:
+            reasons[hand] = exc
+    return reasons
+
+
+def suited_methods(robot: "Robot", hands: Sequence[str], kind: Literal["ik", "planner"] = "ik") -> tuple[str, ...]:
+    """The methods of ``kind`` that run on ``robot``'s arms of ``hands``: all of them when every arm is S-R-S, else those that do not need S-R-S."""
+    names = IK_METHODS if kind == "ik" else PLANNERS
+    srs = not not_srs(robot, hands)
+    return tuple(n for n in names if srs or not METHODS[n].needs_srs)
+
+
+def refuse_unsuited(m: Method, robot: "Robot", hands: Sequence[str]) -> None:
+    """Refuse method ``m`` when it needs S-R-S arms (``needs_srs``) and an arm of ``hands`` is not one.
+
+    Raises:
+        NotSRSError: one line naming the method, the robot, the chain and the joints whose axes
+            miss, and the methods that do run on the robot.
+    """
+    if not m.needs_srs:
+        return
+    reasons = not_srs(robot, hands)
+    if reasons:
+        hand, reason = next(iter(reasons.items()))
+        chain = robot.hand_chain(hand).name
+        usable = ", ".join(n for n, other in METHODS.items() if other.kind == m.kind and not other.needs_srs)
+        raise NotSRSError(f"{m.name} needs S-R-S arms, and the {hand} arm of robot '{excerpt(robot.name, 40)}' is not: {reason}; methods that run on it: {usable}", chain=chain)

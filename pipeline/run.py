@@ -299,6 +299,7 @@ def record_stages(
         if isinstance(exc, StageError):
             exc.run_directory = directory
         raise
+    run.manifest["settings"] = _settings(stages)  # with what the stages chose while running (MC-Inverse's arm angles)
     run.conclude(result.verdict)
     recorder.close(run.manifest)
     return replace(result, directory=run.finish(result.metrics), stage_seconds=recorder.stage_seconds)
@@ -329,6 +330,11 @@ def _attachments(task: Task) -> dict[str, str]:
     return attachments
 
 
+def _settings(stages: Sequence[Stage]) -> dict[str, object]:
+    """Each stage's settings record, in pipeline order."""
+    return {s.name: s.settings_record() for s in sorted(stages, key=lambda s: ALL_STAGES.index(s.name))}
+
+
 def _manifest(task: Task, stages: Sequence[Stage], seed: int, command: Sequence[str], record: str = "full") -> dict[str, object]:
     robot = task.robot
     robot_files = {robot.urdf.path.name: sha256_file(robot.urdf.path)}
@@ -347,6 +353,6 @@ def _manifest(task: Task, stages: Sequence[Stage], seed: int, command: Sequence[
         "seed": seed,
         "stages": [s.name for s in ordered],
         "record": record,
-        "settings": {s.name: s.settings_record() for s in ordered},
+        "settings": _settings(stages),
         "packages": package_versions(),
     }

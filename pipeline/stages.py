@@ -20,9 +20,10 @@ import numpy as np
 
 from dualarm.errors import StageError
 from dualarm.ik.joint_path import JointPath
+from dualarm.ik.mc_path import arm_angle_profiles
 from dualarm.ik.metrics import arm_angles, consistency_metrics, ik_metrics
 from dualarm.limits import limit_ratios
-from dualarm.methods import Method
+from dualarm.methods import Method, refuse_unsuited
 from dualarm.paths import CartesianReference, build_reference
 from dualarm.record.sink import Sink
 from dualarm.retime.trajectory import JointTrajectory
@@ -113,10 +114,17 @@ class IkStage:
     checks: Checks = field(default_factory=Checks)
     retimed: bool = True
     name: ClassVar[str] = "ik"
+    #: MC-Inverse's arm-angle profile per hand (see :meth:`settings_record`), filled by the call.
+    arm_angle_profile: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        """Refuse a method that needs S-R-S arms on a task whose arm is not one (:func:`dualarm.methods.refuse_unsuited`), before anything runs."""
+        refuse_unsuited(self.method, self.task.robot, self.task.spec.hands)
 
     def settings_record(self) -> dict[str, Any]:
-        """The IK method's name and settings."""
-        return {"method": self.method.name, **as_record(self.settings)}
+        """The IK method's name and settings; for MC-Inverse also ``arm_angle_profile``: per hand the mode, the psi held or its range, and the kept branch (1-8), once the stage has run (the recorded run writes its manifest's settings again at its end)."""
+        chosen = {"arm_angle_profile": self.arm_angle_profile} if self.method.name == "mc-inverse" else {}
+        return {"method": self.method.name, **as_record(self.settings), **chosen}
 
     def __call__(self, reference: CartesianReference, sink: Sink) -> tuple[JointPath, dict[str, float]]:
         """Solve the reference from the task's initial configuration: CartesianReference -> JointPath."""
@@ -125,7 +133,9 @@ class IkStage:
         path = self.method.solve(robot, reference, self.task.initial_q, self.settings)
         angles = arm_angles(path, robot, self.task.spec.arm_angle.vertical)
         sink.joint_path(path, robot.limit_array("velocity", path.joint_names), angles)
-        return path, {**ik_metrics(path, robot), **consistency_metrics(path, reference, angles)}
+        profiles = arm_angle_profiles(path, robot, self.settings) if self.method.name == "mc-inverse" else ()
+        self.arm_angle_profile.update({p.hand: p.record() for p in profiles})
+        return path, {**ik_metrics(path, robot), **consistency_metrics(path, reference, angles), **{k: v for p in profiles for k, v in p.metrics().items()}}
 
     def violations(self, path: JointPath) -> list[Violation]:
         """Failed samples, hands off the asked pose (the orientation when the method solved it), position limits; velocity limits when no retime stage follows (``retimed`` False)."""

@@ -90,7 +90,7 @@ def test_ik_srs_json_lists_8_candidates_that_pybullet_confirms(humanoid):
     from dualarm.model.poses import pose_matrix
 
     pose = [0.147, 0.404, 0.455, 0.937, 0.560, -0.377]
-    result = runner.invoke(app, ["ik", "srs", str(HUMANOID), "--arm", "left", "--pose", *map(str, pose), "--arm-angle", "2.2", "--json"])
+    result = runner.invoke(app, ["ik", "srs", str(HUMANOID), "--arm", "left", "--pose", *map(str, pose), "--arm-angle", "2.2", "--json", "--frame", "chain"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     candidates = data["candidates"]

@@ -246,27 +246,28 @@ def mc_inverse(robot: Robot, hand: str, pose: np.ndarray, psi: float, q: Mapping
     return _solver(chain, unit).solve(target, psi)
 
 
-def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict:
+def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0), frame: "PoseFrame | None" = None) -> dict:
     """The paper's Table I for one hand pose: the 8 candidates at arm angle ``psi`` [rad].
 
     Args:
         chain: an S-R-S arm chain.
-        pose: hand pose in the chain base frame, X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z).
+        pose: hand pose, X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z), in ``frame``.
         psi: the arm angle of eq (1) [rad].
         vertical: the reference vertical vector V of eq (1), in the chain base frame.
+        frame: the frame ``pose`` is given in; default the chain base frame.
 
     Returns:
-        A JSON-ready dict: ``chain`` (base, tip, joints), ``pose``, ``arm_angle`` and
-        ``candidates``, each with ``q`` [rad], ``valid``, ``reason``, the position and orientation
-        errors of its forward kinematics against the pose [m, rad] and the arm angle of eq (1)
-        recomputed from its joints (``arm_angle_rad``).
+        A JSON-ready dict: ``chain`` (base, tip, joints), ``frame`` (``robot`` or ``chain`` and its
+        link), ``pose``, ``arm_angle`` and ``candidates``, each with ``q`` [rad], ``valid``,
+        ``reason``, the position and orientation errors of its forward kinematics against the pose
+        [m, rad] and the arm angle of eq (1) recomputed from its joints (``arm_angle_rad``).
     """
     from dualarm.model.check import pose_errors
     from dualarm.model.kinematics import ChainKinematics
-    from dualarm.model.poses import pose_matrix
 
+    frame = frame or PoseFrame.chain_base(chain)
     unit = tuple(np.asarray(vertical, dtype=float) / np.linalg.norm(vertical))
-    target = pose_matrix(pose[:3], pose[3:])
+    target = frame.to_chain(pose)
     solver = McInverse.of(chain, unit)
     solution = solver.solve(target, psi)
     reached = ChainKinematics.of(chain).poses(solution.q)
@@ -276,4 +277,139 @@ def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical:
         {"q": q.tolist(), "valid": bool(r == VALID), "reason": REASONS[int(r)], "position_error_m": float(p), "orientation_error_rad": float(o), "arm_angle_rad": float(a)}
         for q, r, p, o, a in zip(solution.q, solution.reason, position_error, orientation_error, angles)
     ]
-    return {"chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)}, "pose": list(pose), "arm_angle": psi, "candidates": candidates}
+    return {"chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)}, "frame": frame.record(), "pose": list(pose), "arm_angle": psi, "candidates": candidates}
+
+
+#: Default grid step of :func:`sweep_arm_angle` [rad] (1 degree).
+SWEEP_STEP_RAD = np.pi / 180
+#: Smallest and largest grid step of :func:`sweep_arm_angle` [rad] (0.01 and 30 degrees).
+SWEEP_STEP_RANGE_RAD = (np.pi / 18000, np.pi / 6)
+
+
+@dataclass(frozen=True)
+class ArmAngleSweep:
+    """Every candidate of one hand pose over a grid of arm angles: which psi each branch reaches within the joint limits.
+
+    Attributes:
+        psi_rad: the grid, (G,) [rad], from -pi in steps of ``step_rad``.
+        q: the candidates, (G, 8, 7) [rad].
+        reason: their validity codes (see :data:`REASONS`), (G, 8).
+        step_rad: the grid step [rad].
+    """
+
+    psi_rad: np.ndarray
+    q: np.ndarray
+    reason: np.ndarray
+    step_rad: float
+
+    def intervals(self, branch: int) -> list[tuple[float, float]]:
+        """The runs of grid angles where candidate ``branch`` (0-7) is valid, as (first, last) [rad].
+
+        A run that crosses psi = +-pi is one interval whose last angle lies above pi (first + its
+        length); a branch valid on the whole grid gives (-pi, pi - step). The true ends lie within
+        one step outside each run.
+        """
+        valid = self.reason[:, branch] == VALID
+        G = len(valid)
+        if valid.all():
+            return [(float(self.psi_rad[0]), float(self.psi_rad[-1]))]
+        runs: list[list[int]] = []
+        for g in (int(i) for i in np.flatnonzero(valid)):
+            if runs and runs[-1][1] == g - 1:
+                runs[-1][1] = g
+            else:
+                runs.append([g, g])
+        if len(runs) > 1 and runs[0][0] == 0 and runs[-1][1] == G - 1:  # one run across +-pi
+            first = runs.pop()
+            runs[0] = [first[0], runs[0][1] + G]
+        return [(float(self.psi_rad[a]), float(self.psi_rad[a] + (b - a) * self.step_rad)) for a, b in runs]
+
+    def blocking(self, branch: int) -> str:
+        """The most frequent reason why ``branch`` is invalid on the grid (``valid`` when it never is)."""
+        codes = self.reason[:, branch]
+        codes = codes[codes != VALID]
+        return REASONS[int(np.bincount(codes).argmax())] if codes.size else REASONS[VALID]
+
+    @property
+    def reachable(self) -> bool:
+        """Whether any branch is valid at any grid angle."""
+        return bool((self.reason == VALID).any())
+
+
+def sweep_arm_angle(solver: McInverse, pose: np.ndarray, step_rad: float = SWEEP_STEP_RAD) -> ArmAngleSweep:
+    """The 8 candidates of one hand pose (4x4, chain base frame) [m] at every arm angle of a grid from -pi in steps of ``step_rad`` [rad], in one mapped call.
+
+    Raises:
+        InvalidArgumentError: ``pose`` is not a 4x4 rigid transform, or ``step_rad`` is outside :data:`SWEEP_STEP_RANGE_RAD`.
+    """
+    T = rigid_transforms(pose, "pose")
+    step = float(finite_array(step_rad, "step_rad", ()))
+    low, high = SWEEP_STEP_RANGE_RAD
+    if not low <= step <= high:
+        raise InvalidArgumentError("step_rad", f"{step:g} rad is outside [{low:g}, {high:g}] rad")
+    grid = -np.pi + step * np.arange(int(np.ceil(2 * np.pi / step - 1e-9)))
+    q, reason = solver.solve_many(np.repeat(T[None], len(grid), axis=0), grid)
+    return ArmAngleSweep(psi_rad=grid, q=q, reason=reason, step_rad=step)
+
+
+def branch_label(branch: int) -> str:
+    """``branch`` (0-7) as the command line and messages name it: ``3 (elbow 0, shoulder 1, wrist 0)``, numbered from 1."""
+    return f"{branch + 1} (elbow {branch // 4}, shoulder {branch // 2 % 2}, wrist {branch % 2})"
+
+
+def sweep_table(sweep: ArmAngleSweep) -> list[dict]:
+    """Per branch (numbered 1-8) its feasible arm-angle intervals [rad] and, when it has none, the most frequent reason; JSON-ready."""
+    rows = []
+    for b in range(CANDIDATES):
+        intervals = sweep.intervals(b)
+        rows.append(
+            {
+                "branch": b + 1,
+                "elbow": b // 4,
+                "shoulder": b // 2 % 2,
+                "wrist": b % 2,
+                "intervals_rad": [list(i) for i in intervals],
+                "valid_samples": int((sweep.reason[:, b] == VALID).sum()),
+                "blocked_by": None if intervals else sweep.blocking(b),
+            }
+        )
+    return rows
+
+
+@dataclass(frozen=True)
+class PoseFrame:
+    """The frame a hand pose is given in, for ``dualarm ik srs``.
+
+    Attributes:
+        kind: ``robot`` (the robot's base frame, as task files give poses) or ``chain`` (the arm
+            chain's base frame, where the solver works).
+        link: the link whose frame it is.
+        chain_in_frame: the chain base's pose in this frame (4x4) [m].
+    """
+
+    kind: str
+    link: str
+    chain_in_frame: np.ndarray
+
+    @classmethod
+    def chain_base(cls, chain: Chain) -> "PoseFrame":
+        """The chain's own base frame."""
+        return cls("chain", chain.base, np.eye(4))
+
+    @classmethod
+    def robot_base(cls, robot: Robot, chain: Chain) -> "PoseFrame":
+        """The robot's base frame (its URDF's root link), the joints between it and the chain (a waist) at 0."""
+        from dualarm.model.kinematics import ChainKinematics
+
+        between = robot.chain_between(robot.urdf.root, chain.base)
+        return cls("robot", robot.urdf.root, ChainKinematics.of(between).pose(np.zeros(between.dof)))
+
+    def to_chain(self, pose: tuple[float, ...]) -> np.ndarray:
+        """A pose X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z) in this frame as a 4x4 transform in the chain base frame [m]."""
+        from dualarm.model.poses import invert, pose_matrix
+
+        return invert(self.chain_in_frame) @ pose_matrix(pose[:3], pose[3:])
+
+    def record(self) -> dict:
+        """JSON-ready: ``kind``, ``link`` and, for the robot frame, that the joints between it and the chain are at 0."""
+        return {"kind": self.kind, "link": self.link, **({"joints_between_at": 0.0} if self.kind == "robot" else {})}

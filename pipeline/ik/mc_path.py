@@ -3,9 +3,10 @@
 Zou, Min, Xu's consistency argument (section III.B, V): when the arm angle psi is a function of
 where the hand is on the task, and not of how it got there, and the same solution branch is kept
 throughout, then every repetition of a path gives the same joints. Here psi follows the task's
-``[arm_angle]`` table (the initial configuration's psi held, a constant, a schedule over the
-time within a repetition, or ``auto``: the least-travel profile within the limits found over the
-first repetition, see :func:`_auto`). The branch (elbow, shoulder and wrist root of the 8
+``[arm_angle]`` table (``auto``, the default: the least-travel profile within the limits found
+over the first repetition, see :func:`_auto`; the initial configuration's psi held; a constant; or
+a schedule over the time within a repetition). :func:`arm_angle_profiles` reads back the profile
+and branch a path follows (the run's manifest and metrics hold them). The branch (elbow, shoulder and wrist root of the 8
 candidates) is the one nearest the initial configuration at the first sample (``auto`` picks it
 with the profile), and it is kept. A sample where
 that branch is invalid, or where a joint moves more than ``max_joint_step_rad`` between samples,
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -27,7 +29,7 @@ import numpy as np
 from dualarm.errors import NoSolutionFound, StageError
 from dualarm.ik.arms import ArmSolution, arm_problems, joint_path
 from dualarm.ik.joint_path import JointPath
-from dualarm.ik.mc_inverse import REASONS, VALID, McInverse, nearest_candidate
+from dualarm.ik.mc_inverse import OUTSIDE_LIMITS, REASONS, VALID, McInverse, branch_label, nearest_candidate
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference, first_repetition_index, time_in_repetition
 from dualarm.settings import with_overrides
@@ -98,27 +100,43 @@ def solve_mc_inverse(robot: Robot, reference: CartesianReference, q0: Mapping[st
             psi, branch = _auto(solver, arm.targets, reference, psi[0], arm.q0, spec, arm.hand)
         candidates, reasons = solver.solve_many(arm.targets, psi)
         elapsed = time.perf_counter() - start
-        q = _kept_branch(arm.hand, arm.chain.joint_names, arm.q0, reference, candidates, reasons, spec.max_joint_step_rad, branch)
+        q = _kept_branch(arm.hand, solver, arm.q0, reference, psi, candidates, reasons, spec.max_joint_step_rad, branch)
         solutions.append(ArmSolution(q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))))
     return joint_path("mc-inverse", reference, problems, solutions, q0)
 
 
-def _kept_branch(hand: str, names, q0: np.ndarray, reference: CartesianReference, candidates: np.ndarray, reasons: np.ndarray, max_step: float, branch: int | None = None) -> np.ndarray:
-    """The candidate ``branch`` (by default the one nearest ``q0`` [rad] at sample 0), checked along the path."""
+def _kept_branch(
+    hand: str, solver: McInverse, q0: np.ndarray, reference: CartesianReference, psi: np.ndarray, candidates: np.ndarray, reasons: np.ndarray, max_step: float, branch: int | None = None
+) -> np.ndarray:
+    """The candidate ``branch`` (by default the one nearest ``q0`` [rad] at sample 0), checked along the path; ``psi`` (N,) [rad] the arm angle per sample."""
+    names = solver.chain.joint_names
     if branch is None:
         branch = nearest_candidate(candidates[0], reasons[0], q0)
         if branch is None:
             why = ", ".join(sorted({REASONS[int(r)] for r in reasons[0]}))
-            raise NoSolutionFound(f"MC-Inverse, {hand} arm: no valid solution at the path start ({why})", stage="ik", sample=0, t_s=float(reference.t[0]))
+            nearest = int(np.argmin(np.abs(candidates[0] - q0).max(axis=1)))
+            outside = reasons[0, nearest] == OUTSIDE_LIMITS
+            detail = _limit_detail(solver, candidates[0, nearest]) if outside else ""
+            raise NoSolutionFound(
+                f"MC-Inverse, {hand} arm: no valid solution at the path start ({why}){detail} at psi = {psi[0]:.4f} rad; {LIMIT_HINT}",
+                stage="ik",
+                sample=0,
+                t_s=float(reference.t[0]),
+                joint=names[_worst_joint(solver, candidates[0, nearest])] if outside else None,
+            )
     q = candidates[:, branch]
     invalid = np.flatnonzero(reasons[:, branch] != VALID)
     if invalid.size:
         k = invalid[0]
+        outside = reasons[k, branch] == OUTSIDE_LIMITS
+        joint = names[_worst_joint(solver, q[k])] if outside else None
         raise StageError(
-            f"MC-Inverse, {hand} arm: sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]}) has no valid solution on the kept branch {branch + 1}: {REASONS[int(reasons[k, branch])]}",
+            f"MC-Inverse, {hand} arm: sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]}) has no valid solution on the kept branch {branch + 1}: "
+            f"{REASONS[int(reasons[k, branch])]}{_limit_detail(solver, q[k]) if outside else ''} at psi = {psi[k]:.4f} rad; {LIMIT_HINT}",
             stage="ik",
             sample=int(k),
             t_s=float(reference.t[k]),
+            joint=joint,
         )
     steps = np.abs(np.diff(q, axis=0))
     jumps = np.argwhere(steps > max_step)
@@ -132,6 +150,24 @@ def _kept_branch(hand: str, names, q0: np.ndarray, reference: CartesianReference
             joint=names[j],
         )
     return q
+
+
+#: What a user can do when a branch leaves the joint limits.
+LIMIT_HINT = 'set [arm_angle] mode = "auto" in the task (or a range_rad the arm angle may use; dualarm task check and dualarm ik srs --sweep show the feasible psi)'
+
+
+def _worst_joint(solver: McInverse, q: np.ndarray) -> int:
+    """The joint of ``q`` (7,) [rad] farthest outside its limits."""
+    return int(np.argmax(np.maximum(q - solver.upper, solver.lower - q)))
+
+
+def _limit_detail(solver: McInverse, q: np.ndarray) -> str:
+    """``: left_elbow at 2.1000 rad is 0.1000 rad (5.7 deg) above its upper limit 2.0000 rad`` for a candidate ``q`` (7,) [rad] outside the limits."""
+    j = _worst_joint(solver, q)
+    above = q[j] > solver.upper[j]
+    excess = q[j] - solver.upper[j] if above else solver.lower[j] - q[j]
+    side, limit = ("above its upper", solver.upper[j]) if above else ("below its lower", solver.lower[j])
+    return f": {solver.chain.joint_names[j]} at {q[j]:.4f} rad is {excess:.4f} rad ({np.degrees(excess):.1f} deg) {side} limit {limit:.4f} rad"
 
 
 def _margins(solver: McInverse, candidates: np.ndarray, reasons: np.ndarray) -> np.ndarray:
@@ -242,3 +278,66 @@ def _cheapest_profile(node: np.ndarray, steps: np.ndarray, start: np.ndarray, cl
     for k in range(n - 1, 0, -1):
         cells[k - 1] = (cells[k] - shifts[back[k, cells[k]]]) % G
     return float(total[i]), cells
+
+
+@dataclass(frozen=True)
+class ArmAngleProfile:
+    """The arm-angle profile one arm of an MC-Inverse joint path follows, read from its joints.
+
+    Attributes:
+        hand: ``left`` or ``right``.
+        mode: the ``[arm_angle]`` mode that chose it.
+        branch: the kept branch, 0-7 (see :data:`~dualarm.ik.mc_inverse.CANDIDATES`; printed from 1).
+        psi_min_rad, psi_max_rad: the smallest and largest arm angle along the path [rad]
+            (unwrapped: a profile across +-pi may end beyond pi); equal for a held angle.
+    """
+
+    hand: str
+    mode: str
+    branch: int
+    psi_min_rad: float
+    psi_max_rad: float
+
+    @property
+    def constant(self) -> bool:
+        """Whether the arm angle is held (it moves less than :data:`CONSTANT_TOLERANCE_RAD`)."""
+        return self.psi_max_rad - self.psi_min_rad <= CONSTANT_TOLERANCE_RAD
+
+    def record(self) -> dict:
+        """JSON-ready: ``mode``, ``branch`` (1-8), ``value_rad`` for a held angle or ``range_rad``."""
+        psi = {"value_rad": self.psi_min_rad} if self.constant else {"range_rad": [self.psi_min_rad, self.psi_max_rad]}
+        return {"mode": self.mode, "branch": self.branch + 1, **psi}
+
+    def metrics(self) -> dict[str, float]:
+        """``ik.arm_angle_branch.<hand>`` (1-8), ``ik.arm_angle_min_rad.<hand>`` and ``ik.arm_angle_max_rad.<hand>``."""
+        return {f"ik.arm_angle_branch.{self.hand}": float(self.branch + 1), f"ik.arm_angle_min_rad.{self.hand}": self.psi_min_rad, f"ik.arm_angle_max_rad.{self.hand}": self.psi_max_rad}
+
+    def line(self) -> str:
+        """One line for the command line: ``MC-Inverse, left arm: psi auto in [-1.2000, -0.8000] rad, branch 3 (elbow 0, shoulder 1, wrist 0)``."""
+        psi = f"held at {self.psi_min_rad:.4f} rad" if self.constant else f"in [{self.psi_min_rad:.4f}, {self.psi_max_rad:.4f}] rad"
+        return f"MC-Inverse, {self.hand} arm: psi {self.mode} {psi}, branch {branch_label(self.branch)}"
+
+
+#: Largest spread of the arm angle along a path [rad] that counts as held.
+CONSTANT_TOLERANCE_RAD = 1e-9
+
+
+def arm_angle_profiles(path: JointPath, robot: Robot, settings: ArmAngle) -> tuple[ArmAngleProfile, ...]:
+    """The arm-angle profile of each arm of an MC-Inverse joint path: psi of eq (1) from its joints, and the branch, the candidate of MC-Inverse at the first sample's pose and psi equal to its joints.
+
+    Raises:
+        NotSRSError: an arm is not S-R-S.
+    """
+    from dualarm.model.kinematics import ChainKinematics
+
+    vertical = tuple(np.asarray(settings.vertical) / np.linalg.norm(settings.vertical))
+    profiles = []
+    for hand in path.hands:
+        chain = robot.hand_chain(hand)
+        q = path.q[:, [path.joint_names.index(n) for n in chain.joint_names]]
+        solver = McInverse.of(chain, vertical)
+        psi = np.unwrap(solver.kinematics.arm_angles(q))
+        candidates = solver.solve(ChainKinematics.of(chain).pose(q[0]), float(psi[0])).q
+        branch = int(np.argmin(np.abs(candidates - q[0]).max(axis=1)))
+        profiles.append(ArmAngleProfile(hand=hand, mode=settings.mode, branch=branch, psi_min_rad=float(psi.min()), psi_max_rad=float(psi.max())))
+    return tuple(profiles)

@@ -17,6 +17,7 @@ import casadi as cs
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from dualarm.errors import RobotModelError, excerpt
 from dualarm.execute.world import load_pybullet_robot
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import Chain, Robot
@@ -67,6 +68,26 @@ class ChainCheck:
         )
 
 
+def require_limits(robot: Robot) -> None:
+    """Refuse a robot described by a robot.toml whose chain joints lack a finite velocity, acceleration or jerk limit (retiming needs all three; a missing one is ``inf`` in :class:`~dualarm.model.robot.JointLimits`).
+
+    A bare URDF (``--urdf``, no robot.toml) is not refused: it has no place for them.
+
+    Raises:
+        RobotModelError: one line naming robot.toml, the joint, its chain and the table to add it to.
+    """
+    if robot.directory is None:
+        return
+    for chain in robot.chains.values():
+        for joint in chain.joint_names:
+            for kind, unit in (("velocity", "rad/s"), ("acceleration", "rad/s^2"), ("jerk", "rad/s^3")):
+                if not np.isfinite(getattr(robot.limits[joint], kind)):
+                    where = "the URDF's <limit velocity> or " if kind == "velocity" else ""
+                    raise RobotModelError(
+                        f"{excerpt(robot.directory / 'robot.toml')}: joint '{excerpt(joint, 40)}' of chain '{excerpt(chain.name, 40)}' has no {kind} limit: add it to {where}[limits.{kind}] [{unit}]"
+                    )
+
+
 def random_configurations(robot: Robot, chain: Chain, n: int, seed: int) -> np.ndarray:
     """``n`` configurations of ``chain`` drawn uniformly within its limits (+-pi where unlimited); (n, dof)."""
     lower, upper = robot.lower_upper(chain.joint_names)
@@ -83,11 +104,22 @@ def pose_errors(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return position, rotation
 
 
+def _adam_xml(xml: str) -> str:
+    """``xml`` with an explicit identity ``<origin>`` in every ``<inertial>`` that has none (URDF makes it optional; adam-robotics needs it)."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(xml)
+    for inertial in root.iter("inertial"):
+        if inertial.find("origin") is None:
+            ET.SubElement(inertial, "origin", {"xyz": "0 0 0", "rpy": "0 0 0"})
+    return ET.tostring(root, encoding="unicode")
+
+
 def adam_poses(robot: Robot, chain: Chain, Q: np.ndarray) -> np.ndarray:
     """Tip poses in the chain base frame computed by adam-robotics; (N, 4, 4)."""
     from adam.casadi import KinDynComputations
 
-    kd = KinDynComputations(robot.urdf.kinematic_xml, list(chain.joint_names))
+    kd = KinDynComputations(_adam_xml(robot.urdf.kinematic_xml), list(chain.joint_names))
     base = kd.forward_kinematics_fun(chain.base)
     tip = kd.forward_kinematics_fun(chain.tip)
     H = cs.DM.eye(4)

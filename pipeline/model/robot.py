@@ -16,10 +16,11 @@ from dualarm.errors import InvalidArgumentError, RobotModelError, excerpt
 from dualarm.files import listing, read_text
 from dualarm.model.urdf import JointSpec, UrdfModel, load_urdf
 
-#: The range robot.toml's ``[limits]`` accept, per kind: (lowest, highest) [rad/s^2] and [rad/s^3].
+#: The range robot.toml's ``[limits]`` accept, per kind: (lowest, highest) [rad/s], [rad/s^2] and [rad/s^3].
 #: The lowest keeps a retimed motion's duration (path length / limit) bounded, the highest is
-#: beyond any actuator; both are far from the humanoid's (acceleration 4-12, jerk 40-150).
-LIMIT_RANGES = {"acceleration": (1e-2, 1e4), "jerk": (1e-1, 1e6)}
+#: beyond any actuator; both are far from the humanoid's (velocity 2-3, acceleration 4-12, jerk 40-150).
+#: ``velocity`` replaces the URDF's ``<limit velocity>``; acceleration and jerk exist only here.
+LIMIT_RANGES = {"velocity": (1e-3, 1e3), "acceleration": (1e-2, 1e4), "jerk": (1e-1, 1e6)}
 
 
 @dataclass(frozen=True)
@@ -29,7 +30,7 @@ class JointLimits:
     Attributes:
         lower: lowest position [rad].
         upper: highest position [rad].
-        velocity: largest speed [rad/s].
+        velocity: largest speed [rad/s] (robot.toml's ``[limits.velocity]``, else the URDF's).
         acceleration: largest acceleration [rad/s^2] (inf where robot.toml gives none).
         jerk: largest jerk [rad/s^3] (inf where robot.toml gives none).
         effort: largest torque [N m].
@@ -198,12 +199,14 @@ def _number(value: Any, name: str) -> float:
     return number
 
 
-def _limits_from_urdf(urdf: UrdfModel, acceleration: Mapping[str, float], jerk: Mapping[str, float]) -> dict[str, JointLimits]:
+def _limits_from_urdf(urdf: UrdfModel, acceleration: Mapping[str, float], jerk: Mapping[str, float], velocity: Mapping[str, float] | None = None) -> dict[str, JointLimits]:
+    """Every movable joint's limits: position and effort from the URDF, velocity from ``velocity`` or else the URDF, acceleration and jerk from the maps (inf where absent)."""
+    velocity = velocity or {}
     return {
         j.name: JointLimits(
             lower=j.lower,
             upper=j.upper,
-            velocity=j.velocity,
+            velocity=float(velocity.get(j.name, j.velocity)),
             acceleration=float(acceleration.get(j.name, np.inf)),
             jerk=float(jerk.get(j.name, np.inf)),
             effort=j.effort,
@@ -300,9 +303,10 @@ def load_robot(directory: str | Path) -> Robot:
     """Load ``directory/robot.toml`` and the URDF it names; a bare name that is no directory here (``humanoid``) is a shipped robot (see :mod:`dualarm.data`).
 
     robot.toml's keys: ``name``, ``urdf`` (a file name relative to the directory), ``description``,
-    ``[chains.<name>]`` (``base``, ``tip`` links, optional ``hand``), ``[limits.acceleration]`` and
-    ``[limits.jerk]`` (joint -> value, each within :data:`LIMIT_RANGES`), ``[home.<name>]`` (joint ->
-    value within the joint's position limits [rad]).
+    ``[chains.<name>]`` (``base``, ``tip`` links, optional ``hand``), ``[limits.velocity]`` (replacing
+    the URDF's), ``[limits.acceleration]`` and ``[limits.jerk]`` (joint -> value, each within
+    :data:`LIMIT_RANGES`), ``[home.<name>]`` (joint -> value within the joint's position limits [rad]).
+    robots/README.md documents every key.
 
     Raises:
         RobotModelError: one line naming ``robot.toml:key`` for anything missing or malformed, or the
@@ -340,7 +344,7 @@ def load_robot(directory: str | Path) -> Robot:
         for joint, value in values.items():
             if not low <= value <= high:
                 raise RobotModelError(f"{where}:limits.{kind}.{joint}: {value:g} is outside the allowed range [{low:g}, {high:g}]")
-    limits = _limits_from_urdf(urdf, given["acceleration"], given["jerk"])
+    limits = _limits_from_urdf(urdf, given["acceleration"], given["jerk"], given["velocity"])
 
     homes: dict[str, Mapping[str, float]] = {}
     for home, values in _table(data.get("home", {}), f"{where}:home").items():

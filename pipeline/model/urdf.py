@@ -124,8 +124,8 @@ def _parse(path: Path, text: str) -> tuple[URDF, str]:
         if root.tag != "robot":
             raise RobotModelError(f"{excerpt(path)}: root element is <{excerpt(root.tag, 40)}>, a URDF needs <robot>")
         for link in root.iter("link"):
-            for collision in link.findall("collision"):
-                link.remove(collision)
+            for element in link.findall("collision") + link.findall("contact"):  # <contact>: PyBullet's, which urdf_parser_py reports on stderr
+                link.remove(element)
         kinematic_xml = ET.tostring(root, encoding="unicode")
     except ET.ParseError as exc:
         raise RobotModelError(f"{excerpt(path)}: not valid XML ({exc})") from None

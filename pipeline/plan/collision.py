@@ -121,10 +121,13 @@ class CollisionChecker:
         self.resolution_rad = float(resolution_rad)
         self.checks = 0
         self.check_time_s = 0.0
-        with tempfile.TemporaryDirectory() as tmp:
-            urdf = Path(tmp) / robot.urdf.path.name
-            urdf.write_text(inflated_urdf(robot.urdf.path.read_text(), self.margin_m))
-            self._sim = load_pybullet_robot(urdf, self_collision=True)
+        if self.margin_m == 0:  # the robot's own file, so that its relative mesh paths resolve
+            self._sim = load_pybullet_robot(robot.urdf.path, self_collision=True)
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                urdf = Path(tmp) / robot.urdf.path.name
+                urdf.write_text(inflated_urdf(robot.urdf.path.read_text(), self.margin_m))
+                self._sim = load_pybullet_robot(urdf, self_collision=True)
         sim = self._sim
         missing = [n for n in (*self.joint_names, *fixed) if n not in sim.joint_index]
         if missing:

@@ -9,6 +9,11 @@ and first violation (a baseline failing a repetition is the paper's point, not a
 the largest hand orientation error; a method that solved the hands' positions only (TV-GDD and pinv
 in ``position`` task space, ``ik.orientation_solved`` 0) is marked "position only", since its
 repeatability is not bought at the same price as a full-pose method's.
+
+On a robot whose driven arms are not S-R-S there is no arm angle: its column is left out of the
+table and the arm-angle figure is not drawn, and without a list of methods only those that run on
+the robot are compared (:func:`dualarm.methods.suited_methods`); a method asked for that needs
+S-R-S is refused before anything runs.
 """
 
 from __future__ import annotations
@@ -72,27 +77,39 @@ class Consistency:
 CONSISTENCY_STAGES = ("path", "ik")
 
 
+#: The columns that hold an arm angle, left out when no driven arm is S-R-S.
+ARM_ANGLE_COLUMNS = ("rep_arm_angle_deviation_max_rad",)
+
+
 def run_consistency(
     task_file: str | Path,
-    methods: Sequence[str],
+    methods: Sequence[str] | None,
     out_dir: str | Path,
     repetitions: int | None = None,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
 ) -> Consistency:
-    """Run ``methods`` on ``task_file`` (``repetitions`` overriding the file's) and compare them.
+    """Run ``methods`` (None: :data:`DEFAULT_METHODS` that run on the task's robot) on ``task_file`` (``repetitions`` overriding the file's) and compare them.
 
     Raises:
-        DualarmError: an unknown method or a malformed task, before anything runs.
+        DualarmError: an unknown method, a method that needs S-R-S arms on a robot whose arm is not
+            one (:class:`~dualarm.errors.NotSRSError`), or a malformed task, before anything runs.
     """
-    from dualarm.methods import IK_METHODS
+    from dualarm.methods import IK_METHODS, METHODS, refuse_unsuited, suited_methods
     from dualarm.run import record_run
     from dualarm.tasks import load_task
 
-    unknown = [m for m in methods if m not in IK_METHODS]
-    if unknown or not methods:
+    unknown = [m for m in methods or () if m not in IK_METHODS]
+    if unknown or (methods is not None and not methods):
         raise DualarmError(f"unknown IK method '{(unknown or [''])[0]}' (methods: {', '.join(IK_METHODS)})")
     task = load_task(task_file, repetitions)
+    hands = task.spec.hands
+    if methods is None:
+        suited = suited_methods(task.robot, hands)
+        methods = [m for m in DEFAULT_METHODS if m in suited]
+    for m in methods:
+        refuse_unsuited(METHODS[m], task.robot, hands)
+    columns = COLUMNS if any_srs(task) else tuple(c for c in COLUMNS if c not in ARM_ANGLE_COLUMNS)
     out_dir = Path(out_dir)
     _claim = claim_output_dir(out_dir, "consistency")  # refuses a directory holding files dualarm did not write; locked until this returns
     runs_dir = out_dir / "runs"
@@ -112,11 +129,18 @@ def run_consistency(
             continue
         rows.append(_row(method, run))
         samples[method] = run["/ik/sample"]
-    table = pd.DataFrame(rows, columns=["method", "status", "error", "violation", "run", *COLUMNS])
+    table = pd.DataFrame(rows, columns=["method", "status", "error", "violation", "run", *columns])
     written = _figures(task, samples, out_dir)
-    csv = write_whole(out_dir / "consistency.csv", table[["method", *COLUMNS, "status", "violation", "error", "run"]].to_csv(index=False))
-    markdown = write_whole(out_dir / "consistency.md", _markdown(task, table, written, repetitions))
+    csv = write_whole(out_dir / "consistency.csv", table[["method", *columns, "status", "violation", "error", "run"]].to_csv(index=False))
+    markdown = write_whole(out_dir / "consistency.md", _markdown(task, table, written, repetitions, columns))
     return Consistency(table=table, csv=csv, markdown=markdown, figures=written)
+
+
+def any_srs(task) -> bool:
+    """Whether a driven arm of ``task`` is S-R-S (and so has an arm angle)."""
+    from dualarm.methods import not_srs
+
+    return len(not_srs(task.robot, task.spec.hands)) < len(task.spec.hands)
 
 
 def _row(method: str, run: RunData) -> dict[str, object]:
@@ -136,12 +160,14 @@ def _figures(task, samples: dict[str, pd.DataFrame], out_dir: Path) -> tuple[Pat
         joints = list(task.robot.hand_chain(hand).joint_names)
         title = f"{task.name}: {hand} arm joints per repetition" + (f" (cf. MC-Inverse {joints_figure})" if joints_figure != "-" else "")
         written.append(figures.joints_per_repetition(samples, joints, title, out_dir / f"joints_{hand}.png"))
-    title = f"{task.name}: arm angle per repetition" + (f" (cf. MC-Inverse {angle_figure})" if angle_figure != "-" else "")
-    written.append(figures.arm_angle_per_repetition(samples, list(task.spec.hands), title, out_dir / "arm_angle.png"))
+    hands = [h for h in task.spec.hands if any(f"arm_angle_rad.{h}" in sample.columns for sample in samples.values())]  # S-R-S arms only
+    if hands:
+        title = f"{task.name}: arm angle per repetition" + (f" (cf. MC-Inverse {angle_figure})" if angle_figure != "-" else "")
+        written.append(figures.arm_angle_per_repetition(samples, hands, title, out_dir / "arm_angle.png"))
     return tuple(written)
 
 
-def _markdown(task, table: pd.DataFrame, written: tuple[Path, ...], repetitions: int | None) -> str:
+def _markdown(task, table: pd.DataFrame, written: tuple[Path, ...], repetitions: int | None, columns: tuple[str, ...] = COLUMNS) -> str:
     reps = repetitions or task.spec.repetitions
     lines = [
         f"# Consistency: {task.name}, {reps} repetitions",
@@ -150,13 +176,15 @@ def _markdown(task, table: pd.DataFrame, written: tuple[Path, ...], repetitions:
         f"orientation_error_max_rad is the largest angle between an asked and a reached hand orientation; a method marked ({POSITION_ONLY}) solved the hands' positions only, its orientation followed.",
         "",
     ]
-    header = ["method", "verdict", *COLUMNS, "first violation"]
+    if columns != COLUMNS:
+        lines += ["No driven arm is S-R-S, so there is no arm angle: its column and figure are left out.", ""]
+    header = ["method", "verdict", *columns, "first violation"]
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for _, row in table.iterrows():
         if row["status"] == "failed":
-            lines.append(f"| {row['method']} | failed: {row['error']} |" + " |" * len(COLUMNS))
+            lines.append(f"| {row['method']} | failed: {row['error']} |" + " |" * len(columns))
             continue
-        lines.append("| " + " | ".join([method_label(row), str(row["status"]), *(_cell(row[c]) for c in COLUMNS), str(row["violation"])]) + " |")
+        lines.append("| " + " | ".join([method_label(row), str(row["status"]), *(_cell(row[c]) for c in columns), str(row["violation"])]) + " |")
     lines += ["", "Runs:", ""] + [f"- {row['method']}: `{row['run']}`" for _, row in table.iterrows() if row["run"]]
     if written:
         lines += ["", "Figures:", ""] + [f"![{p.stem}]({p.name})" for p in written]

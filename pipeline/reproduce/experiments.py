@@ -181,7 +181,7 @@ class Part:
 PARTS = (
     Part("ball-game-tvgdd", "TV-GDD", "ball game, TV-GDD, every stage", "dualarm run tasks/ball_game.toml --ik tvgdd", ball_game_tvgdd, 13),
     Part("ball-game-pinv", "TV-GDD", "ball game, pseudoinverse baseline", "dualarm run tasks/ball_game.toml --ik pinv --stages path,ik", ball_game_pinv, 4),
-    Part("table-i", "MC-Inverse", "Table I analogue", "dualarm ik srs robots/humanoid --arm left --pose {pose} --arm-angle {psi}", table_i, 1),
+    Part("table-i", "MC-Inverse", "Table I analogue", "dualarm ik srs robots/humanoid --arm left --pose {pose} --arm-angle {psi} --frame chain", table_i, 1),
     Part("triangle", "MC-Inverse", "triangle drawn 5 times, every IK method", "dualarm consistency tasks/triangle.toml", triangle_consistency, 28),
     Part("circle", "MC-Inverse", "circle drawn 5 times, every IK method", "dualarm consistency tasks/circle.toml", circle_consistency, 18),
     Part(

@@ -19,13 +19,13 @@ import numpy as np
 from pydantic import ValidationError
 from pydantic_core import ErrorDetails
 
-from dualarm.errors import InvalidArgumentError, RobotModelError, TaskFileError, UnreachablePoseError, excerpt
+from dualarm.errors import InvalidArgumentError, NotSRSError, RobotModelError, TaskFileError, UnreachablePoseError, excerpt
 from dualarm.files import listing, read_text
 from dualarm.model.kinematics import ChainKinematics, hand_pose, origin_matrix
 from dualarm.model.poses import pose_matrix
 from dualarm.model.robot import Chain, Robot, load_robot
 from dualarm.model.srs import SrsGeometry, srs_geometry
-from dualarm.tasks.schema import MAX_REPETITIONS, TaskSpec
+from dualarm.tasks.schema import FRAME_ROLES, MAX_REPETITIONS, REFERENCE_ARM_M, Pose, TaskSpec
 
 #: Margin kept from the fully stretched or fully folded arm when checking reach [m].
 REACH_MARGIN_M = 1e-3
@@ -268,7 +268,7 @@ def _check_margin(task: Task) -> None:
 
 @dataclass(frozen=True)
 class ArmReach:
-    """The workspace test of one hand: the wrist centre W of a hand pose must lie within [|L2 - L3|, L2 + L3] of the shoulder S (less :data:`REACH_MARGIN_M`).
+    """The workspace test of one hand of an S-R-S arm, in closed form: the wrist centre W of a hand pose must lie within [|L2 - L3|, L2 + L3] of the shoulder S (less :data:`REACH_MARGIN_M`).
 
     With the waist free, S may move on a sphere about the waist centre, and the test becomes the
     necessary condition | |W - centre| - |S - centre| | <= L2 + L3.
@@ -307,11 +307,130 @@ class ArmReach:
         return f"the {self.hand} hand cannot reach [{p}] with this orientation: its wrist centre is {d:.3f} m from {origin}, the arm spans {self.geometry.min_reach:.3f}-{self.geometry.reach:.3f} m"
 
 
-def arm_reach(task: Task, hand: str) -> ArmReach:
-    """The reach test of ``hand`` for ``task`` (waist at its initial configuration, or free)."""
+@dataclass(frozen=True)
+class NumericReach:
+    """The workspace test of one hand of any arm: a pose is within reach when a numeric IK solve inside the joint limits reaches it.
+
+    Why numeric IK, not a sampled workspace: a hand pose has six dimensions, which no affordable
+    sampling of a 7-DOF arm's configurations covers densely enough to decide one given pose (a
+    sampled cloud decides positions only, and blurs the boundary by its resolution); a solve
+    decides the very pose asked, joint limits included, and a solution found is a proof of reach.
+    The solver is SciPy's bounded least squares (``dogbox``, the limits as bounds) on the hand's
+    position error and rotation vector, with the chain's geometric Jacobian; it starts from the
+    previous pose's solution (along a path), the task's initial configuration, then
+    :data:`REACH_SEEDS` configurations drawn uniformly within the limits (fixed seed
+    :data:`REACH_SEED`), and stops at the first that reaches the pose within
+    :data:`REACH_POSITION_TOLERANCE_M` and :data:`REACH_ORIENTATION_TOLERANCE_RAD`. A pose that
+    no start reaches is refused: deterministic, but a pose reachable only from a start none of
+    these finds would be refused too (not seen on the shipped robots).
+
+    Attributes:
+        hand: the hand.
+        chain: the chain from the robot's root link to the hand (a waist included).
+        free: indices into ``chain.joint_names`` of the joints the solve moves (the arm's, and the
+            waist's when it is free).
+        q_initial: the chain's joints at the task's initial configuration [rad], (n,).
+        lower: lowest positions of the free joints [rad], (k,).
+        upper: highest positions of the free joints [rad], (k,).
+        seeds: start configurations of the free joints [rad], (S, k), the initial one first.
+    """
+
+    hand: str
+    chain: Chain
+    free: tuple[int, ...]
+    q_initial: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    seeds: np.ndarray
+
+    def _solve(self, T: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """One bounded solve for pose T (4, 4) from ``start`` (k,): (free joints [rad], position error [m], orientation error [rad])."""
+        from scipy.optimize import least_squares
+        from scipy.spatial.transform import Rotation
+
+        kinematics = ChainKinematics.of(self.chain)
+        free = list(self.free)
+        q = self.q_initial.copy()
+
+        def pose(x: np.ndarray) -> np.ndarray:
+            q[free] = x
+            return kinematics.pose(q)
+
+        def residual(x: np.ndarray) -> np.ndarray:
+            P = pose(x)
+            return np.concatenate([P[:3, 3] - T[:3, 3], Rotation.from_matrix(P[:3, :3] @ T[:3, :3].T).as_rotvec()])
+
+        def jacobian(x: np.ndarray) -> np.ndarray:
+            q[free] = x
+            return kinematics.jacobians(q)[0][:, free]
+
+        x0 = np.clip(start, self.lower, self.upper)
+        result = least_squares(residual, x0, jac=jacobian, bounds=(self.lower, self.upper), method="dogbox", max_nfev=50)
+        r = residual(result.x)
+        return result.x, float(np.linalg.norm(r[:3])), float(np.linalg.norm(r[3:]))
+
+    def solve(self, T: np.ndarray, warm: np.ndarray | None = None) -> tuple[np.ndarray | None, float, float]:
+        """The free joints [rad] reaching pose T (4, 4) within the limits, from ``warm`` then every seed, or None; with the smallest position [m] and orientation [rad] errors met."""
+        best = (np.inf, np.inf)
+        for start in ([warm] if warm is not None else []) + list(self.seeds):
+            x, position, orientation = self._solve(T, start)
+            if position <= REACH_POSITION_TOLERANCE_M and orientation <= REACH_ORIENTATION_TOLERANCE_RAD:
+                return x, position, orientation
+            best = min(best, (position, orientation))
+        return None, *best
+
+    def within(self, T: np.ndarray) -> np.ndarray:
+        """Which of the hand poses T (N, 4, 4) pass; (N,) bool. Poses equal to 1e-9 (a repeated path's) are solved once, in order, each from the previous one's solution."""
+        T = np.asarray(T, dtype=float)
+        _, first, inverse = np.unique(np.round(T.reshape(len(T), 16), 9), axis=0, return_index=True, return_inverse=True)
+        ok = np.zeros(len(first), bool)
+        warm = None
+        for u in np.argsort(first):  # in path order, so each solve starts from its neighbour's
+            x, _, _ = self.solve(T[first[u]], warm)
+            ok[u] = x is not None
+            warm = x if x is not None else warm
+        return ok[np.asarray(inverse).ravel()]
+
+    def explain(self, T: np.ndarray) -> str:
+        """Why one pose T (4, 4) fails, for an error message."""
+        _, position, orientation = self.solve(T)
+        p = ", ".join(f"{v:.3f}" for v in T[:3, 3])
+        return (
+            f"the {self.hand} hand cannot reach [{p}] with this orientation within the joint limits: numeric IK from {len(self.seeds)} starts "
+            f"came no closer than {position:.3g} m and {orientation:.3g} rad (this arm is not S-R-S, so reach is decided by IK)"
+        )
+
+
+#: Numeric reach (:class:`NumericReach`): random starts besides the initial configuration, their seed, and the errors that count as reached [m], [rad].
+REACH_SEEDS = 8
+REACH_SEED = 0
+REACH_POSITION_TOLERANCE_M = 1e-4
+REACH_ORIENTATION_TOLERANCE_RAD = 1e-3
+
+
+def numeric_reach(task: Task, hand: str) -> NumericReach:
+    """The numeric reach test of ``hand`` for ``task``: the arm's joints free (and the waist's when the task frees it), the rest at the initial configuration."""
+    robot = task.robot
+    chain = task.hand_chain_from_root(hand)
+    arm = set(robot.hand_chain(hand).joint_names)
+    names = chain.joint_names
+    free = tuple(i for i, n in enumerate(names) if n in arm or task.spec.waist == "free")
+    lower, upper = robot.lower_upper(tuple(names[i] for i in free))
+    initial = np.array([task.initial_q[n] for n in names])
+    rng = np.random.default_rng(REACH_SEED)
+    low, high = np.clip(lower, -np.pi, np.pi), np.clip(upper, -np.pi, np.pi)  # continuous joints: one turn
+    seeds = np.vstack([initial[list(free)], rng.uniform(low, high, (REACH_SEEDS, len(free)))])
+    return NumericReach(hand=hand, chain=chain, free=free, q_initial=initial, lower=lower, upper=upper, seeds=seeds)
+
+
+def arm_reach(task: Task, hand: str) -> "ArmReach | NumericReach":
+    """The reach test of ``hand`` for ``task`` (waist at its initial configuration, or free): :class:`ArmReach` in closed form for an S-R-S arm, else :class:`NumericReach`."""
     robot = task.robot
     arm = robot.hand_chain(hand)
-    geometry = srs_geometry(arm)
+    try:
+        geometry = srs_geometry(arm)
+    except NotSRSError:
+        return numeric_reach(task, hand)
     to_arm = robot.chain_between(robot.urdf.root, arm.base)
     T_arm = ChainKinematics.of(to_arm).pose(np.array([task.initial_q[n] for n in to_arm.joint_names]))
     centre = None
@@ -339,6 +458,99 @@ def _check_reach(task: Task) -> None:
                 raise UnreachablePoseError(f"{task.where(f'waypoints.{name}')}: {reach.explain(T)}")
 
 
+def frame_pose(robot: Robot, name: str, q: Mapping[str, float]) -> np.ndarray:
+    """The pose (4, 4) [m] of frame ``name`` in the robot base frame at configuration ``q`` [rad]: a role of :data:`~dualarm.tasks.schema.FRAME_ROLES` (checked first) or a URDF link.
+
+    ``left.shoulder`` / ``right.shoulder``: that hand's S-R-S shoulder centre S; ``shoulders``: the
+    midpoint of the two; both with the robot base frame's axes (so a role only moves the origin).
+    A link: its frame, the joints between the root and it at ``q``.
+
+    Raises:
+        RobotModelError: an arm that is not S-R-S for a shoulder role; KeyError: an unknown name.
+    """
+    if name in FRAME_ROLES:
+        hands = ("left", "right") if name == "shoulders" else (name.split(".")[0],)
+        T = np.eye(4)
+        T[:3, 3] = np.mean([shoulder_position(robot, hand, q) for hand in hands], axis=0)
+        return T
+    if name not in robot.urdf.links:
+        raise KeyError(name)
+    chain = robot.chain_between(robot.urdf.root, name)
+    return ChainKinematics.of(chain).pose(np.array([q[n] for n in chain.joint_names]))
+
+
+def shoulder_position(robot: Robot, hand: str, q: Mapping[str, float]) -> np.ndarray:
+    """The shoulder centre S of ``hand``'s S-R-S arm in the robot base frame at configuration ``q`` [m], (3,)."""
+    arm = robot.hand_chain(hand)
+    to_arm = robot.chain_between(robot.urdf.root, arm.base)
+    T = ChainKinematics.of(to_arm).pose(np.array([q[n] for n in to_arm.joint_names]))
+    return T[:3, :3] @ srs_geometry(arm).shoulder + T[:3, 3]
+
+
+def arm_scale(robot: Robot, hands: Sequence[str]) -> float:
+    """``scale = "arm"``'s factor: the mean upper arm + forearm (S-R-S L2 + L3) of ``hands``' arms over :data:`~dualarm.tasks.schema.REFERENCE_ARM_M` (the humanoid's)."""
+    return float(np.mean([srs_geometry(robot.hand_chain(hand)).reach for hand in hands])) / REFERENCE_ARM_M
+
+
+def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str) -> TaskSpec:
+    """``spec`` with its waypoints, ``by`` displacements and arcs taken from its ``frame`` (and ``scale``) into the robot base frame, at configuration ``q``; ``frame`` and ``scale`` then None.
+
+    A pose (p, R) in the frame F becomes F (s p, R): the position scaled by s, then both moved by F.
+    A role frame has the base frame's axes, so a waypoint's rpy is kept as written (bit for bit).
+    """
+    if spec.frame is None and spec.scale is None:
+        return spec
+    from scipy.spatial.transform import Rotation
+
+    hands = tuple(h for h in spec.hands if h in robot.hands) or tuple(robot.hands)  # no hand driven: every arm
+    try:
+        F = np.eye(4) if spec.frame is None else frame_pose(robot, spec.frame, q)
+        s = arm_scale(robot, hands) if spec.scale == "arm" else 1.0
+    except KeyError:
+        ends = dict.fromkeys(link for chain in robot.chains.values() for link in (chain.base, chain.tip))
+        raise TaskFileError(
+            f"{source}:frame: robot '{excerpt(robot.name, 40)}' has no frame '{excerpt(spec.frame, 40)}' "
+            f"(roles: {listing(FRAME_ROLES)}; or a link: the chains' {listing(ends, 6)}, or another of its {len(robot.urdf.links)} links)"
+        ) from None
+    except (NotSRSError, RobotModelError) as exc:
+        key = "scale" if spec.frame is None or spec.frame not in FRAME_ROLES else "frame"
+        raise TaskFileError(f"{source}:{key}: needs the S-R-S shoulder of every driven arm: {exc}") from None
+    R, o = F[:3, :3], F[:3, 3]
+    rotated = not np.array_equal(R, np.eye(3))
+
+    def point(p: tuple[float, float, float]) -> tuple[float, float, float]:
+        return tuple(float(v) for v in R @ (s * np.asarray(p)) + o)  # type: ignore[return-value]
+
+    def vector(v: tuple[float, float, float], length: float) -> tuple[float, float, float]:
+        return tuple(float(x) for x in R @ (length * np.asarray(v)))  # type: ignore[return-value]
+
+    waypoints = {}
+    for name, wp in spec.waypoints.items():
+        rpy = tuple(float(a) for a in Rotation.from_matrix(R @ pose_matrix(wp.position, wp.rpy)[:3, :3]).as_euler("xyz")) if rotated else wp.rpy
+        try:
+            waypoints[name] = Pose(position=point(wp.position), rpy=rpy)  # type: ignore[arg-type]
+        except ValidationError:
+            raise TaskFileError(f"{source}:waypoints.{excerpt(name, 40)}: in the robot base frame its position {point(wp.position)} m is outside [-100, 100] m") from None
+    moves = []
+    for move in spec.moves:
+        update = {}
+        for hand in ("left", "right"):
+            m = move.for_hand(hand)
+            if m is not None and m.by is not None:
+                update[hand] = m.model_copy(update={"by": vector(m.by, s)})
+            elif m is not None and m.arc_center is not None and m.arc_axis is not None:
+                update[hand] = m.model_copy(update={"arc_center": point(m.arc_center), "arc_axis": vector(m.arc_axis, 1.0)})
+        moves.append(move.model_copy(update=update))
+    return spec.model_copy(update={"waypoints": waypoints, "moves": tuple(moves), "frame": None, "scale": None})
+
+
+def _transferred(spec: TaskSpec, robot: Robot) -> TaskSpec:
+    """``spec`` with ``transfer.initial`` and ``transfer.gesture`` in place of ``initial`` and ``gesture`` when ``robot`` is not the one ``transfer.written_for`` names (by robot.toml's ``name``)."""
+    if spec.transfer is None or robot.name == spec.transfer.written_for:
+        return spec
+    return spec.model_copy(update={"initial": spec.transfer.initial, "gesture": spec.transfer.gesture})
+
+
 def _check_environment(task: Task) -> None:
     """Refuse a fixed object that overlaps a link of the robot's base (a link no joint moves), by PyBullet's closest points (imported only for tasks with objects)."""
     if not task.spec.environment:
@@ -363,8 +575,8 @@ def _check_environment(task: Task) -> None:
                     )
 
 
-def load_task(path: str | Path, repetitions: int | None = None) -> Task:
-    """Read, validate and resolve a task file; ``repetitions`` overrides the file's.
+def load_task(path: str | Path, repetitions: int | None = None, robot: str | Path | None = None) -> Task:
+    """Read, validate and resolve a task file; ``repetitions`` overrides the file's, ``robot`` (a robot directory or shipped robot's name) the robot it names.
 
     A ``path`` that does not exist but is a bare name (``triangle``) is a shipped task, and the
     file's ``robot`` a directory relative to it or a shipped robot's name (see :mod:`dualarm.data`).
@@ -380,7 +592,10 @@ def load_task(path: str | Path, repetitions: int | None = None) -> Task:
 
     file = find_task(path)
     text, data = _read(file)
-    return _resolve(_validate(str(file), data), file, text, file.parent, None, repetitions)
+    spec = _validate(str(file), data)
+    if robot is not None:
+        spec = spec.model_copy(update={"robot": str(robot)})
+    return _resolve(spec, file, text, file.parent if robot is None else Path.cwd(), None, repetitions)
 
 
 def task_from_dict(data: Mapping[str, Any] | None = None, /, *, robot: Robot | str | Path | None = None, base_dir: str | Path = ".", **keys: Any) -> Task:
@@ -433,7 +648,9 @@ def _resolve(spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Ro
         if isinstance(value, dict):
             _check_joint_names(f"{source}:limits.{kind}", value, robot)
     robot = robot.with_limits(velocity=spec.limits.velocity, acceleration=spec.limits.acceleration)
+    spec = _transferred(spec, robot)
     initial = _initial_configuration(source, spec, robot)
+    spec = _in_frame(spec, robot, initial, source)
     task = Task(spec=spec, file=file, text=text, robot=robot, initial_q=MappingProxyType(dict(initial)))
     _check_structure(task)
     _check_reach(task)

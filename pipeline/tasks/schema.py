@@ -1,7 +1,8 @@
 """The schema of a task file, as frozen pydantic models (unknown keys are errors).
 
 Units are in the key names: ``_s`` seconds, ``_m`` metres, ``_rad`` radians. Poses are a position
-[m] and roll-pitch-yaw [rad], extrinsic x-y-z (R = Rz Ry Rx), in the robot base frame.
+[m] and roll-pitch-yaw [rad], extrinsic x-y-z (R = Rz Ry Rx), in the robot base frame, or in the
+task's ``frame`` (a link or a role such as the left shoulder; ``dualarm.tasks.load`` resolves them).
 
 Every number has a range, refused at load with the range in the message (``1e+300 m is outside
 the allowed range [-100, 100] m``). The ranges are physical (a scene within 100 m of the robot,
@@ -57,6 +58,12 @@ C_TUNING_RANGE = (1e-4, 1.0)
 WEIGHT_RANGE = (1e-6, 1e6)
 #: Longest task name (it names the recordings directory) [characters].
 MAX_NAME_CHARS = 64
+#: The arm length ``scale = "arm"`` measures against: the shipped humanoid's upper arm (0.32 m) plus
+#: forearm (0.28 m), S-R-S L2 + L3 [m]. The shipped tasks' numbers are written for it.
+REFERENCE_ARM_M = 0.60
+#: Frames a task's ``frame`` may name besides a URDF link: each hand's shoulder centre S (the S-R-S
+#: point joints 1-3 turn about) and their midpoint, with the robot base frame's axes.
+FRAME_ROLES = ("left.shoulder", "right.shoulder", "shoulders")
 
 
 @dataclass(frozen=True)
@@ -294,7 +301,9 @@ class ArmAngle(_Model):
     """How MC-Inverse picks the arm angle psi of eq (1) along the path (Zou, Min, Xu, section III.B).
 
     Attributes:
-        mode: ``initial``: psi of the initial configuration, held; ``constant``: ``value_rad``;
+        mode: ``auto`` (the default, the mode that finds a profile when one exists):
+            see below; ``initial``: psi of the initial configuration, held (the branch nearest the
+            initial configuration, which may leave the joint limits along the path); ``constant``: ``value_rad``;
             ``schedule``: ``schedule`` interpolated linearly in the time since the repetition
             began; ``auto``: the branch and psi profile of least joint and arm-angle travel that
             stays inside the joint limits (``margin_rad`` from them where it can) and within
@@ -317,7 +326,7 @@ class ArmAngle(_Model):
             MC-Inverse paper keeps it in (-pi, 0) for human-like motion).
     """
 
-    mode: Literal["initial", "constant", "schedule", "auto"] = "initial"
+    mode: Literal["initial", "constant", "schedule", "auto"] = "auto"
     value_rad: dict[Literal["left", "right"], Angle] = {}
     schedule: dict[Literal["left", "right"], tuple[tuple[Time, Angle], ...]] = {}
     vertical: Direction = (0.0, 0.0, 1.0)
@@ -422,6 +431,20 @@ class WorkspaceTargetArea(_Model):
         return self
 
 
+class Transfer(_Model):
+    """What a task uses on a robot other than the one its ``initial`` and ``[gesture]`` are written for (run on another with ``--robot``).
+
+    Attributes:
+        written_for: the ``name`` (in its robot.toml) of the robot ``initial`` and ``[gesture]`` are written for.
+        initial: the initial configuration there: a home pose of that robot's ``robot.toml`` (``"ready"``) or joint -> value [rad].
+        gesture: TV-GDD's bounds there (``[gesture]`` names the first robot's joints); default none.
+    """
+
+    written_for: str
+    initial: str | JointValues
+    gesture: Gesture | None = None
+
+
 class TaskSpec(_Model):
     """A whole task file.
 
@@ -432,6 +455,14 @@ class TaskSpec(_Model):
         repetitions: 1 to :data:`MAX_REPETITIONS`.
         moves: at most :data:`MAX_MOVES`; environment and wta at most :data:`MAX_OBJECTS` each,
             expected_contacts at most :data:`MAX_CONTACT_PAIRS`.
+        frame: the frame waypoints, ``by`` displacements and arcs are stated in: a link of the
+            robot's URDF, or a role of :data:`FRAME_ROLES`, its pose taken at the initial
+            configuration; None: the robot base frame. Objects, the environment and WTAs stay in
+            the robot base frame.
+        scale: ``"arm"``: positions relative to ``frame`` (and displacements) are multiplied by
+            the driven arms' mean L2 + L3 over :data:`REFERENCE_ARM_M`; None: as written [m].
+        transfer: the initial configuration (and TV-GDD bounds) on a robot other than the one
+            ``initial`` and ``[gesture]`` are written for.
     """
 
     name: Annotated[str, Field(pattern=r"^[A-Za-z0-9_\-]+$", max_length=MAX_NAME_CHARS)]
@@ -455,6 +486,9 @@ class TaskSpec(_Model):
     environment: Annotated[tuple[EnvironmentObject, ...], Field(max_length=MAX_OBJECTS)] = ()
     wta: Annotated[tuple[WorkspaceTargetArea, ...], Field(max_length=MAX_OBJECTS)] = ()
     expected_contacts: Annotated[tuple[tuple[str, str], ...], Field(max_length=MAX_CONTACT_PAIRS)] = ()
+    frame: Annotated[str, Field(min_length=1)] | None = None
+    scale: Literal["arm"] | None = None
+    transfer: Transfer | None = None
 
     @property
     def hands(self) -> tuple[str, ...]:

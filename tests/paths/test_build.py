@@ -28,8 +28,37 @@ WRIST_TO_HAND_M = 0.09
 REACH_MARGIN_M = 1e-3
 
 
+#: Edits that put a shipped task written in a frame of the robot back in the humanoid's base frame
+#: (the numbers the files held before; tests/tasks/test_frames.py shows both forms give the same path).
+BASE_FRAME_FORM = {
+    "triangle": (
+        ('frame = "left.shoulder"', ""),
+        ('scale = "arm"', ""),
+        ("position = [0.300, 0.070, -0.397]", "position = [0.300, 0.270, 1.003]"),
+        ("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0, 1.303]"),
+        ("position = [0.300, -0.200, -0.397]", "position = [0.300, 0.0, 1.003]"),
+    ),
+    "circle": (
+        ('frame = "left.shoulder"', ""),
+        ('scale = "arm"', ""),
+        ("position = [0.31, 0.04, -0.35]", "position = [0.31, 0.24, 1.05]"),
+        ("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, 0.09, 1.05]"),
+    ),
+    "carry_box": (('frame = "shoulders"', ""), ("position = [0.30, 0.12, -0.40]", "position = [0.30, 0.12, 1.00]")),
+}
+
+
+def _base_frame_text(name: str) -> str:
+    text = (TASKS / f"{name}.toml").read_text()
+    for old, new in BASE_FRAME_FORM.get(name, ()):
+        assert text.count(old) == 1, f"edit target not unique/absent: {old!r}"
+        text = text.replace(old, new)
+    return text
+
+
 def toml(name: str) -> dict:
-    return tomllib.loads((TASKS / f"{name}.toml").read_text())
+    """The task's keys, positions in the robot base frame."""
+    return tomllib.loads(_base_frame_text(name))
 
 
 def rot(rpy) -> np.ndarray:
@@ -62,9 +91,9 @@ def central_angular_velocity(R: np.ndarray, dt: float) -> np.ndarray:
 
 
 def variant(tmp_path: Path, task: str, *edits: tuple[str, str]) -> Path:
-    """A copy of tasks/<task>.toml with the robot path made absolute and (old, new) edits applied
+    """A copy of tasks/<task>.toml in the base frame (:data:`BASE_FRAME_FORM`) with the robot path made absolute and (old, new) edits applied
     to exactly one occurrence each."""
-    text = (TASKS / f"{task}.toml").read_text()
+    text = _base_frame_text(task)
     edits = (('robot = "../robots/humanoid"', f'robot = "{ROBOT_DIR.as_posix()}"'),) + edits
     for old, new in edits:
         assert text.count(old) == 1, f"edit target not unique/absent: {old!r}"

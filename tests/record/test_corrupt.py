@@ -68,7 +68,7 @@ def circle(recordings) -> Path:
 @pytest.fixture(scope="module")
 def failed(recordings) -> Path:
     """A circle whose far side is out of reach: the path stage fails, the run is kept as failed (no metrics.json)."""
-    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, 0.09, 1.05]", "arc_center = [0.31, -0.40, 1.05]")
+    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
     task = recordings / "unreachable.toml"
     task.write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"'))
     with pytest.raises(UnreachablePoseError):

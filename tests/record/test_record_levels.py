@@ -170,7 +170,7 @@ def test_cli_run_records_at_the_level_asked(tmp_path):
 
 def test_a_failed_metrics_run_is_kept_with_its_manifest_only(tmp_path):
     """A circle whose far side is out of reach: the path stage fails; the run is kept as failed, its manifest alone, and reads back."""
-    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, 0.09, 1.05]", "arc_center = [0.31, -0.40, 1.05]")
+    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
     task = tmp_path / "unreachable.toml"
     task.write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"'))
     with pytest.raises(UnreachablePoseError):

@@ -118,7 +118,7 @@ def test_readback_reference_equals_the_task_waypoints(triangle_run):
     for k, name in ((0, "A"), (200, "B"), (400, "C"), (600, "A"), (3000, "A")):
         wp = spec["waypoints"][name]
         row = ref.iloc[k]
-        np.testing.assert_allclose(row[["position.x", "position.y", "position.z"]].to_numpy(float), wp["position"], atol=1e-12)
+        np.testing.assert_allclose(row[["position.x", "position.y", "position.z"]].to_numpy(float), np.add(wp["position"], (0.0, 0.2, 1.4)), atol=1e-12)  # frame = "left.shoulder" (scale 1 here)
         quat = row[["orientation.x", "orientation.y", "orientation.z", "orientation.w"]].to_numpy(float)
         angle = (Rotation.from_quat(quat).inv() * Rotation.from_euler("xyz", wp["rpy"])).magnitude()
         assert angle < 1e-9
@@ -147,7 +147,7 @@ def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
         sim.set_positions(list(initial), list(initial.values()))
         expected = sim.link_pose("left_hand")
     np.testing.assert_allclose(T, expected, atol=1e-6)
-    assert np.linalg.norm(T[:3, 3] - data["waypoints"]["A"]["position"]) < 1e-6
+    assert np.linalg.norm(T[:3, 3] - np.add(data["waypoints"]["A"]["position"], (0.0, 0.2, 1.4))) < 1e-6  # frame = "left.shoulder" (scale 1 here)
 
 
 def test_rerun_file_verifies_with_the_rerun_cli(triangle_run):
@@ -179,7 +179,7 @@ def _task_copy(tmp_path: Path, text: str) -> Path:
 
 def test_failed_stage_leaves_a_failed_run(tmp_path):
     """A circle whose far side is out of reach: the path stage fails mid-way, the run is kept as failed."""
-    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, 0.09, 1.05]", "arc_center = [0.31, -0.40, 1.05]")
+    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
     task = _task_copy(tmp_path, text)
     with pytest.raises(UnreachablePoseError, match=r"moves\[0\]"):
         record_run(task, out_dir=tmp_path / "out")

@@ -719,7 +719,7 @@ def test_consistency_claims_survive_a_failed_method_run(carry_box_runs, tmp_path
 
     task = tmp_path / "carry_box.toml"
     text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
-    task.write_text(text + "\n[arm_angle]\nmax_joint_step_rad = 1e-6\n")
+    task.write_text(text.replace("[arm_angle]\n", "[arm_angle]\nmax_joint_step_rad = 1e-6\n"))
     with pytest.raises(DualarmError, match="max_joint_step_rad"):
         record_run(load_task(task, 2), "mc-inverse", stages=("path", "ik"), out_dir=tmp_path / "runs")
     (failed_dir,) = (tmp_path / "runs").glob("*/*")

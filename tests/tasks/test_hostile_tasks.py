@@ -394,7 +394,7 @@ ABSURD = [
     ("radius_1e-300", "bowl_grasp", ("radius_m = 0.07", "radius_m = 1e-300"), "environment[1].radius_m", "[0.0001, 100] m"),
     ("max_joint_step_huge", "triangle", (ARM_ANGLE, ARM_ANGLE + "\nmax_joint_step_rad = 1e300"), "arm_angle.max_joint_step_rad", "(0, 6.28319] rad"),
     ("vertical_1e200", "triangle", (ARM_ANGLE, ARM_ANGLE + "\nvertical = [1e200, 0.0, 0.0]"), "arm_angle.vertical[0]", "[-1e+06, 1e+06]"),
-    ("waypoint_1e300", "triangle", ("position = [0.300, 0.0, 1.303]", "position = [0.300, 0.0, 1e300]"), "waypoints.B.position[2]", "[-100, 100] m"),
+    ("waypoint_1e300", "triangle", ("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0, 1e300]"), "waypoints.B.position[2]", "[-100, 100] m"),
     ("rpy_1e300", "triangle", ("rpy = [-0.517, -1.380, 2.390]", "rpy = [-0.517, -1.380, 1e300]"), "waypoints.B.rpy[2]", "[-6.28319, 6.28319] rad"),
     ("by_1e300", "carry_box", ("left = { by = [0.0, 0.0, 0.20] }", "left = { by = [0.0, 0.0, 1e300] }"), "moves[0].left.by[2]", "[-100, 100] m"),
     ("box_1e-300", "carry_box", ("size_m = [0.15, 0.24, 0.15]", "size_m = [0.15, 0.24, 1e-300]"), "object.size_m[2]", "[0.0001, 100] m"),

@@ -100,7 +100,7 @@ def test_unmodified_copy_loads(tmp_path: Path):
     task = load_task(variant(tmp_path))
     data = tomllib.loads(TRIANGLE.read_text())
     for name, wp in data["waypoints"].items():
-        assert np.allclose(task.waypoint_pose(name)[:3, 3], wp["position"], atol=1e-15)
+        assert np.allclose(task.waypoint_pose(name)[:3, 3], np.add(wp["position"], (0.0, 0.2, 1.4)), atol=1e-15)  # frame = "left.shoulder": S at [0, 0.2, 1.4] on the humanoid, scale 1
         assert np.allclose(task.waypoint_pose(name)[:3, :3], Rotation.from_euler("xyz", wp["rpy"]).as_matrix(), atol=1e-12)
     # the [initial] table as tomllib reads it; the joints it does not name start at zero
     assert data["initial"] and all(task.initial_q[joint] == value for joint, value in data["initial"].items())
@@ -116,8 +116,8 @@ MALFORMED = [
     ("unknown_top_level_key", [('waist = "locked"', 'waist = "locked"\ncolour = "red"')], "colour"),
     ("unknown_key_in_move", [('left = { to = "B" }', 'left = { to = "B", speed = 1.0 }')], "moves[0].left.speed"),
     ("string_control_period", [("control_period_s = 0.01", 'control_period_s = "0.01"')], "control_period_s"),
-    ("position_two_numbers", [("position = [0.300, 0.0, 1.303]", "position = [0.300, 0.0]")], "waypoints.B.position"),
-    ("position_four_numbers", [("position = [0.300, 0.0, 1.303]", "position = [0.300, 0.0, 1.303, 0.0]")], "waypoints.B.position"),
+    ("position_two_numbers", [("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0]")], "waypoints.B.position"),
+    ("position_four_numbers", [("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0, 1.303, 0.0]")], "waypoints.B.position"),
     ("zero_duration", [(FIRST_MOVE, 'duration_s = 0.0\nleft = { to = "B" }')], "moves[0].duration_s"),
     ("negative_duration", [(FIRST_MOVE, 'duration_s = -2.0\nleft = { to = "B" }')], "moves[0].duration_s"),
     ("zero_control_period", [("control_period_s = 0.01", "control_period_s = 0.0")], "control_period_s"),
@@ -190,7 +190,7 @@ def test_out_of_reach_waypoint(tmp_path: Path):
     R = Rotation.from_euler("xyz", data["waypoints"]["B"]["rpy"]).as_matrix()
     wrist = B - WRIST_TO_HAND_M * R[:, 2]
     assert np.linalg.norm(wrist - LEFT_SHOULDER) > ARM_REACH_M + 0.5
-    path = variant(tmp_path, ("position = [0.300, 0.0, 1.303]", "position = [1.5, 0.0, 1.3]"))
+    path = variant(tmp_path, ("position = [0.300, -0.200, -0.097]", "position = [1.5, 0.0, 1.3]"))
     with pytest.raises(UnreachablePoseError) as info:
         load_task(path)
     assert isinstance(info.value, TaskFileError)
@@ -202,7 +202,7 @@ def test_shipped_waypoints_are_within_reach_by_geometry():
     data = tomllib.loads(TRIANGLE.read_text())
     for wp in data["waypoints"].values():
         R = Rotation.from_euler("xyz", wp["rpy"]).as_matrix()
-        wrist = np.asarray(wp["position"]) - WRIST_TO_HAND_M * R[:, 2]
+        wrist = LEFT_SHOULDER + np.asarray(wp["position"]) - WRIST_TO_HAND_M * R[:, 2]  # frame = "left.shoulder", scale 1 on the humanoid
         assert abs(0.32 - 0.28) < np.linalg.norm(wrist - LEFT_SHOULDER) < ARM_REACH_M
 
 
@@ -272,7 +272,7 @@ def test_relative_robot_path_resolves_against_the_task_file(tmp_path: Path, monk
 
 CLI_CASES = [
     ("unknown_top_level_key", [('waist = "locked"', 'waist = "locked"\ncolour = "red"')]),
-    ("out_of_reach", [("position = [0.300, 0.0, 1.303]", "position = [1.5, 0.0, 1.3]")]),
+    ("out_of_reach", [("position = [0.300, -0.200, -0.097]", "position = [1.5, 0.0, 1.3]")]),
     ("robot_dir_missing", [(f'robot = "{ROBOT_DIR.as_posix()}"', 'robot = "/nonexistent/robots/nobody"')]),
 ]
 
