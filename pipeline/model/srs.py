@@ -8,11 +8,13 @@ the chain itself, never entered by hand.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import casadi as cs
 import numpy as np
 
+from dualarm.arrays import frozen
 from dualarm.errors import NotSRSError
 from dualarm.model.kinematics import chain_frames
 from dualarm.model.robot import Chain
@@ -43,6 +45,10 @@ class SrsGeometry:
     tool_from_wrist: np.ndarray
     upper_arm: float
     forearm: float
+
+    def __post_init__(self) -> None:
+        for name in ("shoulder", "elbow_local", "wrist_local", "tool_from_wrist"):  # read-only: one geometry is shared per chain
+            object.__setattr__(self, name, frozen(getattr(self, name), (3,), name))
 
     @property
     def reach(self) -> float:
@@ -80,8 +86,9 @@ def _meeting_point(lines: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarr
     return x, float(worst)
 
 
+@functools.lru_cache(maxsize=None)
 def srs_geometry(chain: Chain, *, seed: int = 7) -> SrsGeometry:
-    """Derive the S-R-S geometry of ``chain`` from its joints.
+    """Derive the S-R-S geometry of ``chain`` from its joints (once per chain and seed, kept: the task loader, reach tests and solvers all ask for it).
 
     The axes are taken at a random configuration (fixed ``seed``), so that no coincidence of the
     zero pose hides a missing intersection.

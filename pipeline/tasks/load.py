@@ -432,7 +432,6 @@ def arm_reach(task: Task, hand: str) -> "ArmReach | NumericReach":
     except NotSRSError:
         return numeric_reach(task, hand)
     to_arm = robot.chain_between(robot.urdf.root, arm.base)
-    T_arm = ChainKinematics.of(to_arm).pose(np.array([task.initial_q[n] for n in to_arm.joint_names]))
     centre = None
     if task.spec.waist == "free" and to_arm.dof:
         frame = np.eye(4)  # the first waist joint's frame, which no waist motion moves
@@ -441,7 +440,7 @@ def arm_reach(task: Task, hand: str) -> "ArmReach | NumericReach":
             if joint.movable:
                 break
         centre = frame[:3, 3]
-    return ArmReach(hand=hand, geometry=geometry, shoulder=T_arm[:3, :3] @ geometry.shoulder + T_arm[:3, 3], waist_centre=centre)
+    return ArmReach(hand=hand, geometry=geometry, shoulder=shoulder_position(robot, hand, task.initial_q), waist_centre=centre)
 
 
 def _check_reach(task: Task) -> None:
