@@ -318,6 +318,7 @@ def plan(
     timeout: Annotated[Optional[float], typer.Option(help="Planning timeout per trial [s] (default 5).")] = None,
     out_text: Annotated[Optional[str], typer.Option("--out", help="Directory for plan_trials.csv and plan_summary.json (default plans/<task>-<planner>).")] = None,
     recordings_text: Annotated[str, typer.Option("--recordings", help="Directory that receives the recorded run of the first successful plan.")] = "recordings",
+    robot_dir: Annotated[Optional[Path], typer.Option("--robot", help="Robot directory (or shipped robot's name) to plan the task on instead of the one it names.")] = None,
 ) -> None:
     """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed, smoothed, executed and recorded as a run; exits 1 when no trial succeeded, else with the verdict of that run (0 complete, 3 violated, 1 failed)."""
     from dualarm.plan.problem import PlanningSettings
@@ -342,6 +343,7 @@ def plan(
             recordings,
             ["dualarm", *sys.argv[1:]],
             progress=lambda done, total: _update(status, f"planning {task}: trial {done}/{total}" + (" (recording the first plan)" if done == total else "")),
+            robot=robot_dir,
         )
     s = result.summary
     out.print(
@@ -365,22 +367,37 @@ def plan(
 @user_errors
 def reproduce(
     out_text: Annotated[
-        str, typer.Option("--out", help="Directory that receives every run, table and figure, and report.md (emptied first if it holds only an earlier reproduction).")
-    ] = "reports/reproduction",
+        Optional[str],
+        typer.Option(
+            "--out",
+            help="Directory that receives every run, table and figure, and report.md (emptied first if it holds only an earlier reproduction); default reports/reproduction, or reports/reproduction-NAME with --robot.",
+        ),
+    ] = None,
     only: Annotated[Optional[str], typer.Option(help="Comma-separated parts to run (default: all): ball-game-tvgdd, ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp.")] = None,
     jobs: Annotated[int, typer.Option(min=1, help="Parts run at once, each in its own process (default: 2, or 1 on a 1-core machine).")] = min(2, os.cpu_count() or 1),
+    robot_dir: Annotated[
+        Optional[Path],
+        typer.Option(
+            "--robot", help="Robot directory (or shipped robot's name) to run the experiments on instead of the humanoid; a part it cannot run is reported as not available, with the reason."
+        ),
+    ] = None,
 ) -> None:
     """Run every experiment of the three papers, record it, and write DIR/report.md: each paper claim against ours (read back from the recordings), the figures, the runs and the time of each part.
 
-    Exits 1 if a part failed (the report says which and why), else 3 if a claim rests on a run whose verdict is not complete (MC-Inverse's runs, TV-GDD's executed ball game, the carried box, the planner's executed plan; a baseline's violations are reported, not fatal), else 0.
+    Exits 1 if a part failed (the report says which and why), else 3 if a claim rests on a run whose verdict is not complete (MC-Inverse's runs, TV-GDD's executed ball game, the carried box, the planner's executed plan; a baseline's violations are reported, not fatal), else 2 if no part is available on the robot, else 0. A part not available on the robot is reported, not fatal.
     """
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from dualarm.reproduce.experiments import BY_NAME
+    from dualarm.data import find_robot
+    from dualarm.model.robot import load_robot
+    from dualarm.reproduce.experiments import BY_NAME, ROBOT, robot_option
     from dualarm.reproduce.report import reproduction_claims, write_reproduction_report
-    from dualarm.reproduce.runner import parts_named, prepare, run_parts
+    from dualarm.reproduce.runner import NOT_AVAILABLE, parts_named, prepare, run_parts
 
-    out_dir = _out_path(out_text, "--out")
+    robot = find_robot(str(robot_dir), Path.cwd()).resolve() if robot_dir is not None else ROBOT
+    robot_name = load_robot(robot).name  # a robot that does not load is refused before the directory is touched
+    default_out = f"reports/reproduction-{robot_name}" if robot_option(robot) else "reports/reproduction"
+    out_dir = _out_path(out_text if out_text is not None else default_out, "--out")
     names = parts_named([n.strip() for n in only.split(",") if n.strip()] if only is not None else None)
     _claim = prepare(out_dir)  # out_dir stays locked until the command ends: a second reproduction into it is refused
     columns = (TextColumn("{task.fields[part]:<16}", markup=False), BarColumn(), TextColumn("{task.percentage:>3.0f} %"), TimeElapsedColumn(), TextColumn("{task.fields[text]}", markup=False))
@@ -394,7 +411,7 @@ def reproduce(
             if fraction >= 1.0:
                 bar.stop_task(tasks[name])
 
-        results = run_parts(out_dir, names, jobs, on_progress)
+        results = run_parts(out_dir, names, jobs, on_progress, robot)
         report_task = bar.add_task("report", total=1.0, part="report", text="reading the recordings back")
         claims = reproduction_claims(out_dir)
         report_path = write_reproduction_report(out_dir, claims)
@@ -403,14 +420,17 @@ def reproduce(
     for column in ("part", "status", "seconds"):
         table.add_column(column, justify="right" if column == "seconds" else "left")
     for r in results:
-        table.add_row(r.name, r.status if not r.error else f"failed: {r.error}", f"{r.seconds:.1f}")
+        table.add_row(r.name, f"{r.status}: {r.error}" if r.error else r.status, f"{r.seconds:.1f}")
     out.print(table)
     for c in claims:
         if c.contradicted:
             err.print(f"contradicted: {c.paper} {c.where}: {c.claim}: {c.verdict}", markup=False, soft_wrap=True)
     out.print(str(report_path), markup=False, soft_wrap=True)
-    if any(r.status != "complete" for r in results):
+    if any(r.status not in ("complete", NOT_AVAILABLE) for r in results):
         raise typer.Exit(1)
+    if all(r.status == NOT_AVAILABLE for r in results):
+        err.print(f"error: no part of the reproduction runs on {robot_name} (the report says why each is not available)", markup=False, soft_wrap=True)
+        raise typer.Exit(2)
     if any(c.contradicted for c in claims):
         raise typer.Exit(3)
 
@@ -593,6 +613,7 @@ def consistency(
     reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
     out_text: Annotated[Optional[str], typer.Option("--out", help="Output directory (default consistency/<task>).")] = None,
     seed: Annotated[int, typer.Option(help="Random seed (an integer >= 0), recorded in each run's manifest.")] = 0,
+    robot_dir: Annotated[Optional[Path], typer.Option("--robot", help="Robot directory (or shipped robot's name) to run the task on instead of the one it names.")] = None,
 ) -> None:
     """Run each IK method on a repeated task as a recorded run and compare repetition by repetition: consistency.csv, consistency.md and figures; prints the table (with each run's verdict) and the directory.
 
@@ -605,7 +626,7 @@ def consistency(
     chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else None  # None: DEFAULT_METHODS that run on the task's robot
     directory = out_dir or Path("consistency") / task.stem
     with err.status("consistency ...") as status:
-        result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: _update(status, text))
+        result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: _update(status, text), robot=robot_dir)
     shown = {
         "rep_joint_deviation_max_rad": "rep Δq max rad",
         "rep_arm_angle_deviation_max_rad": "rep Δψ max rad",

@@ -9,10 +9,22 @@ from tests.conftest import HUMANOID, TASKS
 runner = CliRunner()
 
 
-@pytest.mark.parametrize(
-    "command",
-    [[], ["run"], ["inspect"], ["report"], ["bench"], ["bench", "tvgdd"], ["bench", "ik"], ["bench", "plan"], ["plan"], ["consistency"], ["robot"], ["robot", "check"], ["ik"], ["ik", "srs"]],
-)
+def _commands(group=None, prefix=()) -> list[list[str]]:
+    """Every command and group of the CLI, walked from typer's command tree (so that a new command cannot be missed)."""
+    import typer
+
+    group = group if group is not None else typer.main.get_command(app)
+    found = [list(prefix)]
+    for name, command in getattr(group, "commands", {}).items():
+        found += _commands(command, (*prefix, name)) if hasattr(command, "commands") else [[*prefix, name]]
+    return found
+
+
+def test_the_command_walk_finds_the_commands_users_type():
+    assert {("reproduce",), ("robot", "init"), ("robot", "poses"), ("task", "check"), ("ik", "srs"), ("view",), ("bench", "plan")} <= {tuple(c) for c in _commands()}
+
+
+@pytest.mark.parametrize("command", _commands(), ids=lambda c: " ".join(c) or "dualarm")
 def test_every_command_has_help(command):
     result = runner.invoke(app, [*command, "--help"])
     assert result.exit_code == 0

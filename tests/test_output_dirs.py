@@ -194,8 +194,8 @@ def test_a_second_reproduction_into_a_directory_in_use_is_refused(tmp_path):
 import dataclasses, pathlib, sys, time
 from dualarm.reproduce import experiments
 part = experiments.BY_NAME["table-i"]
-def paused(out, progress):
-    outputs = part.run(out, progress)
+def paused(out, robot, progress):
+    outputs = part.run(out, robot, progress)
     pathlib.Path({str(held)!r}).touch()
     while not pathlib.Path({str(release)!r}).exists():
         time.sleep(0.05)

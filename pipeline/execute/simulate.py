@@ -33,7 +33,7 @@ import numpy as np
 
 from dualarm.arrays import frozen
 from dualarm.errors import StageError
-from dualarm.execute.world import PyBulletRobot, add_environment, disable_touching_pairs, load_pybullet_robot, pb
+from dualarm.execute.world import PyBulletRobot, add_environment, disable_touching_pairs, in_contact, load_pybullet_robot, pb
 from dualarm.model.robot import Robot
 from dualarm.retime.trajectory import JointTrajectory
 from dualarm.verdict import Violation
@@ -70,7 +70,7 @@ class ContactEvent:
         rep: the repetition index at that time.
         first: a robot link or an object (the pair sorted by name).
         second: the other.
-        depth_m: the deepest penetration between them in the step [m] (0 when they only touch).
+        depth_m: the deepest penetration between them in the step [m] (their shapes overlap: see :func:`~dualarm.execute.world.in_contact`).
         expected: the task expects this pair to touch (``expected_contacts``).
     """
 
@@ -265,7 +265,7 @@ class _Player:
             for h, link in hand_links.items():
                 hand_poses[h][k] = sim.link_pose(link)
             depth: dict[tuple[str, str], float] = {}
-            for contact in pb.getContactPoints(bodyA=body, physicsClientId=client):
+            for contact in filter(in_contact, pb.getContactPoints(bodyA=body, physicsClientId=client)):
                 other = contact[2]
                 first, second = sorted((link_name[contact[3]], link_name[contact[4]] if other == body else self.objects.get(other, str(other))))
                 key = (first, second)

@@ -90,6 +90,16 @@ class PyBulletRobot:
         self.close()
 
 
+def in_contact(point: Sequence) -> bool:
+    """Whether a point of ``pb.getContactPoints`` is a contact: its shapes overlap (distance < 0).
+
+    PyBullet also returns points up to its contact breaking threshold apart (speculative contacts,
+    e.g. a wrist's convex hulls 1.6 mm apart); those are gaps, not contacts. The planners' checker
+    and the execution judge by this one rule.
+    """
+    return point[8] < 0.0
+
+
 #: Two links joined only through links without collision geometry and closer than this at the zero
 #: configuration touch by construction and are not checked [m] (see :func:`disable_touching_pairs`).
 TOUCHING_M = 1e-3

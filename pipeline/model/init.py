@@ -67,6 +67,12 @@ READY_LIMIT_MARGIN = 0.05
 READY_FORWARD = 0.25
 #: ``ready`` keeps each hand at least this high above the root link's origin (a fixed base on the floor) [m].
 READY_MIN_HEIGHT_M = 0.1
+#: ``ready`` keeps each hand's distance from its arm's first joint within these fractions of the arm's length: elbow bent, room to move every way.
+READY_REACH = (0.4, 0.8)
+#: ``ready`` keeps each hand at most this fraction of its arm's length further out sideways (away from the root's x-z plane) than its arm's first joint.
+READY_OUTWARD = 0.25
+#: ``ready`` prefers the hand nearest this point, in arm lengths from the arm's first joint (forward, sideways, up): in front and a little below, as a person holds a tool.
+READY_TARGET = (0.55, 0.0, -0.25)
 
 REVOLUTE = ("revolute", "continuous")
 MOVABLE = ("revolute", "continuous", "prismatic")
@@ -485,7 +491,7 @@ def always_in_contact(robot: Robot, sim, base: Mapping[str, float], samples: int
 
 
 def ready_pose(robot: Robot, sim, base: Mapping[str, float], samples: int = SAMPLES * 10, seed: int = SEED) -> dict[str, float]:
-    """A ``ready`` home pose [rad] by joint: for each arm, random configurations within the limits (:data:`READY_LIMIT_MARGIN` in from each) whose hand is :data:`READY_FORWARD` of the arm's length in front of its first joint and :data:`READY_MIN_HEIGHT_M` above the root, nearest the zero pose first; the first combination of the arms clear of self-collision in PyBullet.
+    """A ``ready`` home pose [rad] by joint: for each arm, random configurations within the limits (:data:`READY_LIMIT_MARGIN` in from each) whose hand is :data:`READY_FORWARD` of the arm's length in front of its first joint, :data:`READY_MIN_HEIGHT_M` above the root, at :data:`READY_REACH` of the arm's length from its first joint and at most :data:`READY_OUTWARD` of it further out sideways, the hand nearest :data:`READY_TARGET` first; the first combination of the arms clear of self-collision in PyBullet.
 
     Raises:
         RobotModelError: no such configuration among the samples (naming the arm).
@@ -502,8 +508,18 @@ def ready_pose(robot: Robot, sim, base: Mapping[str, float], samples: int = SAMP
         columns = [to_tip.joint_names.index(n) for n in arm.joint_names]
         full[:, columns] = Q
         p = ChainKinematics.of(to_tip).poses(full)[:, :3, 3]
-        ok = (p[:, 0] >= shoulder[0] + READY_FORWARD * length) & (p[:, 0] > 0) & (p[:, 2] >= READY_MIN_HEIGHT_M)
-        order = [i for i in np.argsort(np.linalg.norm(Q, axis=1)) if ok[i]]
+        reach = np.linalg.norm(p - shoulder, axis=1) / length
+        outward = np.abs(p[:, 1]) - abs(shoulder[1])
+        ok = (
+            (p[:, 0] >= shoulder[0] + READY_FORWARD * length)
+            & (p[:, 0] > 0)
+            & (p[:, 2] >= READY_MIN_HEIGHT_M)
+            & (reach >= READY_REACH[0])
+            & (reach <= READY_REACH[1])
+            & (outward <= READY_OUTWARD * length)
+        )
+        score = np.linalg.norm(p - (shoulder + length * np.array(READY_TARGET)), axis=1) / length + 0.01 * np.linalg.norm(Q, axis=1)
+        order = [i for i in np.argsort(score, kind="stable") if ok[i]]
         free = []
         for i in order:
             q = dict(zip(arm.joint_names, Q[i]))

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from dualarm.errors import StageError
-from dualarm.execute.world import add_environment, disable_touching_pairs, load_pybullet_robot, pb
+from dualarm.execute.world import add_environment, disable_touching_pairs, in_contact, load_pybullet_robot, pb
 from dualarm.model.robot import Robot
 
 
@@ -164,7 +164,7 @@ class CollisionChecker:
         """Every checked pair closer than the margin at ``q`` [rad], deepest first."""
         deepest: dict[tuple[str, str], float] = {}
         for point in self._contact_points(q):
-            if point[8] < 0.0:
+            if in_contact(point):
                 other = self._link_name[point[4]] if point[2] == self._sim.body else self._objects[point[2]]
                 key = (self._link_name[point[3]], other)
                 deepest[key] = max(deepest.get(key, 0.0), -point[8])
@@ -172,7 +172,7 @@ class CollisionChecker:
 
     def free(self, q: np.ndarray) -> bool:
         """No checked pair is closer than the margin at ``q`` [rad]."""
-        return all(point[8] >= 0.0 for point in self._contact_points(q))
+        return not any(in_contact(point) for point in self._contact_points(q))
 
     def segment_steps(self, a: np.ndarray, b: np.ndarray) -> int:
         """Into how many equal steps the segment from ``a`` to ``b`` [rad] is cut so that no joint moves more than :attr:`resolution_rad` in one (at least 1)."""

@@ -61,15 +61,17 @@ def run_trials(
     recordings: Path = Path("recordings"),
     command: list[str] | None = None,
     progress: Callable[[int, int], None] = lambda done, total: None,
+    robot: str | Path | None = None,
 ) -> TrialsResult:
     """Plan ``trials`` times with ``planner``, write the CSV and the summary into ``out_dir``, and record the first successful plan through retime, smooth and execute under ``recordings``.
 
-    ``progress`` is told the trials done and the total after each trial.
+    ``progress`` is told the trials done and the total after each trial; ``robot`` (a robot
+    directory or shipped robot's name) replaces the one the task names.
 
     Raises:
         OutputError: ``out_dir`` or ``recordings`` cannot be used (before any trial).
     """
-    task = load_task(task_file)
+    task = load_task(task_file, robot=robot)
     with contextlib.ExitStack() as claims:
         claims.enter_context(claim_output_dir(out_dir, "plan"))
         claims.enter_context(claim_output_dir(recordings, "recordings"))

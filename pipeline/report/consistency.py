@@ -88,8 +88,9 @@ def run_consistency(
     repetitions: int | None = None,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
+    robot: str | Path | None = None,
 ) -> Consistency:
-    """Run ``methods`` (None: :data:`DEFAULT_METHODS` that run on the task's robot) on ``task_file`` (``repetitions`` overriding the file's) and compare them.
+    """Run ``methods`` (None: :data:`DEFAULT_METHODS` that run on the task's robot) on ``task_file`` (``repetitions`` overriding the file's; ``robot``, a robot directory or shipped robot's name, the robot it names) and compare them.
 
     Raises:
         DualarmError: an unknown method, a method that needs S-R-S arms on a robot whose arm is not
@@ -102,7 +103,7 @@ def run_consistency(
     unknown = [m for m in methods or () if m not in IK_METHODS]
     if unknown or (methods is not None and not methods):
         raise DualarmError(f"unknown IK method '{(unknown or [''])[0]}' (methods: {', '.join(IK_METHODS)})")
-    task = load_task(task_file, repetitions)
+    task = load_task(task_file, repetitions, robot)
     hands = task.spec.hands
     if methods is None:
         suited = suited_methods(task.robot, hands)
@@ -120,7 +121,14 @@ def run_consistency(
             progress(f"{task.name}: {method} ...")
         before = set((runs_dir / task.name).glob("*")) if (runs_dir / task.name).exists() else set()
         try:
-            recorded = record_run(task, method, stages=CONSISTENCY_STAGES, out_dir=runs_dir, seed=seed, command=["dualarm", "consistency", str(task_file), "--methods", method])
+            recorded = record_run(
+                task,
+                method,
+                stages=CONSISTENCY_STAGES,
+                out_dir=runs_dir,
+                seed=seed,
+                command=["dualarm", "consistency", str(task_file), "--methods", method, *(["--robot", str(robot)] if robot is not None else [])],
+            )
             assert recorded.directory is not None  # record_run always returns its run directory
             run = read_run(recorded.directory)
         except DualarmError as exc:

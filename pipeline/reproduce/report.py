@@ -14,8 +14,8 @@ from dualarm.record.run_dir import write_whole
 from dualarm.report import figures
 from dualarm.report.run_report import write_report
 from dualarm.reproduce.claims import PAPER_TABLE_I, Claim, all_claims, run_verdict
-from dualarm.reproduce.experiments import BY_NAME, PARTS
-from dualarm.reproduce.runner import PARTS_FILE
+from dualarm.reproduce.experiments import BY_NAME, PARTS, ROBOT, command, robot_option
+from dualarm.reproduce.runner import NOT_AVAILABLE, PARTS_FILE
 
 #: The papers, in the order of the report.
 PAPERS = {
@@ -26,18 +26,26 @@ PAPERS = {
 VERDICT = {True: "agrees", False: "**differs**", None: "—"}
 
 
-def command_of(name: str, out: Path, parts: Mapping[str, Mapping]) -> str:
-    """The command that reproduces part ``name`` alone (Table I's with the analogue's pose)."""
-    command = BY_NAME[name].command
+def command_of(name: str, out: Path, parts: Mapping[str, Mapping], robot: Path = ROBOT) -> str:
+    """The command that reproduces part ``name`` alone on the robot directory ``robot`` (Table I's with the analogue's pose)."""
+    text = command(BY_NAME[name], robot)
     if name == "table-i" and parts.get(name, {}).get("status") == "complete":
         data = json.loads((out / parts[name]["outputs"]["table"]).read_text())
-        command = command.format(pose=" ".join(str(v) for v in data["pose"]), psi=str(data["arm_angle"]))
-    return command
+        text = text.format(pose=" ".join(str(v) for v in data["pose"]), psi=str(data["arm_angle"]))
+    return text
 
 
-def _claims_table(claims: list[Claim], out: Path, parts: Mapping[str, Mapping]) -> list[str]:
+def _robot(index: Mapping) -> Path:
+    """The robot directory a reproduction ran on (the humanoid for one written before ``--robot``)."""
+    return Path(index["robot"]["directory"]) if "robot" in index else ROBOT
+
+
+def _claims_table(claims: list[Claim], out: Path, parts: Mapping[str, Mapping], robot: Path) -> list[str]:
     lines = ["| where | claim | paper | ours | ours against the paper | verdict | runs' verdicts | reproduce alone |", "|---|---|---|---|---|---|---|---|"]
-    cells = [(c.where, c.claim, c.theirs, c.ours, c.comparison, VERDICT[c.agrees], ("**contradicted:** " if c.contradicted else "") + c.verdict, f"`{command_of(c.part, out, parts)}`") for c in claims]
+    cells = [
+        (c.where, c.claim, c.theirs, c.ours, c.comparison, VERDICT[c.agrees], ("**contradicted:** " if c.contradicted else "") + c.verdict, f"`{command_of(c.part, out, parts, robot)}`")
+        for c in claims
+    ]
     return lines + ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in cells]
 
 
@@ -90,6 +98,15 @@ def _figures(out: Path, parts: Mapping[str, Mapping]) -> list[tuple[str, str]]:
     return made
 
 
+def _why_absent(part: Mapping | None, robot: str) -> str:
+    """Why a part has no claims: not run, not available on ``robot`` (and why), or failed (and why)."""
+    if part is None:
+        return "not run (see --only)"
+    if part["status"] == NOT_AVAILABLE:
+        return f"not available on {robot}: {part['error']}"
+    return f"failed: {part['error']}"
+
+
 def _index(out: Path) -> dict:
     try:
         return json.loads((out / PARTS_FILE).read_text())
@@ -120,9 +137,12 @@ def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None
     claims = all_claims(out, parts) if claims is None else claims
     judged = [c for c in claims if c.agrees is not None]
     contradicted = [c for c in claims if c.contradicted]
+    robot = _robot(index)
+    name = index.get("robot", {}).get("name", "humanoid")
     lines = [
-        "# dualarm: the three papers reproduced",
+        "# dualarm: the three papers reproduced" + (f" on {name}" if robot_option(robot) else ""),
         "",
+        *([] if not robot_option(robot) else [f"Robot: `{name}` ({robot}); the tasks transfer to it as tasks/README.md describes (frame, scale, `[transfer]`).", ""]),
         f"{sum(bool(c.agrees) for c in judged)} of {len(judged)} claims agree"
         + (f"; {len(contradicted)} rest on a run whose verdict is not complete (marked **contradicted**)" if contradicted else "")
         + f'. Every figure under "ours" is read back from the recordings in this directory; the papers\' figures are quoted from their text. '
@@ -134,9 +154,9 @@ def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None
     for paper, title in PAPERS.items():
         mine = [c for c in claims if c.paper == paper]
         lines += [f"## {paper}", "", title, ""]
-        lines += _claims_table(mine, out, parts) if mine else []
+        lines += _claims_table(mine, out, parts, robot) if mine else []
         absent = [p for p in missing if p.paper == paper]
-        lines += ["", *[f"- {p.title} (`{p.name}`): not available: {parts[p.name]['error'] if p.name in parts else 'not run (see --only)'}" for p in absent], ""]
+        lines += ["", *[f"- {p.title} (`{p.name}`): {_why_absent(parts.get(p.name), name)}" for p in absent], ""]
     if parts.get("table-i", {}).get("status") == "complete":
         lines += _table_i(out, parts)
     lines += ["## Figures", ""] + [f"{caption}:\n\n![{Path(path).stem}]({path})\n" for caption, path in _figures(out, parts)]

@@ -32,11 +32,11 @@ from typing import Any
 
 from dualarm.errors import DualarmError, Terminated, excerpt
 from dualarm.record.run_dir import MARKER, OutputDir, claim_output_dir, write_whole
-from dualarm.reproduce.experiments import BY_NAME, PARTS, Outputs
+from dualarm.reproduce.experiments import BY_NAME, PARTS, ROBOT, Outputs, unavailable
 
 #: The index of a reproduction directory.
 PARTS_FILE = "parts.json"
-__all__ = ["MARKER", "PARTS_FILE", "OnProgress", "PartResult", "parts_named", "prepare", "run_parts"]
+__all__ = ["MARKER", "NOT_AVAILABLE", "PARTS_FILE", "OnProgress", "PartResult", "parts_named", "prepare", "run_parts"]
 
 #: ``(part, fraction done, text)``.
 OnProgress = Callable[[str, float, str], None]
@@ -48,8 +48,8 @@ class PartResult:
 
     Attributes:
         name: the part's name.
-        status: ``complete`` or ``failed``.
-        error: the error of a failed part ("" otherwise).
+        status: ``complete``, ``failed``, or ``not available`` on this robot (not run).
+        error: the error of a failed part, why one is not available ("" otherwise).
         seconds: its wall-clock time [s].
         outputs: the files it wrote, relative to the reproduction directory.
     """
@@ -88,10 +88,14 @@ def prepare(out: Path) -> OutputDir:
     return claimed
 
 
-def _run_part(name: str, out: Path, report: Callable[[float, str], None]) -> PartResult:
+#: The status of a part the robot cannot run.
+NOT_AVAILABLE = "not available"
+
+
+def _run_part(name: str, out: Path, robot: Path, report: Callable[[float, str], None]) -> PartResult:
     start = time.perf_counter()
     try:
-        outputs = BY_NAME[name].run(out, report)
+        outputs = BY_NAME[name].run(out, robot, report)
         status, error = "complete", ""
     except DualarmError as exc:
         outputs, status, error = {}, "failed", str(exc)
@@ -118,7 +122,7 @@ def _unraisable(unraisable: Any) -> None:
         sys.__unraisablehook__(unraisable)
 
 
-def _worker(name: str, out: Path, queue: Any) -> None:
+def _worker(name: str, out: Path, robot: Path, queue: Any) -> None:
     """A worker process: run part ``name``; put ``("progress", name, fraction, text)`` while it runs, then ``("result", PartResult)``.
 
     Ctrl-C is the main process's to handle; SIGTERM ends the part with :class:`Terminated` (its
@@ -133,7 +137,7 @@ def _worker(name: str, out: Path, queue: Any) -> None:
             raise Terminated()
         queue.put(("progress", name, fraction, text))
 
-    queue.put(("result", _run_part(name, out, report)))
+    queue.put(("result", _run_part(name, out, robot, report)))
 
 
 @contextlib.contextmanager
@@ -149,7 +153,7 @@ def _sigint_ignored() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _run_in_workers(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgress) -> dict[str, PartResult]:
+def _run_in_workers(out: Path, names: Sequence[str], robot: Path, jobs: int, on_progress: OnProgress) -> dict[str, PartResult]:
     """Run ``names`` in worker processes, ``jobs`` at a time, the longest first.
 
     A process per part rather than a pool: a pool worker that dies loses its task for good
@@ -180,7 +184,7 @@ def _run_in_workers(out: Path, names: Sequence[str], jobs: int, on_progress: OnP
         while waiting or running:
             while waiting and len(running) < jobs:
                 name = waiting.pop(0)
-                process = context.Process(target=_worker, args=(name, out, queue), name=f"dualarm reproduce {name}")
+                process = context.Process(target=_worker, args=(name, out, robot, queue), name=f"dualarm reproduce {name}")
                 running[name], started[name] = process, time.perf_counter()
                 with _sigint_ignored():
                     process.start()
@@ -208,20 +212,39 @@ def _run_in_workers(out: Path, names: Sequence[str], jobs: int, on_progress: OnP
     return results
 
 
-def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgress) -> list[PartResult]:
-    """Run the parts ``names`` into ``out`` (after :func:`prepare`), ``jobs`` processes at a time (the longest first; ``jobs = 1`` runs them in this process), and write :data:`PARTS_FILE`.
+def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgress, robot: Path = ROBOT) -> list[PartResult]:
+    """Run the parts ``names`` on the robot directory ``robot`` into ``out`` (after :func:`prepare`), ``jobs`` processes at a time (the longest first; ``jobs = 1`` runs them in this process), and write :data:`PARTS_FILE`.
 
-    Returns the results in report order.
+    A part the robot cannot run (:func:`~dualarm.reproduce.experiments.unavailable`) is not
+    started: its status is :data:`NOT_AVAILABLE` and its error says why. Returns the results in
+    report order.
+
+    Raises:
+        RobotModelError: ``robot`` is not a robot directory (before any part runs).
     """
+    from dualarm.model.robot import load_robot
+
     started = time.perf_counter()
+    name_of_robot = load_robot(robot).name
     results: dict[str, PartResult] = {}
+    for name in names:
+        if reason := unavailable(BY_NAME[name], robot):
+            results[name] = PartResult(name, NOT_AVAILABLE, reason, 0.0, {})
+            on_progress(name, 1.0, NOT_AVAILABLE)
+    runnable = [n for n in names if n not in results]
     if jobs == 1:
-        for name in names:
-            results[name] = _run_part(name, out, functools.partial(on_progress, name))
+        for name in runnable:
+            results[name] = _run_part(name, out, robot, functools.partial(on_progress, name))
             on_progress(name, 1.0, results[name].status)
-    else:
-        results = _run_in_workers(out, names, jobs, on_progress)
+    elif runnable:
+        results.update(_run_in_workers(out, runnable, robot, jobs, on_progress))
     ordered = [results[n] for n in names]
-    index = {"jobs": jobs, "cpu_count": os.cpu_count(), "wall_time_s": time.perf_counter() - started, "parts": [asdict(r) for r in ordered]}
+    index = {
+        "robot": {"name": name_of_robot, "directory": str(robot)},
+        "jobs": jobs,
+        "cpu_count": os.cpu_count(),
+        "wall_time_s": time.perf_counter() - started,
+        "parts": [asdict(r) for r in ordered],
+    }
     write_whole(out / PARTS_FILE, json.dumps(index, indent=2) + "\n")
     return ordered

@@ -75,8 +75,7 @@ def _load(file: Path, robot: Path | None) -> tuple[Task, dict]:
     """The task (``robot`` replacing its robot) and its raw keys; a task whose waypoints the loader's reach test refuses is loaded again without its moves, so that every waypoint is reported."""
     task = None
     try:
-        if robot is None:
-            task = load_task(file)
+        task = load_task(file, robot=robot)
     except UnreachablePoseError:
         pass
     try:
@@ -88,11 +87,11 @@ def _load(file: Path, robot: Path | None) -> tuple[Task, dict]:
     if task is not None:
         return task, data
     base = file.parent if robot is None else Path.cwd()  # a --robot path is the user's, from where they are (as load_task takes it)
+    starts = {hand: "initial" for hand in data.get("start", {})}
     try:
-        return task_from_dict(data, robot=robot, base_dir=base), data
-    except UnreachablePoseError:
-        starts = {hand: "initial" for hand in data.get("start", {})}
         return task_from_dict({**data, "start": starts, "moves": []}, robot=robot, base_dir=base), data
+    except TaskFileError as exc:  # named by the file, not by the dict it was loaded from
+        raise TaskFileError(str(exc).replace("<dict>", excerpt(file), 1)) from None
 
 
 def _targets(task: Task, data: dict) -> list[tuple[str, str]]:

@@ -544,10 +544,12 @@ def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str)
 
 
 def _transferred(spec: TaskSpec, robot: Robot) -> TaskSpec:
-    """``spec`` with ``transfer.initial`` and ``transfer.gesture`` in place of ``initial`` and ``gesture`` when ``robot`` is not the one ``transfer.written_for`` names (by robot.toml's ``name``)."""
+    """``spec`` with ``transfer.initial``, ``transfer.gesture`` and ``transfer.limits`` in place of ``initial``, ``gesture`` and ``limits``, and its moves' durations times ``transfer.duration_scale``, when ``robot`` is not the one ``transfer.written_for`` names (by robot.toml's ``name``)."""
     if spec.transfer is None or robot.name == spec.transfer.written_for:
         return spec
-    return spec.model_copy(update={"initial": spec.transfer.initial, "gesture": spec.transfer.gesture})
+    k, period = spec.transfer.duration_scale, spec.control_period_s
+    moves = tuple(m.model_copy(update={"duration_s": round(m.duration_s * k / period) * period}) for m in spec.moves) if k != 1.0 else spec.moves
+    return spec.model_copy(update={"initial": spec.transfer.initial, "gesture": spec.transfer.gesture, "limits": spec.transfer.limits, "moves": moves})
 
 
 def _check_environment(task: Task) -> None:
@@ -642,12 +644,12 @@ def _resolve(spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Ro
             robot = load_robot(_resolved(find_robot(spec.robot, base)))
         except RobotModelError as exc:
             raise TaskFileError(f"{source}:robot: {exc}") from None
+    spec = _transferred(spec, robot)
     for kind in ("velocity", "acceleration"):
         value = getattr(spec.limits, kind)
         if isinstance(value, dict):
             _check_joint_names(f"{source}:limits.{kind}", value, robot)
     robot = robot.with_limits(velocity=spec.limits.velocity, acceleration=spec.limits.acceleration)
-    spec = _transferred(spec, robot)
     initial = _initial_configuration(source, spec, robot)
     spec = _in_frame(spec, robot, initial, source)
     task = Task(spec=spec, file=file, text=text, robot=robot, initial_q=MappingProxyType(dict(initial)))

@@ -103,6 +103,9 @@ class Range:
         return json
 
 
+#: ``[transfer] duration_scale``: slower on another robot, up to ten times.
+DURATION_SCALE_RANGE = (1.0, 10.0)
+
 #: Metadata of every float of a task file: a TOML float or integer, finite.
 FINITE = Field(strict=True, allow_inf_nan=False)
 
@@ -438,11 +441,18 @@ class Transfer(_Model):
         written_for: the ``name`` (in its robot.toml) of the robot ``initial`` and ``[gesture]`` are written for.
         initial: the initial configuration there: a home pose of that robot's ``robot.toml`` (``"ready"``) or joint -> value [rad].
         gesture: TV-GDD's bounds there (``[gesture]`` names the first robot's joints); default none.
+        limits: the limits there in place of ``[limits]`` (a paper's robot's limits are not
+            another robot's); default none: that robot's own.
+        duration_scale: every move's ``duration_s`` there is multiplied by this (in
+            :data:`DURATION_SCALE_RANGE`, rounded to whole control periods), for a task whose
+            paper gives no timing and whose pace asks more speed than other robots' joints have.
     """
 
     written_for: str
     initial: str | JointValues
     gesture: Gesture | None = None
+    limits: Limits = Limits()
+    duration_scale: Annotated[float, FINITE, Range(*DURATION_SCALE_RANGE)] = 1.0
 
 
 class TaskSpec(_Model):

@@ -38,7 +38,8 @@ MOUNT_Y_M = 0.10
 MOUNT_RPY = {"left": "-1.5707963267948966 0 0", "right": "1.5707963267948966 0 0"}
 #: Outputs of the build (replaced on every run).
 OUTPUTS = ("dual_iiwa.urdf", "robot.toml", "meshes")
-#: KUKA's data sheet for the LBR iiwa 14 R820: largest speed per axis A1..A7 [deg/s]; pybullet_data's URDF says 10 rad/s for all.
+#: KUKA's data sheet for the LBR iiwa 14 R820: largest speed per axis A1..A7 [deg/s], as lbr-stack/lbr_fri_ros2_stack's
+#: lbr_description/urdf/iiwa14/joint_limits.yaml also gives them; pybullet_data's URDF says 10 rad/s for all.
 DATASHEET_VELOCITY_DEG_S = (85, 85, 100, 75, 130, 135, 135)
 
 
@@ -111,7 +112,9 @@ def assemble() -> str:
 def _velocity_table() -> str:
     lines = [
         "",
-        "# Velocity limits from KUKA's LBR iiwa 14 R820 data sheet (A1..A7 in deg/s: " + ", ".join(map(str, DATASHEET_VELOCITY_DEG_S)) + "),",
+        "# Velocity limits from KUKA's LBR iiwa 14 R820 data sheet (A1..A7 in deg/s: "
+        + ", ".join(map(str, DATASHEET_VELOCITY_DEG_S))
+        + "; the same in lbr_fri_ros2_stack's iiwa14/joint_limits.yaml),",
         "# replacing the URDF's 10 rad/s; written by build.py.",
         "[limits.velocity]  # [rad/s]",
     ]

@@ -130,6 +130,16 @@ def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
         try:
             body = pb.loadURDF(str(source), useFixedBase=True, flags=pb.URDF_USE_SELF_COLLISION | pb.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS, physicsClientId=client)
             index = {pb.getJointInfo(body, i, physicsClientId=client)[1].decode(): i for i in range(pb.getNumJoints(body, physicsClientId=client))}
+
+            def position(joint: str) -> np.ndarray:
+                """Where PyBullet puts ``joint``'s child link frame now."""
+                return np.array(pb.getLinkState(body, index[joint], computeForwardKinematics=True, physicsClientId=client)[4])
+
+            def tip_joint(arm) -> str:
+                return next(j for j in index if pb.getJointInfo(body, index[j], physicsClientId=client)[12].decode() == arm.tip)
+
+            first = {arm.hand: robot.chains[arm.chain].joint_names[0] for arm in result.arms}
+            stretched = {arm.hand: np.linalg.norm(position(tip_joint(arm)) - position(first[arm.hand])) for arm in result.arms}  # at the zero pose, as robot init measures an arm
             for joint, value in ready.items():
                 info = pb.getJointInfo(body, index[joint], physicsClientId=client)
                 assert info[8] <= value <= info[9], joint
@@ -141,8 +151,10 @@ def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
             names = {i: pb.getJointInfo(body, i, physicsClientId=client)[12].decode() for i in index.values()}
             assert not [p for p in penetrating if tuple(sorted((names[p[3]], names[p[4]]))) not in touching]
             for arm in result.arms:
-                position = pb.getLinkState(body, index[next(j for j in index if names[index[j]] == arm.tip)], computeForwardKinematics=True, physicsClientId=client)[4]
-                assert position[0] > 0.1, arm.hand
+                hand, shoulder = position(tip_joint(arm)), position(first[arm.hand])
+                assert hand[0] > 0.1, arm.hand
+                assert 0.4 - 1e-6 <= np.linalg.norm(hand - shoulder) / stretched[arm.hand] <= 0.8 + 1e-6, arm.hand  # elbow bent (init.READY_REACH)
+                assert abs(hand[1]) - abs(shoulder[1]) <= 0.25 * stretched[arm.hand] + 1e-6, arm.hand  # not out to the side (init.READY_OUTWARD)
         finally:
             pb.disconnect(physicsClientId=client)
 

@@ -444,3 +444,23 @@ def test_checker_rejects_bad_settings(task, names):
         make_checker(task, names, 0.01, resolution_rad=0.0)
     with pytest.raises(StageError, match="no joint"):
         CollisionChecker(task.robot, ("no_such_joint",), {}, task.spec.environment)
+
+
+@pytest.mark.parametrize(("gap_m", "contact"), [(0.005, False), (-0.001, True)])
+def test_a_point_pybullet_reports_across_a_gap_is_not_a_contact(gap_m, contact):
+    """Two convex hulls (the shape PyBullet gives a mesh) 5 mm apart: PyBullet still returns a contact point, at a positive distance; in_contact, the rule of the checker and of the execution, counts it only when the hulls overlap."""
+    from dualarm.execute.world import in_contact
+
+    client = pb.connect(pb.DIRECT)
+    try:
+        cube = [[x, y, z] for x in (-0.1, 0.1) for y in (-0.1, 0.1) for z in (-0.1, 0.1)]
+        shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=cube, physicsClientId=client)
+        a = pb.createMultiBody(1.0, shape, basePosition=[0, 0, 0], physicsClientId=client)
+        b = pb.createMultiBody(1.0, shape, basePosition=[0.2 + gap_m, 0, 0], physicsClientId=client)
+        pb.performCollisionDetection(physicsClientId=client)
+        points = pb.getContactPoints(a, b, physicsClientId=client)
+        assert points  # PyBullet reports the pair either way
+        assert (min(p[8] for p in points) > 0) is not contact
+        assert any(in_contact(p) for p in points) is contact
+    finally:
+        pb.disconnect(client)

@@ -214,11 +214,11 @@ def test_report_sections_not_available_commands_and_links(repro):
 
     # parts not run: said so, in their paper's section, and no claim of theirs appears
     for name, paper in ALL_PARTS.items():
-        marked = [line for line in body[paper] if f"(`{name}`): not available" in line]
+        marked = [line for line in body[paper] if f"(`{name}`): " in line]
         if name in CHOSEN:
-            assert not marked and f"(`{name}`): not available" not in report
+            assert not marked and f"(`{name}`): not run" not in report
         else:
-            assert len(marked) == 1 and marked[0].endswith("not available: not run (see --only)"), marked
+            assert len(marked) == 1 and marked[0].endswith(f"(`{name}`): not run (see --only)"), marked
     assert rows["Li & Liang"] == []
     assert not any(r["where"].startswith(("V.B", "V.C", "V.D", "section 5", "eq (11)", "section IV")) for r in rows["MC-Inverse"])
 
@@ -559,10 +559,10 @@ def test_second_reproduction_replaces_the_first(repro, tmp_path):
     report = (out / "report.md").read_text()
     rows = claim_rows(report)
     assert rows["TV-GDD"] == [] and len(rows["MC-Inverse"]) == 5
-    assert "(`ball-game-tvgdd`): not available: not run" in report and "runs/" not in report
+    assert "(`ball-game-tvgdd`): not run (see --only)" in report and "runs/" not in report
 
 
-def _boom(out, progress):
+def _boom(out, robot, progress):
     raise DualarmError("ball_game.toml: the simulator caught fire")
 
 
@@ -578,7 +578,7 @@ def failed_repro(tmp_path_factory):
     return out, result
 
 
-def test_a_failing_part_exits_1_and_is_reported_not_available(failed_repro):
+def test_a_failing_part_exits_1_and_is_reported_failed(failed_repro):
     out, result = failed_repro
     assert result.exit_code == 1, (result.output, result.exception)
     lines = [line for line in result.stdout.splitlines() if line.strip()]
@@ -591,7 +591,7 @@ def test_a_failing_part_exits_1_and_is_reported_not_available(failed_repro):
 
     report = (out / "report.md").read_text()
     body, rows = sections(report), claim_rows(report)
-    assert any(line.endswith("(`ball-game-tvgdd`): not available: ball_game.toml: the simulator caught fire") for line in body["TV-GDD"])
+    assert any(line.endswith("(`ball-game-tvgdd`): failed: ball_game.toml: the simulator caught fire") for line in body["TV-GDD"])
     assert not any(r["command"] == f"`{TVGDD_COMMAND}`" for r in rows["TV-GDD"])  # nothing of TV-GDD's is made up
     assert "figures/ball-game-tvgdd" not in report
     assert [r["claim"] for r in rows["MC-Inverse"]] == [

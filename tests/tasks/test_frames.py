@@ -216,3 +216,47 @@ def test_a_waypoint_scaled_beyond_the_coordinate_range_is_one_line_naming_it():
 
     with pytest.raises(TaskFileError, match=r"^<dict>:waypoints\.far: in the robot base frame its position .* outside \[-100, 100\] m$"):
         task_from_dict(name="far", robot=DUAL_IIWA, control_period_s=0.01, initial="ready", start={}, frame="left.shoulder", scale="arm", waypoints={"far": {"position": [99.0, 0.0, 0.0]}})
+
+
+def test_the_ball_game_runs_on_the_dual_iiwa_through_every_stage_from_its_ready_pose_at_its_own_limits(tmp_path, iiwa_ready):
+    """`dualarm run ball_game --robot dual_iiwa --ik tvgdd` completes through execution; the IK starts at robot.toml's ready (PyBullet FK of both hands), the first stroke lifts both hands by 0.10 m times the arm's scale (from PyBullet's joint axes), and the joints are held to KUKA's data-sheet velocities, not the paper's 6 rad/s."""
+    import math
+
+    from dualarm.record.readback import read_run
+
+    result = runner.invoke(app, ["run", "ball_game", "--robot", "dual_iiwa", "--ik", "tvgdd", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    run = read_run(result.stdout.strip().splitlines()[-1])
+    assert run.manifest["status"] == "complete"
+    assert set(run.stages) == {"path", "ik", "retime", "smooth", "approach", "execute"}
+    ik = run["/ik/sample"]
+    _, scale = _shoulder_and_scale(iiwa_ready, "left")
+    start = {h: iiwa_ready.link_pose(f"{h}_lbr_iiwa_link_7")[:3, 3] for h in ("left", "right")}
+    after_stroke = ik.iloc[int(np.argmin(np.abs(ik["t"].to_numpy() - 3.0)))]
+    for n in iiwa_ready.joint:
+        if f"position.{n}" in ik:
+            pb.resetJointState(iiwa_ready.body, iiwa_ready.joint[n], float(after_stroke[f"position.{n}"]), physicsClientId=iiwa_ready.client)
+    for hand in ("left", "right"):
+        lifted = iiwa_ready.link_pose(f"{hand}_lbr_iiwa_link_7")[:3, 3] - start[hand]
+        assert np.linalg.norm(lifted - [0.0, 0.0, 0.10 * scale]) < 1e-3  # TV-GDD tracks to its feedback error, well under a millimetre
+    first = ik.iloc[0]
+    from dualarm.model.robot import load_robot
+
+    ready = load_robot(DUAL_IIWA).homes["ready"]
+    assert max(abs(first[f"position.{n}"] - v) for n, v in ready.items()) < 1e-9
+    limits = run["/ik/limits"].iloc[0]
+    for k, deg_s in enumerate((85, 85, 100, 75, 130, 135, 135), start=1):  # KUKA's LBR iiwa 14 R820 data sheet
+        assert limits[f"velocity.left_lbr_iiwa_joint_{k}"] == pytest.approx(math.radians(deg_s), abs=1e-4)
+
+
+def test_the_circle_takes_its_transfer_duration_on_another_robot():
+    """circle.toml's [transfer] duration_scale = 1.5: one circle takes 4 s on the humanoid and 6 s on the dual iiwa (the reference's own clock)."""
+    from dualarm.paths import build_reference
+    from dualarm.tasks import load_task
+
+    data = tomllib.loads((TASKS / "circle.toml").read_text())
+    assert data["transfer"]["duration_scale"] == 1.5
+    humanoid, iiwa = (build_reference(load_task(TASKS / "circle.toml", robot=r)) for r in (None, DUAL_IIWA))
+    reps = data["repetitions"]
+    assert humanoid.duration_s == pytest.approx(reps * 4.0)
+    assert iiwa.duration_s == pytest.approx(reps * 6.0)
