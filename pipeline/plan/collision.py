@@ -36,7 +36,7 @@ from dualarm.model.robot import Robot
 def inflated_urdf(text: str, margin_m: float) -> str:
     """The URDF ``text`` with every ``<collision>`` shape grown by ``margin_m`` [m] on every side."""
     root = ET.fromstring(text)
-    for geometry in root.iter("collision"):
+    for link, geometry in ((link, collision) for link in root.iter("link") for collision in link.iter("collision")):
         for shape in geometry.iter():
             if shape.tag in ("capsule", "sphere", "cylinder"):
                 shape.set("radius", repr(float(_attribute(shape, "radius")) + margin_m))
@@ -45,7 +45,10 @@ def inflated_urdf(text: str, margin_m: float) -> str:
             elif shape.tag == "box":
                 shape.set("size", " ".join(repr(float(s) + 2 * margin_m) for s in _attribute(shape, "size").split()))
             elif shape.tag == "mesh":
-                raise StageError("collision checking: mesh collision shapes cannot be inflated by the safety margin (use capsules, spheres, cylinders or boxes)")
+                raise StageError(
+                    f"collision checking: link '{link.get('name')}' collides as a mesh ({shape.get('filename')}), which the planners' safety margin cannot inflate; "
+                    "give its <collision> capsules, spheres, cylinders or boxes (a run's execution checks the meshes themselves)"
+                )
     return ET.tostring(root, encoding="unicode")
 
 

@@ -1,0 +1,406 @@
+"""Shoulder-elbow-wrist (SEW) angle and every inverse-kinematics solution at one SEW angle, for 7R arms that are not S-R-S.
+
+Elias and Wen ("Redundancy parameterization and inverse kinematics of 7-DOF revolute
+manipulators", 2023; arXiv 2307.13122) generalise MC-Inverse's arm angle (its eq 1) to any 7R arm:
+three points S, E, W fixed on the links, and psi the angle about the shoulder-wrist line from a
+reference half-plane to the half-plane holding E. With psi fixed, the remaining 6-DOF problem is
+solved with the canonical subproblems of IK-Geo (Elias and Wen, arXiv 2211.05737), in closed form
+or with a 1-D search.
+
+This module solves the family of the Franka Panda, "3R-R-2R-R" (Elias and Wen's
+``IK_3R_R_2R_R``): joints 1-3 meet at the shoulder S, joints 5 and 6 intersect at C, joint 4 is
+the elbow, joint 7 is offset from C (on an S-R-S arm it passes through C: that arm is MC-Inverse's).
+The points are E, the foot of S on the elbow axis, and W, the foot of C on axis 7. For each angle
+theta of the upper arm S-E from SW in the SEW half-plane, subproblem 3 gives q7 (2 roots),
+subproblem 2 gives (q5, q6) (2 roots), and q4 exists where the elbow axis's component of a vector
+is right (subproblem 1's condition): an error e(theta) per branch. Its zeros are bracketed by a
+sign change between neighbouring samples of a fine grid over the whole [0, pi] and refined by
+bisection, so every crossing root in the range is found, not the one nearest a seed (a root where
+e touches zero without crossing it is missed, as in IK-Geo's ``search_1D``). q4 follows from
+subproblem 1, (q1, q2) from subproblem 2 and q3 from subproblem 1.
+
+All arrays are numpy; axes and points are those of the chain at q = 0 in its base frame (product
+of exponentials).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from dualarm.errors import NotSRSError
+from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.robot import Chain
+from dualarm.model.srs import INTERSECTION_TOLERANCE_M, _axis_lines, _meeting_point
+
+#: Samples of the 1-D search over the upper arm's angle in [0, pi].
+SEARCH_SAMPLES = 2000
+#: Bisection steps refining each bracketed root (2000 samples: pi / 2000 / 2^60 is below rounding).
+BISECTION_STEPS = 60
+#: Newton steps polishing each solution on the 7 equations (pose and SEW angle).
+POLISH_STEPS = 3
+#: Central-difference step of the polishing Jacobian [rad].
+DIFF_RAD = 1e-7
+#: The golden section's ratio, (sqrt 5 - 1) / 2.
+GOLDEN = (5**0.5 - 1) / 2
+#: A candidate reproducing the pose worse than this is dropped [m, rad].
+RESIDUAL_TOLERANCE = 1e-7
+
+
+class NotSewError(NotSRSError):
+    """A chain is not of the family the SEW solver handles (one line naming the chain and the joints)."""
+
+
+# ----------------------------------------------------------------------------- subproblems (numpy)
+
+
+def _rot(k: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """exp([k] theta) for unit axes k (..., 3) and angles theta (...,) -> (..., 3, 3) (Rodrigues)."""
+    k = np.broadcast_to(k, np.shape(theta) + (3,))
+    K = np.zeros(k.shape + (3,))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -k[..., 2], k[..., 1], -k[..., 0]
+    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = k[..., 2], -k[..., 1], k[..., 0]
+    s, c = np.sin(theta)[..., None, None], np.cos(theta)[..., None, None]
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("...i,...i->...", a, b)
+
+
+def sp1(p: np.ndarray, q: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Subproblem 1: the angle about unit axis k turning p towards q (exact when their k-components and norms agree)."""
+    return np.arctan2(_dot(k, np.cross(p, q)), _dot(p, q) - _dot(k, p) * _dot(k, q))
+
+
+def sp2(p1: np.ndarray, p2: np.ndarray, k1: np.ndarray, k2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Subproblem 2: rot(k1, t1) p1 = rot(k2, t2) p2 for non-parallel unit axes; (t1, t2), each (..., 2), NaN where there is no exact solution.
+
+    The common vector c = a k1 + b k2 + g (k1 x k2) keeps p1's component along k1 and p2's along k2,
+    with g^2 from |c| = |p1|.
+    """
+    c12 = _dot(k1, k2)
+    n = np.cross(k1, k2)
+    n2 = _dot(n, n)
+    u, v = _dot(k1, p1), _dot(k2, p2)
+    a = (u - c12 * v) / n2
+    b = (v - c12 * u) / n2
+    g2 = (_dot(p1, p1) - a**2 - b**2 - 2 * a * b * c12) / n2
+    g = np.sqrt(np.where(g2 >= 0, g2, np.nan))
+    t1, t2 = [], []
+    for sign in (1.0, -1.0):
+        c = a[..., None] * k1 + b[..., None] * k2 + (sign * g)[..., None] * n
+        t1.append(sp1(p1, c, k1))
+        t2.append(sp1(p2, c, k2))
+    return np.stack(t1, -1), np.stack(t2, -1)
+
+
+def sp3(p1: np.ndarray, p2: np.ndarray, k: np.ndarray, d: float | np.ndarray) -> np.ndarray:
+    """Subproblem 3: |rot(k, t) p1 - p2| = d; t (..., 2), NaN where there is no exact solution.
+
+    p2 . rot(k, t) p1 = A cos t + B sin t + (k.p1)(k.p2) = (|p1|^2 + |p2|^2 - d^2) / 2.
+    """
+    A = _dot(p2, p1 - _dot(k, p1)[..., None] * k)
+    B = _dot(p2, np.cross(k, p1))
+    rhs = (_dot(p1, p1) + _dot(p2, p2) - d**2) / 2 - _dot(k, p1) * _dot(k, p2)
+    r = np.hypot(A, B)
+    ratio = np.where(np.abs(rhs) <= r, rhs / np.where(r > 0, r, 1.0), np.nan)
+    phi, delta = np.arctan2(B, A), np.arccos(ratio)
+    return np.stack([phi + delta, phi - delta], -1)
+
+
+# ----------------------------------------------------------------------------- the SEW angle
+
+
+@dataclass(frozen=True)
+class SewAngle:
+    """The SEW angle: psi about the shoulder-wrist line e_SW, from the reference direction e_x(e_SW) to the elbow's direction from that line.
+
+    Conventional (``singular`` None): e_x is the reference direction ``reference`` made normal to
+    e_SW; undefined where e_SW is parallel to it (a whole line through S). Stereographic
+    (``singular`` e_t): e_x is normal to (e_SW - e_t) x e_r and to e_SW, undefined only on the
+    half-line from S along e_t, which can be put out of reach (Elias and Wen, section 3).
+
+    Attributes:
+        reference: e_r, unit (3,) in the chain base frame.
+        singular: e_t, unit (3,), or None for the conventional angle.
+    """
+
+    reference: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    singular: tuple[float, float, float] | None = None
+
+    def reference_direction(self, e_sw: np.ndarray) -> np.ndarray:
+        """e_x: the unit direction of psi = 0, normal to the unit shoulder-wrist directions ``e_sw`` (..., 3)."""
+        r = np.asarray(self.reference, dtype=float)
+        if self.singular is None:
+            x = r - _dot(e_sw, r)[..., None] * e_sw
+        else:
+            x = np.cross(np.cross(e_sw - np.asarray(self.singular, dtype=float), r), e_sw)
+        return x / np.linalg.norm(x, axis=-1, keepdims=True)
+
+    def angle(self, S: np.ndarray, E: np.ndarray, W: np.ndarray) -> np.ndarray:
+        """The angle psi [rad] in (-pi, pi] of points S, E, W (..., 3): right-handed about S -> W."""
+        e_sw = (W - S) / np.linalg.norm(W - S, axis=-1, keepdims=True)
+        x = self.reference_direction(e_sw)
+        return np.arctan2(_dot(e_sw, np.cross(x, E - S)), _dot(x, E - S))
+
+    def half_plane_normal(self, S: np.ndarray, W: np.ndarray, psi: float) -> tuple[np.ndarray, np.ndarray]:
+        """(e_SW, n): the unit shoulder-wrist direction and the unit normal n = e_SW x e_CE of the half-plane holding the elbow at angle ``psi``."""
+        e_sw = (W - S) / np.linalg.norm(W - S)
+        e_ce = _rot(e_sw, np.asarray(psi)) @ self.reference_direction(e_sw)
+        return e_sw, np.cross(e_sw, e_ce)
+
+
+# ----------------------------------------------------------------------------- the arm
+
+
+@dataclass(frozen=True)
+class SewChain:
+    """A 3R-R-2R-R arm as products of exponentials at q = 0 in its chain base frame.
+
+    Attributes:
+        chain: the chain.
+        axes: h1..h7, unit (7, 3).
+        shoulder: S, where axes 1-3 meet [m].
+        elbow: E at q = 0, the foot of S on axis 4 [m].
+        crossing: C, where axes 5 and 6 meet [m].
+        wrist: W at q = 0, the foot of C on axis 7 [m].
+        tool: the tip's position from W at q = 0 [m] (3,).
+        tool_rotation: the tip's rotation at q = 0 (3, 3).
+    """
+
+    chain: Chain
+    axes: np.ndarray
+    shoulder: np.ndarray
+    elbow: np.ndarray
+    crossing: np.ndarray
+    wrist: np.ndarray
+    tool: np.ndarray
+    tool_rotation: np.ndarray
+
+    @property
+    def p4(self) -> np.ndarray:
+        """S -> E at q = 0."""
+        return self.elbow - self.shoulder
+
+    @property
+    def p5(self) -> np.ndarray:
+        """E -> C at q = 0."""
+        return self.crossing - self.elbow
+
+    @property
+    def p7(self) -> np.ndarray:
+        """C -> W at q = 0."""
+        return self.wrist - self.crossing
+
+    def rotations(self, Q: np.ndarray) -> np.ndarray:
+        """R_0i for i = 1..7 at configurations Q (N, 7): (N, 7, 3, 3), products of exp([h_j] q_j)."""
+        R = np.empty(Q.shape + (3, 3))
+        acc = np.broadcast_to(np.eye(3), Q.shape[:1] + (3, 3))
+        for i in range(7):
+            acc = acc @ _rot(self.axes[i], Q[:, i])
+            R[:, i] = acc
+        return R
+
+    def points(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """S, E, W at configurations Q (N, 7), each (N, 3) [m]."""
+        R = self.rotations(Q)
+        S = np.broadcast_to(self.shoulder, (len(Q), 3))
+        E = S + R[:, 2] @ self.p4
+        W = E + R[:, 3] @ self.p5 + R[:, 5] @ self.p7
+        return S, E, W
+
+    def poses(self, Q: np.ndarray) -> np.ndarray:
+        """Tip poses (N, 4, 4) at configurations Q (N, 7), by products of exponentials."""
+        R = self.rotations(Q)
+        _, _, W = self.points(Q)
+        T = np.tile(np.eye(4), (len(Q), 1, 1))
+        T[:, :3, :3] = R[:, 6] @ self.tool_rotation
+        T[:, :3, 3] = W + R[:, 6] @ self.tool
+        return T
+
+
+def _foot(point: np.ndarray, line: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    p, d = line
+    return p + d * np.dot(point - p, d)
+
+
+@functools.lru_cache(maxsize=None)
+def sew_chain(chain: Chain) -> SewChain:
+    """The 3R-R-2R-R geometry of ``chain`` (once per chain).
+
+    Raises:
+        NotSewError: one line naming the chain and what it lacks: 7 revolute joints, axes 1-3
+            meeting, axes 5 and 6 meeting; or an S-R-S arm (axis 7 through C), which MC-Inverse
+            solves.
+    """
+    movable = [j for j in chain.joints if j.movable]
+    names = [j.name for j in movable]
+    if len(movable) != 7 or any(j.type == "prismatic" for j in movable):
+        raise NotSewError(f"chain '{chain.name}' has {len(movable)} movable joints; the SEW solver needs 7 revolute joints", chain.name)
+    check = _axis_lines(chain, np.random.default_rng(7).uniform(-0.8, 0.8, 7))  # no coincidence of the zero pose
+    for idx in ((0, 1, 2), (4, 5)):
+        _, miss = _meeting_point([check[i] for i in idx])
+        if miss > INTERSECTION_TOLERANCE_M:
+            raise NotSewError(
+                f"chain '{chain.name}': the axes of {', '.join(names[i] for i in idx)} do not meet in one point (miss {miss:.3g} m); "
+                "the SEW solver handles arms whose joints 1-3 and 5-6 meet (3R-R-2R-R, as the Franka Panda)",
+                chain.name,
+            )
+    lines = _axis_lines(chain, np.zeros(7))
+    S, _ = _meeting_point(lines[0:3])
+    C, _ = _meeting_point(lines[4:6])
+    E, W = _foot(S, lines[3]), _foot(C, lines[6])
+    if np.linalg.norm(W - C) <= INTERSECTION_TOLERANCE_M:
+        raise NotSewError(f"chain '{chain.name}' is S-R-S (the axis of {names[6]} passes through where {names[4]} and {names[5]} meet): use mc-inverse", chain.name)
+    tip = ChainKinematics.of(chain).pose(np.zeros(7))
+    return SewChain(
+        chain=chain,
+        axes=np.array([d for _, d in lines]),
+        shoulder=S,
+        elbow=E,
+        crossing=C,
+        wrist=W,
+        tool=tip[:3, 3] - W,
+        tool_rotation=tip[:3, :3],
+    )
+
+
+# ----------------------------------------------------------------------------- inverse kinematics
+
+
+@dataclass(frozen=True)
+class SewSolutions:
+    """Every solution of one pose at one SEW angle.
+
+    Attributes:
+        q: (M, 7) joint angles [rad], wrapped into (-pi, pi].
+        upper_arm_rad: (M,) the angle of S -> E from S -> W at which each was found [rad].
+        branch: (M,) which of the 8 branches (q7 root, (q5, q6) root, (q1, q2) root) it is, 0-7.
+        residual: (M,) the largest error of the pose (position [m], rotation: the vector part of
+            R_goal^T R) and the SEW angle [rad] each reproduces, by products of exponentials.
+    """
+
+    q: np.ndarray
+    upper_arm_rad: np.ndarray
+    branch: np.ndarray
+    residual: np.ndarray
+
+
+def _equations(arm: SewChain, sew: SewAngle, T: np.ndarray, psi: float, Q: np.ndarray) -> np.ndarray:
+    """What a solution must zero, (N, 7): the position error [m], the rotation error (the vector part of R_goal^T R) and the SEW angle's error [rad]."""
+    got = arm.poses(Q)
+    D = np.einsum("ji,njk->nik", T[:3, :3], got[:, :3, :3])
+    rotation = 0.5 * np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0], D[:, 1, 0] - D[:, 0, 1]], -1)
+    angle = np.angle(np.exp(1j * (sew.angle(*arm.points(Q)) - psi)))
+    return np.concatenate([got[:, :3, 3] - T[:3, 3], rotation, angle[:, None]], axis=1)
+
+
+def solve(arm: SewChain, T: np.ndarray, psi: float, sew: SewAngle = SewAngle(), samples: int = SEARCH_SAMPLES) -> SewSolutions:
+    """Every solution of the hand pose ``T`` (4, 4, chain base frame) at SEW angle ``psi`` [rad] (module docstring), limits not applied."""
+    R07 = T[:3, :3] @ arm.tool_rotation.T
+    W = T[:3, 3] - R07 @ arm.tool
+    S = arm.shoulder
+    p17 = W - S
+    e_sw, n = sew.half_plane_normal(S, W, psi)
+    h = arm.axes
+    P4, P5, P7 = arm.p4, arm.p5, arm.p7
+
+    def partial(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For upper-arm angles theta (N,): the error e (N, 4) of the 4 (q7, (q5, q6)) branches, their q5, q6, q7 (N, 4, 3) and S -> E (N, 3)."""
+        p14 = (_rot(n, theta) @ e_sw) * np.linalg.norm(P4)
+        d = (p17 - p14) @ R07  # R07^T (p17 - p14)
+        t7 = sp3(P7, d, -h[6], float(np.linalg.norm(P5)))  # |R67^T P7 - d| = |P5|
+        errors, q567 = [], []
+        for i7 in range(2):
+            q7 = t7[:, i7]
+            R67 = _rot(h[6], q7)
+            t5, t6 = sp2(P5, np.einsum("nij,nj->ni", R67, d) - P7, -h[4], h[5])
+            for i56 in range(2):
+                q5, q6 = t5[:, i56], t6[:, i56]
+                R47 = _rot(h[4], q5) @ _rot(h[5], q6) @ R67
+                v = np.einsum("nij,nj->ni", R47, p14 @ R07)
+                errors.append(h[3] @ P4 - v @ h[3])
+                q567.append(np.stack([q5, q6, q7], -1))
+        return np.stack(errors, -1), np.stack(q567, 1), p14
+
+    def on_branch(theta: np.ndarray, branch: np.ndarray) -> np.ndarray:
+        return partial(theta)[0][np.arange(len(theta)), branch]
+
+    grid = np.linspace(0.0, np.pi, samples)
+    finite = np.isfinite(partial(grid)[0])
+    # where a branch's domain ends between two samples, the end is found and sampled too: a root
+    # lying between the end and the first sample past it would otherwise have no bracket
+    k, b = np.nonzero(finite[:-1] != finite[1:])
+    lo, hi, lo_inside = grid[k], grid[k + 1], finite[k, b]
+    for _ in range(BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        with_lo = np.isfinite(on_branch(mid, b)) == lo_inside
+        lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, hi, mid)
+    grid = np.unique(np.concatenate([grid, np.where(lo_inside, lo, hi)]))
+    e = partial(grid)[0]
+    # two roots closer than the samples leave no sign change: where a branch turns back towards
+    # zero between samples of one sign, the turning point is found (golden section) and sampled too
+    before, here, after = e[:-2], e[1:-1], e[2:]
+    k, b = np.nonzero(
+        np.isfinite(before)
+        & np.isfinite(here)
+        & np.isfinite(after)
+        & (np.sign(before) == np.sign(here))
+        & (np.sign(here) == np.sign(after))
+        & (np.abs(here) <= np.minimum(np.abs(before), np.abs(after)))
+    )
+    lo, hi, toward = grid[k], grid[k + 2], -np.sign(e[k + 1, b])
+    for _ in range(BISECTION_STEPS):
+        m1, m2 = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
+        f1, f2 = toward * on_branch(m1, b), toward * on_branch(m2, b)
+        higher = np.nan_to_num(f2, nan=-np.inf) >= np.nan_to_num(f1, nan=-np.inf)
+        lo, hi = np.where(higher, m1, lo), np.where(higher, hi, m2)
+    turning = 0.5 * (lo + hi)
+    crossed = toward * on_branch(turning, b) > 0
+    if crossed.any():
+        grid = np.unique(np.concatenate([grid, turning[crossed]]))
+        e = partial(grid)[0]
+    a, c = e[:-1], e[1:]
+    k, b = np.nonzero(np.isfinite(a) & np.isfinite(c) & ((a == 0) | (np.sign(a) != np.sign(c))))
+    lo, hi, e_lo = grid[k], grid[k + 1], a[k, b]
+    for _ in range(BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        e_mid = on_branch(mid, b)
+        with_lo = np.isfinite(e_mid) & (np.sign(e_mid) == np.sign(e_lo))
+        with_hi = np.isfinite(e_mid) & ~with_lo
+        lo, e_lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, e_mid, e_lo), np.where(with_hi, mid, hi)
+    roots = list(zip(0.5 * (lo + hi), b))
+
+    qs, thetas, branches = [], [], []
+    for theta, branch in roots:
+        _, q567, p14 = partial(np.array([theta]))
+        q5, q6, q7 = q567[0, branch]
+        R47 = _rot(h[4], q5) @ _rot(h[5], q6) @ _rot(h[6], q7)
+        q4 = sp1(P4, R47 @ (R07.T @ p14[0]), -h[3])
+        R03 = R07 @ R47.T @ _rot(h[3], q4).T
+        t2, t1 = sp2(h[2], R03 @ h[2], h[1], -h[0])
+        for i12 in range(2):
+            q1, q2 = t1[i12], t2[i12]
+            if not (np.isfinite(q1) and np.isfinite(q2)):
+                continue
+            R23 = _rot(h[1], q2).T @ _rot(h[0], q1).T @ R03
+            q3 = sp1(h[1], R23 @ h[1], h[2])
+            qs.append([q1, q2, q3, q4, q5, q6, q7])
+            thetas.append(theta)
+            branches.append(2 * int(branch) + i12)
+    Q = np.array(qs, dtype=float).reshape(-1, 7)
+    if len(Q) == 0:
+        return SewSolutions(Q, np.zeros(0), np.zeros(0, dtype=int), np.zeros(0))
+    for _ in range(POLISH_STEPS):  # roots near a branch's end or a double root are found to ~1e-8 rad only
+        F = _equations(arm, sew, T, psi, Q)
+        J = np.stack([(_equations(arm, sew, T, psi, Q + DIFF_RAD * np.eye(7)[j]) - _equations(arm, sew, T, psi, Q - DIFF_RAD * np.eye(7)[j])) / (2 * DIFF_RAD) for j in range(7)], -1)
+        step = np.stack([np.linalg.lstsq(Jn, Fn, rcond=None)[0] for Jn, Fn in zip(J, F)])  # least squares: J is singular at a double root
+        better = np.abs(_equations(arm, sew, T, psi, Q - step)).max(axis=1) < np.abs(F).max(axis=1)
+        Q = np.where(better[:, None], Q - step, Q)
+    Q = np.angle(np.exp(1j * Q))  # into (-pi, pi]
+    residual = np.abs(_equations(arm, sew, T, psi, Q)).max(axis=1)
+    keep = residual <= RESIDUAL_TOLERANCE
+    return SewSolutions(Q[keep], np.array(thetas)[keep], np.array(branches)[keep], residual[keep])
