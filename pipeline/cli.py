@@ -702,6 +702,22 @@ def _robot(robot_dir: Optional[Path], urdf: Optional[Path], base: Optional[str],
     return robot_from_urdf(urdf, base, tip)
 
 
+def _arm_chain(robot_dir: Optional[Path], arm: Optional[str], urdf: Optional[Path], base: Optional[str], tip: Optional[str]):
+    """(robot, arm chain) of ``ROBOT_DIR --arm SIDE`` or of ``--urdf PATH --base LINK --tip LINK``."""
+    robot = _robot(robot_dir, urdf, base, tip)
+    if urdf is not None:
+        return robot, robot.chain("chain")
+    if arm not in ("left", "right"):
+        raise DualarmError("give --arm left or --arm right with ROBOT_DIR")
+    return robot, robot.hand_chain(arm)
+
+
+def _pose(pose: tuple[float, ...]) -> None:
+    """Refuse a --pose value outside the ranges task files allow."""
+    for name, value, bound in zip(("X", "Y", "Z", "ROLL", "PITCH", "YAW"), pose, (MAX_POSITION_M,) * 3 + (MAX_ANGLE_RAD,) * 3):
+        _within(value, f"--pose {name}", -bound, bound)
+
+
 @ik_app.command("srs")
 @user_errors
 def ik_srs(
@@ -723,8 +739,7 @@ def ik_srs(
 
     from dualarm.ik.mc_inverse import PoseFrame, candidate_table
 
-    for name, value, bound in zip(("X", "Y", "Z", "ROLL", "PITCH", "YAW"), pose, (MAX_POSITION_M,) * 3 + (MAX_ANGLE_RAD,) * 3):
-        _within(value, f"--pose {name}", -bound, bound)
+    _pose(pose)
     if frame not in ("robot", "chain"):
         raise DualarmError(f"--frame '{excerpt(frame)}': give robot or chain")
     if sweep:
@@ -737,13 +752,7 @@ def ik_srs(
         _within(arm_angle, "--arm-angle", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
     for value in vertical:
         _within(value, "--vertical", -MAX_POSITION_M, MAX_POSITION_M)
-    robot = _robot(robot_dir, urdf, base, tip)
-    if urdf is not None:
-        chain = robot.chain("chain")
-    elif arm not in ("left", "right"):
-        raise DualarmError("give --arm left or --arm right with ROBOT_DIR")
-    else:
-        chain = robot.hand_chain(arm)
+    robot, chain = _arm_chain(robot_dir, arm, urdf, base, tip)
     if not np.linalg.norm(vertical) > 0:
         raise DualarmError("--vertical must not be zero")
     where = PoseFrame.robot_base(robot, chain) if frame == "robot" else PoseFrame.chain_base(chain)
@@ -763,6 +772,73 @@ def ik_srs(
         table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}", f"{c['arm_angle_rad']:.4f}")
     out.print(table)
     out.print(f"joints: {', '.join(chain.joint_names)}; {sum(c['valid'] for c in candidates)} of 8 valid", markup=False)
+
+
+@ik_app.command("sew")
+@user_errors
+def ik_sew(
+    pose: Annotated[tuple[float, float, float, float, float, float], typer.Option(help="Hand pose: X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z, as in task files), in the frame of --frame.")],
+    sew_angle: Annotated[float, typer.Option(help="SEW angle psi [rad]: the elbow's turn about the shoulder-wrist line from the reference half-plane.")],
+    robot_dir: Annotated[Optional[Path], typer.Argument(help="Robot directory holding robot.toml (with --arm).")] = None,
+    arm: Annotated[Optional[str], typer.Option(help="Which arm of ROBOT_DIR: left or right.")] = None,
+    urdf: Annotated[Optional[Path], typer.Option(help="A bare URDF instead (needs --base and --tip).")] = None,
+    base: Annotated[Optional[str], typer.Option(help="Base link of the arm chain (with --urdf).")] = None,
+    tip: Annotated[Optional[str], typer.Option(help="Tip link of the arm chain (with --urdf).")] = None,
+    reference: Annotated[tuple[float, float, float], typer.Option(help="Reference direction e_r of psi = 0, in the chain base frame.")] = (0.0, 0.0, 1.0),
+    singular: Annotated[
+        tuple[float, float, float], typer.Option(help="Stereographic SEW angle: the direction e_t of its singular half-line from the shoulder, in the chain base frame (keep it out of reach).")
+    ] = (0.0, 0.0, -1.0),
+    conventional: Annotated[bool, typer.Option("--conventional", help="The conventional SEW angle (singular along the whole line through the shoulder along e_r) instead.")] = False,
+    frame: Annotated[str, typer.Option(help="Frame of --pose: robot (the URDF's root link, as task files) or chain (the arm chain's base).")] = "robot",
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON: {chain, frame, pose, sew_angle, reference, singular, candidates}.")] = False,
+) -> None:
+    """Every solution of one hand pose at one SEW angle for a 7R arm that is not S-R-S (the Panda's family: joints 1-3 and 5-6 meet), with validity and the error of each solution's forward kinematics (Elias and Wen; the analogue of ik srs).
+
+    Exits 2 with one line for an arm of another family, or when no solution exists at that SEW angle (the pose out of reach, or the elbow unable to lie in that half-plane).
+    """
+    import json
+
+    from dualarm.errors import UnreachablePoseError
+    from dualarm.ik.mc_inverse import PoseFrame
+    from dualarm.ik.sew import SewAngle, candidate_table
+
+    _pose(pose)
+    _within(sew_angle, "--sew-angle", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
+    if frame not in ("robot", "chain"):
+        raise DualarmError(f"--frame '{excerpt(frame)}': give robot or chain")
+    directions = {"--reference": np.asarray(reference, dtype=float), "--singular": np.asarray(singular, dtype=float)}
+    for option, direction in directions.items():
+        if not (np.all(np.isfinite(direction)) and np.linalg.norm(direction) > 0):
+            raise DualarmError(f"{option} must be a finite non-zero direction")
+    e_r, e_t = (v / np.linalg.norm(v) for v in directions.values())
+    if not conventional and np.linalg.norm(np.cross(e_r, e_t)) < 1e-9 and e_r @ e_t > 0:
+        raise DualarmError("--singular must not point along --reference (the stereographic angle needs e_t != e_r)")
+    robot, chain = _arm_chain(robot_dir, arm, urdf, base, tip)
+    where = PoseFrame.robot_base(robot, chain) if frame == "robot" else PoseFrame.chain_base(chain)
+    sew = SewAngle(reference=(float(e_r[0]), float(e_r[1]), float(e_r[2])), singular=None if conventional else (float(e_t[0]), float(e_t[1]), float(e_t[2])))
+    candidates = candidate_table(robot, chain, where.to_chain(pose), sew_angle, sew)
+    if not candidates:
+        raise UnreachablePoseError(f"no solution at psi = {sew_angle:g} rad: the pose is out of reach, or this SEW angle puts the elbow where the arm cannot reach it")
+    if as_json:
+        data = {
+            "chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)},
+            "frame": where.record(),
+            "pose": list(pose),
+            "sew_angle": sew_angle,
+            "reference": list(sew.reference),
+            "singular": list(sew.singular) if sew.singular is not None else None,
+            "candidates": candidates,
+        }
+        typer.echo(json.dumps(data, indent=2))
+        return
+    kind = "conventional" if conventional else "stereographic"
+    table = Table(title=f"SEW IK, {chain.base} -> {chain.tip}, pose in the {frame} frame ({where.link}), {kind} psi = {sew_angle:g} rad", title_justify="left")
+    for column in ("#", *[f"θ{i}" for i in range(1, 8)], "validity", "pos. err [m]", "rot. err [rad]", "ψ of q [rad]"):
+        table.add_column(column, justify="left" if column == "validity" else "right", no_wrap=True)
+    for i, c in enumerate(candidates):
+        table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"].split(" at ")[0], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}", f"{c['sew_angle_rad']:.4f}")
+    out.print(table)
+    out.print(f"joints: {', '.join(chain.joint_names)}; {len(candidates)} solutions, {sum(c['valid'] for c in candidates)} within the joint limits", markup=False)
 
 
 def _ik_srs_sweep(chain, pose: tuple[float, ...], vertical: tuple[float, float, float], frame, step_rad: float, as_json: bool) -> None:

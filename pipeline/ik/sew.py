@@ -32,7 +32,7 @@ import numpy as np
 
 from dualarm.errors import NotSRSError
 from dualarm.model.kinematics import ChainKinematics
-from dualarm.model.robot import Chain
+from dualarm.model.robot import Chain, Robot
 from dualarm.model.srs import INTERSECTION_TOLERANCE_M, _axis_lines, _meeting_point
 
 #: Samples of the 1-D search over the upper arm's angle in [0, pi].
@@ -404,3 +404,43 @@ def solve(arm: SewChain, T: np.ndarray, psi: float, sew: SewAngle = SewAngle(), 
     residual = np.abs(_equations(arm, sew, T, psi, Q)).max(axis=1)
     keep = residual <= RESIDUAL_TOLERANCE
     return SewSolutions(Q[keep], np.array(thetas)[keep], np.array(branches)[keep], residual[keep])
+
+
+def into_limits(Q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Each angle of Q (M, 7) moved by a multiple of 2 pi into [lower, upper] where one lands there (limits that reach past +-pi)."""
+    shifted = Q + 2 * np.pi * np.ceil((lower - Q) / (2 * np.pi))  # the smallest equivalent angle >= lower
+    return np.where(shifted <= upper, shifted, Q)
+
+
+def candidate_table(robot: Robot, chain: Chain, T: np.ndarray, psi: float, sew: SewAngle) -> list[dict]:
+    """``dualarm ik sew``'s rows: every solution of the pose ``T`` (chain base frame) at SEW angle ``psi``, each with ``q`` [rad] (moved into the joint limits where an equivalent angle is), ``valid``, ``reason`` ("valid" or the first joint outside its limits), the position [m] and orientation [rad] errors of the chain's forward kinematics, its SEW angle [rad], the upper arm's angle from S -> W [rad] and its branch.
+
+    Raises:
+        NotSewError: the chain is not of the family solved here (one line).
+    """
+    from dualarm.ik.orientation import orientation_errors
+
+    arm = sew_chain(chain)
+    found = solve(arm, T, psi, sew)
+    lower, upper = robot.lower_upper(chain.joint_names)
+    Q = into_limits(found.q, lower, upper)
+    got = ChainKinematics.of(chain).poses(Q) if len(Q) else np.zeros((0, 4, 4))
+    angles = sew.angle(*arm.points(Q)) if len(Q) else np.zeros(0)
+    rotation = orientation_errors(T[:3, :3], got[:, :3, :3]) if len(Q) else np.zeros(0)
+    rows = []
+    for i, q in enumerate(Q):
+        outside = [j for j in range(7) if not lower[j] <= q[j] <= upper[j]]
+        reason = "valid" if not outside else f"outside limits: {chain.joint_names[outside[0]]} at {q[outside[0]]:.4f} [{lower[outside[0]]:.4f}, {upper[outside[0]]:.4f}]"
+        rows.append(
+            {
+                "q": q.tolist(),
+                "valid": not outside,
+                "reason": reason,
+                "position_error_m": float(np.linalg.norm(got[i, :3, 3] - T[:3, 3])),
+                "orientation_error_rad": float(rotation[i]),
+                "sew_angle_rad": float(angles[i]),
+                "upper_arm_rad": float(found.upper_arm_rad[i]),
+                "branch": int(found.branch[i]),
+            }
+        )
+    return rows

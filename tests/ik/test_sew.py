@@ -150,3 +150,48 @@ def test_refusals_name_the_chain_and_why():
     panda = load_robot(PANDA)
     with pytest.raises(NotSRSError, match="has 6 movable joints; the SEW solver needs 7 revolute joints"):
         sew_chain(panda.chain_between("panda_link1", panda.hand_chain("right").tip))
+
+
+def test_ik_sew_command_prints_every_solution_as_json(panda):
+    """`dualarm ik sew panda --arm right --pose ... --sew-angle PSI --json` at the pose and SEW angle of a configuration inside the limits: that configuration is among the candidates and marked valid, every candidate's reported FK errors are below 1e-9, and valid means inside robot.toml's limits."""
+    import json
+
+    from scipy.spatial.transform import Rotation
+    from typer.testing import CliRunner
+
+    from dualarm.cli import app
+
+    robot, chain, arm, Q = panda
+    q = Q[0]
+    T = ChainKinematics.of(chain).pose(q)  # the chain's base is the Panda's root link: robot frame = chain frame
+    pose = [*T[:3, 3], *Rotation.from_matrix(T[:3, :3]).as_euler("xyz")]
+    psi = _psi(arm, STEREO, q)
+    result = CliRunner().invoke(app, ["ik", "sew", "panda", "--arm", "right", "--pose", *(repr(float(v)) for v in pose), "--sew-angle", repr(psi), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["singular"] == [0.0, 0.0, -1.0] and data["reference"] == [0.0, 0.0, 1.0]
+    candidates = data["candidates"]
+    mine = [c for c in candidates if _wrapped(np.array(c["q"]) - q).max() < 1e-6]
+    assert len(mine) == 1 and mine[0]["valid"] and mine[0]["reason"] == "valid"
+    assert max(c["position_error_m"] for c in candidates) < 1e-9 and max(c["orientation_error_rad"] for c in candidates) < 1e-9
+    lower, upper = robot.lower_upper(chain.joint_names)
+    for c in candidates:
+        inside = bool(np.all((lower <= c["q"]) & (np.array(c["q"]) <= upper)))
+        assert c["valid"] is inside
+
+
+def test_ik_sew_command_refuses_in_one_line():
+    """An S-R-S arm, and a pose out of reach, exit 2 with one line and no traceback."""
+    from typer.testing import CliRunner
+
+    from dualarm.cli import app
+
+    runner = CliRunner()
+    for args, needle in (
+        (["ik", "sew", "humanoid", "--arm", "left", "--pose", "0.3", "0.27", "1.0", "0", "0", "0", "--sew-angle", "0.5"], "is S-R-S"),
+        (["ik", "sew", "panda", "--arm", "right", "--pose", "2", "0", "0.5", "3.1416", "0", "0", "--sew-angle", "0.5"], "no solution at psi = 0.5 rad"),
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, result.output
+        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1 and needle in lines[0] and "Traceback" not in result.output
