@@ -214,7 +214,7 @@ def run(
             help="Comma-separated stages to run: path, ik or plan, retime, smooth, approach (from the task's initial configuration to the motion's start), execute (default: all of them when --ik or --planner is given, else path)."
         ),
     ] = None,
-    ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd, pinv, mc-inverse, trac-ik, pybullet, dls-svd or ikfast-style.")] = None,
+    ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd, pinv, mc-inverse, sew, trac-ik, pybullet, dls-svd or ikfast-style.")] = None,
     scheme: Annotated[str, typer.Option(help="TV-GDD scheme: mvn (minimum velocity norm), rmp (repetitive motion) or mke (minimum kinetic energy).")] = "mvn",
     qp_backend: Annotated[str, typer.Option(help="TV-GDD QP solver: casadi (DAQP through CasADi conic) or lvi (the paper's projection solver).")] = "casadi",
     lvi_tolerance: Annotated[float, typer.Option(help="Stop of the lvi backend on ||eps(u)||_2 (the paper's 1e-5; its velocity error can be ~35x this, see docs).")] = 1e-5,

@@ -48,6 +48,8 @@ class Method:
         settings_class: the attribute of ``module`` naming its settings class.
         defaults: the attribute of ``module`` giving its settings for a task,
             ``(task, **overrides) -> settings``; None when a task has no table for them.
+        needs_sew: it works only on 7R arms of the family :mod:`dualarm.ik.sew` solves (joints
+            1-3 and 5-6 meet, joint 7 offset: the Franka Panda's).
     """
 
     name: str
@@ -59,6 +61,7 @@ class Method:
     solver: str
     settings_class: str
     defaults: str | None = None
+    needs_sew: bool = False
 
     def _get(self, attribute: str) -> Any:
         return getattr(importlib.import_module(self.module), attribute)
@@ -116,6 +119,18 @@ METHODS: Mapping[str, Method] = MappingProxyType(
                 "ArmAngle",
                 "settings_for",
             ),
+            Method(
+                "sew",
+                "ik",
+                "SEW angle (Elias, Wen): every solution at the SEW angle by a 1-D search, the one continuing the path kept; 7R arms of the Panda's family",
+                False,
+                True,
+                "dualarm.ik.sew_path",
+                "solve_sew",
+                "ArmAngle",
+                "settings_for",
+                needs_sew=True,
+            ),
             Method("trac-ik", "ik", "TRAC-IK (pytracik) pose by pose, seeded with the previous answer", False, True, _POINTWISE, "solve_trac_ik", "TracIkSettings"),
             Method("pybullet", "ik", "pybullet.calculateInverseKinematics pose by pose", False, True, _POINTWISE, "solve_pybullet", "PyBulletIkSettings"),
             Method("dls-svd", "ik", "damped least squares through the SVD, pose by pose (Li, Liang, eqs 12-20)", False, True, _POINTWISE, "solve_dls_svd", "DlsSettings"),
@@ -159,25 +174,45 @@ def not_srs(robot: "Robot", hands: Sequence[str]) -> dict[str, NotSRSError]:
     return reasons
 
 
+def not_sew(robot: "Robot", hands: Sequence[str]) -> dict[str, NotSRSError]:
+    """The arms of ``hands`` that are not of the family :mod:`dualarm.ik.sew` solves: hand -> why not."""
+    from dualarm.ik.sew import sew_chain
+
+    reasons = {}
+    for hand in hands:
+        try:
+            sew_chain(robot.hand_chain(hand))
+        except NotSRSError as exc:
+            reasons[hand] = exc
+    return reasons
+
+
 def suited_methods(robot: "Robot", hands: Sequence[str], kind: Literal["ik", "planner"] = "ik") -> tuple[str, ...]:
-    """The methods of ``kind`` that run on ``robot``'s arms of ``hands``: all of them when every arm is S-R-S, else those that do not need S-R-S."""
+    """The methods of ``kind`` that run on ``robot``'s arms of ``hands``: those whose needs (S-R-S arms, the SEW solver's family) every arm meets."""
     names = IK_METHODS if kind == "ik" else PLANNERS
     srs = not not_srs(robot, hands)
-    return tuple(n for n in names if srs or not METHODS[n].needs_srs)
+    sew = not not_sew(robot, hands)
+    return tuple(n for n in names if (srs or not METHODS[n].needs_srs) and (sew or not METHODS[n].needs_sew))
 
 
 def refuse_unsuited(m: Method, robot: "Robot", hands: Sequence[str]) -> None:
-    """Refuse method ``m`` when it needs S-R-S arms (``needs_srs``) and an arm of ``hands`` is not one.
+    """Refuse method ``m`` when it needs S-R-S arms (``needs_srs``) and an arm of ``hands`` is not one, or the SEW solver's family (``needs_sew``) and an arm is not of it.
 
     Raises:
         NotSRSError: one line naming the method, the robot, the chain and the joints whose axes
             miss, and the methods that do run on the robot.
     """
+    if m.needs_sew:
+        sew_reasons = not_sew(robot, hands)
+        if sew_reasons:
+            hand, reason = next(iter(sew_reasons.items()))
+            usable = ", ".join(suited_methods(robot, hands, m.kind))
+            raise NotSRSError(f"{m.name} does not run on the {hand} arm of robot '{excerpt(robot.name, 40)}': {reason}; methods that run on it: {usable}", chain=robot.hand_chain(hand).name)
     if not m.needs_srs:
         return
     reasons = not_srs(robot, hands)
     if reasons:
         hand, reason = next(iter(reasons.items()))
         chain = robot.hand_chain(hand).name
-        usable = ", ".join(n for n, other in METHODS.items() if other.kind == m.kind and not other.needs_srs)
+        usable = ", ".join(suited_methods(robot, hands, m.kind))
         raise NotSRSError(f"{m.name} needs S-R-S arms, and the {hand} arm of robot '{excerpt(robot.name, 40)}' is not: {reason}; methods that run on it: {usable}", chain=chain)

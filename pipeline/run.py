@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from dualarm.errors import DualarmError, StageError
 from dualarm.ik.joint_path import JointPath
-from dualarm.methods import IK_METHODS, PLANNERS
+from dualarm.methods import IK_METHODS, PLANNERS, refuse_unsuited
 from dualarm.methods import method as registered
 from dualarm.paths import CartesianReference
 from dualarm.record.run_dir import RunDirectory, package_versions, sha256_file
@@ -158,6 +158,8 @@ def build_stages(
     m = registered(method) if method is not None else None
     chosen = resolve_stages(stages, m.name if m and m.kind == "ik" else None, m.name if m and m.kind == "planner" else None)
     if m is not None:
+        if m.kind == "ik":
+            refuse_unsuited(m, task.robot, task.spec.hands)  # the robot first: its settings may not apply to it either
         settings = m.settings_for(task) if settings is None else settings
         if not isinstance(settings, m.settings_type):
             raise DualarmError(f"{m.name} takes {m.settings_type.__name__} settings, not {type(settings).__name__}")

@@ -43,11 +43,12 @@ def test_import_is_light():
 def test_registry_matches_the_cli():
     from dualarm.methods import IK_METHODS, PLANNERS
 
-    assert IK_METHODS == ("tvgdd", "pinv", "mc-inverse", "trac-ik", "pybullet", "dls-svd", "ikfast-style")
+    assert IK_METHODS == ("tvgdd", "pinv", "mc-inverse", "sew", "trac-ik", "pybullet", "dls-svd", "ikfast-style")
     assert PLANNERS == ("mcikrrt", "ompl-rrtconnect")
     for m in dualarm.METHODS.values():
         assert callable(m.solve) and isinstance(m.settings_for(), m.settings_type)
     assert {n for n, m in dualarm.METHODS.items() if m.needs_srs} == {"mc-inverse", "ikfast-style"}
+    assert {n for n, m in dualarm.METHODS.items() if m.needs_sew} == {"sew"}
     assert {n for n, m in dualarm.METHODS.items() if not m.orientation} == {"tvgdd", "pinv"}
 
 

@@ -45,8 +45,12 @@ POLISH_STEPS = 3
 DIFF_RAD = 1e-7
 #: The golden section's ratio, (sqrt 5 - 1) / 2.
 GOLDEN = (5**0.5 - 1) / 2
-#: A candidate reproducing the pose worse than this is dropped [m, rad].
-RESIDUAL_TOLERANCE = 1e-7
+#: Goals searched at once (memory: samples x this x a few 3x3 matrices).
+CHUNK_GOALS = 64
+#: A turning point of the search's error, or the end of a branch's domain, this close to zero is a root [m].
+TOUCHING_M = 1e-6
+#: A candidate reproducing the pose (position [m], rotation) or the SEW angle [rad] worse than this is dropped.
+RESIDUAL_TOLERANCE = 1e-9
 
 
 class NotSewError(NotSRSError):
@@ -145,12 +149,6 @@ class SewAngle:
         e_sw = (W - S) / np.linalg.norm(W - S, axis=-1, keepdims=True)
         x = self.reference_direction(e_sw)
         return np.arctan2(_dot(e_sw, np.cross(x, E - S)), _dot(x, E - S))
-
-    def half_plane_normal(self, S: np.ndarray, W: np.ndarray, psi: float) -> tuple[np.ndarray, np.ndarray]:
-        """(e_SW, n): the unit shoulder-wrist direction and the unit normal n = e_SW x e_CE of the half-plane holding the elbow at angle ``psi``."""
-        e_sw = (W - S) / np.linalg.norm(W - S)
-        e_ce = _rot(e_sw, np.asarray(psi)) @ self.reference_direction(e_sw)
-        return e_sw, np.cross(e_sw, e_ce)
 
 
 # ----------------------------------------------------------------------------- the arm
@@ -289,121 +287,171 @@ class SewSolutions:
     residual: np.ndarray
 
 
-def _equations(arm: SewChain, sew: SewAngle, T: np.ndarray, psi: float, Q: np.ndarray) -> np.ndarray:
-    """What a solution must zero, (N, 7): the position error [m], the rotation error (the vector part of R_goal^T R) and the SEW angle's error [rad]."""
+def _equations(arm: SewChain, sew: SewAngle, T: np.ndarray, psi: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """What a solution must zero, (M, 7), for goals T (M, 4, 4) and psi (M,): the position error [m], the rotation error (the vector part of R_goal^T R) and the SEW angle's error [rad]."""
     got = arm.poses(Q)
-    D = np.einsum("ji,njk->nik", T[:3, :3], got[:, :3, :3])
+    D = np.einsum("nji,njk->nik", T[:, :3, :3], got[:, :3, :3])
     rotation = 0.5 * np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0], D[:, 1, 0] - D[:, 0, 1]], -1)
     angle = np.angle(np.exp(1j * (sew.angle(*arm.points(Q)) - psi)))
-    return np.concatenate([got[:, :3, 3] - T[:3, 3], rotation, angle[:, None]], axis=1)
+    return np.concatenate([got[:, :3, 3] - T[:, :3, 3], rotation, angle[:, None]], axis=1)
+
+
+def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Matrices (..., 3, 3) times vectors (..., 3)."""
+    return np.einsum("...ij,...j->...i", M, v)
+
+
+class _Search:
+    """The 1-D search's function for N goals at once: the error of subproblem 1's condition for q4 along the upper arm's angle, per (q7, (q5, q6)) branch."""
+
+    def __init__(self, arm: SewChain, sew: SewAngle, T: np.ndarray, psi: np.ndarray):
+        self.arm = arm
+        self.R07 = np.einsum("nij,kj->nik", T[:, :3, :3], arm.tool_rotation)  # R_0T R_T0^T
+        self.p17 = T[:, :3, 3] - _mv(self.R07, arm.tool) - arm.shoulder  # S -> W
+        self.e_sw = self.p17 / np.linalg.norm(self.p17, axis=1, keepdims=True)
+        e_ce = _mv(_rot(self.e_sw, psi), sew.reference_direction(self.e_sw))
+        self.n = np.cross(self.e_sw, e_ce)  # normal of the half-plane holding the elbow
+
+    def __call__(self, pose: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For goals ``pose`` (M,) (indices) at upper-arm angles ``theta`` (M,): e (M, 4), (q5, q6, q7) (M, 4, 3), and S -> E (M, 3)."""
+        arm, h = self.arm, self.arm.axes
+        P4, P5, P7 = arm.p4, arm.p5, arm.p7
+        p14 = _mv(_rot(self.n[pose], theta), self.e_sw[pose]) * np.linalg.norm(P4)
+        R07 = self.R07[pose]
+        d = np.einsum("nji,nj->ni", R07, self.p17[pose] - p14)  # R07^T (p17 - p14)
+        local = np.einsum("nji,nj->ni", R07, p14)  # R07^T p14
+        t7 = sp3(P7, d, -h[6], float(np.linalg.norm(P5)))  # |R67^T P7 - d| = |P5|
+        errors, q567 = [], []
+        for i7 in range(2):
+            R67 = _rot(h[6], t7[:, i7])
+            t5, t6 = sp2(P5, _mv(R67, d) - P7, -h[4], h[5])
+            for i56 in range(2):
+                R47 = _rot(h[4], t5[:, i56]) @ _rot(h[5], t6[:, i56]) @ R67
+                errors.append(h[3] @ P4 - _mv(R47, local) @ h[3])
+                q567.append(np.stack([t5[:, i56], t6[:, i56], t7[:, i7]], -1))
+        return np.stack(errors, -1), np.stack(q567, 1), p14
+
+    def on_branch(self, pose: np.ndarray, theta: np.ndarray, branch: np.ndarray) -> np.ndarray:
+        return self(pose, theta)[0][np.arange(len(theta)), branch]
+
+
+def _brackets(search: _Search, N: int, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(goal, branch, lo, hi) of every bracketed root of e on the grid of ``samples`` angles over [0, pi], with the ends of each branch's domain and its turning points towards zero sampled too (module docstring)."""
+    grid = np.linspace(0.0, np.pi, samples)
+    found: tuple[list[np.ndarray], ...] = ([], [], [], [])  # goals, branches, lows, highs
+
+    def add(goal, branch, lo, hi):
+        for column, value in zip(found, (goal, branch, lo, hi)):
+            column.append(value)
+
+    for first in range(0, N, CHUNK_GOALS):
+        block = np.arange(first, min(N, first + CHUNK_GOALS))
+        pose = np.repeat(block, samples)
+        e = search(pose, np.tile(grid, len(block)))[0].reshape(len(block), samples, 4)
+        finite = np.isfinite(e)
+        # sign changes between neighbours
+        a, c = e[:, :-1], e[:, 1:]
+        g, k, b = np.nonzero(finite[:, :-1] & finite[:, 1:] & ((a == 0) | (np.sign(a) != np.sign(c))))
+        add(block[g], b, grid[k], grid[k + 1])
+        # the end of a branch's domain between two samples: found by bisection; a root between it
+        # and the first sample inside has no sign change on the grid
+        g, k, b = np.nonzero(finite[:, :-1] != finite[:, 1:])
+        lo, hi, lo_inside = grid[k], grid[k + 1], finite[g, k, b]
+        for _ in range(BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            with_lo = np.isfinite(search.on_branch(block[g], mid, b)) == lo_inside
+            lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, hi, mid)
+        edge = np.where(lo_inside, lo, hi)
+        inside = np.where(lo_inside, k, k + 1)
+        e_edge = search.on_branch(block[g], edge, b)
+        crossed = np.isfinite(e_edge) & (np.sign(e_edge) != np.sign(e[g, inside, b]))
+        add(block[g][crossed], b[crossed], np.minimum(edge, grid[inside])[crossed], np.maximum(edge, grid[inside])[crossed])
+        # a root at the end itself (two branches meeting there with e = 0, as at a planar home
+        # pose): e behaves as sqrt near an end, so in doubles it gets only to ~1e-7 of it; kept for the polish
+        at_end = ~crossed & (np.abs(e_edge) <= TOUCHING_M)
+        add(block[g][at_end], b[at_end], edge[at_end], edge[at_end])
+        # two roots closer than the samples: where a branch turns back towards zero between
+        # samples of one sign, its turning point (golden section) splits the pair
+        before, here, after = e[:, :-2], e[:, 1:-1], e[:, 2:]
+        same = (np.sign(before) == np.sign(here)) & (np.sign(here) == np.sign(after))
+        g, k, b = np.nonzero(finite[:, :-2] & finite[:, 1:-1] & finite[:, 2:] & same & (np.abs(here) <= np.minimum(np.abs(before), np.abs(after))))
+        lo, hi, toward = grid[k], grid[k + 2], -np.sign(e[g, k + 1, b])
+        for _ in range(BISECTION_STEPS):
+            m1, m2 = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
+            f1 = np.nan_to_num(toward * search.on_branch(block[g], m1, b), nan=-np.inf)
+            f2 = np.nan_to_num(toward * search.on_branch(block[g], m2, b), nan=-np.inf)
+            higher = f2 >= f1
+            lo, hi = np.where(higher, m1, lo), np.where(higher, hi, m2)
+        turning = 0.5 * (lo + hi)
+        e_turning = toward * search.on_branch(block[g], turning, b)
+        crossed = e_turning > 0
+        add(block[g][crossed], b[crossed], grid[k][crossed], turning[crossed])
+        add(block[g][crossed], b[crossed], turning[crossed], grid[k + 2][crossed])
+        # a double root (e touching zero, as at a planar configuration, where two solutions
+        # coincide) may miss zero by rounding either way: kept, for the polish to settle
+        touching = ~crossed & (np.abs(e_turning) <= TOUCHING_M)
+        add(block[g][touching], b[touching], turning[touching], turning[touching])
+    goal, branch, lo, hi = (np.concatenate(column) for column in found)
+    return goal, branch, lo, hi
+
+
+def solve_many(arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = SewAngle(), samples: int = SEARCH_SAMPLES) -> list[SewSolutions]:
+    """Every solution of each hand pose ``T`` (N, 4, 4, chain base frame) at its SEW angle ``psi`` (N,) [rad] (module docstring), limits not applied; one :class:`SewSolutions` per pose."""
+    T = np.asarray(T, dtype=float).reshape(-1, 4, 4)
+    psi = np.broadcast_to(np.asarray(psi, dtype=float), len(T))
+    h = arm.axes
+    search = _Search(arm, sew, T, psi)
+    goal, branch, lo, hi = _brackets(search, len(T), samples)
+    goal, branch = goal.astype(int), branch.astype(int)
+    e_lo = search.on_branch(goal, lo, branch)
+    for _ in range(BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        e_mid = search.on_branch(goal, mid, branch)
+        with_lo = np.isfinite(e_mid) & (np.sign(e_mid) == np.sign(e_lo))
+        with_hi = np.isfinite(e_mid) & ~with_lo
+        lo, e_lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, e_mid, e_lo), np.where(with_hi, mid, hi)
+    theta = 0.5 * (lo + hi)
+    _, q567, p14 = search(goal, theta)
+    q5, q6, q7 = q567[np.arange(len(theta)), branch].T
+    R07 = search.R07[goal]
+    R47 = _rot(h[4], q5) @ _rot(h[5], q6) @ _rot(h[6], q7)
+    q4 = sp1(arm.p4, _mv(R47, np.einsum("nji,nj->ni", R07, p14)), -h[3])
+    R03 = R07 @ np.swapaxes(R47, 1, 2) @ np.swapaxes(_rot(h[3], q4), 1, 2)
+    t2, t1 = sp2(h[2], _mv(R03, h[2]), h[1], -h[0])
+    rows = []
+    for i12 in range(2):
+        q1, q2 = t1[:, i12], t2[:, i12]
+        R23 = np.swapaxes(_rot(h[1], q2), 1, 2) @ np.swapaxes(_rot(h[0], q1), 1, 2) @ R03
+        q3 = sp1(h[1], _mv(R23, h[1]), h[2])
+        rows.append(np.stack([q1, q2, q3, q4, q5, q6, q7], -1))
+    Q = np.concatenate(rows)
+    goal, theta, branch = np.tile(goal, 2), np.tile(theta, 2), np.concatenate([2 * branch, 2 * branch + 1])
+    ok = np.all(np.isfinite(Q), axis=1)
+    Q, goal, theta, branch = Q[ok], goal[ok], theta[ok], branch[ok]
+    for _ in range(POLISH_STEPS):  # roots near a branch's end or a double root are found to ~1e-8 rad only
+        F = _equations(arm, sew, T[goal], psi[goal], Q)
+        J = np.stack(
+            [(_equations(arm, sew, T[goal], psi[goal], Q + DIFF_RAD * np.eye(7)[j]) - _equations(arm, sew, T[goal], psi[goal], Q - DIFF_RAD * np.eye(7)[j])) / (2 * DIFF_RAD) for j in range(7)], -1
+        )
+        step = np.stack([np.linalg.lstsq(Jn, Fn, rcond=None)[0] for Jn, Fn in zip(J, F)]) if len(Q) else Q  # least squares: J is singular at a double root
+        better = np.abs(_equations(arm, sew, T[goal], psi[goal], Q - step)).max(axis=1) < np.abs(F).max(axis=1)
+        Q = np.where(better[:, None], Q - step, Q)
+    Q = np.angle(np.exp(1j * Q))  # into (-pi, pi]
+    residual = np.abs(_equations(arm, sew, T[goal], psi[goal], Q)).max(axis=1) if len(Q) else np.zeros(0)
+    keep = residual <= RESIDUAL_TOLERANCE
+    out = []
+    for n in range(len(T)):
+        mine = keep & (goal == n)
+        q = Q[mine]
+        unique = np.unique(np.round(q, 9), axis=0, return_index=True)[1] if len(q) else np.zeros(0, dtype=int)  # a root bracketed twice (at a sample) once
+        unique = np.sort(unique)
+        out.append(SewSolutions(q[unique], theta[mine][unique], branch[mine][unique], residual[mine][unique]))
+    return out
 
 
 def solve(arm: SewChain, T: np.ndarray, psi: float, sew: SewAngle = SewAngle(), samples: int = SEARCH_SAMPLES) -> SewSolutions:
     """Every solution of the hand pose ``T`` (4, 4, chain base frame) at SEW angle ``psi`` [rad] (module docstring), limits not applied."""
-    R07 = T[:3, :3] @ arm.tool_rotation.T
-    W = T[:3, 3] - R07 @ arm.tool
-    S = arm.shoulder
-    p17 = W - S
-    e_sw, n = sew.half_plane_normal(S, W, psi)
-    h = arm.axes
-    P4, P5, P7 = arm.p4, arm.p5, arm.p7
-
-    def partial(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For upper-arm angles theta (N,): the error e (N, 4) of the 4 (q7, (q5, q6)) branches, their q5, q6, q7 (N, 4, 3) and S -> E (N, 3)."""
-        p14 = (_rot(n, theta) @ e_sw) * np.linalg.norm(P4)
-        d = (p17 - p14) @ R07  # R07^T (p17 - p14)
-        t7 = sp3(P7, d, -h[6], float(np.linalg.norm(P5)))  # |R67^T P7 - d| = |P5|
-        errors, q567 = [], []
-        for i7 in range(2):
-            q7 = t7[:, i7]
-            R67 = _rot(h[6], q7)
-            t5, t6 = sp2(P5, np.einsum("nij,nj->ni", R67, d) - P7, -h[4], h[5])
-            for i56 in range(2):
-                q5, q6 = t5[:, i56], t6[:, i56]
-                R47 = _rot(h[4], q5) @ _rot(h[5], q6) @ R67
-                v = np.einsum("nij,nj->ni", R47, p14 @ R07)
-                errors.append(h[3] @ P4 - v @ h[3])
-                q567.append(np.stack([q5, q6, q7], -1))
-        return np.stack(errors, -1), np.stack(q567, 1), p14
-
-    def on_branch(theta: np.ndarray, branch: np.ndarray) -> np.ndarray:
-        return partial(theta)[0][np.arange(len(theta)), branch]
-
-    grid = np.linspace(0.0, np.pi, samples)
-    finite = np.isfinite(partial(grid)[0])
-    # where a branch's domain ends between two samples, the end is found and sampled too: a root
-    # lying between the end and the first sample past it would otherwise have no bracket
-    k, b = np.nonzero(finite[:-1] != finite[1:])
-    lo, hi, lo_inside = grid[k], grid[k + 1], finite[k, b]
-    for _ in range(BISECTION_STEPS):
-        mid = 0.5 * (lo + hi)
-        with_lo = np.isfinite(on_branch(mid, b)) == lo_inside
-        lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, hi, mid)
-    grid = np.unique(np.concatenate([grid, np.where(lo_inside, lo, hi)]))
-    e = partial(grid)[0]
-    # two roots closer than the samples leave no sign change: where a branch turns back towards
-    # zero between samples of one sign, the turning point is found (golden section) and sampled too
-    before, here, after = e[:-2], e[1:-1], e[2:]
-    k, b = np.nonzero(
-        np.isfinite(before)
-        & np.isfinite(here)
-        & np.isfinite(after)
-        & (np.sign(before) == np.sign(here))
-        & (np.sign(here) == np.sign(after))
-        & (np.abs(here) <= np.minimum(np.abs(before), np.abs(after)))
-    )
-    lo, hi, toward = grid[k], grid[k + 2], -np.sign(e[k + 1, b])
-    for _ in range(BISECTION_STEPS):
-        m1, m2 = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
-        f1, f2 = toward * on_branch(m1, b), toward * on_branch(m2, b)
-        higher = np.nan_to_num(f2, nan=-np.inf) >= np.nan_to_num(f1, nan=-np.inf)
-        lo, hi = np.where(higher, m1, lo), np.where(higher, hi, m2)
-    turning = 0.5 * (lo + hi)
-    crossed = toward * on_branch(turning, b) > 0
-    if crossed.any():
-        grid = np.unique(np.concatenate([grid, turning[crossed]]))
-        e = partial(grid)[0]
-    a, c = e[:-1], e[1:]
-    k, b = np.nonzero(np.isfinite(a) & np.isfinite(c) & ((a == 0) | (np.sign(a) != np.sign(c))))
-    lo, hi, e_lo = grid[k], grid[k + 1], a[k, b]
-    for _ in range(BISECTION_STEPS):
-        mid = 0.5 * (lo + hi)
-        e_mid = on_branch(mid, b)
-        with_lo = np.isfinite(e_mid) & (np.sign(e_mid) == np.sign(e_lo))
-        with_hi = np.isfinite(e_mid) & ~with_lo
-        lo, e_lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, e_mid, e_lo), np.where(with_hi, mid, hi)
-    roots = list(zip(0.5 * (lo + hi), b))
-
-    qs, thetas, branches = [], [], []
-    for theta, branch in roots:
-        _, q567, p14 = partial(np.array([theta]))
-        q5, q6, q7 = q567[0, branch]
-        R47 = _rot(h[4], q5) @ _rot(h[5], q6) @ _rot(h[6], q7)
-        q4 = sp1(P4, R47 @ (R07.T @ p14[0]), -h[3])
-        R03 = R07 @ R47.T @ _rot(h[3], q4).T
-        t2, t1 = sp2(h[2], R03 @ h[2], h[1], -h[0])
-        for i12 in range(2):
-            q1, q2 = t1[i12], t2[i12]
-            if not (np.isfinite(q1) and np.isfinite(q2)):
-                continue
-            R23 = _rot(h[1], q2).T @ _rot(h[0], q1).T @ R03
-            q3 = sp1(h[1], R23 @ h[1], h[2])
-            qs.append([q1, q2, q3, q4, q5, q6, q7])
-            thetas.append(theta)
-            branches.append(2 * int(branch) + i12)
-    Q = np.array(qs, dtype=float).reshape(-1, 7)
-    if len(Q) == 0:
-        return SewSolutions(Q, np.zeros(0), np.zeros(0, dtype=int), np.zeros(0))
-    for _ in range(POLISH_STEPS):  # roots near a branch's end or a double root are found to ~1e-8 rad only
-        F = _equations(arm, sew, T, psi, Q)
-        J = np.stack([(_equations(arm, sew, T, psi, Q + DIFF_RAD * np.eye(7)[j]) - _equations(arm, sew, T, psi, Q - DIFF_RAD * np.eye(7)[j])) / (2 * DIFF_RAD) for j in range(7)], -1)
-        step = np.stack([np.linalg.lstsq(Jn, Fn, rcond=None)[0] for Jn, Fn in zip(J, F)])  # least squares: J is singular at a double root
-        better = np.abs(_equations(arm, sew, T, psi, Q - step)).max(axis=1) < np.abs(F).max(axis=1)
-        Q = np.where(better[:, None], Q - step, Q)
-    Q = np.angle(np.exp(1j * Q))  # into (-pi, pi]
-    residual = np.abs(_equations(arm, sew, T, psi, Q)).max(axis=1)
-    keep = residual <= RESIDUAL_TOLERANCE
-    return SewSolutions(Q[keep], np.array(thetas)[keep], np.array(branches)[keep], residual[keep])
+    return solve_many(arm, T[None], np.array([psi]), sew, samples)[0]
 
 
 def into_limits(Q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

@@ -48,7 +48,8 @@ def test_suited_methods_are_those_that_do_not_need_srs():
     panda, humanoid = load_robot(PANDA), load_robot(HUMANOID)
     assert suited_methods(panda, ["right"]) == tuple(n for n in IK_METHODS if not METHODS[n].needs_srs)
     assert {"mc-inverse", "ikfast-style"}.isdisjoint(suited_methods(panda, ["right"]))
-    assert suited_methods(humanoid, ["left", "right"]) == IK_METHODS
+    assert "sew" in suited_methods(panda, ["right"])  # the Panda is of the SEW solver's family
+    assert suited_methods(humanoid, ["left", "right"]) == tuple(n for n in IK_METHODS if n != "sew")  # S-R-S arms are MC-Inverse's
 
 
 @pytest.mark.parametrize("method", ["mc-inverse", "ikfast-style"])
@@ -62,7 +63,7 @@ def test_a_method_that_needs_srs_is_refused_naming_method_chain_and_joints(metho
     assert "tvgdd" in message and "mc-inverse" not in message.split("methods that run on it:")[1]
 
 
-@pytest.mark.parametrize("method", ["tvgdd", "pinv", "dls-svd", "trac-ik", "pybullet"])
+@pytest.mark.parametrize("method", ["tvgdd", "pinv", "dls-svd", "trac-ik", "pybullet", "sew"])
 def test_every_method_that_does_not_need_srs_is_built(method):
     stages = build_stages(load_task(TASK), method, stages=("path", "ik"))
     assert [s.name for s in stages] == ["path", "ik"]

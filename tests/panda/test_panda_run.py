@@ -68,7 +68,7 @@ def test_ready_is_inside_the_limits_and_the_datasheet_limits_are_read():
     assert robot.limit_array("jerk", ARM).tolist() == [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0]
 
 
-@pytest.mark.parametrize("method", ["tvgdd", "dls-svd"])
+@pytest.mark.parametrize("method", ["tvgdd", "dls-svd", "sew"])
 def test_every_stage_runs_and_the_hand_follows_the_path(method, original, tmp_path):
     result = record_run(TASK, method, out_dir=tmp_path, command=["test"])
     run = read_run(result.directory)
