@@ -161,30 +161,29 @@ def method(name: str, kind: Literal["ik", "planner"] | None = None, argument: st
     return METHODS[name]
 
 
+def _failing(robot: "Robot", hands: Sequence[str], check: Callable[[Any], object]) -> dict[str, NotSRSError]:
+    """The arms of ``hands`` whose chain ``check`` refuses: hand -> its one-line reason."""
+    reasons = {}
+    for hand in hands:
+        try:
+            check(robot.hand_chain(hand))
+        except NotSRSError as exc:
+            reasons[hand] = exc
+    return reasons
+
+
 def not_srs(robot: "Robot", hands: Sequence[str]) -> dict[str, NotSRSError]:
     """The arms of ``hands`` (``left``/``right``) that are not S-R-S: hand -> why not (the chain and the joints whose axes miss, as :func:`dualarm.model.srs.srs_geometry` says)."""
     from dualarm.model.srs import srs_geometry
 
-    reasons = {}
-    for hand in hands:
-        try:
-            srs_geometry(robot.hand_chain(hand))
-        except NotSRSError as exc:
-            reasons[hand] = exc
-    return reasons
+    return _failing(robot, hands, srs_geometry)
 
 
 def not_sew(robot: "Robot", hands: Sequence[str]) -> dict[str, NotSRSError]:
     """The arms of ``hands`` that are not of the family :mod:`dualarm.ik.sew` solves: hand -> why not."""
     from dualarm.ik.sew import sew_chain
 
-    reasons = {}
-    for hand in hands:
-        try:
-            sew_chain(robot.hand_chain(hand))
-        except NotSRSError as exc:
-            reasons[hand] = exc
-    return reasons
+    return _failing(robot, hands, sew_chain)
 
 
 def suited_methods(robot: "Robot", hands: Sequence[str], kind: Literal["ik", "planner"] = "ik") -> tuple[str, ...]:

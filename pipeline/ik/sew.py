@@ -14,13 +14,16 @@ The points are E, the foot of S on the elbow axis, and W, the foot of C on axis 
 theta of the upper arm S-E from SW in the SEW half-plane, subproblem 3 gives q7 (2 roots),
 subproblem 2 gives (q5, q6) (2 roots), and q4 exists where the elbow axis's component of a vector
 is right (subproblem 1's condition): an error e(theta) per branch. Its zeros are bracketed by a
-sign change between neighbouring samples of a fine grid over the whole [0, pi] and refined by
-bisection, so every crossing root in the range is found, not the one nearest a seed (a root where
-e touches zero without crossing it is missed, as in IK-Geo's ``search_1D``). q4 follows from
-subproblem 1, (q1, q2) from subproblem 2 and q3 from subproblem 1.
+sign change between neighbouring samples of a fine grid over the whole [0, pi] (as IK-Geo's
+``search_1D``), and beyond it: the ends of each branch's domain (where two branches meet and e
+behaves as a square root; a planar pose such as the Panda's ``ready`` has its solutions exactly
+there) and the turning points of e between samples (two roots closer than the samples, or a double
+root) are located and sampled too. Every root is refined by bisection, so every root in the range
+is found, not the one nearest a seed. q4 follows from subproblem 1, (q1, q2) from subproblem 2 and
+q3 from subproblem 1; each solution is then polished by Newton on the 7 equations.
 
-All arrays are numpy; axes and points are those of the chain at q = 0 in its base frame (product
-of exponentials).
+All arrays are numpy, every goal of a path searched at once (:func:`solve_many`); axes and points
+are those of the chain at q = 0 in its base frame (product of exponentials).
 """
 
 from __future__ import annotations

@@ -20,13 +20,14 @@ PANDA = REPO / "robots" / "panda"
 runner = CliRunner()
 
 
-@pytest.fixture(scope="module")
-def compared(tmp_path_factory):
-    return run_consistency(TASK, ["sew", "dls-svd"], tmp_path_factory.mktemp("sew") / "consistency", repetitions=3)
+@pytest.fixture(scope="module", params=[("panda_triangle.toml", 3), ("panda_circle.toml", 2)], ids=["triangle", "circle"])
+def compared(request, tmp_path_factory):
+    name, repetitions = request.param
+    return run_consistency(HERE / name, ["sew", "dls-svd"], tmp_path_factory.mktemp("sew") / "consistency", repetitions=repetitions)
 
 
 def test_sew_repeats_every_repetition_and_dls_svd_does_not(compared):
-    """3 triangles: sew's joints repeat to 1e-9 rad (the issue's bound), DLS-SVD's drift by more than 1e-3 rad; both complete."""
+    """3 triangles, 2 circles: sew's joints repeat to 1e-9 rad (the issue's bound), DLS-SVD's drift by more than 1e-3 rad; both complete."""
     table = compared.table.set_index("method")
     assert table.loc["sew", "status"] == "complete" and table.loc["dls-svd", "status"] == "complete"
     assert table.loc["sew", "rep_joint_deviation_max_rad"] <= 1e-9
@@ -37,10 +38,10 @@ def test_the_sew_angle_is_held_along_the_path_as_pybullet_measures_it(compared):
     """The SEW angle of the recorded joints, with S, E, W carried by PyBullet's link frames of pybullet_data's Panda (E fixed in link 3, W in link 6), equals the initial configuration's at every 10th sample (1e-6: PyBullet's float32)."""
     from dualarm.record.readback import read_run
 
-    task = load_task(TASK)
+    run = read_run(compared.table.set_index("method").loc["sew", "run"])
+    task = load_task(run.manifest["task_file"])
     chain = task.robot.hand_chain("right")
     arm, sew = sew_chain(chain), sew_angle_of(settings_for(task))
-    run = read_run(compared.table.set_index("method").loc["sew", "run"])
     q = run["/ik/sample"][[f"position.{n}" for n in chain.joint_names]].to_numpy()
     client = pb.connect(pb.DIRECT)
     try:
