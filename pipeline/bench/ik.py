@@ -1,8 +1,21 @@
-"""``dualarm bench ik``: position-level IK of one arm, MC-Inverse against iterative solvers.
+"""``dualarm bench ik``: position-level IK of one arm, the analytic solver of its family against iterative solvers.
 
 Measured in one process, on the same random reachable poses of an arm chain: each pose is the
 forward kinematics of a configuration drawn uniformly within the joint limits (fixed seed), so
-every pose is reachable, and its arm angle psi is that configuration's (eq 1 of MC-Inverse).
+every pose is reachable, and its arm angle psi is that configuration's (eq 1 of MC-Inverse; on an
+arm of the SEW solver's family, its stereographic SEW angle, :mod:`dualarm.ik.sew`).
+
+On an S-R-S arm the analytic rows are MC-Inverse's; on an arm of the SEW family they are:
+
+- SEW called singly: :func:`dualarm.ik.sew.solve` per pose, on the first :data:`SEW_SINGLE_POSES`
+  poses only (each call runs the whole search with its per-step overhead).
+- SEW batched: :func:`dualarm.ik.sew.solve_many` over all poses in one call; time per pose.
+- IK-Geo, the peer (the ``ik-geo`` package): with q7 fixed at the original configuration's, the
+  arm's joints 1-6 reversed are IK-Geo's ``spherical_two_intersecting`` robot; one call per pose
+  (the robot built in the call, since its tool depends on q7).
+
+Success for SEW and IK-Geo: the original configuration among the exact solutions to
+:data:`SEW_MATCH_TOLERANCE_RAD` (near a double root a solution is determined only so far).
 
 - MC-Inverse called singly: one Python call of :meth:`McInverse.solve` per pose (all 8
   candidates); time per call.
@@ -33,6 +46,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dualarm.methods import not_sew, not_srs
 from dualarm.model.robot import Robot
 from dualarm.quiet import c_output_silenced
 
@@ -54,6 +68,13 @@ MATCH_TOLERANCE_RAD = 1e-9
 SEED_NOISE_RAD = 0.1
 #: Timed calls of the batched MC-Inverse over all poses (after the warm-up).
 BATCH_REPEATS = 5
+SEW_SINGLE = "SEW, single"
+SEW_BATCHED = "SEW, batched"
+IK_GEO = "IK-Geo (q7 fixed)"
+#: Poses the single-call SEW row measures (the first ones).
+SEW_SINGLE_POSES = 100
+#: Largest joint difference that counts as finding the original configuration, for SEW and IK-Geo [rad].
+SEW_MATCH_TOLERANCE_RAD = 1e-6
 #: Targets of the issue: batched MC-Inverse time per pose [s] and DLS-SVD success rate [1].
 TARGET_BATCHED_S = 5e-6
 TARGET_DLS_SUCCESS = 0.999
@@ -85,12 +106,13 @@ class IkBenchRow:
     note: str = ""
 
 
-def ratios(rows: Sequence[IkBenchRow], reference_name: str = MC_BATCHED) -> dict[str, float]:
+def ratios(rows: Sequence[IkBenchRow], reference_name: str | None = None) -> dict[str, float]:
     """Mean time per pose of every row divided by that of the row ``reference_name``.
 
     Args:
         rows: rows of :func:`bench_ik`.
-        reference_name: the row the others are compared with (default: batched MC-Inverse).
+        reference_name: the row the others are compared with (default: the batched analytic
+            row, :data:`MC_BATCHED` or :data:`SEW_BATCHED`).
 
     Returns:
         Row name -> mean-time ratio [1] (> 1: slower than the reference).
@@ -98,7 +120,8 @@ def ratios(rows: Sequence[IkBenchRow], reference_name: str = MC_BATCHED) -> dict
     Raises:
         KeyError: no row named ``reference_name``.
     """
-    reference = {r.name: r for r in rows}[reference_name].mean_s
+    by_name = {r.name: r for r in rows}
+    reference = by_name[reference_name or (MC_BATCHED if MC_BATCHED in by_name else SEW_BATCHED)].mean_s
     return {r.name: r.mean_s / reference for r in rows}
 
 
@@ -114,7 +137,8 @@ def reachable_poses(robot: Robot, arm: str, poses: int, seed: int, mc: McInverse
 
     Returns:
         The configurations Q (N, 7) [rad] drawn uniformly within the limits, their hand poses
-        (N, 4, 4) in the chain base frame [m], and their arm angles psi (N,) [rad].
+        (N, 4, 4) in the chain base frame [m], and their arm angles psi (N,) [rad] (their SEW
+        angles on an arm that is not S-R-S but of the SEW solver's family).
     """
     from dualarm.ik.mc_inverse import McInverse
     from dualarm.model.check import random_configurations
@@ -123,12 +147,18 @@ def reachable_poses(robot: Robot, arm: str, poses: int, seed: int, mc: McInverse
     chain = robot.hand_chain(arm)
     Q = random_configurations(robot, chain, poses, seed)
     T = ChainKinematics.of(chain).poses(Q)
+    if mc is None and not_srs(robot, (arm,)) and not not_sew(robot, (arm,)):
+        from dualarm.ik.sew import sew_chain
+        from dualarm.ik.sew_path import sew_angle_of
+        from dualarm.tasks.schema import ArmAngle
+
+        return Q, T, sew_angle_of(ArmAngle()).angle(*sew_chain(chain).points(Q))
     psi = (mc or McInverse.of(chain)).kinematics.arm_angles(Q)
     return Q, T, psi
 
 
 def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, seed: int = 0, progress: Progress | None = None) -> list[IkBenchRow]:
-    """Time and success rate of MC-Inverse (single and batched), DLS-SVD, TRAC-IK and PyBullet on the same random reachable poses of one arm (see the module docstring).
+    """Time and success rate of the arm's analytic solver (MC-Inverse on an S-R-S arm, SEW and its peer IK-Geo on an arm of the SEW family; single and batched), DLS-SVD, TRAC-IK and PyBullet on the same random reachable poses of one arm (see the module docstring).
 
     Args:
         robot: the robot, or its directory (as for :func:`~dualarm.model.robot.load_robot`).
@@ -139,15 +169,16 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
             of the poses, and when it ends.
 
     Returns:
-        Rows in the order MC-Inverse single, MC-Inverse batched, DLS-SVD, TRAC-IK, PyBullet.
+        Rows in the order MC-Inverse single, MC-Inverse batched (or SEW single, SEW batched,
+        IK-Geo), DLS-SVD, TRAC-IK, PyBullet.
 
     Raises:
         ValueError: ``poses`` below 1.
         RobotModelError: no hand ``arm``.
-        NotSRSError: the arm chain is not S-R-S.
+        NotSRSError: the arm chain is neither S-R-S nor of the SEW solver's family.
     """
+    from dualarm.errors import NotSRSError
     from dualarm.ik.baselines import PyBulletIkSolver, TracIkSolver
-    from dualarm.ik.batched import THREADS, BatchedCandidates
     from dualarm.ik.dls import DlsSolver
     from dualarm.ik.mc_inverse import McInverse
     from dualarm.model.robot import load_robot
@@ -157,7 +188,10 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
     if not isinstance(robot, Robot):
         robot = load_robot(robot)
     chain = robot.hand_chain(arm)
-    mc = McInverse.of(chain)
+    srs = not not_srs(robot, (arm,))
+    if not srs and not_sew(robot, (arm,)):
+        raise NotSRSError(f"bench ik: the {arm} arm of '{robot.name}' is neither S-R-S nor of the SEW solver's family: {not_sew(robot, (arm,))[arm]}")
+    mc = McInverse.of(chain) if srs else None
     Q, T, psi = reachable_poses(robot, arm, poses, seed, mc)
     lower, upper = robot.lower_upper(chain.joint_names)
     seeds = np.clip(Q + np.random.default_rng(seed + 1).normal(0.0, SEED_NOISE_RAD, Q.shape), lower, upper)
@@ -176,33 +210,7 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
                 report(name, i + 1, poses)
         return IkBenchRow(name, poses, float(times.mean()), float(np.median(times)), float(ok.mean()))
 
-    rows = []
-
-    # 1. MC-Inverse, one call per pose; the success test is outside the timed call.
-    solutions = []
-
-    def mc_single(i: int) -> bool:
-        solutions.append(mc.solve(T[i], psi[i]))
-        return True
-
-    mc.solve(T[0], psi[0])  # the Function's first call
-    row = per_pose(MC_SINGLE, mc_single)
-    distance = np.array([_closest(s.q, s.reason, q) for s, q in zip(solutions, Q)])
-    rows.append(replace(row, success_rate=float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note=_mc_note(distance)))
-
-    # 2. MC-Inverse, all poses in one call.
-    report(MC_BATCHED, 0, poses)
-    mc.solve_many(T, psi)  # warm-up: builds the mapped Function
-    calls = []
-    for _ in range(BATCH_REPEATS):
-        start = time.perf_counter()
-        q_all, reason_all = mc.solve_many(T, psi)
-        calls.append((time.perf_counter() - start) / poses)
-    report(MC_BATCHED, poses, poses)
-    distance = np.array([_closest(c, r, q) for c, r, q in zip(q_all, reason_all, Q)])
-    note = f"{_mc_note(distance)}; best of {BATCH_REPEATS} calls {min(calls) * 1e6:.2f} µs/pose"
-    note += f"; mapped calls of {BatchedCandidates.chunk} poses on {THREADS} threads"
-    rows.append(IkBenchRow(MC_BATCHED, poses, float(np.mean(calls)), float(np.median(calls)), float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note))
+    rows = _mc_rows(mc, T, psi, Q, per_pose, report) if mc is not None else _sew_rows(robot, arm, T, psi, Q, report)
 
     # 3. Iterative solvers from perturbed seeds.
     dls = DlsSolver.of(robot, chain.base, [chain.tip])
@@ -230,6 +238,107 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
     with bullet:
         row = per_pose(PYBULLET, lambda i: bullet.solve(T[i], seeds[i]).ok)
     rows.append(replace(row, note=f"{bullet.max_iterations} iterations max, tolerances {bullet.position_tolerance_m:g} m, {bullet.orientation_tolerance_rad:g} rad by FK"))
+    return rows
+
+
+def _mc_rows(mc: "McInverse", T: np.ndarray, psi: np.ndarray, Q: np.ndarray, per_pose: Callable[[str, Callable[[int], bool]], IkBenchRow], report: Progress) -> list[IkBenchRow]:
+    """MC-Inverse called singly and batched (the module docstring)."""
+    from dualarm.ik.batched import THREADS, BatchedCandidates
+
+    poses = len(Q)
+    rows = []
+    # 1. MC-Inverse, one call per pose; the success test is outside the timed call.
+    solutions = []
+
+    def mc_single(i: int) -> bool:
+        solutions.append(mc.solve(T[i], psi[i]))
+        return True
+
+    mc.solve(T[0], psi[0])  # the Function's first call
+    row = per_pose(MC_SINGLE, mc_single)
+    distance = np.array([_closest(s.q, s.reason, q) for s, q in zip(solutions, Q)])
+    rows.append(replace(row, success_rate=float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note=_mc_note(distance)))
+
+    # 2. MC-Inverse, all poses in one call.
+    report(MC_BATCHED, 0, poses)
+    mc.solve_many(T, psi)  # warm-up: builds the mapped Function
+    calls = []
+    for _ in range(BATCH_REPEATS):
+        start = time.perf_counter()
+        q_all, reason_all = mc.solve_many(T, psi)
+        calls.append((time.perf_counter() - start) / poses)
+    report(MC_BATCHED, poses, poses)
+    distance = np.array([_closest(c, r, q) for c, r, q in zip(q_all, reason_all, Q)])
+    note = f"{_mc_note(distance)}; best of {BATCH_REPEATS} calls {min(calls) * 1e6:.2f} µs/pose"
+    note += f"; mapped calls of {BatchedCandidates.chunk} poses on {THREADS} threads"
+    rows.append(IkBenchRow(MC_BATCHED, poses, float(np.mean(calls)), float(np.median(calls)), float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note))
+    return rows
+
+
+def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndarray, report: Progress) -> list[IkBenchRow]:
+    """SEW called singly (the first :data:`SEW_SINGLE_POSES` poses) and batched, and IK-Geo with q7 fixed (the module docstring)."""
+    import ik_geo
+
+    from dualarm.ik.sew import _rot, sew_chain, solve, solve_many
+    from dualarm.ik.sew_path import sew_angle_of
+    from dualarm.tasks.schema import ArmAngle
+
+    chain = robot.hand_chain(arm)
+    sew_arm, sew = sew_chain(chain), sew_angle_of(ArmAngle())
+    poses = len(Q)
+
+    def found(q_all: np.ndarray, q: np.ndarray, columns: int = 7) -> bool:
+        return bool(len(q_all)) and float(np.abs(np.angle(np.exp(1j * (np.asarray(q_all)[:, :columns] - q[:columns])))).max(axis=1).min()) <= SEW_MATCH_TOLERANCE_RAD
+
+    rows = []
+    single = min(poses, SEW_SINGLE_POSES)
+    times, ok = np.empty(single), np.zeros(single, dtype=bool)
+    report(SEW_SINGLE, 0, single)
+    for i in range(single):
+        start = time.perf_counter()
+        q_all = solve(sew_arm, T[i], float(psi[i]), sew).q
+        times[i] = time.perf_counter() - start
+        ok[i] = found(q_all, Q[i])
+        report(SEW_SINGLE, i + 1, single)
+    rows.append(
+        IkBenchRow(SEW_SINGLE, single, float(times.mean()), float(np.median(times)), float(ok.mean()), f"the first {single} poses; original q among the solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad")
+    )
+
+    report(SEW_BATCHED, 0, poses)
+    start = time.perf_counter()
+    batched = solve_many(sew_arm, T, psi, sew)
+    elapsed = (time.perf_counter() - start) / poses
+    report(SEW_BATCHED, poses, poses)
+    counts = np.array([len(b.q) for b in batched])
+    success = float(np.mean([found(b.q, q) for b, q in zip(batched, Q)]))
+    rows.append(IkBenchRow(SEW_BATCHED, poses, elapsed, elapsed, success, f"one call; {counts.min()}-{counts.max()} solutions per pose (median {np.median(counts):.0f})"))
+
+    S, E, C = sew_arm.shoulder, sew_arm.elbow, sew_arm.crossing
+    H = (-sew_arm.axes[:6][::-1]).tolist()
+    times, ok = np.empty(poses), np.zeros(poses, dtype=bool)
+    every = max(1, poses // 100)
+    report(IK_GEO, 0, poses)
+    for i in range(poses):
+        start = time.perf_counter()
+        R67 = _rot(sew_arm.axes[6], np.asarray(Q[i, 6]))
+        end = C + (sew_arm.wrist - C) + R67 @ sew_arm.tool  # the 6R's tip at q = 0
+        P = [(C - end).tolist(), [0.0] * 3, (E - C).tolist(), (S - E).tolist(), [0.0] * 3, [0.0] * 3, (-S).tolist()]
+        R06 = T[i, :3, :3] @ sew_arm.tool_rotation.T @ R67.T
+        answers = ik_geo.Robot.spherical_two_intersecting(H, P).get_ik(R06.tolist(), (-R06.T @ T[i, :3, 3]).tolist())  # rows read as columns: R06 is R06^T^T
+        times[i] = time.perf_counter() - start
+        ok[i] = found(np.array([a[::-1] for a, least_squares in answers if not least_squares]).reshape(-1, 6), Q[i], 6)
+        if (i + 1) % every == 0 or i + 1 == poses:
+            report(IK_GEO, i + 1, poses)
+    rows.append(
+        IkBenchRow(
+            IK_GEO,
+            poses,
+            float(times.mean()),
+            float(np.median(times)),
+            float(ok.mean()),
+            "ik-geo's spherical_two_intersecting on joints 6..1 with q7 fixed at the original's; original q1..q6 among its exact solutions",
+        )
+    )
     return rows
 
 
