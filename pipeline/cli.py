@@ -702,6 +702,16 @@ def _robot(robot_dir: Optional[Path], urdf: Optional[Path], base: Optional[str],
     return robot_from_urdf(urdf, base, tip)
 
 
+#: What every ``dualarm ik`` command takes to name an arm and a hand pose.
+PoseOption = Annotated[tuple[float, float, float, float, float, float], typer.Option(help="Hand pose: X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z, as in task files), in the frame of --frame.")]
+ArmRobotArgument = Annotated[Optional[Path], typer.Argument(help="Robot directory holding robot.toml (with --arm).")]
+ArmOption = Annotated[Optional[str], typer.Option(help="Which arm of ROBOT_DIR: left or right.")]
+UrdfOption = Annotated[Optional[Path], typer.Option(help="A bare URDF instead (needs --base and --tip).")]
+BaseLinkOption = Annotated[Optional[str], typer.Option(help="Base link of the arm chain (with --urdf).")]
+TipLinkOption = Annotated[Optional[str], typer.Option(help="Tip link of the arm chain (with --urdf).")]
+FrameOption = Annotated[str, typer.Option(help="Frame of --pose: robot (the URDF's root link, waist at 0; as task files) or chain (the arm chain's base).")]
+
+
 def _arm_chain(robot_dir: Optional[Path], arm: Optional[str], urdf: Optional[Path], base: Optional[str], tip: Optional[str]):
     """(robot, arm chain) of ``ROBOT_DIR --arm SIDE`` or of ``--urdf PATH --base LINK --tip LINK``."""
     robot = _robot(robot_dir, urdf, base, tip)
@@ -712,24 +722,26 @@ def _arm_chain(robot_dir: Optional[Path], arm: Optional[str], urdf: Optional[Pat
     return robot, robot.hand_chain(arm)
 
 
-def _pose(pose: tuple[float, ...]) -> None:
-    """Refuse a --pose value outside the ranges task files allow."""
+def _pose(pose: tuple[float, ...], frame: str) -> None:
+    """Refuse a --pose value outside the ranges task files allow, and a --frame other than robot or chain."""
     for name, value, bound in zip(("X", "Y", "Z", "ROLL", "PITCH", "YAW"), pose, (MAX_POSITION_M,) * 3 + (MAX_ANGLE_RAD,) * 3):
         _within(value, f"--pose {name}", -bound, bound)
+    if frame not in ("robot", "chain"):
+        raise DualarmError(f"--frame '{excerpt(frame)}': give robot or chain")
 
 
 @ik_app.command("srs")
 @user_errors
 def ik_srs(
-    pose: Annotated[tuple[float, float, float, float, float, float], typer.Option(help="Hand pose: X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z, as in task files), in the frame of --frame.")],
+    pose: PoseOption,
     arm_angle: Annotated[Optional[float], typer.Option(help="Arm angle psi of MC-Inverse eq (1) [rad] (not with --sweep).")] = None,
-    robot_dir: Annotated[Optional[Path], typer.Argument(help="Robot directory holding robot.toml (with --arm).")] = None,
-    arm: Annotated[Optional[str], typer.Option(help="Which arm of ROBOT_DIR: left or right.")] = None,
-    urdf: Annotated[Optional[Path], typer.Option(help="A bare URDF instead (needs --base and --tip).")] = None,
-    base: Annotated[Optional[str], typer.Option(help="Base link of the arm chain (with --urdf).")] = None,
-    tip: Annotated[Optional[str], typer.Option(help="Tip link of the arm chain (with --urdf).")] = None,
+    robot_dir: ArmRobotArgument = None,
+    arm: ArmOption = None,
+    urdf: UrdfOption = None,
+    base: BaseLinkOption = None,
+    tip: TipLinkOption = None,
     vertical: Annotated[tuple[float, float, float], typer.Option(help="Vertical vector V of the arm angle's reference plane, in the chain base frame.")] = (0.0, 0.0, 1.0),
-    frame: Annotated[str, typer.Option(help="Frame of --pose: robot (the URDF's root link, waist at 0; as task files) or chain (the arm chain's base).")] = "robot",
+    frame: FrameOption = "robot",
     sweep: Annotated[bool, typer.Option("--sweep", help="Instead of one arm angle: the feasible psi intervals (within the joint limits) of each of the 8 branches.")] = False,
     step: Annotated[float, typer.Option(help="Grid step of --sweep [deg], in [0.01, 30].")] = 1.0,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON: {chain, frame, pose, arm_angle, candidates}; with --sweep {chain, frame, pose, step_rad, branches}.")] = False,
@@ -739,9 +751,7 @@ def ik_srs(
 
     from dualarm.ik.mc_inverse import PoseFrame, candidate_table
 
-    _pose(pose)
-    if frame not in ("robot", "chain"):
-        raise DualarmError(f"--frame '{excerpt(frame)}': give robot or chain")
+    _pose(pose, frame)
     if sweep:
         if arm_angle is not None:
             raise DualarmError("give either --arm-angle PSI or --sweep")
@@ -765,31 +775,26 @@ def ik_srs(
     if as_json:
         typer.echo(json.dumps(data, indent=2))
         return
-    table = Table(title=f"MC-Inverse, {chain.base} -> {chain.tip}, pose in the {frame} frame ({where.link}), psi = {arm_angle:g} rad", title_justify="left")
-    for column in ("#", *[f"θ{i}" for i in range(1, 8)], "validity", "pos. err [m]", "rot. err [rad]", "ψ of q [rad]"):
-        table.add_column(column, justify="left" if column == "validity" else "right", no_wrap=True)
-    for i, c in enumerate(candidates):
-        table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}", f"{c['arm_angle_rad']:.4f}")
-    out.print(table)
+    _print_candidates(f"MC-Inverse, {chain.base} -> {chain.tip}, pose in the {frame} frame ({where.link}), psi = {arm_angle:g} rad", candidates, "arm_angle_rad")
     out.print(f"joints: {', '.join(chain.joint_names)}; {sum(c['valid'] for c in candidates)} of 8 valid", markup=False)
 
 
 @ik_app.command("sew")
 @user_errors
 def ik_sew(
-    pose: Annotated[tuple[float, float, float, float, float, float], typer.Option(help="Hand pose: X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z, as in task files), in the frame of --frame.")],
+    pose: PoseOption,
     sew_angle: Annotated[float, typer.Option(help="SEW angle psi [rad]: the elbow's turn about the shoulder-wrist line from the reference half-plane.")],
-    robot_dir: Annotated[Optional[Path], typer.Argument(help="Robot directory holding robot.toml (with --arm).")] = None,
-    arm: Annotated[Optional[str], typer.Option(help="Which arm of ROBOT_DIR: left or right.")] = None,
-    urdf: Annotated[Optional[Path], typer.Option(help="A bare URDF instead (needs --base and --tip).")] = None,
-    base: Annotated[Optional[str], typer.Option(help="Base link of the arm chain (with --urdf).")] = None,
-    tip: Annotated[Optional[str], typer.Option(help="Tip link of the arm chain (with --urdf).")] = None,
+    robot_dir: ArmRobotArgument = None,
+    arm: ArmOption = None,
+    urdf: UrdfOption = None,
+    base: BaseLinkOption = None,
+    tip: TipLinkOption = None,
     reference: Annotated[tuple[float, float, float], typer.Option(help="Reference direction e_r of psi = 0, in the chain base frame.")] = (0.0, 0.0, 1.0),
     singular: Annotated[
         tuple[float, float, float], typer.Option(help="Stereographic SEW angle: the direction e_t of its singular half-line from the shoulder, in the chain base frame (keep it out of reach).")
     ] = (0.0, 0.0, -1.0),
     conventional: Annotated[bool, typer.Option("--conventional", help="The conventional SEW angle (singular along the whole line through the shoulder along e_r) instead.")] = False,
-    frame: Annotated[str, typer.Option(help="Frame of --pose: robot (the URDF's root link, as task files) or chain (the arm chain's base).")] = "robot",
+    frame: FrameOption = "robot",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON: {chain, frame, pose, sew_angle, reference, singular, candidates}.")] = False,
 ) -> None:
     """Every solution of one hand pose at one SEW angle for a 7R arm that is not S-R-S (the Panda's family: joints 1-3 and 5-6 meet), with validity and the error of each solution's forward kinematics (Elias and Wen; the analogue of ik srs).
@@ -802,10 +807,8 @@ def ik_sew(
     from dualarm.ik.mc_inverse import PoseFrame
     from dualarm.ik.sew import SewAngle, candidate_table
 
-    _pose(pose)
+    _pose(pose, frame)
     _within(sew_angle, "--sew-angle", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
-    if frame not in ("robot", "chain"):
-        raise DualarmError(f"--frame '{excerpt(frame)}': give robot or chain")
     directions = {"--reference": np.asarray(reference, dtype=float), "--singular": np.asarray(singular, dtype=float)}
     for option, direction in directions.items():
         if not (np.all(np.isfinite(direction)) and np.linalg.norm(direction) > 0):
@@ -832,13 +835,18 @@ def ik_sew(
         typer.echo(json.dumps(data, indent=2))
         return
     kind = "conventional" if conventional else "stereographic"
-    table = Table(title=f"SEW IK, {chain.base} -> {chain.tip}, pose in the {frame} frame ({where.link}), {kind} psi = {sew_angle:g} rad", title_justify="left")
+    _print_candidates(f"SEW IK, {chain.base} -> {chain.tip}, pose in the {frame} frame ({where.link}), {kind} psi = {sew_angle:g} rad", candidates, "sew_angle_rad")
+    out.print(f"joints: {', '.join(chain.joint_names)}; {len(candidates)} solutions, {sum(c['valid'] for c in candidates)} within the joint limits", markup=False)
+
+
+def _print_candidates(title: str, candidates: list[dict], angle: str) -> None:
+    """``ik srs``'s and ``ik sew``'s table: each candidate's joints, validity (the reason's head), FK errors and its angle (the key ``angle``)."""
+    table = Table(title=title, title_justify="left")
     for column in ("#", *[f"θ{i}" for i in range(1, 8)], "validity", "pos. err [m]", "rot. err [rad]", "ψ of q [rad]"):
         table.add_column(column, justify="left" if column == "validity" else "right", no_wrap=True)
     for i, c in enumerate(candidates):
-        table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"].split(" at ")[0], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}", f"{c['sew_angle_rad']:.4f}")
+        table.add_row(str(i + 1), *(f"{v:.4f}" for v in c["q"]), c["reason"].split(" at ")[0], f"{c['position_error_m']:.1e}", f"{c['orientation_error_rad']:.1e}", f"{c[angle]:.4f}")
     out.print(table)
-    out.print(f"joints: {', '.join(chain.joint_names)}; {len(candidates)} solutions, {sum(c['valid'] for c in candidates)} within the joint limits", markup=False)
 
 
 def _ik_srs_sweep(chain, pose: tuple[float, ...], vertical: tuple[float, float, float], frame, step_rad: float, as_json: bool) -> None:

@@ -42,7 +42,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -195,20 +195,12 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
     Q, T, psi = reachable_poses(robot, arm, poses, seed, mc)
     lower, upper = robot.lower_upper(chain.joint_names)
     seeds = np.clip(Q + np.random.default_rng(seed + 1).normal(0.0, SEED_NOISE_RAD, Q.shape), lower, upper)
-    every = max(1, poses // 100)
     report = progress or (lambda name, done, total: None)
 
     def per_pose(name: str, solve: Callable[[int], bool]) -> IkBenchRow:
-        """Time ``solve(i)`` (returning success) for every pose, one perf_counter pair per call."""
-        times, ok = np.empty(poses), np.zeros(poses, dtype=bool)
-        report(name, 0, poses)
-        for i in range(poses):
-            start = time.perf_counter()
-            ok[i] = solve(i)
-            times[i] = time.perf_counter() - start
-            if (i + 1) % every == 0 or i + 1 == poses:
-                report(name, i + 1, poses)
-        return IkBenchRow(name, poses, float(times.mean()), float(np.median(times)), float(ok.mean()))
+        """Time ``solve(i)`` (returning success) for every pose."""
+        row, ok = _timed(name, poses, solve, report)
+        return replace(row, success_rate=float(np.mean(ok)))
 
     rows = _mc_rows(mc, T, psi, Q, per_pose, report) if mc is not None else _sew_rows(robot, arm, T, psi, Q, report)
 
@@ -292,17 +284,9 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
 
     rows = []
     single = min(poses, SEW_SINGLE_POSES)
-    times, ok = np.empty(single), np.zeros(single, dtype=bool)
-    report(SEW_SINGLE, 0, single)
-    for i in range(single):
-        start = time.perf_counter()
-        q_all = solve(sew_arm, T[i], float(psi[i]), sew).q
-        times[i] = time.perf_counter() - start
-        ok[i] = found(q_all, Q[i])
-        report(SEW_SINGLE, i + 1, single)
-    rows.append(
-        IkBenchRow(SEW_SINGLE, single, float(times.mean()), float(np.median(times)), float(ok.mean()), f"the first {single} poses; original q among the solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad")
-    )
+    row, answers = _timed(SEW_SINGLE, single, lambda i: solve(sew_arm, T[i], float(psi[i]), sew).q, report)
+    success = float(np.mean([found(a, q) for a, q in zip(answers, Q)]))
+    rows.append(replace(row, success_rate=success, note=f"the first {single} poses; original q among the solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad"))
 
     report(SEW_BATCHED, 0, poses)
     start = time.perf_counter()
@@ -315,31 +299,34 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
 
     S, E, C = sew_arm.shoulder, sew_arm.elbow, sew_arm.crossing
     H = (-sew_arm.axes[:6][::-1]).tolist()
-    times, ok = np.empty(poses), np.zeros(poses, dtype=bool)
-    every = max(1, poses // 100)
-    report(IK_GEO, 0, poses)
-    for i in range(poses):
-        start = time.perf_counter()
+
+    def ik_geo_solve(i: int) -> list:
         R67 = _rot(sew_arm.axes[6], np.asarray(Q[i, 6]))
         end = C + (sew_arm.wrist - C) + R67 @ sew_arm.tool  # the 6R's tip at q = 0
         P = [(C - end).tolist(), [0.0] * 3, (E - C).tolist(), (S - E).tolist(), [0.0] * 3, [0.0] * 3, (-S).tolist()]
         R06 = T[i, :3, :3] @ sew_arm.tool_rotation.T @ R67.T
-        answers = ik_geo.Robot.spherical_two_intersecting(H, P).get_ik(R06.tolist(), (-R06.T @ T[i, :3, 3]).tolist())  # rows read as columns: R06 is R06^T^T
-        times[i] = time.perf_counter() - start
-        ok[i] = found(np.array([a[::-1] for a, least_squares in answers if not least_squares]).reshape(-1, 6), Q[i], 6)
-        if (i + 1) % every == 0 or i + 1 == poses:
-            report(IK_GEO, i + 1, poses)
-    rows.append(
-        IkBenchRow(
-            IK_GEO,
-            poses,
-            float(times.mean()),
-            float(np.median(times)),
-            float(ok.mean()),
-            "ik-geo's spherical_two_intersecting on joints 6..1 with q7 fixed at the original's; original q1..q6 among its exact solutions",
-        )
-    )
+        return ik_geo.Robot.spherical_two_intersecting(H, P).get_ik(R06.tolist(), (-R06.T @ T[i, :3, 3]).tolist())  # rows read as columns: R06 is R06^T^T
+
+    row, answers = _timed(IK_GEO, poses, ik_geo_solve, report)
+    exact = [np.array([a[::-1] for a, least_squares in answer if not least_squares]).reshape(-1, 6) for answer in answers]
+    success = float(np.mean([found(a, q, 6) for a, q in zip(exact, Q)]))
+    note = "ik-geo's spherical_two_intersecting on joints 6..1 with q7 fixed at the original's; original q1..q6 among its exact solutions"
+    rows.append(replace(row, success_rate=success, note=note))
     return rows
+
+
+def _timed(name: str, count: int, call: Callable[[int], Any], report: Progress) -> tuple[IkBenchRow, list]:
+    """Time ``call(i)`` for the first ``count`` poses, one perf_counter pair per call, reporting about every 1 %: the row (success rate 0 until the caller scores the results) and the results."""
+    times, results = np.empty(count), []
+    every = max(1, count // 100)
+    report(name, 0, count)
+    for i in range(count):
+        start = time.perf_counter()
+        results.append(call(i))
+        times[i] = time.perf_counter() - start
+        if (i + 1) % every == 0 or i + 1 == count:
+            report(name, i + 1, count)
+    return IkBenchRow(name, count, float(times.mean()), float(np.median(times)), 0.0), results
 
 
 def _closest(candidates: np.ndarray, reason: np.ndarray, q: np.ndarray) -> float:

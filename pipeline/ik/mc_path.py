@@ -54,17 +54,17 @@ def settings_for(task: "Task", **overrides: object) -> ArmAngle:
     return with_overrides(task.spec.arm_angle, overrides)
 
 
-def arm_angles(spec: ArmAngle, hand: str, reference: CartesianReference, solver: McInverse, q0: np.ndarray) -> np.ndarray:
-    """Psi per sample (N,) [rad] for ``hand`` by the ``[arm_angle]`` settings ``spec``; ``q0`` is the arm's initial configuration [rad] (``auto`` gives its psi, the preferred one; see :func:`_auto`)."""
+def arm_angles(spec: ArmAngle, hand: str, reference: CartesianReference, initial: float) -> np.ndarray:
+    """Psi per sample (N,) [rad] for ``hand`` by the ``[arm_angle]`` settings ``spec``; ``initial`` is the arm's initial configuration's psi [rad] (``auto`` gives it too, the preferred one; see :func:`_auto`). SEW IK's angle follows the same modes (:mod:`dualarm.ik.sew_path`)."""
     N = len(reference)
     if spec.mode in ("initial", "auto"):
-        return np.full(N, float(solver.kinematics.arm_angles(q0)[0]))
+        return np.full(N, initial)
     if spec.mode == "constant":
         if hand not in spec.value_rad:
-            raise StageError(f"arm_angle.value_rad has no value for the {hand} hand")
+            raise StageError(f"arm_angle.value_rad has no value for the {hand} hand", stage="ik")
         return np.full(N, spec.value_rad[hand])
     if hand not in spec.schedule:
-        raise StageError(f"arm_angle.schedule has no entry for the {hand} hand")
+        raise StageError(f"arm_angle.schedule has no entry for the {hand} hand", stage="ik")
     times, values = np.array(spec.schedule[hand]).T
     return np.interp(time_in_repetition(reference.t, reference.rep), times, values)
 
@@ -93,7 +93,7 @@ def solve_mc_inverse(robot: Robot, reference: CartesianReference, q0: Mapping[st
     solutions = []
     for arm in problems:
         solver = McInverse.of(arm.chain, vertical)
-        psi = arm_angles(spec, arm.hand, reference, solver, arm.q0)
+        psi = arm_angles(spec, arm.hand, reference, float(solver.kinematics.arm_angles(arm.q0)[0]))
         start = time.perf_counter()
         branch = None
         if spec.mode == "auto":

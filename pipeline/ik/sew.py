@@ -205,22 +205,24 @@ class SewChain:
             R[:, i] = acc
         return R
 
-    def points(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """S, E, W at configurations Q (N, 7), each (N, 3) [m]."""
+    def points_and_poses(self, Q: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+        """(S, E, W), each (N, 3) [m], and the tip poses (N, 4, 4) at configurations Q (N, 7), from one product of exponentials."""
         R = self.rotations(Q)
         S = np.broadcast_to(self.shoulder, (len(Q), 3))
         E = S + R[:, 2] @ self.p4
         W = E + R[:, 3] @ self.p5 + R[:, 5] @ self.p7
-        return S, E, W
-
-    def poses(self, Q: np.ndarray) -> np.ndarray:
-        """Tip poses (N, 4, 4) at configurations Q (N, 7), by products of exponentials."""
-        R = self.rotations(Q)
-        _, _, W = self.points(Q)
         T = np.tile(np.eye(4), (len(Q), 1, 1))
         T[:, :3, :3] = R[:, 6] @ self.tool_rotation
         T[:, :3, 3] = W + R[:, 6] @ self.tool
-        return T
+        return (S, E, W), T
+
+    def points(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """S, E, W at configurations Q (N, 7), each (N, 3) [m]."""
+        return self.points_and_poses(Q)[0]
+
+    def poses(self, Q: np.ndarray) -> np.ndarray:
+        """Tip poses (N, 4, 4) at configurations Q (N, 7), by products of exponentials."""
+        return self.points_and_poses(Q)[1]
 
 
 def _foot(point: np.ndarray, line: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
@@ -292,10 +294,10 @@ class SewSolutions:
 
 def _equations(arm: SewChain, sew: SewAngle, T: np.ndarray, psi: np.ndarray, Q: np.ndarray) -> np.ndarray:
     """What a solution must zero, (M, 7), for goals T (M, 4, 4) and psi (M,): the position error [m], the rotation error (the vector part of R_goal^T R) and the SEW angle's error [rad]."""
-    got = arm.poses(Q)
+    points, got = arm.points_and_poses(Q)
     D = np.einsum("nji,njk->nik", T[:, :3, :3], got[:, :3, :3])
     rotation = 0.5 * np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0], D[:, 1, 0] - D[:, 0, 1]], -1)
-    angle = np.angle(np.exp(1j * (sew.angle(*arm.points(Q)) - psi)))
+    angle = np.angle(np.exp(1j * (sew.angle(*points) - psi)))
     return np.concatenate([got[:, :3, 3] - T[:, :3, 3], rotation, angle[:, None]], axis=1)
 
 
@@ -431,16 +433,17 @@ def solve_many(arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = Se
     goal, theta, branch = np.tile(goal, 2), np.tile(theta, 2), np.concatenate([2 * branch, 2 * branch + 1])
     ok = np.all(np.isfinite(Q), axis=1)
     Q, goal, theta, branch = Q[ok], goal[ok], theta[ok], branch[ok]
+    T_goal, psi_goal = T[goal], psi[goal]
+    offsets = DIFF_RAD * np.concatenate([np.eye(7), -np.eye(7)])  # central differences, all 14 in one call
     for _ in range(POLISH_STEPS):  # roots near a branch's end or a double root are found to ~1e-8 rad only
-        F = _equations(arm, sew, T[goal], psi[goal], Q)
-        J = np.stack(
-            [(_equations(arm, sew, T[goal], psi[goal], Q + DIFF_RAD * np.eye(7)[j]) - _equations(arm, sew, T[goal], psi[goal], Q - DIFF_RAD * np.eye(7)[j])) / (2 * DIFF_RAD) for j in range(7)], -1
-        )
+        F = _equations(arm, sew, T_goal, psi_goal, Q)
+        around = _equations(arm, sew, np.repeat(T_goal, 14, axis=0), np.repeat(psi_goal, 14), (Q[:, None] + offsets).reshape(-1, 7)).reshape(len(Q), 14, 7)
+        J = np.swapaxes(around[:, :7] - around[:, 7:], 1, 2) / (2 * DIFF_RAD)
         step = np.stack([np.linalg.lstsq(Jn, Fn, rcond=None)[0] for Jn, Fn in zip(J, F)]) if len(Q) else Q  # least squares: J is singular at a double root
-        better = np.abs(_equations(arm, sew, T[goal], psi[goal], Q - step)).max(axis=1) < np.abs(F).max(axis=1)
+        better = np.abs(_equations(arm, sew, T_goal, psi_goal, Q - step)).max(axis=1) < np.abs(F).max(axis=1)
         Q = np.where(better[:, None], Q - step, Q)
     Q = np.angle(np.exp(1j * Q))  # into (-pi, pi]
-    residual = np.abs(_equations(arm, sew, T[goal], psi[goal], Q)).max(axis=1) if len(Q) else np.zeros(0)
+    residual = np.abs(_equations(arm, sew, T_goal, psi_goal, Q)).max(axis=1) if len(Q) else np.zeros(0)
     keep = residual <= RESIDUAL_TOLERANCE
     out = []
     for n in range(len(T)):

@@ -30,7 +30,7 @@ from dualarm.ik.arms import ArmSolution, arm_problems, joint_path
 from dualarm.ik.joint_path import JointPath
 from dualarm.ik.sew import SewAngle, sew_chain, solve_many
 from dualarm.model.robot import Robot
-from dualarm.paths.reference import CartesianReference, time_in_repetition
+from dualarm.paths.reference import CartesianReference
 from dualarm.tasks.schema import ArmAngle
 
 if TYPE_CHECKING:
@@ -60,23 +60,6 @@ def sew_angle_of(spec: ArmAngle) -> SewAngle:
     return SewAngle(reference=(float(v[0]), float(v[1]), float(v[2])), singular=(float(-v[0]), float(-v[1]), float(-v[2])))
 
 
-def _angles(spec: ArmAngle, hand: str, reference: CartesianReference, initial: float) -> np.ndarray:
-    """The SEW angle per sample (N,) [rad] for ``hand``; ``initial`` is the initial configuration's."""
-    N = len(reference)
-    if spec.mode == "auto":
-        raise StageError(f"sew: {AUTO_REFUSED}", stage="ik")
-    if spec.mode == "initial":
-        return np.full(N, initial)
-    if spec.mode == "constant":
-        if hand not in spec.value_rad:
-            raise StageError(f"arm_angle.value_rad has no value for the {hand} hand", stage="ik")
-        return np.full(N, spec.value_rad[hand])
-    if hand not in spec.schedule:
-        raise StageError(f"arm_angle.schedule has no entry for the {hand} hand", stage="ik")
-    times, values = np.array(spec.schedule[hand]).T
-    return np.interp(time_in_repetition(reference.t, reference.rep), times, values)
-
-
 def solve_sew(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: ArmAngle = ArmAngle(mode="initial")) -> JointPath:
     """Joint path of every hand of ``reference`` by SEW IK (module docstring), each arm a 7R chain of the Panda's family.
 
@@ -86,13 +69,15 @@ def solve_sew(robot: Robot, reference: CartesianReference, q0: Mapping[str, floa
             above ``max_joint_step_rad`` (the error's ``sample``, ``t_s`` and ``joint`` say where).
     """
     spec = settings
+    if spec.mode == "auto":  # settings_for refuses it from a task; this is for a direct call
+        raise StageError(f"sew: {AUTO_REFUSED}", stage="ik")
     q0 = robot.configuration(q0, "q0")
     sew = sew_angle_of(spec)
     problems = arm_problems(robot, reference, q0)
     solutions = []
     for problem in problems:
         arm = sew_chain(problem.chain)
-        psi = _angles(spec, problem.hand, reference, float(sew.angle(*(x[0] for x in arm.points(problem.q0[None])))))
+        psi = mc_path.arm_angles(spec, problem.hand, reference, float(sew.angle(*(x[0] for x in arm.points(problem.q0[None])))))
         start = time.perf_counter()
         found = solve_many(arm, problem.targets, psi, sew)
         elapsed = time.perf_counter() - start

@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dualarm.errors import NotSRSError, TaskFileError, UnreachablePoseError, excerpt
+from dualarm.errors import NotSRSError, UnreachablePoseError, excerpt
 from dualarm.ik.mc_inverse import SWEEP_STEP_RAD, McInverse, sweep_arm_angle
 from dualarm.model.kinematics import to_arm_frame
-from dualarm.tasks.load import Task, load_task, numeric_reach, task_from_dict
+from dualarm.tasks.load import Task, load_task, load_task_unmoved, numeric_reach
 from dualarm.tasks.schema import unit_vector
 
 
@@ -73,25 +73,11 @@ class TaskCheck:
 
 def _load(file: Path, robot: Path | None) -> tuple[Task, dict]:
     """The task (``robot`` replacing its robot) and its raw keys; a task whose waypoints the loader's reach test refuses is loaded again without its moves, so that every waypoint is reported."""
-    task = None
     try:
         task = load_task(file, robot=robot)
     except UnreachablePoseError:
-        pass
-    try:
-        data = tomllib.loads(task.text if task is not None else file.read_text())
-    except OSError as exc:
-        raise TaskFileError(f"{excerpt(file)}: cannot be read ({exc.strerror or exc})") from None
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise TaskFileError(f"{excerpt(file)}: not a TOML file ({excerpt(str(exc), 80)})") from None
-    if task is not None:
-        return task, data
-    base = file.parent if robot is None else Path.cwd()  # a --robot path is the user's, from where they are (as load_task takes it)
-    starts = {hand: "initial" for hand in data.get("start", {})}
-    try:
-        return task_from_dict({**data, "start": starts, "moves": []}, robot=robot, base_dir=base), data
-    except TaskFileError as exc:  # named by the file, not by the dict it was loaded from
-        raise TaskFileError(str(exc).replace("<dict>", excerpt(file), 1)) from None
+        task = load_task_unmoved(file, robot)
+    return task, tomllib.loads(task.text)
 
 
 def _targets(task: Task, data: dict) -> list[tuple[str, str]]:

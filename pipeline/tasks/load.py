@@ -9,7 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -589,11 +589,21 @@ def load_task(path: str | Path, repetitions: int | None = None, robot: str | Pat
             :data:`~dualarm.tasks.schema.MAX_REPETITIONS`; the file and the OS's reason when the
             file cannot be read (only a regular file is opened).
     """
+    return _load_file(path, repetitions, robot)
+
+
+def load_task_unmoved(path: str | Path, robot: str | Path | None = None) -> Task:
+    """The task file at ``path`` with every hand it starts staying at the initial configuration and no moves, as :func:`load_task` loads it (errors name the file): ``dualarm task check`` loads it so when a waypoint is out of reach, to report every waypoint."""
+    return _load_file(path, None, robot, lambda data: {**data, "start": {hand: "initial" for hand in data.get("start", {})}, "moves": []})
+
+
+def _load_file(path: str | Path, repetitions: int | None, robot: str | Path | None, edit: Callable[[dict], dict] = lambda data: data) -> Task:
+    """:func:`load_task`, the file's keys passed through ``edit`` before validation."""
     from dualarm.data import find_task
 
     file = find_task(path)
     text, data = _read(file)
-    spec = _validate(str(file), data)
+    spec = _validate(str(file), edit(data))
     if robot is not None:
         spec = spec.model_copy(update={"robot": str(robot)})
     return _resolve(spec, file, text, file.parent if robot is None else Path.cwd(), None, repetitions)
