@@ -1,10 +1,14 @@
-"""Shared fixtures: the repository's robot and task directories."""
+"""Shared fixtures: the repository's robot and task directories, and PyBullet's own view of a URDF."""
 
+import contextlib
 import subprocess
 import sys
 import sysconfig
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -75,3 +79,44 @@ def shipped_runs(tmp_path_factory) -> dict[str, Path]:
 
     out = tmp_path_factory.mktemp("shipped")
     return {name: record_run(load_task(name, 1), method, out_dir=out).directory for name, method in SHIPPED.items()}
+
+
+@dataclass
+class PyBulletURDF:
+    """A URDF loaded in its own DIRECT PyBullet client (fixed base at the origin): an independent forward kinematics for tests."""
+
+    client: int
+    body: int
+    joint: dict[str, int]
+    link: dict[str, int]
+
+    def set(self, names: Sequence[str], values: Sequence[float]) -> None:
+        """Put joints ``names`` at ``values`` [rad]."""
+        import pybullet as pb
+
+        for name, value in zip(names, values):
+            pb.resetJointState(self.body, self.joint[name], float(value), physicsClientId=self.client)
+
+    def frame(self, link: str) -> np.ndarray:
+        """The URDF frame of ``link`` (not a root link) in the world, (4, 4) [m]; PyBullet computes in single precision."""
+        import pybullet as pb
+
+        state = pb.getLinkState(self.body, self.link[link], computeForwardKinematics=True, physicsClientId=self.client)
+        T = np.eye(4)
+        T[:3, :3] = np.reshape(pb.getMatrixFromQuaternion(state[5]), (3, 3))
+        T[:3, 3] = state[4]
+        return T
+
+
+@contextlib.contextmanager
+def pybullet_urdf(path: Path) -> Iterator[PyBulletURDF]:
+    """``path`` loaded in a DIRECT PyBullet client, joints and child links by name; the client is closed after."""
+    import pybullet as pb
+
+    client = pb.connect(pb.DIRECT)
+    try:
+        body = pb.loadURDF(str(path), useFixedBase=True, physicsClientId=client)
+        infos = [pb.getJointInfo(body, i, physicsClientId=client) for i in range(pb.getNumJoints(body, physicsClientId=client))]
+        yield PyBulletURDF(client, body, {info[1].decode(): i for i, info in enumerate(infos)}, {info[12].decode(): i for i, info in enumerate(infos)})
+    finally:
+        pb.disconnect(client)

@@ -9,7 +9,7 @@ from dualarm.errors import NotSRSError
 from dualarm.ik.sew import NotSewError, SewAngle, sew_chain, solve
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import load_robot
-from tests.conftest import HUMANOID, REPO
+from tests.conftest import HUMANOID, REPO, pybullet_urdf
 
 PANDA = REPO / "robots" / "panda"
 #: The stereographic SEW angle: singular half-line straight down from the shoulder (into the Panda's base), reference up.
@@ -37,18 +37,13 @@ def test_the_product_of_exponentials_is_the_urdf_chain(panda):
     """The POE poses equal the chain's FK (1e-11) at random configurations; S, E, C, W sit on the axes that define them, as PyBullet places the joints at q = 0; the offsets are the Panda's (0.088 m at the wrist, 0.0825 m at the elbow)."""
     _, chain, arm, Q = panda
     assert np.abs(arm.poses(Q) - ChainKinematics.of(chain).poses(Q)).max() < 1e-11
-    client = pb.connect(pb.DIRECT)
-    try:
-        body = pb.loadURDF(str(PANDA / "panda.urdf"), useFixedBase=True, physicsClientId=client)
-        infos = {pb.getJointInfo(body, i, physicsClientId=client)[1].decode(): pb.getJointInfo(body, i, physicsClientId=client) for i in range(pb.getNumJoints(body, physicsClientId=client))}
+    with pybullet_urdf(PANDA / "panda.urdf") as sim:  # at q = 0
         on = (arm.shoulder, arm.shoulder, arm.shoulder, arm.elbow, arm.crossing, arm.crossing, arm.wrist)
         for name, point in zip(chain.joint_names, on):
-            info = infos[name]
-            state = pb.getLinkState(body, info[0], computeForwardKinematics=True, physicsClientId=client)  # the joint frame is its child link's
-            axis = np.reshape(pb.getMatrixFromQuaternion(state[5]), (3, 3)) @ np.asarray(info[13])
-            assert np.linalg.norm(np.cross(axis, point - np.asarray(state[4]))) < 1e-6, name
-    finally:
-        pb.disconnect(client)
+            info = pb.getJointInfo(sim.body, sim.joint[name], physicsClientId=sim.client)
+            T = sim.frame(info[12].decode())  # the joint frame is its child link's
+            axis = T[:3, :3] @ np.asarray(info[13])
+            assert np.linalg.norm(np.cross(axis, point - T[:3, 3])) < 1e-6, name
     assert np.linalg.norm(arm.wrist - arm.crossing) == pytest.approx(0.088, abs=1e-9)
     assert np.linalg.norm(arm.elbow - arm.shoulder) == pytest.approx(np.hypot(0.316, 0.0825), abs=1e-9)
 
@@ -89,24 +84,14 @@ def test_candidates_agree_with_pybullet(panda):
     """PyBullet's hand frame at every candidate of 10 poses equals the asked pose (1e-6: PyBullet reports float32)."""
     _, chain, arm, Q = panda
     kin = ChainKinematics.of(chain)
-    client = pb.connect(pb.DIRECT)
-    try:
-        body = pb.loadURDF(str(PANDA / "panda.urdf"), useFixedBase=True, physicsClientId=client)
-        joints, links = {}, {}
-        for i in range(pb.getNumJoints(body, physicsClientId=client)):
-            info = pb.getJointInfo(body, i, physicsClientId=client)
-            joints[info[1].decode()], links[info[12].decode()] = i, i
+    with pybullet_urdf(PANDA / "panda.urdf") as sim:
         for q in Q[:10]:
             T = kin.pose(q)
             for candidate in solve(arm, T, _psi(arm, STEREO, q), STEREO).q:
-                for name, value in zip(chain.joint_names, candidate):
-                    pb.resetJointState(body, joints[name], float(value), physicsClientId=client)
-                state = pb.getLinkState(body, links[chain.tip], computeForwardKinematics=True, physicsClientId=client)
-                R = np.reshape(pb.getMatrixFromQuaternion(state[5]), (3, 3))
-                assert np.linalg.norm(np.asarray(state[4]) - T[:3, 3]) < 1e-6
-                assert np.abs(R - T[:3, :3]).max() < 1e-6
-    finally:
-        pb.disconnect(client)
+                sim.set(chain.joint_names, candidate)
+                reached = sim.frame(chain.tip)
+                assert np.linalg.norm(reached[:3, 3] - T[:3, 3]) < 1e-6
+                assert np.abs(reached[:3, :3] - T[:3, :3]).max() < 1e-6
 
 
 def test_ik_geo_with_joint_7_fixed_finds_the_same_solutions(panda):

@@ -3,7 +3,6 @@
 from pathlib import Path
 
 import numpy as np
-import pybullet as pb
 import pytest
 from typer.testing import CliRunner
 
@@ -12,7 +11,7 @@ from dualarm.ik.sew import sew_chain
 from dualarm.ik.sew_path import settings_for, sew_angle_of
 from dualarm.report.consistency import run_consistency
 from dualarm.tasks import load_task
-from tests.conftest import REPO
+from tests.conftest import REPO, pybullet_urdf
 
 HERE = Path(__file__).parent
 TASK = HERE / "panda_triangle.toml"
@@ -43,23 +42,11 @@ def test_the_sew_angle_is_held_along_the_path_as_pybullet_measures_it(compared):
     chain = task.robot.hand_chain("right")
     arm, sew = sew_chain(chain), sew_angle_of(settings_for(task))
     q = run["/ik/sample"][[f"position.{n}" for n in chain.joint_names]].to_numpy()
-    client = pb.connect(pb.DIRECT)
-    try:
-        body = pb.loadURDF(str(PANDA / "panda.urdf"), useFixedBase=True, physicsClientId=client)
-        index = {pb.getJointInfo(body, i, physicsClientId=client)[12].decode(): i for i in range(pb.getNumJoints(body, physicsClientId=client))}
-        joint = {pb.getJointInfo(body, i, physicsClientId=client)[1].decode(): i for i in range(pb.getNumJoints(body, physicsClientId=client))}
-
-        def frame(link: str) -> np.ndarray:
-            state = pb.getLinkState(body, index[link], computeForwardKinematics=True, physicsClientId=client)
-            T = np.eye(4)
-            T[:3, :3] = np.reshape(pb.getMatrixFromQuaternion(state[5]), (3, 3))
-            T[:3, 3] = state[4]
-            return T
+    with pybullet_urdf(PANDA / "panda.urdf") as sim:
 
         def points(row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            for name, value in zip(chain.joint_names, row):
-                pb.resetJointState(body, joint[name], float(value), physicsClientId=client)
-            return frame("panda_link3"), frame("panda_link6")
+            sim.set(chain.joint_names, row)
+            return sim.frame("panda_link3"), sim.frame("panda_link6")
 
         zero3, zero6 = points(np.zeros(7))
         e_local = np.linalg.inv(zero3) @ np.append(arm.elbow, 1.0)
@@ -68,8 +55,6 @@ def test_the_sew_angle_is_held_along_the_path_as_pybullet_measures_it(compared):
         for row in q[::10]:
             T3, T6 = points(row)
             angles.append(float(sew.angle(arm.shoulder, (T3 @ e_local)[:3], (T6 @ w_local)[:3])))
-    finally:
-        pb.disconnect(client)
     initial = float(sew.angle(*(x[0] for x in arm.points(np.array([[task.initial_q[n] for n in chain.joint_names]])))))
     assert np.abs(np.array(angles) - initial).max() < 1e-6
 

@@ -3,28 +3,14 @@
 import json
 
 import numpy as np
-import pybullet as pb
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from tests.conftest import REPO
+from tests.conftest import REPO, pybullet_urdf
 
 runner = CliRunner()
 DUAL_IIWA = REPO / "robots" / "dual_iiwa"
-
-
-def _link_in(body: int, client: int, links: dict[str, int], link: str, frame: str) -> np.ndarray:
-    """PyBullet's pose of ``link`` in ``frame`` (4, 4)."""
-
-    def pose(name: str) -> np.ndarray:
-        state = pb.getLinkState(body, links[name], computeForwardKinematics=True, physicsClientId=client)
-        T = np.eye(4)
-        T[:3, :3] = np.reshape(pb.getMatrixFromQuaternion(state[5]), (3, 3))
-        T[:3, 3] = state[4]
-        return T
-
-    return np.linalg.inv(pose(frame)) @ pose(link)
 
 
 def test_the_paper_experiments_run_on_the_dual_iiwa_and_the_bowl_grasp_is_not_available(tmp_path):
@@ -50,23 +36,14 @@ def test_the_paper_experiments_run_on_the_dual_iiwa_and_the_bowl_grasp_is_not_av
     asked = np.eye(4)
     asked[:3, :3] = Rotation.from_euler("xyz", table["pose"][3:]).as_matrix()
     asked[:3, 3] = table["pose"][:3]
-    client = pb.connect(pb.DIRECT)
-    try:
-        body = pb.loadURDF(str(DUAL_IIWA / "dual_iiwa.urdf"), useFixedBase=True, physicsClientId=client)
-        joints, links = {}, {}
-        for i in range(pb.getNumJoints(body, physicsClientId=client)):
-            info = pb.getJointInfo(body, i, physicsClientId=client)
-            joints[info[1].decode()], links[info[12].decode()] = i, i
+    with pybullet_urdf(DUAL_IIWA / "dual_iiwa.urdf") as sim:
         valid = [c for c in table["candidates"] if c["valid"]]
         assert len(valid) >= 4
         for candidate in valid:
-            for k, value in enumerate(candidate["q"], start=1):
-                pb.resetJointState(body, joints[f"left_lbr_iiwa_joint_{k}"], value, physicsClientId=client)
-            reached = _link_in(body, client, links, "left_lbr_iiwa_link_7", table["chain"]["base"])
+            sim.set([f"left_lbr_iiwa_joint_{k}" for k in range(1, 8)], candidate["q"])
+            reached = np.linalg.inv(sim.frame(table["chain"]["base"])) @ sim.frame("left_lbr_iiwa_link_7")
             assert np.linalg.norm(reached[:3, 3] - asked[:3, 3]) < 1e-6  # PyBullet's link states are float32
             assert np.abs(reached[:3, :3] - asked[:3, :3]).max() < 1e-6
-    finally:
-        pb.disconnect(client)
 
 
 def test_a_robot_that_runs_no_part_exits_2_and_the_report_says_why(tmp_path):

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from tests.conftest import HUMANOID, REPO, TASKS
+from tests.conftest import HUMANOID, REPO, TASKS, PyBulletURDF, pybullet_urdf
 
 DUAL_IIWA = REPO / "robots" / "dual_iiwa"
 runner = CliRunner()
@@ -64,35 +64,13 @@ def test_converted_tasks_resolve_to_the_papers_poses_on_the_humanoid(name):
     assert converted.spec.gesture == original.spec.gesture
 
 
-class _Iiwa:
-    """The dual iiwa's URDF in PyBullet at a configuration: link frames and the S-R-S points from the joint axes (independent of dualarm's kinematics)."""
-
-    def __init__(self, q: dict[str, float]):
-        self.client = pb.connect(pb.DIRECT)
-        self.body = pb.loadURDF(str(DUAL_IIWA / "dual_iiwa.urdf"), useFixedBase=True, physicsClientId=self.client)
-        self.joint = {}
-        self.link = {}
-        for i in range(pb.getNumJoints(self.body, physicsClientId=self.client)):
-            info = pb.getJointInfo(self.body, i, physicsClientId=self.client)
-            self.joint[info[1].decode()] = i
-            self.link[info[12].decode()] = i
-            pb.resetJointState(self.body, i, q.get(info[1].decode(), 0.0), physicsClientId=self.client)
-
-    def close(self) -> None:
-        pb.disconnect(self.client)
-
-    def link_pose(self, link: str) -> np.ndarray:
-        """The URDF frame of ``link`` in the root link's frame (the root sits at the world origin) (4, 4)."""
-        state = pb.getLinkState(self.body, self.link[link], computeForwardKinematics=True, physicsClientId=self.client)
-        T = np.eye(4)
-        T[:3, :3] = np.reshape(pb.getMatrixFromQuaternion(state[5]), (3, 3))
-        T[:3, 3] = state[4]
-        return T
+class _Iiwa(PyBulletURDF):
+    """The dual iiwa's URDF in PyBullet (:class:`tests.conftest.PyBulletURDF`, the root at the world origin): link frames and the S-R-S points from the joint axes (independent of dualarm's kinematics)."""
 
     def axis(self, joint: str) -> tuple[np.ndarray, np.ndarray]:
         """(a point, the unit direction) of ``joint``'s axis: the joint's frame is its child link's frame."""
         info = pb.getJointInfo(self.body, self.joint[joint], physicsClientId=self.client)
-        T = self.link_pose(info[12].decode())
+        T = self.frame(info[12].decode())
         return T[:3, 3], T[:3, :3] @ np.asarray(info[13])
 
     def meet(self, a: str, b: str) -> np.ndarray:
@@ -107,9 +85,11 @@ class _Iiwa:
 def iiwa_ready():
     from dualarm.model.robot import load_robot
 
-    sim = _Iiwa(dict(load_robot(DUAL_IIWA).homes["ready"]))
-    yield sim
-    sim.close()
+    ready = load_robot(DUAL_IIWA).homes["ready"]
+    with pybullet_urdf(DUAL_IIWA / "dual_iiwa.urdf") as sim:
+        iiwa = _Iiwa(sim.client, sim.body, sim.joint, sim.link)
+        iiwa.set(list(ready), list(ready.values()))
+        yield iiwa
 
 
 def _shoulder_and_scale(sim: _Iiwa, hand: str) -> tuple[np.ndarray, float]:
@@ -151,7 +131,7 @@ def test_a_link_frame_turns_and_moves_the_waypoints(tmp_path, iiwa_ready):
     file = tmp_path / "triangle.toml"
     file.write_text(text)
     task = load_task(file)
-    link = iiwa_ready.link_pose("left_lbr_iiwa_link_0")
+    link = iiwa_ready.frame("left_lbr_iiwa_link_0")
     assert not np.allclose(link[:3, :3], np.eye(3))
     data = tomllib.loads(text)
     for wp, written in data["waypoints"].items():
@@ -198,7 +178,7 @@ def test_the_triangle_runs_on_the_dual_iiwa_and_its_hand_draws_the_triangle_abou
         row = ik.iloc[i]
         for n in names:
             pb.resetJointState(iiwa_ready.body, iiwa_ready.joint[n], float(row[f"position.{n}"]), physicsClientId=iiwa_ready.client)
-        hand = iiwa_ready.link_pose("left_lbr_iiwa_link_7")
+        hand = iiwa_ready.frame("left_lbr_iiwa_link_7")
         ref = reference.iloc[i]
         assert np.linalg.norm(hand[:3, 3] - [ref["position.x"], ref["position.y"], ref["position.z"]]) < 1e-6
         R = Rotation.from_quat([ref["orientation.x"], ref["orientation.y"], ref["orientation.z"], ref["orientation.w"]]).as_matrix()
@@ -231,13 +211,13 @@ def test_the_ball_game_runs_on_the_dual_iiwa_through_every_stage_from_its_ready_
     assert set(run.stages) == {"path", "ik", "retime", "smooth", "approach", "execute"}
     ik = run["/ik/sample"]
     _, scale = _shoulder_and_scale(iiwa_ready, "left")
-    start = {h: iiwa_ready.link_pose(f"{h}_lbr_iiwa_link_7")[:3, 3] for h in ("left", "right")}
+    start = {h: iiwa_ready.frame(f"{h}_lbr_iiwa_link_7")[:3, 3] for h in ("left", "right")}
     after_stroke = ik.iloc[int(np.argmin(np.abs(ik["t"].to_numpy() - 3.0)))]
     for n in iiwa_ready.joint:
         if f"position.{n}" in ik:
             pb.resetJointState(iiwa_ready.body, iiwa_ready.joint[n], float(after_stroke[f"position.{n}"]), physicsClientId=iiwa_ready.client)
     for hand in ("left", "right"):
-        lifted = iiwa_ready.link_pose(f"{hand}_lbr_iiwa_link_7")[:3, 3] - start[hand]
+        lifted = iiwa_ready.frame(f"{hand}_lbr_iiwa_link_7")[:3, 3] - start[hand]
         assert np.linalg.norm(lifted - [0.0, 0.0, 0.10 * scale]) < 1e-3  # TV-GDD tracks to its feedback error, well under a millimetre
     first = ik.iloc[0]
     from dualarm.model.robot import load_robot
