@@ -797,7 +797,7 @@ def ik_sew(
     frame: FrameOption = "robot",
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON: {chain, frame, pose, sew_angle, reference, singular, candidates}.")] = False,
 ) -> None:
-    """Every solution of one hand pose at one SEW angle for a 7R arm that is not S-R-S (the Panda's family: joints 1-3 and 5-6 meet), with validity and the error of each solution's forward kinematics (Elias and Wen; the analogue of ik srs).
+    """Every solution of one hand pose at one SEW angle for a 7R arm of a SEW family (joints 2-3 and 5-7 meet: an offset humanoid shoulder, any S-R-S arm; or joints 1-3 and 5-6: the Panda), with validity and the error of each solution's forward kinematics (Elias and Wen; the analogue of ik srs).
 
     Exits 2 with one line for an arm of another family, or when no solution exists at that SEW angle (the pose out of reach, or the elbow unable to lie in that half-plane).
     """
@@ -837,6 +837,20 @@ def ik_sew(
     kind = "conventional" if conventional else "stereographic"
     _print_candidates(f"SEW IK, {chain.base} -> {chain.tip}, pose in the {frame} frame ({where.link}), {kind} psi = {sew_angle:g} rad", candidates, "sew_angle_rad")
     out.print(f"joints: {', '.join(chain.joint_names)}; {len(candidates)} solutions, {sum(c['valid'] for c in candidates)} within the joint limits", markup=False)
+
+
+def _sew_line(chain) -> str:
+    """``robot check``'s line on a 7-DOF chain's SEW family (what ``--ik sew`` and ``ik sew`` need), or why it has none."""
+    from dualarm.ik.sew import FIRST_JOINT_FAMILY, sew_chain
+
+    try:
+        arm = sew_chain(chain)
+    except NotSRSError as exc:
+        return f"no SEW family: {exc}"
+    first = arm.family == FIRST_JOINT_FAMILY
+    offset = float(np.linalg.norm(arm.crossing - arm.shoulder if first else arm.wrist - arm.crossing))
+    where = "shoulder (joints 2-3 from axis 1)" if first else "wrist (axis 7 from joints 5-6)"
+    return f"SEW family {arm.family} (--ik sew, ik sew): S = {(np.round(arm.shoulder, 4) + 0.0).tolist()} m, {where} offset {offset:.4f} m"
 
 
 def _print_candidates(title: str, candidates: list[dict], angle: str) -> None:
@@ -1026,6 +1040,7 @@ def robot_check(
                 )
             except NotSRSError as exc:
                 out.print(f"not S-R-S: {exc}", markup=False)
+            out.print(_sew_line(chain), markup=False)
         with err.status(f"checking {chain.name} on {samples} configurations ..."):
             results.append(check_chain(robot, chain, samples=samples, seed=seed))
     table = Table(title=f"kinematics check ({samples} random configurations per chain, seed {seed})", title_justify="left")

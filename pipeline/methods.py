@@ -48,8 +48,9 @@ class Method:
         settings_class: the attribute of ``module`` naming its settings class.
         defaults: the attribute of ``module`` giving its settings for a task,
             ``(task, **overrides) -> settings``; None when a task has no table for them.
-        needs_sew: it works only on 7R arms of the family :mod:`dualarm.ik.sew` solves (joints
-            1-3 and 5-6 meet, joint 7 offset: the Franka Panda's).
+        needs_sew: it works only on 7R arms of a family :mod:`dualarm.ik.sew` solves (joints 2-3
+            and 5-7 meet: S-R-S arms and humanoid arms with an offset shoulder; or joints 1-3 and
+            5-6: the Franka Panda's).
     """
 
     name: str
@@ -122,7 +123,7 @@ METHODS: Mapping[str, Method] = MappingProxyType(
             Method(
                 "sew",
                 "ik",
-                "SEW angle (Elias, Wen): every solution at the SEW angle by a 1-D search, the one continuing the path kept; 7R arms of the Panda's family",
+                "SEW angle (Elias, Wen): every solution at the SEW angle by a 1-D search, the one continuing the path kept; 7R arms with a spherical wrist and two meeting shoulder axes (S-R-S, offset humanoid shoulders) or a spherical shoulder and two meeting wrist axes (the Panda)",
                 False,
                 True,
                 "dualarm.ik.sew_path",

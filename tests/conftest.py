@@ -13,7 +13,17 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 HUMANOID = REPO / "robots" / "humanoid"
+OFFSET = REPO / "robots" / "humanoid_offset"
 TASKS = REPO / "tasks"
+
+
+def wrist_offset_robot(directory: Path) -> Path:
+    """Write into ``directory`` the offset humanoid with its left wrist pitch axis moved 2 cm off the forearm roll axis: a 7R arm of no SEW family (the right arm untouched). Returns ``directory``."""
+    text = (OFFSET / "humanoid_offset.urdf").read_text()
+    origin = text.index('<origin xyz="0 0 0"', text.index('<joint name="left_wrist_pitch"'))
+    (directory / "offset_wrist.urdf").write_text(text[:origin] + '<origin xyz="0.02 0 0"' + text[origin + len('<origin xyz="0 0 0"') :])
+    (directory / "robot.toml").write_text((OFFSET / "robot.toml").read_text().replace('urdf = "humanoid_offset.urdf"', 'urdf = "offset_wrist.urdf"'))
+    return directory
 
 
 @pytest.fixture(scope="session")

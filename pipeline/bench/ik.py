@@ -10,9 +10,10 @@ On an S-R-S arm the analytic rows are MC-Inverse's; on an arm of the SEW family 
 - SEW called singly: :func:`dualarm.ik.sew.solve` per pose, on the first :data:`SEW_SINGLE_POSES`
   poses only (each call runs the whole search with its per-step overhead).
 - SEW batched: :func:`dualarm.ik.sew.solve_many` over all poses in one call; time per pose.
-- IK-Geo, the peer (the ``ik-geo`` package): with q7 fixed at the original configuration's, the
-  arm's joints 1-6 reversed are IK-Geo's ``spherical_two_intersecting`` robot; one call per pose
-  (the robot built in the call, since its tool depends on q7).
+- IK-Geo, the peer (the ``ik-geo`` package): with one joint fixed at the original configuration's
+  (q7 on the Panda's family, q1 on the R-2R-R-3R family), the other six are IK-Geo's
+  ``spherical_two_intersecting`` robot (:func:`ik_geo_solutions`); one call per pose (the robot
+  built in the call, since it depends on the fixed joint).
 
 Success for SEW and IK-Geo: the original configuration among the exact solutions to
 :data:`SEW_MATCH_TOLERANCE_RAD` (near a double root a solution is determined only so far).
@@ -52,6 +53,7 @@ from dualarm.quiet import c_output_silenced
 
 if TYPE_CHECKING:
     from dualarm.ik.mc_inverse import McInverse
+    from dualarm.ik.sew import SewChain
 
 #: Row names, in the order of :func:`bench_ik`'s rows.
 MC_SINGLE = "MC-Inverse, single"
@@ -70,7 +72,7 @@ SEED_NOISE_RAD = 0.1
 BATCH_REPEATS = 5
 SEW_SINGLE = "SEW, single"
 SEW_BATCHED = "SEW, batched"
-IK_GEO = "IK-Geo (q7 fixed)"
+IK_GEO = "IK-Geo (one joint fixed)"
 #: Poses the single-call SEW row measures (the first ones).
 SEW_SINGLE_POSES = 100
 #: Largest joint difference that counts as finding the original configuration, for SEW and IK-Geo [rad].
@@ -268,10 +270,8 @@ def _mc_rows(mc: "McInverse", T: np.ndarray, psi: np.ndarray, Q: np.ndarray, per
 
 
 def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndarray, report: Progress) -> list[IkBenchRow]:
-    """SEW called singly (the first :data:`SEW_SINGLE_POSES` poses) and batched, and IK-Geo with q7 fixed (the module docstring)."""
-    import ik_geo
-
-    from dualarm.ik.sew import _rot, sew_chain, solve, solve_many
+    """SEW called singly (the first :data:`SEW_SINGLE_POSES` poses) and batched, and IK-Geo with one joint fixed (the module docstring)."""
+    from dualarm.ik.sew import UPPER_ARM_FAMILY, sew_chain, solve, solve_many
     from dualarm.ik.sew_path import sew_angle_of
     from dualarm.tasks.schema import ArmAngle
 
@@ -279,8 +279,8 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
     sew_arm, sew = sew_chain(chain), sew_angle_of(ArmAngle())
     poses = len(Q)
 
-    def found(q_all: np.ndarray, q: np.ndarray, columns: int = 7) -> bool:
-        return bool(len(q_all)) and float(np.abs(np.angle(np.exp(1j * (np.asarray(q_all)[:, :columns] - q[:columns])))).max(axis=1).min()) <= SEW_MATCH_TOLERANCE_RAD
+    def found(q_all: np.ndarray, q: np.ndarray) -> bool:
+        return bool(len(q_all)) and float(np.abs(np.angle(np.exp(1j * (np.asarray(q_all) - q)))).max(axis=1).min()) <= SEW_MATCH_TOLERANCE_RAD
 
     rows = []
     single = min(poses, SEW_SINGLE_POSES)
@@ -297,22 +297,39 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
     success = float(np.mean([found(b.q, q) for b, q in zip(batched, Q)]))
     rows.append(IkBenchRow(SEW_BATCHED, poses, elapsed, elapsed, success, f"one call; {counts.min()}-{counts.max()} solutions per pose (median {np.median(counts):.0f})"))
 
-    S, E, C = sew_arm.shoulder, sew_arm.elbow, sew_arm.crossing
-    H = (-sew_arm.axes[:6][::-1]).tolist()
-
-    def ik_geo_solve(i: int) -> list:
-        R67 = _rot(sew_arm.axes[6], np.asarray(Q[i, 6]))
-        end = C + (sew_arm.wrist - C) + R67 @ sew_arm.tool  # the 6R's tip at q = 0
-        P = [(C - end).tolist(), [0.0] * 3, (E - C).tolist(), (S - E).tolist(), [0.0] * 3, [0.0] * 3, (-S).tolist()]
-        R06 = T[i, :3, :3] @ sew_arm.tool_rotation.T @ R67.T
-        return ik_geo.Robot.spherical_two_intersecting(H, P).get_ik(R06.tolist(), (-R06.T @ T[i, :3, 3]).tolist())  # rows read as columns: R06 is R06^T^T
-
-    row, answers = _timed(IK_GEO, poses, ik_geo_solve, report)
-    exact = [np.array([a[::-1] for a, least_squares in answer if not least_squares]).reshape(-1, 6) for answer in answers]
-    success = float(np.mean([found(a, q, 6) for a, q in zip(exact, Q)]))
-    note = "ik-geo's spherical_two_intersecting on joints 6..1 with q7 fixed at the original's; original q1..q6 among its exact solutions"
+    row, answers = _timed(IK_GEO, poses, lambda i: ik_geo_solutions(sew_arm, T[i], Q[i]), report)
+    success = float(np.mean([found(np.array(a).reshape(-1, 7), q) for a, q in zip(answers, Q)]))
+    fixed = "q7, joints 6..1" if sew_arm.family == UPPER_ARM_FAMILY else "q1, joints 2..7"
+    note = f"ik-geo's spherical_two_intersecting with {fixed} fixed at the original's; original q among its exact solutions"
     rows.append(replace(row, success_rate=success, note=note))
     return rows
+
+
+def ik_geo_solutions(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list[np.ndarray]:
+    """IK-Geo's exact solutions (each (7,) [rad]) of the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,).
+
+    Both SEW families are IK-Geo's ``spherical_two_intersecting`` 6R (the ``ik-geo`` package: axes
+    1 and 2 meet, axes 4-6 meet) once one joint is fixed: 3R-R-2R-R with q7 fixed, joints 6..1
+    reversed (joints 6, 5 meet; 3, 2, 1 meet at the shoulder), the pose inverted; R-2R-R-3R with q1
+    fixed, joints 2..7 (2, 3 meet; 5, 6, 7 meet), joint 1's turn about its axis through S undone.
+    ik-geo reads a rotation's rows as its columns.
+    """
+    import ik_geo
+
+    from dualarm.ik.sew import UPPER_ARM_FAMILY, _rot
+
+    S, E, C, W = arm.shoulder, arm.elbow, arm.crossing, arm.wrist
+    if arm.family == UPPER_ARM_FAMILY:
+        R67 = _rot(arm.axes[6], np.asarray(q[6]))
+        P = [C - (W + R67 @ arm.tool), np.zeros(3), E - C, S - E, np.zeros(3), np.zeros(3), -S]  # from the 6R's tip at q = 0
+        R06 = T[:3, :3] @ arm.tool_rotation.T @ R67.T
+        found = ik_geo.Robot.spherical_two_intersecting((-arm.axes[:6][::-1]).tolist(), np.array(P).tolist()).get_ik(R06.tolist(), (-R06.T @ T[:3, 3]).tolist())
+        return [np.append(np.array(s)[::-1], q[6]) for s, least_squares in found if not least_squares]
+    R1 = _rot(arm.axes[0], np.asarray(q[0]))
+    P = [C, np.zeros(3), E - C, W - E, np.zeros(3), np.zeros(3), arm.tool]
+    R = R1.T @ T[:3, :3] @ arm.tool_rotation.T  # the 6R's rotation, without the tip's at q = 0
+    found = ik_geo.Robot.spherical_two_intersecting(arm.axes[1:].tolist(), np.array(P).tolist()).get_ik(R.T.tolist(), (R1.T @ (T[:3, 3] - S) + S).tolist())
+    return [np.insert(np.array(s), 0, q[0]) for s, least_squares in found if not least_squares]
 
 
 def _timed(name: str, count: int, call: Callable[[int], Any], report: Progress) -> tuple[IkBenchRow, list]:

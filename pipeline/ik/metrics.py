@@ -56,18 +56,23 @@ def _orientation_metrics(path: JointPath) -> dict[str, float]:
 
 
 def arm_angles(path: JointPath, robot: Robot, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict[str, np.ndarray]:
-    """Arm angle psi of eq (1) of MC-Inverse per hand of the path along it (N,) [rad], with V = ``vertical`` in each arm's base frame; hands whose arm joints are not all in the path, or whose arm is not S-R-S, are left out."""
-    v = np.asarray(vertical, dtype=float)
+    """The arm angle per hand of the path along it (N,) [rad]: psi of eq (1) of MC-Inverse, with V = ``vertical`` in each arm's base frame, on an S-R-S arm; on another arm of a SEW family the stereographic SEW angle that ``--ik sew`` holds or schedules (:func:`dualarm.ik.sew.SewAngle.stereographic` of ``vertical``). Hands whose arm joints are not all in the path, or whose arm has neither, are left out."""
+    from dualarm.ik.sew import SewAngle, sew_chain
+
+    v = np.asarray(vertical, dtype=float) / np.linalg.norm(vertical)
     angles = {}
     for hand in path.hands:
         chain = robot.hand_chain(hand)
-        if set(chain.joint_names) <= set(path.joint_names):
-            columns = [path.joint_names.index(n) for n in chain.joint_names]
+        if not set(chain.joint_names) <= set(path.joint_names):
+            continue
+        q = path.q[:, [path.joint_names.index(n) for n in chain.joint_names]]
+        try:
+            angles[hand] = SrsKinematics.of(chain, tuple(v)).arm_angles(q)
+        except NotSRSError:
             try:
-                kinematics = SrsKinematics.of(chain, tuple(v / np.linalg.norm(v)))
+                angles[hand] = SewAngle.stereographic(v).angle(*sew_chain(chain).points(q))
             except NotSRSError:
                 continue
-            angles[hand] = kinematics.arm_angles(path.q[:, columns])
     return angles
 
 

@@ -95,7 +95,7 @@ IK_SAMPLE = {
             "description": "hand -> angle of R_asked^T R_reached [rad] (IK stages; measured even where the method solved positions only)",
         },
         "task_space": {"type": "string", "enum": ["pose", "position"], "description": "what the method solved: the hands' poses, or their positions only"},
-        "arm_angle_rad": {**_HAND_MAP, "description": "hand -> arm angle psi of MC-Inverse eq (1) [rad]"},
+        "arm_angle_rad": {**_HAND_MAP, "description": "hand -> arm angle [rad]: psi of MC-Inverse eq (1) on an S-R-S arm, else the stereographic SEW angle"},
     },
     "required": ["t", "rep", "method", "status", "solve_time_s", "position", "velocity", "hand_error_m", "arm_angle_rad"],
 }

@@ -110,7 +110,7 @@ def run_consistency(
         methods = [m for m in DEFAULT_METHODS if m in suited]
     for m in methods:
         refuse_unsuited(METHODS[m], task.robot, hands)
-    columns = COLUMNS if any_srs(task) else tuple(c for c in COLUMNS if c not in ARM_ANGLE_COLUMNS)
+    columns = COLUMNS if any_arm_angle(task) else tuple(c for c in COLUMNS if c not in ARM_ANGLE_COLUMNS)
     out_dir = Path(out_dir)
     _claim = claim_output_dir(out_dir, "consistency")  # refuses a directory holding files dualarm did not write; locked until this returns
     runs_dir = out_dir / "runs"
@@ -144,11 +144,11 @@ def run_consistency(
     return Consistency(table=table, csv=csv, markdown=markdown, figures=written)
 
 
-def any_srs(task) -> bool:
-    """Whether a driven arm of ``task`` is S-R-S (and so has an arm angle)."""
-    from dualarm.methods import not_srs
+def any_arm_angle(task) -> bool:
+    """Whether a driven arm of ``task`` has an arm angle: MC-Inverse's on an S-R-S arm, the SEW angle on another arm of a SEW family (S-R-S arms are of one too)."""
+    from dualarm.methods import not_sew
 
-    return len(not_srs(task.robot, task.spec.hands)) < len(task.spec.hands)
+    return len(not_sew(task.robot, task.spec.hands)) < len(task.spec.hands)
 
 
 def _row(method: str, run: RunData) -> dict[str, object]:
@@ -168,7 +168,7 @@ def _figures(task, samples: dict[str, pd.DataFrame], out_dir: Path) -> tuple[Pat
         joints = list(task.robot.hand_chain(hand).joint_names)
         title = f"{task.name}: {hand} arm joints per repetition" + (f" (cf. MC-Inverse {joints_figure})" if joints_figure != "-" else "")
         written.append(figures.joints_per_repetition(samples, joints, title, out_dir / f"joints_{hand}.png"))
-    hands = [h for h in task.spec.hands if any(f"arm_angle_rad.{h}" in sample.columns for sample in samples.values())]  # S-R-S arms only
+    hands = [h for h in task.spec.hands if any(f"arm_angle_rad.{h}" in sample.columns for sample in samples.values())]  # arms with an arm angle only
     if hands:
         title = f"{task.name}: arm angle per repetition" + (f" (cf. MC-Inverse {angle_figure})" if angle_figure != "-" else "")
         written.append(figures.arm_angle_per_repetition(samples, hands, title, out_dir / "arm_angle.png"))

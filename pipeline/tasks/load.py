@@ -460,12 +460,12 @@ def _check_reach(task: Task) -> None:
 def frame_pose(robot: Robot, name: str, q: Mapping[str, float]) -> np.ndarray:
     """The pose (4, 4) [m] of frame ``name`` in the robot base frame at configuration ``q`` [rad]: a role of :data:`~dualarm.tasks.schema.FRAME_ROLES` (checked first) or a URDF link.
 
-    ``left.shoulder`` / ``right.shoulder``: that hand's S-R-S shoulder centre S; ``shoulders``: the
+    ``left.shoulder`` / ``right.shoulder``: that hand's shoulder centre S (:func:`shoulder_position`); ``shoulders``: the
     midpoint of the two; both with the robot base frame's axes (so a role only moves the origin).
     A link: its frame, the joints between the root and it at ``q``.
 
     Raises:
-        RobotModelError: an arm that is not S-R-S for a shoulder role; KeyError: an unknown name.
+        NotSRSError: an arm without a shoulder centre for a shoulder role; KeyError: an unknown name.
     """
     if name in FRAME_ROLES:
         hands = ("left", "right") if name == "shoulders" else (name.split(".")[0],)
@@ -479,16 +479,36 @@ def frame_pose(robot: Robot, name: str, q: Mapping[str, float]) -> np.ndarray:
 
 
 def shoulder_position(robot: Robot, hand: str, q: Mapping[str, float]) -> np.ndarray:
-    """The shoulder centre S of ``hand``'s S-R-S arm in the robot base frame at configuration ``q`` [m], (3,)."""
+    """The shoulder centre S of ``hand``'s arm in the robot base frame at configuration ``q`` [m], (3,): where an S-R-S arm's joints 1-3 meet, else the SEW angle's S on joint 1's axis (:mod:`dualarm.ik.sew`: where joints 1-3 meet, or the point of joint 1's axis nearest where joints 2 and 3 meet).
+
+    Raises:
+        NotSRSError: the arm is neither S-R-S nor of a SEW family (the SEW solver's one line).
+    """
     arm = robot.hand_chain(hand)
     to_arm = robot.chain_between(robot.urdf.root, arm.base)
     T = ChainKinematics.of(to_arm).pose(np.array([q[n] for n in to_arm.joint_names]))
-    return T[:3, :3] @ srs_geometry(arm).shoulder + T[:3, 3]
+    return T[:3, :3] @ _shoulder_and_length(arm)[0] + T[:3, 3]
 
 
 def arm_scale(robot: Robot, hands: Sequence[str]) -> float:
-    """``scale = "arm"``'s factor: the mean upper arm + forearm (S-R-S L2 + L3) of ``hands``' arms over :data:`~dualarm.tasks.schema.REFERENCE_ARM_M` (the humanoid's)."""
-    return float(np.mean([srs_geometry(robot.hand_chain(hand)).reach for hand in hands])) / REFERENCE_ARM_M
+    """``scale = "arm"``'s factor: the mean arm length of ``hands``' arms (S-R-S: upper arm + forearm, L2 + L3; else |SE| + |EW| at q = 0 of the SEW angle's points) over :data:`~dualarm.tasks.schema.REFERENCE_ARM_M` (the humanoid's)."""
+    return float(np.mean([_shoulder_and_length(robot.hand_chain(hand))[1] for hand in hands])) / REFERENCE_ARM_M
+
+
+def _shoulder_and_length(arm: Chain) -> tuple[np.ndarray, float]:
+    """The shoulder centre S [m] (3,) in the arm's base frame and the arm's length [m]: an S-R-S arm's S and L2 + L3; else those of the SEW angle's points at q = 0 (S, and |SE| + |EW|), which on an S-R-S arm are the same.
+
+    Raises:
+        NotSRSError: the arm is neither S-R-S nor of a SEW family (the SEW solver's one line).
+    """
+    from dualarm.ik.sew import sew_chain
+
+    try:
+        geometry = srs_geometry(arm)
+        return geometry.shoulder, geometry.reach
+    except NotSRSError:
+        sew = sew_chain(arm)
+        return sew.shoulder, float(np.linalg.norm(sew.elbow - sew.shoulder) + np.linalg.norm(sew.wrist - sew.elbow))
 
 
 def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str) -> TaskSpec:
@@ -513,7 +533,7 @@ def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str)
         ) from None
     except (NotSRSError, RobotModelError) as exc:
         key = "scale" if spec.frame is None or spec.frame not in FRAME_ROLES else "frame"
-        raise TaskFileError(f"{source}:{key}: needs the S-R-S shoulder of every driven arm: {exc}") from None
+        raise TaskFileError(f"{source}:{key}: needs the shoulder centre of every driven arm: {exc}") from None
     R, o = F[:3, :3], F[:3, 3]
     rotated = not np.array_equal(R, np.eye(3))
 

@@ -1,28 +1,31 @@
-"""SEW-angle IK on the Franka Panda (3R-R-2R-R, not S-R-S): every candidate against the project's double-precision FK, PyBullet's FK, the paper's form of the stereographic SEW angle, and IK-Geo (the `ik-geo` package) with joint 7 fixed."""
+"""SEW-angle IK on arms that are not S-R-S, of both families: the Franka Panda (3R-R-2R-R) and the offset humanoid (R-2R-R-3R). Every candidate against the project's double-precision FK, PyBullet's FK, the paper's form of the stereographic SEW angle, and IK-Geo (the `ik-geo` package) with one joint fixed; on S-R-S arms, against MC-Inverse."""
 
-import ik_geo
 import numpy as np
-import pybullet as pb
 import pytest
 
+from dualarm.bench.ik import ik_geo_solutions
 from dualarm.errors import NotSRSError
-from dualarm.ik.sew import NotSewError, SewAngle, sew_chain, solve
+from dualarm.ik.mc_inverse import McInverse
+from dualarm.ik.sew import FIRST_JOINT_FAMILY, UPPER_ARM_FAMILY, NotSewError, SewAngle, sew_chain, solve
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import load_robot
-from tests.conftest import HUMANOID, REPO, pybullet_urdf
+from tests.conftest import HUMANOID, OFFSET, REPO, pybullet_urdf, wrist_offset_robot
 
 PANDA = REPO / "robots" / "panda"
-#: The stereographic SEW angle: singular half-line straight down from the shoulder (into the Panda's base), reference up.
+#: The stereographic SEW angle: singular half-line straight down from the shoulder (into the robot), reference up.
 STEREO = SewAngle(reference=(0.0, 0.0, 1.0), singular=(0.0, 0.0, -1.0))
+#: (robot directory, URDF, hand) of each family's arm.
+ARMS = {"panda": (PANDA, "panda.urdf", "right"), "humanoid_offset": (OFFSET, "humanoid_offset.urdf", "left")}
 
 
-@pytest.fixture(scope="module")
-def panda():
-    robot = load_robot(PANDA)
-    chain = robot.hand_chain("right")
+@pytest.fixture(scope="module", params=sorted(ARMS))
+def arm7(request):
+    directory, urdf, hand = ARMS[request.param]
+    robot = load_robot(directory)
+    chain = robot.hand_chain(hand)
     lower, upper = robot.lower_upper(chain.joint_names)
     Q = np.random.default_rng(11).uniform(lower, upper, (60, 7))
-    return robot, chain, sew_chain(chain), Q
+    return robot, chain, sew_chain(chain), Q, directory / urdf
 
 
 def _psi(arm, sew, q):
@@ -33,19 +36,36 @@ def _wrapped(a):
     return np.abs(np.angle(np.exp(1j * np.asarray(a))))
 
 
-def test_the_product_of_exponentials_is_the_urdf_chain(panda):
-    """The POE poses equal the chain's FK (1e-11) at random configurations; S, E, C, W sit on the axes that define them, as PyBullet places the joints at q = 0; the offsets are the Panda's (0.088 m at the wrist, 0.0825 m at the elbow)."""
-    _, chain, arm, Q = panda
+def _chain_frame(sim, chain, link):
+    """PyBullet's frame of ``link`` in the chain's base frame (the identity for a root base)."""
+    base = sim.frame(chain.base) if chain.base in sim.link else np.eye(4)
+    return np.linalg.inv(base) @ sim.frame(link)
+
+
+def test_the_product_of_exponentials_is_the_urdf_chain(arm7):
+    """The POE poses equal the chain's FK (1e-11) at random configurations; S, E, C, W sit on the axes that define them, as PyBullet places the joints at q = 0; the offsets are the arm's: the Panda's 0.088 m at the wrist and 0.0825 m at the elbow, the offset humanoid's 0.04 m at the shoulder and 0.03 m at the elbow (behind the upper arm)."""
+    robot, chain, arm, Q, urdf = arm7
     assert np.abs(arm.poses(Q) - ChainKinematics.of(chain).poses(Q)).max() < 1e-11
-    with pybullet_urdf(PANDA / "panda.urdf") as sim:  # at q = 0
-        on = (arm.shoulder, arm.shoulder, arm.shoulder, arm.elbow, arm.crossing, arm.crossing, arm.wrist)
+    S, E, C, W = arm.shoulder, arm.elbow, arm.crossing, arm.wrist
+    on = (S, S, S, E, C, C, W) if arm.family == UPPER_ARM_FAMILY else (S, C, C, E, W, W, W)
+    with pybullet_urdf(urdf) as sim:  # at q = 0
+        import pybullet as pb
+
         for name, point in zip(chain.joint_names, on):
             info = pb.getJointInfo(sim.body, sim.joint[name], physicsClientId=sim.client)
-            T = sim.frame(info[12].decode())  # the joint frame is its child link's
+            T = _chain_frame(sim, chain, info[12].decode())  # the joint frame is its child link's
             axis = T[:3, :3] @ np.asarray(info[13])
             assert np.linalg.norm(np.cross(axis, point - T[:3, 3])) < 1e-6, name
-    assert np.linalg.norm(arm.wrist - arm.crossing) == pytest.approx(0.088, abs=1e-9)
-    assert np.linalg.norm(arm.elbow - arm.shoulder) == pytest.approx(np.hypot(0.316, 0.0825), abs=1e-9)
+    if robot.name == "panda":
+        assert arm.family == UPPER_ARM_FAMILY
+        assert np.linalg.norm(W - C) == pytest.approx(0.088, abs=1e-9)
+        assert np.linalg.norm(E - S) == pytest.approx(np.hypot(0.316, 0.0825), abs=1e-9)
+    else:
+        assert arm.family == FIRST_JOINT_FAMILY
+        assert np.linalg.norm(C - S) == pytest.approx(0.04, abs=1e-9)  # axes 2-3 meet 4 cm from axis 1
+        h3, h4 = arm.axes[2], arm.axes[3]
+        n = np.cross(h3, h4) / np.linalg.norm(np.cross(h3, h4))
+        assert abs(n @ (arm.axis_points[3] - C)) == pytest.approx(0.03, abs=1e-9)  # axis 4 misses axis 3 by the elbow offset
 
 
 def test_the_stereographic_angle_is_the_papers_formula():
@@ -62,83 +82,90 @@ def test_the_stereographic_angle_is_the_papers_formula():
     assert _wrapped(STEREO.angle(S, E, W) - expected).max() < 1e-12
 
 
-def test_every_candidate_reproduces_the_pose_and_angle_and_one_is_the_configuration(panda):
-    """60 random configurations within the limits: at each one's own pose and SEW angle, one candidate is that configuration (1e-6: near a double root it is determined only so far), and every candidate reproduces the pose by the chain's FK to 1e-9 m / 1e-9 and the angle to 1e-9 rad."""
-    _, chain, arm, Q = panda
+def test_every_candidate_reproduces_the_pose_and_angle_and_one_is_the_configuration(arm7):
+    """60 random configurations within the limits: at each one's own pose and SEW angle, one candidate is that configuration (1e-6: near a double root it is determined only so far), and every candidate reproduces the pose by the chain's FK to 1e-9 m / 1e-9 and the angle to 1e-9 rad. Their number is even: the last subproblem (the shoulder's or the wrist's pair of axes) gives two distinct roots at a configuration off its singularity."""
+    _, chain, arm, Q, _ = arm7
     kin = ChainKinematics.of(chain)
-    counts = []
     for q in Q:
         T, psi = kin.pose(q), _psi(arm, STEREO, q)
         found = solve(arm, T, psi, STEREO)
-        counts.append(len(found.q))
         assert _wrapped(found.q - q).max(axis=1).min() < 1e-6
         got = kin.poses(found.q)
         assert np.linalg.norm(got[:, :3, 3] - T[:3, 3], axis=1).max() < 1e-9
         assert np.abs(got[:, :3, :3] - T[:3, :3]).max() < 1e-9
         assert _wrapped(STEREO.angle(*arm.points(found.q)) - psi).max() < 1e-9
         assert len(np.unique(np.round(found.q, 6), axis=0)) == len(found.q)  # no solution twice
-    assert max(counts) <= 16 and min(counts) >= 2  # solutions come in shoulder pairs
+        assert len(found.q) % 2 == 0
 
 
-def test_candidates_agree_with_pybullet(panda):
-    """PyBullet's hand frame at every candidate of 10 poses equals the asked pose (1e-6: PyBullet reports float32)."""
-    _, chain, arm, Q = panda
+def test_candidates_agree_with_pybullet(arm7):
+    """PyBullet's hand frame (in the chain's base frame) at every candidate of 10 poses equals the asked pose (1e-6: PyBullet reports float32)."""
+    _, chain, arm, Q, urdf = arm7
     kin = ChainKinematics.of(chain)
-    with pybullet_urdf(PANDA / "panda.urdf") as sim:
+    with pybullet_urdf(urdf) as sim:
         for q in Q[:10]:
             T = kin.pose(q)
             for candidate in solve(arm, T, _psi(arm, STEREO, q), STEREO).q:
                 sim.set(chain.joint_names, candidate)
-                reached = sim.frame(chain.tip)
+                reached = _chain_frame(sim, chain, chain.tip)
                 assert np.linalg.norm(reached[:3, 3] - T[:3, 3]) < 1e-6
                 assert np.abs(reached[:3, :3] - T[:3, :3]).max() < 1e-6
 
 
-def test_ik_geo_with_joint_7_fixed_finds_the_same_solutions(panda):
-    """IK-Geo (`ik-geo`): with q7 fixed at a candidate's, the Panda's joints 1-6 reversed are its spherical_two_intersecting robot (joints 6, 5 meet; 3, 2, 1 meet at the shoulder). Every candidate's q1..q6 is among its solutions, and every exact solution it finds at that q7 with our SEW angle is among ours."""
-    _, chain, arm, Q = panda
+def test_ik_geo_with_one_joint_fixed_finds_the_same_solutions(arm7):
+    """IK-Geo (`ik-geo`, wired by dualarm.bench.ik.ik_geo_solutions) with the joint its 6R leaves out fixed at a candidate's (q7 on the Panda, reversed; q1 on the offset humanoid): every candidate is among its solutions, and every exact solution it finds there with our SEW angle is among ours (1e-6)."""
+    _, chain, arm, Q, _ = arm7
     kin = ChainKinematics.of(chain)
-    S, E, C = arm.shoulder, arm.elbow, arm.crossing
     checked = 0
     for q in Q[:20]:
         T, psi = kin.pose(q), _psi(arm, STEREO, q)
         ours = solve(arm, T, psi, STEREO).q
         for candidate in ours:
-            R67 = _rot(arm.axes[6], candidate[6])
-            tool = (arm.wrist - C) + R67 @ arm.tool  # C -> tip with q7 fixed
-            end = C + tool  # the 6R's tip at q = 0
-            H = -arm.axes[:6][::-1]
-            P = np.array([C - end, np.zeros(3), E - C, S - E, np.zeros(3), np.zeros(3), -S])
-            robot = ik_geo.Robot.spherical_two_intersecting(H.tolist(), P.tolist())
-            R06 = T[:3, :3] @ arm.tool_rotation.T @ R67.T
-            # the reversed chain's pose is the inverse; ik-geo reads a rotation's rows as columns, so R06 (= (R06^T)^T) is passed as is
-            theirs = [np.array(s)[::-1] for s, least_squares in robot.get_ik(R06.tolist(), (-R06.T @ T[:3, 3]).tolist()) if not least_squares]
-            assert min(_wrapped(t - candidate[:6]).max() for t in theirs) < 1e-6
+            theirs = ik_geo_solutions(arm, T, candidate)
+            assert min(_wrapped(t - candidate).max() for t in theirs) < 1e-6
             for t in theirs:
-                full = np.append(t, candidate[6])
-                if _wrapped(_psi(arm, STEREO, full) - psi) < 1e-6:
-                    assert _wrapped(ours - full).max(axis=1).min() < 1e-6
+                if _wrapped(_psi(arm, STEREO, t) - psi) < 1e-6:
+                    assert _wrapped(ours - t).max(axis=1).min() < 1e-6
             checked += 1
     assert checked >= 40
 
 
-def _rot(k, t):
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
+@pytest.mark.parametrize("robot_dir", [HUMANOID, REPO / "robots" / "dual_iiwa"], ids=["humanoid", "dual_iiwa"])
+def test_on_s_r_s_arms_it_gives_mc_inverses_candidates(robot_dir):
+    """On an S-R-S arm (R-2R-R-3R with axis 1 through the shoulder) the SEW angle with e_r = -V (conventional) is minus MC-Inverse's arm angle of eq (1) (1e-9 rad: the iiwa's URDF axes are exact only to ~1e-13), and at a pose's angle the SEW solutions are MC-Inverse's 8 candidates, each of ours one of theirs and each of theirs one of ours (1e-9 rad), at 30 random configurations per arm."""
+    robot = load_robot(robot_dir)
+    for hand in ("left", "right"):
+        chain = robot.hand_chain(hand)
+        arm, mc = sew_chain(chain), McInverse.of(chain)
+        assert arm.family == FIRST_JOINT_FAMILY and np.linalg.norm(arm.shoulder - arm.crossing) < 1e-9
+        lower, upper = robot.lower_upper(chain.joint_names)
+        Q = np.random.default_rng(3).uniform(lower, upper, (30, 7))
+        conventional = SewAngle(reference=(0.0, 0.0, -1.0))
+        psi_mc = mc.kinematics.arm_angles(Q)
+        assert _wrapped(conventional.angle(*arm.points(Q)) + psi_mc).max() < 1e-9
+        kin = ChainKinematics.of(chain)
+        for q, psi in zip(Q, psi_mc):
+            T = kin.pose(q)
+            ours, theirs = solve(arm, T, -psi, conventional).q, mc.solve(T, psi).q
+            assert len(ours) == 8
+            assert max(_wrapped(ours - t).max(axis=1).min() for t in theirs) < 1e-9
+            assert max(_wrapped(theirs - o).max(axis=1).min() for o in ours) < 1e-9
 
 
-def test_refusals_name_the_chain_and_why():
-    """An S-R-S arm is MC-Inverse's; a chain without 7 joints is no 7R arm: one line each, a NotSRSError (the CLI's exit 2)."""
-    humanoid = load_robot(HUMANOID)
-    with pytest.raises(NotSewError, match="left_arm' is S-R-S .*use mc-inverse"):
-        sew_chain(humanoid.hand_chain("left"))
+def test_refusals_name_the_chain_and_why(tmp_path):
+    """A 7R arm of neither family names both families' axes and how far they miss; a chain without 7 joints is no 7R arm: one line each, a NotSRSError (the CLI's exit 2)."""
+    odd = load_robot(wrist_offset_robot(tmp_path))
+    with pytest.raises(NotSewError, match=r"left_arm' is of no family .*left_forearm_roll, left_wrist_pitch, left_wrist_roll \(miss 0\.0[12]\d* m\)") as caught:
+        sew_chain(odd.hand_chain("left"))
+    assert "\n" not in str(caught.value)
+    sew_chain(odd.hand_chain("right"))  # the other arm is untouched
     panda = load_robot(PANDA)
     with pytest.raises(NotSRSError, match="has 6 movable joints; the SEW solver needs 7 revolute joints"):
         sew_chain(panda.chain_between("panda_link1", panda.hand_chain("right").tip))
 
 
-def test_ik_sew_command_prints_every_solution_as_json(panda):
-    """`dualarm ik sew panda --arm right --pose ... --sew-angle PSI --json` at the pose and SEW angle of a configuration inside the limits: that configuration is among the candidates and marked valid, every candidate's reported FK errors are below 1e-9, and valid means inside robot.toml's limits."""
+def test_ik_sew_command_prints_every_solution_as_json(arm7):
+    """`dualarm ik sew ROBOT --arm HAND --pose ... --sew-angle PSI --json` at the pose and SEW angle of a configuration inside the limits: that configuration is among the candidates and marked valid, every candidate's reported FK errors are below 1e-9, and valid means inside robot.toml's limits."""
     import json
 
     from scipy.spatial.transform import Rotation
@@ -146,12 +173,14 @@ def test_ik_sew_command_prints_every_solution_as_json(panda):
 
     from dualarm.cli import app
 
-    robot, chain, arm, Q = panda
+    robot, chain, arm, Q, urdf = arm7
     q = Q[0]
-    T = ChainKinematics.of(chain).pose(q)  # the chain's base is the Panda's root link: robot frame = chain frame
+    hand = ARMS[robot.name][2]
+    to_base = robot.chain_between(robot.urdf.root, chain.base)
+    T = ChainKinematics.of(to_base).pose(np.zeros(len(to_base.joint_names))) @ ChainKinematics.of(chain).pose(q)  # robot base frame, the waist at 0
     pose = [*T[:3, 3], *Rotation.from_matrix(T[:3, :3]).as_euler("xyz")]
     psi = _psi(arm, STEREO, q)
-    result = CliRunner().invoke(app, ["ik", "sew", "panda", "--arm", "right", "--pose", *(repr(float(v)) for v in pose), "--sew-angle", repr(psi), "--json"])
+    result = CliRunner().invoke(app, ["ik", "sew", str(urdf.parent), "--arm", hand, "--pose", *(repr(float(v)) for v in pose), "--sew-angle", repr(psi), "--json"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert data["singular"] == [0.0, 0.0, -1.0] and data["reference"] == [0.0, 0.0, 1.0]
@@ -165,15 +194,15 @@ def test_ik_sew_command_prints_every_solution_as_json(panda):
         assert c["valid"] is inside
 
 
-def test_ik_sew_command_refuses_in_one_line():
-    """An S-R-S arm, and a pose out of reach, exit 2 with one line and no traceback."""
+def test_ik_sew_command_refuses_in_one_line(tmp_path):
+    """An arm of neither family, and a pose out of reach, exit 2 with one line and no traceback."""
     from typer.testing import CliRunner
 
     from dualarm.cli import app
 
     runner = CliRunner()
     for args, needle in (
-        (["ik", "sew", "humanoid", "--arm", "left", "--pose", "0.3", "0.27", "1.0", "0", "0", "0", "--sew-angle", "0.5"], "is S-R-S"),
+        (["ik", "sew", str(wrist_offset_robot(tmp_path)), "--arm", "left", "--pose", "0.3", "0.27", "1.0", "0", "0", "0", "--sew-angle", "0.5"], "is of no family"),
         (["ik", "sew", "panda", "--arm", "right", "--pose", "2", "0", "0.5", "3.1416", "0", "0", "--sew-angle", "0.5"], "no solution at psi = 0.5 rad"),
     ):
         result = runner.invoke(app, args)

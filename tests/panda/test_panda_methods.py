@@ -49,7 +49,7 @@ def test_suited_methods_are_those_that_do_not_need_srs():
     assert suited_methods(panda, ["right"]) == tuple(n for n in IK_METHODS if not METHODS[n].needs_srs)
     assert {"mc-inverse", "ikfast-style"}.isdisjoint(suited_methods(panda, ["right"]))
     assert "sew" in suited_methods(panda, ["right"])  # the Panda is of the SEW solver's family
-    assert suited_methods(humanoid, ["left", "right"]) == tuple(n for n in IK_METHODS if n != "sew")  # S-R-S arms are MC-Inverse's
+    assert suited_methods(humanoid, ["left", "right"]) == IK_METHODS  # an S-R-S arm is of the SEW solver's R-2R-R-3R family too
 
 
 @pytest.mark.parametrize("method", ["mc-inverse", "ikfast-style"])

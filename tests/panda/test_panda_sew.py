@@ -11,10 +11,9 @@ from dualarm.ik.sew import sew_chain
 from dualarm.ik.sew_path import settings_for, sew_angle_of
 from dualarm.report.consistency import run_consistency
 from dualarm.tasks import load_task
-from tests.conftest import REPO, pybullet_urdf
+from tests.conftest import REPO, pybullet_urdf, wrist_offset_robot
 
 HERE = Path(__file__).parent
-TASK = HERE / "panda_triangle.toml"
 PANDA = REPO / "robots" / "panda"
 runner = CliRunner()
 
@@ -59,19 +58,12 @@ def test_the_sew_angle_is_held_along_the_path_as_pybullet_measures_it(compared):
     assert np.abs(np.array(angles) - initial).max() < 1e-6
 
 
-def test_sew_on_an_s_r_s_arm_and_in_auto_mode_is_refused_in_one_line(tmp_path):
-    """The humanoid's S-R-S arm: refused naming the chain and mc-inverse; a Panda task without [arm_angle] mode: refused naming the file and key. Exit 2, one line, no run left behind."""
-    source = TASK.read_text()
-    auto = tmp_path / "auto.toml"
-    auto.write_text(
-        source.replace("[arm_angle]   # sew: the initial configuration's SEW angle, held (MC-Inverse's auto search does not apply)\nmode = \"initial\"\n", "").replace("../../robots/panda", str(PANDA))
-    )
-    for args, needle in (
-        (["run", "triangle", "--ik", "sew", "--stages", "path,ik", "--out", str(tmp_path / "runs")], "is S-R-S"),
-        (["run", str(auto), "--ik", "sew", "--stages", "path,ik", "--out", str(tmp_path / "runs")], "auto.toml:arm_angle.mode"),
-    ):
-        result = runner.invoke(app, args)
-        assert result.exit_code == 2, result.output
-        lines = [line for line in result.stderr.splitlines() if line.strip()]
-        assert len(lines) == 1 and needle in lines[0]
+def test_sew_on_an_arm_of_no_family_is_refused_in_one_line(tmp_path):
+    """The offset humanoid with its left wrist offset too (no SEW family): `dualarm run triangle --robot` with sew exits 2 with one line naming the chain, and leaves no run behind."""
+    (tmp_path / "robot").mkdir()
+    robot = wrist_offset_robot(tmp_path / "robot")
+    result = runner.invoke(app, ["run", "triangle", "--robot", str(robot), "--ik", "sew", "--stages", "path,ik", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "chain 'left_arm' is of no family the SEW solver handles" in lines[0]
     assert not (tmp_path / "runs").exists()

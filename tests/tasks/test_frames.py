@@ -159,7 +159,7 @@ def test_task_check_passes_on_the_dual_iiwa(name):
 
 
 def test_the_triangle_runs_on_the_dual_iiwa_and_its_hand_draws_the_triangle_about_its_shoulder(tmp_path, iiwa_ready):
-    """`dualarm run triangle --robot robots/dual_iiwa --ik mc-inverse --stages path,ik` completes; PyBullet's FK of the recorded IK joints puts the hand on A, B, C, A (the file's numbers about the PyBullet shoulder, scaled) at 0, 2, 4, 6 s, and on the reference throughout."""
+    """`dualarm run triangle --robot robots/dual_iiwa --ik mc-inverse --stages path,ik` completes; PyBullet's FK of the recorded IK joints puts the hand on A, B, C, A (the file's numbers about the PyBullet shoulder, scaled) at 0, 2, 4, 6 s times the file's [transfer] duration_scale, and on the reference throughout."""
     from dualarm.record.readback import read_run
 
     result = runner.invoke(app, ["run", "triangle", "--robot", str(DUAL_IIWA), "--ik", "mc-inverse", "--stages", "path,ik", "--out", str(tmp_path)])
@@ -172,8 +172,9 @@ def test_the_triangle_runs_on_the_dual_iiwa_and_its_hand_draws_the_triangle_abou
     S, scale = _shoulder_and_scale(iiwa_ready, "left")
     data = tomllib.loads((TASKS / "triangle.toml").read_text())
     names = [f"left_lbr_iiwa_joint_{k}" for k in range(1, 8)]
-    vertices = {0: "A", 200: "B", 400: "C", 600: "A"}  # samples at 0, 2, 4 and 6 s (0.01 s apart)
-    assert np.allclose(ik["t"].to_numpy()[list(vertices)], [0.0, 2.0, 4.0, 6.0])
+    stretch = data["transfer"]["duration_scale"]
+    vertices = {round(k * 200 * stretch): name for k, name in enumerate("ABCA")}  # samples at 0, 2, 4 and 6 s stretched (0.01 s apart)
+    assert np.allclose(ik["t"].to_numpy()[list(vertices)], np.array([0.0, 2.0, 4.0, 6.0]) * stretch)
     for i in range(0, len(ik), 25):  # the right arm stays at ready, as the fixture set it
         row = ik.iloc[i]
         for n in names:
