@@ -12,8 +12,8 @@ On an S-R-S arm the analytic rows are MC-Inverse's; on an arm of the SEW family 
 - SEW batched: :func:`dualarm.ik.sew.solve_many` over all poses in one call; time per pose.
 - IK-Geo, the peer (the ``ik-geo`` package): with one joint fixed at the original configuration's
   (q7 on the Panda's family, q1 on the R-2R-R-3R family), the other six are IK-Geo's
-  ``spherical_two_intersecting`` robot (:func:`ik_geo_solutions`); one call per pose (the robot
-  built in the call, since it depends on the fixed joint).
+  ``spherical_two_intersecting`` robot (:func:`ik_geo_call`); one call per pose (the robot
+  built in the call, since it depends on the fixed joint; its answer turned into rows after).
 
 Success for SEW and IK-Geo: the original configuration among the exact solutions to
 :data:`SEW_MATCH_TOLERANCE_RAD` (near a double root a solution is determined only so far).
@@ -297,8 +297,8 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
     success = float(np.mean([found(b.q, q) for b, q in zip(batched, Q)]))
     rows.append(IkBenchRow(SEW_BATCHED, poses, elapsed, elapsed, success, f"one call; {counts.min()}-{counts.max()} solutions per pose (median {np.median(counts):.0f})"))
 
-    row, answers = _timed(IK_GEO, poses, lambda i: ik_geo_solutions(sew_arm, T[i], Q[i]), report)
-    success = float(np.mean([found(np.array(a).reshape(-1, 7), q) for a, q in zip(answers, Q)]))
+    row, answers = _timed(IK_GEO, poses, lambda i: ik_geo_call(sew_arm, T[i], Q[i]), report)
+    success = float(np.mean([found(np.array(ik_geo_rows(sew_arm, a, q)).reshape(-1, 7), q) for a, q in zip(answers, Q)]))
     fixed = "q7, joints 6..1" if sew_arm.family == UPPER_ARM_FAMILY else "q1, joints 2..7"
     note = f"ik-geo's spherical_two_intersecting with {fixed} fixed at the original's; original q among its exact solutions"
     rows.append(replace(row, success_rate=success, note=note))
@@ -306,7 +306,12 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
 
 
 def ik_geo_solutions(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list[np.ndarray]:
-    """IK-Geo's exact solutions (each (7,) [rad]) of the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,).
+    """IK-Geo's exact solutions (each (7,) [rad]) of the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,): :func:`ik_geo_call`'s answer as rows of the 7 joints."""
+    return ik_geo_rows(arm, ik_geo_call(arm, T, q), q)
+
+
+def ik_geo_call(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list:
+    """IK-Geo's answer (its list of (6 joints, least-squares flag)) for the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,).
 
     Both SEW families are IK-Geo's ``spherical_two_intersecting`` 6R (the ``ik-geo`` package: axes
     1 and 2 meet, axes 4-6 meet) once one joint is fixed: 3R-R-2R-R with q7 fixed, joints 6..1
@@ -316,20 +321,33 @@ def ik_geo_solutions(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list[np.n
     """
     import ik_geo
 
-    from dualarm.ik.sew import UPPER_ARM_FAMILY, _rot
+    from dualarm.ik.sew import UPPER_ARM_FAMILY
 
     S, E, C, W = arm.shoulder, arm.elbow, arm.crossing, arm.wrist
     if arm.family == UPPER_ARM_FAMILY:
-        R67 = _rot(arm.axes[6], np.asarray(q[6]))
+        R67 = _rotation(arm.axes[6], float(q[6]))
         P = [C - (W + R67 @ arm.tool), np.zeros(3), E - C, S - E, np.zeros(3), np.zeros(3), -S]  # from the 6R's tip at q = 0
         R06 = T[:3, :3] @ arm.tool_rotation.T @ R67.T
-        found = ik_geo.Robot.spherical_two_intersecting((-arm.axes[:6][::-1]).tolist(), np.array(P).tolist()).get_ik(R06.tolist(), (-R06.T @ T[:3, 3]).tolist())
-        return [np.append(np.array(s)[::-1], q[6]) for s, least_squares in found if not least_squares]
-    R1 = _rot(arm.axes[0], np.asarray(q[0]))
+        return ik_geo.Robot.spherical_two_intersecting((-arm.axes[:6][::-1]).tolist(), np.array(P).tolist()).get_ik(R06.tolist(), (-R06.T @ T[:3, 3]).tolist())
+    R1 = _rotation(arm.axes[0], float(q[0]))
     P = [C, np.zeros(3), E - C, W - E, np.zeros(3), np.zeros(3), arm.tool]
     R = R1.T @ T[:3, :3] @ arm.tool_rotation.T  # the 6R's rotation, without the tip's at q = 0
-    found = ik_geo.Robot.spherical_two_intersecting(arm.axes[1:].tolist(), np.array(P).tolist()).get_ik(R.T.tolist(), (R1.T @ (T[:3, 3] - S) + S).tolist())
-    return [np.insert(np.array(s), 0, q[0]) for s, least_squares in found if not least_squares]
+    return ik_geo.Robot.spherical_two_intersecting(arm.axes[1:].tolist(), np.array(P).tolist()).get_ik(R.T.tolist(), (R1.T @ (T[:3, 3] - S) + S).tolist())
+
+
+def _rotation(k: np.ndarray, angle: float) -> np.ndarray:
+    """exp([k] angle) for one unit axis k (3,) (Rodrigues; the batched :func:`dualarm.ik.sew._rot` costs ~40 us on one angle)."""
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
+
+
+def ik_geo_rows(arm: "SewChain", answer: list, q: np.ndarray) -> list[np.ndarray]:
+    """The exact solutions of :func:`ik_geo_call`'s ``answer`` as rows of the 7 joints [rad], the fixed one at ``q``'s."""
+    from dualarm.ik.sew import UPPER_ARM_FAMILY
+
+    if arm.family == UPPER_ARM_FAMILY:
+        return [np.append(np.array(s)[::-1], q[6]) for s, least_squares in answer if not least_squares]
+    return [np.insert(np.array(s), 0, q[0]) for s, least_squares in answer if not least_squares]
 
 
 def _timed(name: str, count: int, call: Callable[[int], Any], report: Progress) -> tuple[IkBenchRow, list]:
