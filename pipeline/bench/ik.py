@@ -336,8 +336,10 @@ def ik_geo_call(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list:
 
 
 def _rotation(k: np.ndarray, angle: float) -> np.ndarray:
-    """exp([k] angle) for one unit axis k (3,) (Rodrigues; the batched :func:`dualarm.ik.sew._rot` costs ~40 us on one angle)."""
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    """exp([k] angle) for one unit axis k (3,) (Rodrigues, in numpy: a CasADi call costs more than the product on one angle)."""
+    from dualarm.ik.subproblems import hat
+
+    K = hat(k)
     return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
 
 

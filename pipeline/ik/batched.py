@@ -1,11 +1,11 @@
-"""Evaluating a per-pose candidates Function over many poses in mapped CasADi calls.
+"""Evaluating a CasADi Function over many inputs in mapped calls.
 
-Analytic IK solvers (MC-Inverse, ikfast-style) are CasADi Functions
-``(T (4x4) hand pose [m], x (scalar)) -> (Q (7xC) [rad], reason (1xC))`` with a scalar x (the arm
-angle, a free joint value). Building ``Function.map(N)`` costs time in N, and a plain call spends
-most of its time converting the outputs to numpy; so one map of a fixed chunk size is built per
-Function (and a smaller one for a last, partial chunk) and called through a CasADi ``FunctionBuffer`` on flat column-major arrays, with its
-instances spread over the machine's cores.
+A per-item Function (an analytic IK solver's ``(T (4x4) hand pose [m], x (scalar)) -> (Q (7xC)
+[rad], reason (1xC))`` with x the arm angle or a free joint value, or a piece of the SEW search) is
+evaluated over N items by :class:`Batched`. Building ``Function.map(N)`` costs time in N, and a
+plain call spends most of its time converting the outputs to numpy; so one map of a fixed chunk size
+is built per Function (and a smaller one for a last, partial chunk) and called through a CasADi
+``FunctionBuffer`` on flat column-major arrays, with its instances spread over the machine's cores.
 """
 
 from __future__ import annotations
@@ -23,12 +23,12 @@ REST_STEP = 64
 
 
 @dataclass(frozen=True)
-class BatchedCandidates:
-    """``function`` mapped over ``chunk`` poses at a time.
+class Batched:
+    """``function`` mapped over ``chunk`` items at a time.
 
     Attributes:
-        function: ``(T (4x4), x) -> (Q (7xC), reason (1xC))``.
-        chunk: poses per mapped call.
+        function: any CasADi Function of dense inputs (its outputs are made dense).
+        chunk: items per mapped call.
     """
 
     function: cs.Function
@@ -37,40 +37,69 @@ class BatchedCandidates:
     _buffers: dict = field(default_factory=dict, repr=False, compare=False)
 
     def _buffer(self, size: int):
-        """The Function mapped over ``size`` poses with its FunctionBuffer (built once per size)."""
+        """The Function mapped over ``size`` items with its FunctionBuffer and flat arrays (built once per size)."""
         if size not in self._buffers:
-            mapped = self.function.map(size, "thread", THREADS)
+            f = self.function
+            if not all(f.sparsity_out(i).is_dense() for i in range(f.n_out())):  # the buffers hold every entry
+                args = f.mx_in()
+                f = cs.Function(f.name(), args, [cs.densify(out) for out in f(*args)])
+            mapped = f.map(size, "thread", THREADS)
             buffer, evaluate = mapped.buffer()
-            arrays = (np.zeros(mapped.numel_in(0)), np.zeros(mapped.numel_in(1)), np.zeros(mapped.numel_out(0)), np.zeros(mapped.numel_out(1)))
-            buffer.set_arg(0, arrays[0].data)
-            buffer.set_arg(1, arrays[1].data)
-            buffer.set_res(0, arrays[2].data)
-            buffer.set_res(1, arrays[3].data)
+            ins = [np.zeros(mapped.numel_in(i)) for i in range(mapped.n_in())]
+            outs = [np.zeros(mapped.numel_out(i)) for i in range(mapped.n_out())]
+            for i, array in enumerate(ins):
+                buffer.set_arg(i, array.data)
+            for i, array in enumerate(outs):
+                buffer.set_res(i, array.data)
 
             def run(_keep=buffer) -> None:
                 evaluate()
 
-            self._buffers[size] = (run, arrays)
+            self._buffers[size] = (run, ins, outs)
         return self._buffers[size]
 
-    def __call__(self, poses: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidates of N poses (N, 4, 4) [m] at scalars x (N,) (or one for all): full chunks, then the rest in a map of the rest's size rounded up to :data:`REST_STEP`.
+    def __call__(self, *inputs: np.ndarray | float) -> tuple[np.ndarray, ...]:
+        """Evaluate over N items: full chunks, then the rest in a map of its size rounded up to :data:`REST_STEP`.
+
+        Args:
+            inputs: one per Function input of shape (r, c): N items (N, r, c), (N, r) for a column,
+                (N,) for a scalar; or one value for all N.
+
+        Returns:
+            one array per output of shape (r, c): (N, r, c), or (N, r) for a column.
+        """
+        f = self.function
+        flat = []
+        for i, value in enumerate(inputs):
+            r, c = f.size_in(i)
+            flat.append(np.asarray(value, dtype=float).reshape(-1, r, c).transpose(0, 2, 1).reshape(-1, r * c))  # column-major
+        N = max(len(a) for a in flat)
+        results = [np.empty((N, f.numel_out(i))) for i in range(f.n_out())]
+        for start in range(0, N, self.chunk):
+            m = min(self.chunk, N - start)
+            size = self.chunk if m == self.chunk else min(self.chunk, -(-m // REST_STEP) * REST_STEP)
+            evaluate, ins, outs = self._buffer(size)
+            for value, array in zip(flat, ins):
+                array.reshape(size, -1)[:m] = value if len(value) == 1 else value[start : start + m]
+            evaluate()
+            for result, array in zip(results, outs):
+                result[start : start + m] = array.reshape(size, -1)[:m]
+        shaped = []
+        for i, result in enumerate(results):
+            r, c = f.size_out(i)
+            shaped.append(result.reshape(N, r) if c == 1 else result.reshape(N, c, r).transpose(0, 2, 1))
+        return tuple(shaped)
+
+
+class BatchedCandidates(Batched):
+    """An analytic IK solver's candidates Function ``(T (4x4), x) -> (Q (7xC), reason (1xC))`` mapped over many poses."""
+
+    def candidates(self, poses: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Candidates of N poses (N, 4, 4) [m] at scalars x (N,) (or one for all).
 
         Returns:
             Q (N, C, n) [rad] and reason codes (N, C).
         """
         poses = np.asarray(poses, dtype=float).reshape(-1, 4, 4)
-        x = np.broadcast_to(np.asarray(x, dtype=float), poses.shape[:1])
-        n, C = self.function.size1_out(0), self.function.size2_out(0)
-        N = poses.shape[0]
-        q, reason = np.empty((N, C, n)), np.empty((N, C), int)
-        for start in range(0, N, self.chunk):
-            m = min(self.chunk, N - start)
-            size = self.chunk if m == self.chunk else min(self.chunk, -(-m // REST_STEP) * REST_STEP)
-            evaluate, (T, values, Q, code) = self._buffer(size)
-            T.reshape(size, 4, 4)[:m] = poses[start : start + m].transpose(0, 2, 1)  # column-major
-            values[:m] = x[start : start + m]
-            evaluate()
-            q[start : start + m] = Q.reshape(size, C, n)[:m]
-            reason[start : start + m] = code.reshape(size, C)[:m]
-        return q, reason
+        Q, reason = self(poses, np.broadcast_to(np.asarray(x, dtype=float), poses.shape[:1]))
+        return Q.transpose(0, 2, 1), reason[:, 0].astype(int)

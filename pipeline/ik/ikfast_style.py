@@ -165,13 +165,13 @@ class IkfastStyle:
         Returns:
             q (N, 8, 7) [rad] and reason codes (N, 8).
         """
-        return self._batched(poses, theta3)
+        return self._batched.candidates(poses, theta3)
 
     def nearest(self, pose: np.ndarray, previous: np.ndarray) -> "IkfastResult":
         """The valid candidate over all free values nearest ``previous`` (7,) [rad] (Euclidean joint distance) for one hand pose (4x4, chain base frame) [m]: one mapped call over the F x 8 candidates."""
         previous = np.asarray(previous, dtype=float)
         F = len(self.free_values)
-        q, reason = self._batched(np.broadcast_to(np.asarray(pose, dtype=float), (F, 4, 4)), self.free_values)
+        q, reason = self._batched.candidates(np.broadcast_to(np.asarray(pose, dtype=float), (F, 4, 4)), self.free_values)
         q, valid = q.reshape(-1, 7), (reason == VALID).ravel()
         if not valid.any():
             return IkfastResult(q=previous.copy(), ok=False, free_value=float("nan"))

@@ -152,7 +152,7 @@ class McInverse:
         Returns:
             q (N, 8, 7) [rad] and reason codes (N, 8).
         """
-        return self._batched(poses, psi)
+        return self._batched.candidates(poses, psi)
 
     @cached_property
     def _batched(self) -> BatchedCandidates:

@@ -29,20 +29,30 @@ over the whole range (as IK-Geo's ``search_1D``), and beyond it: the ends of eac
 ``ready`` has its solutions exactly there) and the turning points of e between samples (two roots
 closer than the samples, or a double root) are located and sampled too. Every root is refined by
 bisection, so every root in the range is found, not the one nearest a seed; each solution is then
-polished by Newton on the 7 equations.
+polished by Newton on the 7 equations, with their Jacobian from CasADi's algorithmic
+differentiation.
 
-All arrays are numpy, every goal of a path searched at once (:func:`solve_many`); axes and points
-are those of the chain at q = 0 in its base frame (product of exponentials).
+The subproblems, each family's error and configurations, the forward kinematics (products of
+exponentials of the chain's axes at q = 0 in its base frame), the SEW angle and the polish's
+equations are CasADi expressions (:class:`_Solver`), evaluated over every goal of a path at once in
+mapped calls (:class:`dualarm.ik.batched.Batched`): the grid of a goal in one call, each step of
+the bisections for all brackets of all goals in one call. The bracketing and its bookkeeping are
+numpy (:func:`solve_many`).
 """
 
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from typing import TypeVar
 
+import casadi as cs
 import numpy as np
 
 from dualarm.errors import NotSRSError
+from dualarm.ik.batched import Batched
+from dualarm.ik.subproblems import rotate, rotation, subproblem2, turn
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import Chain, Robot
 from dualarm.model.srs import INTERSECTION_TOLERANCE_M, _axis_lines, _meeting_point
@@ -53,11 +63,9 @@ SEARCH_SAMPLES = 2000
 BISECTION_STEPS = 60
 #: Newton steps polishing each solution on the 7 equations (pose and SEW angle).
 POLISH_STEPS = 3
-#: Central-difference step of the polishing Jacobian [rad].
-DIFF_RAD = 1e-7
 #: The golden section's ratio, (sqrt 5 - 1) / 2.
 GOLDEN = (5**0.5 - 1) / 2
-#: Goals searched at once (memory: samples x this x a few 3x3 matrices).
+#: Goals whose grids are evaluated in one mapped call (memory: samples x 4 errors x this).
 CHUNK_GOALS = 64
 #: A turning point of the search's error, or the end of a branch's domain, this close to zero is a root [m].
 TOUCHING_M = 1e-6
@@ -65,79 +73,44 @@ TOUCHING_M = 1e-6
 RESIDUAL_TOLERANCE = 1e-9
 
 
+_Built = TypeVar("_Built")
+
+
 class NotSewError(NotSRSError):
     """A chain is of no family the SEW solver handles (one line naming the chain and the joints)."""
 
 
-# ----------------------------------------------------------------------------- subproblems (numpy)
+# ----------------------------------------------------------------------------- subproblems (CasADi)
 
 
-def _rot(k: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """exp([k] theta) for unit axes k (..., 3) and angles theta (...,) -> (..., 3, 3) (Rodrigues)."""
-    k = np.broadcast_to(k, np.shape(theta) + (3,))
-    x, y, z = k[..., 0], k[..., 1], k[..., 2]
-    zero = np.zeros_like(x)
-    K = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], -1).reshape(k.shape + (3,))
-    s, c = np.sin(theta)[..., None, None], np.cos(theta)[..., None, None]
-    return c * np.eye(3) + s * K + (1 - c) * (k[..., :, None] * k[..., None, :])  # K^2 = k k^T - I
+def _rot(k, theta):
+    """exp([k] theta) (3x3) for a unit axis k (3,) and an angle theta (Rodrigues)."""
+    return rotation(k, cs.cos(theta), cs.sin(theta))
 
 
-def _turn(k: np.ndarray, theta: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """exp([k] theta) v for unit axes k (..., 3), angles theta (...,) and vectors v (..., 3), without forming the matrices (Rodrigues)."""
-    s, c = np.sin(theta)[..., None], np.cos(theta)[..., None]
-    return c * v + s * _cross(k, v) + (1 - c) * _dot(k, v)[..., None] * k
+def _turn(k, theta, v):
+    """exp([k] theta) v for a unit axis k, an angle theta and a vector v, without forming the matrix (Rodrigues)."""
+    return rotate(k, cs.cos(theta), cs.sin(theta), v)
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("...i,...i->...", a, b)
+def sp2(p1, p2, k1: np.ndarray, k2: np.ndarray) -> list[tuple]:
+    """Subproblem 2: rot(k1, t1) p1 = rot(k2, t2) p2 for constant non-parallel unit axes; two (t1, t2), NaN where there is no exact solution (:func:`dualarm.ik.subproblems.subproblem2` of rot(k1, -t1) rot(k2, t2) p2 = p1)."""
+    roots, gamma2, _ = subproblem2(k1, k2, p2, p1)
+    return [(cs.if_else(gamma2 >= 0, -t1, np.nan), cs.if_else(gamma2 >= 0, t2, np.nan)) for t1, t2 in roots]
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The cross product a x b of vectors (..., 3), broadcast (np.cross's axis handling costs more than the product on the search's small arrays)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack(np.broadcast_arrays(a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), -1)
-
-
-def sp1(p: np.ndarray, q: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Subproblem 1: the angle about unit axis k turning p towards q (exact when their k-components and norms agree)."""
-    return np.arctan2(_dot(k, _cross(p, q)), _dot(p, q) - _dot(k, p) * _dot(k, q))
-
-
-def sp2(p1: np.ndarray, p2: np.ndarray, k1: np.ndarray, k2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Subproblem 2: rot(k1, t1) p1 = rot(k2, t2) p2 for non-parallel unit axes; (t1, t2), each (..., 2), NaN where there is no exact solution.
-
-    The common vector c = a k1 + b k2 + g (k1 x k2) keeps p1's component along k1 and p2's along k2,
-    with g^2 from |c| = |p1|.
-    """
-    c12 = _dot(k1, k2)
-    n = _cross(k1, k2)
-    n2 = _dot(n, n)
-    u, v = _dot(k1, p1), _dot(k2, p2)
-    a = (u - c12 * v) / n2
-    b = (v - c12 * u) / n2
-    g2 = (_dot(p1, p1) - a**2 - b**2 - 2 * a * b * c12) / n2
-    g = np.sqrt(np.where(g2 >= 0, g2, np.nan))
-    t1, t2 = [], []
-    for sign in (1.0, -1.0):
-        c = a[..., None] * k1 + b[..., None] * k2 + (sign * g)[..., None] * n
-        t1.append(sp1(p1, c, k1))
-        t2.append(sp1(p2, c, k2))
-    return np.stack(t1, -1), np.stack(t2, -1)
-
-
-def sp3(p1: np.ndarray, p2: np.ndarray, k: np.ndarray, d: float | np.ndarray) -> np.ndarray:
-    """Subproblem 3: |rot(k, t) p1 - p2| = d; t (..., 2), NaN where there is no exact solution.
+def sp3(p1, p2, k, d) -> list:
+    """Subproblem 3: |rot(k, t) p1 - p2| = d; two t, NaN where there is no exact solution.
 
     p2 . rot(k, t) p1 = A cos t + B sin t + (k.p1)(k.p2) = (|p1|^2 + |p2|^2 - d^2) / 2.
     """
-    A = _dot(p2, p1 - _dot(k, p1)[..., None] * k)
-    B = _dot(p2, _cross(k, p1))
-    rhs = (_dot(p1, p1) + _dot(p2, p2) - d**2) / 2 - _dot(k, p1) * _dot(k, p2)
-    r = np.hypot(A, B)
-    ratio = np.where(np.abs(rhs) <= r, rhs / np.where(r > 0, r, 1.0), np.nan)
-    phi, delta = np.arctan2(B, A), np.arccos(ratio)
-    return np.stack([phi + delta, phi - delta], -1)
+    A = cs.dot(p2, p1 - cs.dot(k, p1) * k)
+    B = cs.dot(p2, cs.cross(k, p1))
+    rhs = (cs.dot(p1, p1) + cs.dot(p2, p2) - d**2) / 2 - cs.dot(k, p1) * cs.dot(k, p2)
+    r = cs.sqrt(A**2 + B**2)
+    ratio = cs.if_else(cs.fabs(rhs) <= r, rhs / cs.if_else(r > 0, r, 1), np.nan)
+    phi, delta = cs.atan2(B, A), cs.acos(ratio)
+    return [phi + delta, phi - delta]
 
 
 # ----------------------------------------------------------------------------- the SEW angle
@@ -166,20 +139,31 @@ class SewAngle:
         v = np.asarray(vertical, dtype=float) / np.linalg.norm(vertical)
         return cls(reference=(float(v[0]), float(v[1]), float(v[2])), singular=(float(-v[0]), float(-v[1]), float(-v[2])))
 
-    def reference_direction(self, e_sw: np.ndarray) -> np.ndarray:
-        """e_x: the unit direction of psi = 0, normal to the unit shoulder-wrist directions ``e_sw`` (..., 3)."""
-        r = np.asarray(self.reference, dtype=float)
+    def reference_direction(self, e_sw):
+        """e_x: the unit direction of psi = 0, normal to the unit shoulder-wrist direction ``e_sw`` (CasADi, 3x1)."""
+        r = cs.DM(self.reference)
         if self.singular is None:
-            x = r - _dot(e_sw, r)[..., None] * e_sw
+            x = r - cs.dot(e_sw, r) * e_sw
         else:
-            x = np.cross(np.cross(e_sw - np.asarray(self.singular, dtype=float), r), e_sw)
-        return x / np.linalg.norm(x, axis=-1, keepdims=True)
+            x = cs.cross(cs.cross(e_sw - cs.DM(self.singular), r), e_sw)
+        return x / cs.norm_2(x)
+
+    def symbolic(self, S, E, W):
+        """The angle psi [rad] in (-pi, pi] of points S, E, W (CasADi, 3x1 each): right-handed about S -> W."""
+        e_sw = (W - S) / cs.norm_2(W - S)
+        x = self.reference_direction(e_sw)
+        return cs.atan2(cs.dot(e_sw, cs.cross(x, E - S)), cs.dot(x, E - S))
 
     def angle(self, S: np.ndarray, E: np.ndarray, W: np.ndarray) -> np.ndarray:
-        """The angle psi [rad] in (-pi, pi] of points S, E, W (..., 3): right-handed about S -> W."""
-        e_sw = (W - S) / np.linalg.norm(W - S, axis=-1, keepdims=True)
-        x = self.reference_direction(e_sw)
-        return np.arctan2(_dot(e_sw, np.cross(x, E - S)), _dot(x, E - S))
+        """The angle psi [rad] in (-pi, pi] of points S, E, W (..., 3) (:meth:`symbolic`, in mapped calls)."""
+        S, E, W = np.broadcast_arrays(*(np.asarray(p, dtype=float) for p in (S, E, W)))
+        return _angle_function(self)(S.reshape(-1, 3), E.reshape(-1, 3), W.reshape(-1, 3))[0][:, 0].reshape(S.shape[:-1])
+
+
+@functools.lru_cache(maxsize=None)
+def _angle_function(sew: SewAngle) -> Batched:
+    S, E, W = (cs.SX.sym(name, 3) for name in "SEW")
+    return Batched(cs.Function("sew_angle", [S, E, W], [sew.symbolic(S, E, W)]))
 
 
 # ----------------------------------------------------------------------------- the arm
@@ -221,27 +205,41 @@ class SewChain:
     tool: np.ndarray
     tool_rotation: np.ndarray
 
-    def transforms(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """R_0i (N, 7, 3, 3) and t_0i (N, 7, 3) [m] of T_0i = exp([xi_1] q_1) ... exp([xi_i] q_i) at configurations Q (N, 7): a point fixed in link i at x (q = 0) is at R_0i x + t_0i."""
-        R, t = np.empty(Q.shape + (3, 3)), np.empty(Q.shape + (3,))
-        R_acc, t_acc = np.broadcast_to(np.eye(3), Q.shape[:1] + (3, 3)), np.zeros(Q.shape[:1] + (3,))
+    _functions: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def transforms(self, q) -> list[tuple]:
+        """(R_0i (3x3), t_0i (3x1) [m]) of T_0i = exp([xi_1] q_1) ... exp([xi_i] q_i), i = 1..7, for q (CasADi, 7x1): a point fixed in link i at x (q = 0) is at R_0i x + t_0i."""
+        R, t, frames = cs.SX.eye(3), cs.SX.zeros(3), []
         for i, (h, p) in enumerate(zip(self.axes, self.axis_points)):
-            R_i = _rot(h, Q[:, i])
-            t_acc = t_acc + _mv(R_acc, p - _mv(R_i, p))  # exp([xi] q) x = R x + (I - R) p for the line through p
-            R_acc = R_acc @ R_i
-            R[:, i], t[:, i] = R_acc, t_acc
-        return R, t
+            R_i = _rot(h, q[i])
+            t = t + R @ (p - R_i @ p)  # exp([xi] q) x = R x + (I - R) p for the line through p
+            R = R @ R_i
+            frames.append((R, t))
+        return frames
+
+    def symbolic(self, q) -> tuple:
+        """E, W (3x1) [m] and the tip pose T (4x4) for q (CasADi, 7x1), from one product of exponentials."""
+        frames = self.transforms(q)
+        (R3, t3), (R6, t6), (R7, t7) = frames[2], frames[5], frames[6]
+        T = cs.vertcat(cs.horzcat(R7 @ self.tool_rotation, R7 @ (self.wrist + self.tool) + t7), cs.DM([[0.0, 0.0, 0.0, 1.0]]))
+        return R3 @ self.elbow + t3, R6 @ self.wrist + t6, T
+
+    def cached(self, name: Hashable, build: Callable[[], _Built]) -> _Built:
+        """This arm's CasADi Function(s) ``name``, ``build()`` the first time (once per arm and name)."""
+        if name not in self._functions:
+            self._functions[name] = build()
+        return self._functions[name]
 
     def points_and_poses(self, Q: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
-        """(S, E, W), each (N, 3) [m], and the tip poses (N, 4, 4) at configurations Q (N, 7), from one product of exponentials."""
-        R, t = self.transforms(Q)
-        S = np.broadcast_to(self.shoulder, (len(Q), 3))
-        E = _mv(R[:, 2], self.elbow) + t[:, 2]
-        W = _mv(R[:, 5], self.wrist) + t[:, 5]
-        T = np.tile(np.eye(4), (len(Q), 1, 1))
-        T[:, :3, :3] = R[:, 6] @ self.tool_rotation
-        T[:, :3, 3] = _mv(R[:, 6], self.wrist + self.tool) + t[:, 6]
-        return (S, E, W), T
+        """(S, E, W), each (N, 3) [m], and the tip poses (N, 4, 4) at configurations Q (N, 7) (:meth:`symbolic`, in mapped calls)."""
+
+        def build() -> Batched:
+            q = cs.SX.sym("q", 7)
+            return Batched(cs.Function("sew_fk", [q], list(self.symbolic(q)), {"cse": True}))
+
+        Q = np.asarray(Q, dtype=float).reshape(-1, 7)
+        E, W, T = self.cached("fk", build)(Q)
+        return (np.broadcast_to(self.shoulder, E.shape), E, W), T
 
     def points(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """S, E, W at configurations Q (N, 7), each (N, 3) [m]."""
@@ -326,135 +324,133 @@ class SewSolutions:
     residual: np.ndarray
 
 
-def _equations(arm: SewChain, sew: SewAngle, T: np.ndarray, psi: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """What a solution must zero, (M, 7), for goals T (M, 4, 4) and psi (M,): the position error [m], the rotation error (the vector part of R_goal^T R) and the SEW angle's error [rad]."""
-    points, got = arm.points_and_poses(Q)
-    D = np.einsum("nji,njk->nik", T[:, :3, :3], got[:, :3, :3])
-    rotation = 0.5 * np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0], D[:, 1, 0] - D[:, 0, 1]], -1)
-    angle = np.angle(np.exp(1j * (sew.angle(*points) - psi)))
-    return np.concatenate([got[:, :3, 3] - T[:, :3, 3], rotation, angle[:, None]], axis=1)
+#: The size of :func:`_goal`'s vector.
+GOAL_SIZE = 18
 
 
-def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Matrices (..., 3, 3) times vectors (..., 3)."""
-    return np.einsum("...ij,...j->...i", M, v)
+def _goal(arm: SewChain, sew: SewAngle, T, psi):
+    """What the search needs of a goal pose T (4x4) and SEW angle psi (CasADi), as one vector of :data:`GOAL_SIZE` (see :func:`_unpack`)."""
+    R07 = T[:3, :3] @ arm.tool_rotation.T
+    W = T[:3, 3] - R07 @ arm.tool
+    e_sw = (W - arm.shoulder) / cs.norm_2(W - arm.shoulder)
+    n = cs.cross(e_sw, _turn(e_sw, psi, sew.reference_direction(e_sw)))
+    return cs.vertcat(cs.vec(R07), W, e_sw, n)
 
 
-def _t(M: np.ndarray) -> np.ndarray:
-    """Transposes of matrices (..., 3, 3)."""
-    return np.swapaxes(M, -1, -2)
+def _unpack(goal) -> tuple:
+    """:func:`_goal`'s vector as R_07 (the tip's rotation without its rotation at q = 0), the wrist point W [m], e_SW, and the normal n of the half-plane that must hold the elbow."""
+    return cs.reshape(goal[:9], 3, 3), goal[9:12], goal[12:15], goal[15:18]
 
 
-class _Search:
-    """A family's 1-D search for N goals at once: along the search variable x over ``span``, an error per branch whose zeros are the solutions (module docstring)."""
+def _upper_arm_search(arm: SewChain, goal: tuple, x) -> tuple[list, list]:
+    """3R-R-2R-R: x is the upper arm's angle from S -> W in the SEW half-plane, over [0, pi]. Subproblem 3 gives q7 (2 roots), subproblem 2 (q5, q6) (2 roots); e is the error of subproblem 1's condition for q4 (the elbow axis's component). Then q4 by subproblem 1, (q1, q2) by subproblem 2 (2 roots), q3 by subproblem 1.
+
+    Returns:
+        the error e of the 4 branches, and each branch's 2 configurations (7x1).
+    """
+    h, (R07, W, e_sw, n) = arm.axes, _unpack(goal)
+    P4, P5, P7 = arm.elbow - arm.shoulder, arm.crossing - arm.elbow, arm.wrist - arm.crossing
+    p14 = _turn(n, x, e_sw) * float(np.linalg.norm(P4))  # S -> E
+    d = R07.T @ (W - arm.shoulder - p14)  # R07^T (S -> W - S -> E)
+    local = R07.T @ p14
+    errors, configurations = [], []
+    for t7 in sp3(P7, d, -h[6], float(np.linalg.norm(P5))):  # |R67^T P7 - d| = |P5|
+        local7 = _turn(h[6], t7, local)
+        for t5, t6 in sp2(P5, _turn(h[6], t7, d) - P7, -h[4], h[5]):
+            errors.append(cs.dot(h[3], P4) - cs.dot(h[3], _turn(h[4], t5, _turn(h[5], t6, local7))))  # vectors turned: fewer operations on the grid
+            R47 = _rot(h[4], t5) @ _rot(h[5], t6) @ _rot(h[6], t7)
+            q4 = turn(-h[3], P4, R47 @ local)
+            R03 = R07 @ R47.T @ _rot(h[3], q4).T
+            rows = []
+            for t2, t1 in sp2(h[2], R03 @ h[2], h[1], -h[0]):
+                q3 = turn(h[2], h[1], (_rot(h[0], t1) @ _rot(h[1], t2)).T @ R03 @ h[1])
+                rows.append(cs.vertcat(t1, t2, q3, q4, t5, t6, t7))
+            configurations.append(rows)
+    return errors, configurations
+
+
+def _first_joint_search(arm: SewChain, goal: tuple, x) -> tuple[list, list]:
+    """R-2R-R-3R: x is q1, over [-pi, pi]. C turns with q1 about axis 1; |C - W| fixes q4 (subproblem 3, 2 roots); (q2, q3) turn C -> W onto the goal's (subproblem 2, 2 roots); e is E's distance from the SEW plane (zero on both of its half-planes: the one beyond S -> W fails the SEW-angle residual). Then (q5, q6) by subproblem 2 (2 roots) and q7 by subproblem 1.
+
+    Returns:
+        the error e of the 4 branches, and each branch's 2 configurations (7x1).
+    """
+    h, p4, (R07, W, _, n) = arm.axes, arm.axis_points[3], _unpack(goal)
+    C = arm.shoulder + _turn(h[0], x, arm.crossing - arm.shoulder)
+    u = _turn(h[0], -x, W - C)  # R2 R3 (C -> W after q4) must be this
+    errors, configurations = [], []
+    for t4 in sp3(arm.wrist - p4, arm.crossing - p4, h[3], cs.norm_2(W - C)):
+        v = p4 + _turn(h[3], t4, arm.wrist - p4) - arm.crossing  # C -> W at q4 alone
+        for t2, t3 in sp2(u, v, -h[1], h[2]):
+            errors.append(cs.dot(n, C + _turn(h[0], x, _turn(h[1], t2, _turn(h[2], t3, arm.elbow - arm.crossing))) - arm.shoulder))
+            R03 = _rot(h[0], x) @ _rot(h[1], t2) @ _rot(h[2], t3)
+            R47 = (R03 @ _rot(h[3], t4)).T @ R07
+            rows = []
+            for t5, t6 in sp2(R47 @ h[6], h[6], -h[4], h[5]):
+                q7 = turn(h[6], h[5], (_rot(h[4], t5) @ _rot(h[5], t6)).T @ R47 @ h[5])
+                rows.append(cs.vertcat(x, t2, t3, t4, t5, t6, q7))
+            configurations.append(rows)
+    return errors, configurations
+
+
+#: Each family's search: the span of its variable and the builder of its errors and configurations.
+SEARCHES: dict[str, tuple[tuple[float, float], Callable[[SewChain, tuple, cs.SX], tuple[list, list]]]] = {
+    UPPER_ARM_FAMILY: ((0.0, np.pi), _upper_arm_search),
+    FIRST_JOINT_FAMILY: ((-np.pi, np.pi), _first_joint_search),
+}
+
+
+@dataclass(frozen=True)
+class _Solver:
+    """The CasADi Functions of one arm's search at one SEW-angle definition, batched (:class:`dualarm.ik.batched.Batched`).
+
+    Attributes:
+        span: the search variable's range [rad].
+        goal: ``(T (4x4), psi) -> g (18)``: what the search needs of a goal (:func:`_goal`).
+        grid: ``g -> e (4 x samples)``: the error of the 4 branches on the grid over ``span``.
+        errors: ``(g, x) -> e (4)``.
+        configurations: ``(g, x) -> Q (7x8)`` [rad]: column 2 b + j the last subproblem's root j on branch b.
+        equations: ``(T, psi, q) -> (F (7), dF/dq (7x7))``: what a solution must zero, the position
+            error [m], the rotation error (the vector part of R_goal^T R) and the SEW angle's error [rad],
+            and its Jacobian (by CasADi's algorithmic differentiation).
+    """
 
     span: tuple[float, float]
+    goal: Batched
+    grid: Batched
+    errors: Batched
+    configurations: Batched
+    equations: Batched
 
-    def __init__(self, arm: SewChain, sew: SewAngle, T: np.ndarray, psi: np.ndarray):
-        self.arm = arm
-        self.R07 = np.einsum("nij,kj->nik", T[:, :3, :3], arm.tool_rotation)  # R_0T R_T0^T
-        self.W = T[:, :3, 3] - _mv(self.R07, arm.tool)
-        self.e_sw = (self.W - arm.shoulder) / np.linalg.norm(self.W - arm.shoulder, axis=1, keepdims=True)
-        e_ce = _mv(_rot(self.e_sw, psi), sew.reference_direction(self.e_sw))
-        self.n = _cross(self.e_sw, e_ce)  # normal of the half-plane holding the elbow
+    @classmethod
+    def of(cls, arm: SewChain, sew: SewAngle, samples: int) -> "_Solver":
+        span, search = SEARCHES[arm.family]
+        T, psi, g, x, q = cs.SX.sym("T", 4, 4), cs.SX.sym("psi"), cs.SX.sym("g", GOAL_SIZE), cs.SX.sym("x"), cs.SX.sym("q", 7)
+        goal = cs.Function("sew_goal", [T, psi], [_goal(arm, sew, T, psi)], {"cse": True})
+        errors, configurations = search(arm, g, x)
+        e = cs.Function("sew_errors", [g, x], [cs.vertcat(*errors)], {"cse": True})
+        Q = cs.Function("sew_configurations", [g, x], [cs.horzcat(*(c for rows in configurations for c in rows))], {"cse": True})
+        E, W, got = arm.symbolic(q)
+        D = T[:3, :3].T @ got[:3, :3]
+        angle = sew.symbolic(cs.DM(arm.shoulder), E, W) - psi
+        F = cs.vertcat(got[:3, 3] - T[:3, 3], 0.5 * cs.vertcat(D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]), cs.atan2(cs.sin(angle), cs.cos(angle)))
+        equations = cs.Function("sew_equations", [T, psi, q], [F, cs.jacobian(F, q)], {"cse": True})
+        gm = cs.MX.sym("g", GOAL_SIZE)
+        grid = cs.Function("sew_grid", [gm], [e.map(samples)(gm, cs.DM(np.linspace(*span, samples)).T)])
+        return cls(span, Batched(goal), Batched(grid, CHUNK_GOALS), Batched(e), Batched(Q), Batched(equations))
 
-    def __call__(self, pose: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For goals ``pose`` (M,) (indices) at ``x`` (M,): the error e (M, 4) and the joints found on the way (M, 4, k)."""
-        raise NotImplementedError
-
-    def on_branch(self, pose: np.ndarray, x: np.ndarray, branch: np.ndarray) -> np.ndarray:
-        return self(pose, x)[0][np.arange(len(x)), branch]
-
-    def configurations(self, goal: np.ndarray, x: np.ndarray, branch: np.ndarray) -> np.ndarray:
-        """The joints (2M, 7) at roots x (M,) of e on ``branch`` (M,): the last subproblem's first root for every root, then its second."""
-        raise NotImplementedError
-
-
-class _UpperArmSearch(_Search):
-    """3R-R-2R-R: x is the upper arm's angle from S -> W in the SEW half-plane, over [0, pi]. Subproblem 3 gives q7 (2 roots), subproblem 2 (q5, q6) (2 roots); e is the error of subproblem 1's condition for q4 (the elbow axis's component)."""
-
-    span = (0.0, np.pi)
-
-    def __call__(self, pose: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        arm, h = self.arm, self.arm.axes
-        P4, P5, P7 = arm.elbow - arm.shoulder, arm.crossing - arm.elbow, arm.wrist - arm.crossing
-        p14 = self._upper_arm(pose, x)
-        R07 = self.R07[pose]
-        d = _mv(_t(R07), self.W[pose] - arm.shoulder - p14)  # R07^T (S -> W - S -> E)
-        local = _mv(_t(R07), p14)
-        t7 = sp3(P7, d, -h[6], float(np.linalg.norm(P5)))  # |R67^T P7 - d| = |P5|
-        errors, q567 = [], []
-        for i7 in range(2):
-            local7 = _turn(h[6], t7[:, i7], local)
-            t5, t6 = sp2(P5, _turn(h[6], t7[:, i7], d) - P7, -h[4], h[5])
-            for i56 in range(2):
-                errors.append(h[3] @ P4 - _turn(h[4], t5[:, i56], _turn(h[5], t6[:, i56], local7)) @ h[3])
-                q567.append(np.stack([t5[:, i56], t6[:, i56], t7[:, i7]], -1))
-        return np.stack(errors, -1), np.stack(q567, 1)
-
-    def _upper_arm(self, pose: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """S -> E (M, 3) [m] at angle x from S -> W in the SEW half-plane."""
-        return _turn(self.n[pose], x, self.e_sw[pose]) * np.linalg.norm(self.arm.elbow - self.arm.shoulder)
-
-    def configurations(self, goal: np.ndarray, x: np.ndarray, branch: np.ndarray) -> np.ndarray:
-        arm, h = self.arm, self.arm.axes
-        q5, q6, q7 = self(goal, x)[1][np.arange(len(x)), branch].T
-        R47 = _rot(h[4], q5) @ _rot(h[5], q6) @ _rot(h[6], q7)
-        q4 = sp1(arm.elbow - arm.shoulder, _mv(R47, _mv(_t(self.R07[goal]), self._upper_arm(goal, x))), -h[3])
-        R03 = self.R07[goal] @ _t(R47) @ _t(_rot(h[3], q4))
-        t2, t1 = sp2(h[2], _mv(R03, h[2]), h[1], -h[0])
-        rows = []
-        for i12 in range(2):
-            q1, q2 = t1[:, i12], t2[:, i12]
-            q3 = sp1(h[1], _mv(_t(_rot(h[0], q1) @ _rot(h[1], q2)) @ R03, h[1]), h[2])
-            rows.append(np.stack([q1, q2, q3, q4, q5, q6, q7], -1))
-        return np.concatenate(rows)
+    def on_branch(self, G: np.ndarray, x: np.ndarray, branch: np.ndarray) -> np.ndarray:
+        """The error e (M,) of goals G (M, 18) at x (M,) on ``branch`` (M,)."""
+        return self.errors(G, x)[0][np.arange(len(x)), branch]
 
 
-class _FirstJointSearch(_Search):
-    """R-2R-R-3R: x is q1, over [-pi, pi]. C turns with q1 about axis 1; |C - W| fixes q4 (subproblem 3, 2 roots); (q2, q3) turn C -> W onto the goal's (subproblem 2, 2 roots); e is E's distance from the SEW plane (zero on both of its half-planes: the one beyond S -> W fails the SEW-angle residual). Then (q5, q6) by subproblem 2 (2 roots) and q7 by subproblem 1."""
-
-    span = (-np.pi, np.pi)
-
-    def __call__(self, pose: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        arm, h, p4 = self.arm, self.arm.axes, self.arm.axis_points[3]
-        C = arm.shoulder + _turn(h[0], x, arm.crossing - arm.shoulder)
-        u = _turn(h[0], -x, self.W[pose] - C)  # R2 R3 (C -> W after q4) must be this
-        t4 = sp3(arm.wrist - p4, arm.crossing - p4, h[3], np.linalg.norm(self.W[pose] - C, axis=1))
-        errors, q1234 = [], []
-        for i4 in range(2):
-            v = p4 + _turn(h[3], t4[:, i4], arm.wrist - p4) - arm.crossing  # C -> W at q4 alone
-            t2, t3 = sp2(u, v, -h[1], h[2])
-            for i23 in range(2):
-                E = C + _turn(h[0], x, _turn(h[1], t2[:, i23], _turn(h[2], t3[:, i23], arm.elbow - arm.crossing)))
-                errors.append(_dot(self.n[pose], E - arm.shoulder))
-                q1234.append(np.stack([x, t2[:, i23], t3[:, i23], t4[:, i4]], -1))
-        return np.stack(errors, -1), np.stack(q1234, 1)
-
-    def configurations(self, goal: np.ndarray, x: np.ndarray, branch: np.ndarray) -> np.ndarray:
-        h = self.arm.axes
-        q1234 = self(goal, x)[1][np.arange(len(x)), branch]
-        R04 = _rot(h[0], q1234[:, 0]) @ _rot(h[1], q1234[:, 1]) @ _rot(h[2], q1234[:, 2]) @ _rot(h[3], q1234[:, 3])
-        R47 = _t(R04) @ self.R07[goal]
-        t5, t6 = sp2(_mv(R47, h[6]), h[6], -h[4], h[5])
-        rows = []
-        for i56 in range(2):
-            R7 = _t(_rot(h[4], t5[:, i56]) @ _rot(h[5], t6[:, i56])) @ R47
-            q7 = sp1(h[5], _mv(R7, h[5]), h[6])
-            rows.append(np.concatenate([q1234, np.stack([t5[:, i56], t6[:, i56], q7], -1)], 1))
-        return np.concatenate(rows)
-
-
-SEARCHES: dict[str, type[_Search]] = {UPPER_ARM_FAMILY: _UpperArmSearch, FIRST_JOINT_FAMILY: _FirstJointSearch}
-
-
-def _brackets(search: _Search, N: int, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(goal, branch, lo, hi) of every bracketed root of e on the grid of ``samples`` values of x over the search's span, with the ends of each branch's domain and its turning points towards zero sampled too (module docstring).
 
     The grid is evaluated :data:`CHUNK_GOALS` goals at a time; the ends and turning points of all
-    goals are then refined together, one vectorised step at a time.
+    goals are then refined together, one batched step at a time.
     """
-    grid = np.linspace(*search.span, samples)
+    grid = np.linspace(*solver.span, samples)
     found: tuple[list[np.ndarray], ...] = ([], [], [], [])  # goals, branches, lows, highs
     edges: tuple[list[np.ndarray], ...] = ([], [], [], [], [])  # goals, branches, grid index before the end, whether that sample is inside, e at the sample inside
     turns: tuple[list[np.ndarray], ...] = ([], [], [], [])  # goals, branches, grid index before the turn, sign of e there
@@ -463,10 +459,9 @@ def _brackets(search: _Search, N: int, samples: int) -> tuple[np.ndarray, np.nda
         for column, value in zip(to, values):
             column.append(value)
 
-    for first in range(0, N, CHUNK_GOALS):
-        block = np.arange(first, min(N, first + CHUNK_GOALS))
-        pose = np.repeat(block, samples)
-        e = search(pose, np.tile(grid, len(block)))[0].reshape(len(block), samples, 4)
+    for first in range(0, len(G), CHUNK_GOALS):
+        block = np.arange(first, min(len(G), first + CHUNK_GOALS))
+        e = solver.grid(G[block])[0].transpose(0, 2, 1)  # (goals, samples, 4)
         finite = np.isfinite(e)
         # sign changes between neighbours
         a, c = e[:, :-1], e[:, 1:]
@@ -483,13 +478,14 @@ def _brackets(search: _Search, N: int, samples: int) -> tuple[np.ndarray, np.nda
     # the ends, by bisection on where e is defined: a root between an end and the first sample
     # inside has no sign change on the grid
     g, b, k, lo_inside, e_inside = (np.concatenate(column) for column in edges)
+    G_g = G[g]
     lo, hi = grid[k], grid[k + 1]
     for _ in range(BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        with_lo = np.isfinite(search.on_branch(g, mid, b)) == lo_inside
+        with_lo = np.isfinite(solver.on_branch(G_g, mid, b)) == lo_inside
         lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, hi, mid)
     edge, inside = np.where(lo_inside, lo, hi), np.where(lo_inside, grid[k], grid[k + 1])
-    e_edge = search.on_branch(g, edge, b)
+    e_edge = solver.on_branch(G_g, edge, b)
     crossed = np.isfinite(e_edge) & (np.sign(e_edge) != np.sign(e_inside))
     add(found, g[crossed], b[crossed], np.minimum(edge, inside)[crossed], np.maximum(edge, inside)[crossed])
     # a root at the end itself (two branches meeting there with e = 0, as at a planar home pose):
@@ -498,15 +494,16 @@ def _brackets(search: _Search, N: int, samples: int) -> tuple[np.ndarray, np.nda
     add(found, g[at_end], b[at_end], edge[at_end], edge[at_end])
     # the turning points (golden section) split the pairs
     g, b, k, sign = (np.concatenate(column) for column in turns)
+    G_g = G[g]
     lo, hi, toward = grid[k], grid[k + 2], -sign
     for _ in range(BISECTION_STEPS):
         m1, m2 = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
-        f1 = np.nan_to_num(toward * search.on_branch(g, m1, b), nan=-np.inf)
-        f2 = np.nan_to_num(toward * search.on_branch(g, m2, b), nan=-np.inf)
+        f = np.tile(toward, 2) * solver.on_branch(np.tile(G_g, (2, 1)), np.concatenate([m1, m2]), np.tile(b, 2))
+        f1, f2 = np.nan_to_num(f.reshape(2, -1), nan=-np.inf)
         higher = f2 >= f1
         lo, hi = np.where(higher, m1, lo), np.where(higher, hi, m2)
     turning = 0.5 * (lo + hi)
-    e_turning = toward * search.on_branch(g, turning, b)
+    e_turning = toward * solver.on_branch(G_g, turning, b)
     crossed = e_turning > 0
     add(found, g[crossed], b[crossed], grid[k][crossed], turning[crossed])
     add(found, g[crossed], b[crossed], turning[crossed], grid[k + 2][crossed])
@@ -515,39 +512,36 @@ def _brackets(search: _Search, N: int, samples: int) -> tuple[np.ndarray, np.nda
     touching = ~crossed & (np.abs(e_turning) <= TOUCHING_M)
     add(found, g[touching], b[touching], turning[touching], turning[touching])
     goal, branch, lo, hi = (np.concatenate(column) for column in found)
-    return goal, branch, lo, hi
+    return goal.astype(int), branch.astype(int), lo, hi
 
 
 def solve_many(arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = SewAngle(), samples: int = SEARCH_SAMPLES) -> list[SewSolutions]:
     """Every solution of each hand pose ``T`` (N, 4, 4, chain base frame) at its SEW angle ``psi`` (N,) [rad] (module docstring), limits not applied; one :class:`SewSolutions` per pose."""
     T = np.asarray(T, dtype=float).reshape(-1, 4, 4)
     psi = np.broadcast_to(np.asarray(psi, dtype=float), len(T))
-    search = SEARCHES[arm.family](arm, sew, T, psi)
-    goal, branch, lo, hi = _brackets(search, len(T), samples)
-    goal, branch = goal.astype(int), branch.astype(int)
-    e_lo = search.on_branch(goal, lo, branch)
+    solver = arm.cached(("solver", sew, samples), lambda: _Solver.of(arm, sew, samples))
+    G = solver.goal(T, psi)[0]
+    goal, branch, lo, hi = _brackets(solver, G, samples)
+    e_lo = solver.on_branch(G[goal], lo, branch)
     for _ in range(BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        e_mid = search.on_branch(goal, mid, branch)
+        e_mid = solver.on_branch(G[goal], mid, branch)
         with_lo = np.isfinite(e_mid) & (np.sign(e_mid) == np.sign(e_lo))
         with_hi = np.isfinite(e_mid) & ~with_lo
         lo, e_lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, e_mid, e_lo), np.where(with_hi, mid, hi)
     x = 0.5 * (lo + hi)
-    Q = search.configurations(goal, x, branch)
-    goal, x, branch = np.tile(goal, 2), np.tile(x, 2), np.concatenate([2 * branch, 2 * branch + 1])
+    Q = solver.configurations(G[goal], x)[0].transpose(0, 2, 1)[np.arange(len(x))[:, None], 2 * branch[:, None] + np.arange(2)]  # (M, 2, 7)
+    Q, goal, x, branch = Q.reshape(-1, 7), np.repeat(goal, 2), np.repeat(x, 2), (2 * branch[:, None] + np.arange(2)).ravel()
     ok = np.all(np.isfinite(Q), axis=1)
     Q, goal, x, branch = Q[ok], goal[ok], x[ok], branch[ok]
     T_goal, psi_goal = T[goal], psi[goal]
-    offsets = DIFF_RAD * np.concatenate([np.eye(7), -np.eye(7)])  # central differences, all 14 in one call
     for _ in range(POLISH_STEPS):  # roots near a branch's end or a double root are found to ~1e-8 rad only
-        F = _equations(arm, sew, T_goal, psi_goal, Q)
-        around = _equations(arm, sew, np.repeat(T_goal, 14, axis=0), np.repeat(psi_goal, 14), (Q[:, None] + offsets).reshape(-1, 7)).reshape(len(Q), 14, 7)
-        J = np.swapaxes(around[:, :7] - around[:, 7:], 1, 2) / (2 * DIFF_RAD)
+        F, J = solver.equations(T_goal, psi_goal, Q)
         step = (np.linalg.pinv(J) @ F[..., None])[..., 0]  # least squares: J is singular at a double root
-        better = np.abs(_equations(arm, sew, T_goal, psi_goal, Q - step)).max(axis=1) < np.abs(F).max(axis=1)
+        better = np.abs(solver.equations(T_goal, psi_goal, Q - step)[0]).max(axis=1) < np.abs(F).max(axis=1)
         Q = np.where(better[:, None], Q - step, Q)
     Q = np.angle(np.exp(1j * Q))  # into (-pi, pi]
-    residual = np.abs(_equations(arm, sew, T_goal, psi_goal, Q)).max(axis=1) if len(Q) else np.zeros(0)
+    residual = np.abs(solver.equations(T_goal, psi_goal, Q)[0]).max(axis=1) if len(Q) else np.zeros(0)
     keep = residual <= RESIDUAL_TOLERANCE
     out = []
     for n in range(len(T)):
