@@ -27,8 +27,12 @@ Either error's zeros are bracketed by a sign change between neighbouring samples
 over the whole range (as IK-Geo's ``search_1D``), and beyond it: the ends of each branch's domain
 (where two branches meet and e behaves as a square root; a planar pose such as the Panda's
 ``ready`` has its solutions exactly there) and the turning points of e between samples (two roots
-closer than the samples, or a double root) are located and sampled too. Every root is refined by
-bisection, so every root in the range is found, not the one nearest a seed; each solution is then
+closer than the samples, or a double root), also between an end and the samples inside it, are
+located and sampled too. Each branch's margin (negative exactly where its subproblems have no
+solution, defined everywhere) finds the domains the grid does not see: a branch that exists only
+between two samples (the margin peaks above zero there) and a gap narrower than a sample (it dips
+below). Every root is refined by bisection, so every root in the range is found, not the one
+nearest a seed; each solution is then
 polished by Newton on the 7 equations, with their Jacobian from CasADi's algorithmic
 differentiation.
 
@@ -69,6 +73,8 @@ GOLDEN = (5**0.5 - 1) / 2
 CHUNK_GOALS = 64
 #: A turning point of the search's error, or the end of a branch's domain, this close to zero is a root [m].
 TOUCHING_M = 1e-6
+#: Solutions of one goal closer than this are one [rad] (a solution is found to ~1e-10 rad, to ~1e-8 where two branches meet).
+SAME_SOLUTION_RAD = 1e-7
 #: A candidate reproducing the pose (position [m], rotation) or the SEW angle [rad] worse than this is dropped.
 RESIDUAL_TOLERANCE = 1e-9
 
@@ -93,14 +99,14 @@ def _turn(k, theta, v):
     return rotate(k, cs.cos(theta), cs.sin(theta), v)
 
 
-def sp2(p1, p2, k1: np.ndarray, k2: np.ndarray) -> list[tuple]:
-    """Subproblem 2: rot(k1, t1) p1 = rot(k2, t2) p2 for constant non-parallel unit axes; two (t1, t2), NaN where there is no exact solution (:func:`dualarm.ik.subproblems.subproblem2` of rot(k1, -t1) rot(k2, t2) p2 = p1)."""
+def sp2(p1, p2, k1: np.ndarray, k2: np.ndarray) -> tuple[list[tuple], cs.SX]:
+    """Subproblem 2: rot(k1, t1) p1 = rot(k2, t2) p2 for constant non-parallel unit axes; two (t1, t2), NaN where there is no exact solution (:func:`dualarm.ik.subproblems.subproblem2` of rot(k1, -t1) rot(k2, t2) p2 = p1), and a margin, negative exactly there (gamma^2 / |p2|^2)."""
     roots, gamma2, _ = subproblem2(k1, k2, p2, p1)
-    return [(cs.if_else(gamma2 >= 0, -t1, np.nan), cs.if_else(gamma2 >= 0, t2, np.nan)) for t1, t2 in roots]
+    return [(cs.if_else(gamma2 >= 0, -t1, np.nan), cs.if_else(gamma2 >= 0, t2, np.nan)) for t1, t2 in roots], gamma2
 
 
-def sp3(p1, p2, k, d) -> list:
-    """Subproblem 3: |rot(k, t) p1 - p2| = d; two t, NaN where there is no exact solution.
+def sp3(p1, p2, k, d) -> tuple[list, cs.SX]:
+    """Subproblem 3: |rot(k, t) p1 - p2| = d; two t, NaN where there is no exact solution, and a margin, negative exactly there ((r - |rhs|) / (|p1| |p2|) below).
 
     p2 . rot(k, t) p1 = A cos t + B sin t + (k.p1)(k.p2) = (|p1|^2 + |p2|^2 - d^2) / 2.
     """
@@ -110,7 +116,7 @@ def sp3(p1, p2, k, d) -> list:
     r = cs.sqrt(A**2 + B**2)
     ratio = cs.if_else(cs.fabs(rhs) <= r, rhs / cs.if_else(r > 0, r, 1), np.nan)
     phi, delta = cs.atan2(B, A), cs.acos(ratio)
-    return [phi + delta, phi - delta]
+    return [phi + delta, phi - delta], (r - cs.fabs(rhs)) / (cs.norm_2(p1) * cs.norm_2(p2))
 
 
 # ----------------------------------------------------------------------------- the SEW angle
@@ -342,59 +348,67 @@ def _unpack(goal) -> tuple:
     return cs.reshape(goal[:9], 3, 3), goal[9:12], goal[12:15], goal[15:18]
 
 
-def _upper_arm_search(arm: SewChain, goal: tuple, x) -> tuple[list, list]:
+def _upper_arm_search(arm: SewChain, goal: cs.SX, x: cs.SX) -> tuple[list, list, list]:
     """3R-R-2R-R: x is the upper arm's angle from S -> W in the SEW half-plane, over [0, pi]. Subproblem 3 gives q7 (2 roots), subproblem 2 (q5, q6) (2 roots); e is the error of subproblem 1's condition for q4 (the elbow axis's component). Then q4 by subproblem 1, (q1, q2) by subproblem 2 (2 roots), q3 by subproblem 1.
 
     Returns:
-        the error e of the 4 branches, and each branch's 2 configurations (7x1).
+        the error e of the 4 branches, their margins (negative exactly where the branch's
+        subproblems have no solution), and each branch's 2 configurations (7x1).
     """
     h, (R07, W, e_sw, n) = arm.axes, _unpack(goal)
     P4, P5, P7 = arm.elbow - arm.shoulder, arm.crossing - arm.elbow, arm.wrist - arm.crossing
     p14 = _turn(n, x, e_sw) * float(np.linalg.norm(P4))  # S -> E
     d = R07.T @ (W - arm.shoulder - p14)  # R07^T (S -> W - S -> E)
     local = R07.T @ p14
-    errors, configurations = [], []
-    for t7 in sp3(P7, d, -h[6], float(np.linalg.norm(P5))):  # |R67^T P7 - d| = |P5|
+    errors, margins, configurations = [], [], []
+    t7s, m7 = sp3(P7, d, -h[6], float(np.linalg.norm(P5)))  # |R67^T P7 - d| = |P5|
+    for t7 in t7s:
         local7 = _turn(h[6], t7, local)
-        for t5, t6 in sp2(P5, _turn(h[6], t7, d) - P7, -h[4], h[5]):
+        t56s, m56 = sp2(P5, _turn(h[6], t7, d) - P7, -h[4], h[5])
+        for t5, t6 in t56s:
+            margins.append(cs.if_else(m7 < 0, m7, m56))
             errors.append(cs.dot(h[3], P4) - cs.dot(h[3], _turn(h[4], t5, _turn(h[5], t6, local7))))  # vectors turned: fewer operations on the grid
             R47 = _rot(h[4], t5) @ _rot(h[5], t6) @ _rot(h[6], t7)
             q4 = turn(-h[3], P4, R47 @ local)
             R03 = R07 @ R47.T @ _rot(h[3], q4).T
             rows = []
-            for t2, t1 in sp2(h[2], R03 @ h[2], h[1], -h[0]):
+            for t2, t1 in sp2(h[2], R03 @ h[2], h[1], -h[0])[0]:
                 q3 = turn(h[2], h[1], (_rot(h[0], t1) @ _rot(h[1], t2)).T @ R03 @ h[1])
                 rows.append(cs.vertcat(t1, t2, q3, q4, t5, t6, t7))
             configurations.append(rows)
-    return errors, configurations
+    return errors, margins, configurations
 
 
-def _first_joint_search(arm: SewChain, goal: tuple, x) -> tuple[list, list]:
+def _first_joint_search(arm: SewChain, goal: cs.SX, x: cs.SX) -> tuple[list, list, list]:
     """R-2R-R-3R: x is q1, over [-pi, pi]. C turns with q1 about axis 1; |C - W| fixes q4 (subproblem 3, 2 roots); (q2, q3) turn C -> W onto the goal's (subproblem 2, 2 roots); e is E's distance from the SEW plane (zero on both of its half-planes: the one beyond S -> W fails the SEW-angle residual). Then (q5, q6) by subproblem 2 (2 roots) and q7 by subproblem 1.
 
     Returns:
-        the error e of the 4 branches, and each branch's 2 configurations (7x1).
+        the error e of the 4 branches, their margins (negative exactly where the branch's
+        subproblems have no solution), and each branch's 2 configurations (7x1).
     """
     h, p4, (R07, W, _, n) = arm.axes, arm.axis_points[3], _unpack(goal)
     C = arm.shoulder + _turn(h[0], x, arm.crossing - arm.shoulder)
     u = _turn(h[0], -x, W - C)  # R2 R3 (C -> W after q4) must be this
-    errors, configurations = [], []
-    for t4 in sp3(arm.wrist - p4, arm.crossing - p4, h[3], cs.norm_2(W - C)):
+    errors, margins, configurations = [], [], []
+    t4s, m4 = sp3(arm.wrist - p4, arm.crossing - p4, h[3], cs.norm_2(W - C))
+    for t4 in t4s:
         v = p4 + _turn(h[3], t4, arm.wrist - p4) - arm.crossing  # C -> W at q4 alone
-        for t2, t3 in sp2(u, v, -h[1], h[2]):
+        t23s, m23 = sp2(u, v, -h[1], h[2])
+        for t2, t3 in t23s:
+            margins.append(cs.if_else(m4 < 0, m4, m23))
             errors.append(cs.dot(n, C + _turn(h[0], x, _turn(h[1], t2, _turn(h[2], t3, arm.elbow - arm.crossing))) - arm.shoulder))
             R03 = _rot(h[0], x) @ _rot(h[1], t2) @ _rot(h[2], t3)
             R47 = (R03 @ _rot(h[3], t4)).T @ R07
             rows = []
-            for t5, t6 in sp2(R47 @ h[6], h[6], -h[4], h[5]):
+            for t5, t6 in sp2(R47 @ h[6], h[6], -h[4], h[5])[0]:
                 q7 = turn(h[6], h[5], (_rot(h[4], t5) @ _rot(h[5], t6)).T @ R47 @ h[5])
                 rows.append(cs.vertcat(x, t2, t3, t4, t5, t6, q7))
             configurations.append(rows)
-    return errors, configurations
+    return errors, margins, configurations
 
 
-#: Each family's search: the span of its variable and the builder of its errors and configurations.
-SEARCHES: dict[str, tuple[tuple[float, float], Callable[[SewChain, tuple, cs.SX], tuple[list, list]]]] = {
+#: Each family's search: the span of its variable and the builder of its errors, margins and configurations.
+SEARCHES: dict[str, tuple[tuple[float, float], Callable[[SewChain, cs.SX, cs.SX], tuple[list, list, list]]]] = {
     UPPER_ARM_FAMILY: ((0.0, np.pi), _upper_arm_search),
     FIRST_JOINT_FAMILY: ((-np.pi, np.pi), _first_joint_search),
 }
@@ -407,8 +421,10 @@ class _Solver:
     Attributes:
         span: the search variable's range [rad].
         goal: ``(T (4x4), psi) -> g (18)``: what the search needs of a goal (:func:`_goal`).
-        grid: ``g -> e (4 x samples)``: the error of the 4 branches on the grid over ``span``.
-        errors: ``(g, x) -> e (4)``.
+        grid: ``g -> (e, m) (4 x samples each)``: the error and margin of the 4 branches on the grid over ``span``.
+        errors: per branch, ``(g, x) -> (e, m)``: its error (NaN where it has no solution) and its
+            margin (negative exactly there: defined everywhere, so a branch that exists only
+            between two samples shows as a margin rising towards zero).
         configurations: ``(g, x) -> Q (7x8)`` [rad]: column 2 b + j the last subproblem's root j on branch b.
         equations: ``(T, psi, q) -> (F (7), dF/dq (7x7))``: what a solution must zero, the position
             error [m], the rotation error (the vector part of R_goal^T R) and the SEW angle's error [rad],
@@ -418,7 +434,7 @@ class _Solver:
     span: tuple[float, float]
     goal: Batched
     grid: Batched
-    errors: Batched
+    errors: tuple[Batched, ...]
     configurations: Batched
     equations: Batched
 
@@ -427,8 +443,9 @@ class _Solver:
         span, search = SEARCHES[arm.family]
         T, psi, g, x, q = cs.SX.sym("T", 4, 4), cs.SX.sym("psi"), cs.SX.sym("g", GOAL_SIZE), cs.SX.sym("x"), cs.SX.sym("q", 7)
         goal = cs.Function("sew_goal", [T, psi], [_goal(arm, sew, T, psi)], {"cse": True})
-        errors, configurations = search(arm, g, x)
-        e = cs.Function("sew_errors", [g, x], [cs.vertcat(*errors)], {"cse": True})
+        errors, margins, configurations = search(arm, g, x)
+        e = cs.Function("sew_errors", [g, x], [cs.vertcat(*errors), cs.vertcat(*margins)], {"cse": True})
+        on_branch = tuple(Batched(cs.Function(f"sew_errors_{b}", [g, x], [errors[b], margins[b]], {"cse": True})) for b in range(len(errors)))
         Q = cs.Function("sew_configurations", [g, x], [cs.horzcat(*(c for rows in configurations for c in rows))], {"cse": True})
         E, W, got = arm.symbolic(q)
         D = T[:3, :3].T @ got[:3, :3]
@@ -436,24 +453,41 @@ class _Solver:
         F = cs.vertcat(got[:3, 3] - T[:3, 3], 0.5 * cs.vertcat(D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]), cs.atan2(cs.sin(angle), cs.cos(angle)))
         equations = cs.Function("sew_equations", [T, psi, q], [F, cs.jacobian(F, q)], {"cse": True})
         gm = cs.MX.sym("g", GOAL_SIZE)
-        grid = cs.Function("sew_grid", [gm], [e.map(samples)(gm, cs.DM(np.linspace(*span, samples)).T)])
-        return cls(span, Batched(goal), Batched(grid, CHUNK_GOALS), Batched(e), Batched(Q), Batched(equations))
+        grid = cs.Function("sew_grid", [gm], e.map(samples)(gm, cs.DM(np.linspace(*span, samples)).T))
+        return cls(span, Batched(goal), Batched(grid, CHUNK_GOALS), on_branch, Batched(Q), Batched(equations))
 
-    def on_branch(self, G: np.ndarray, x: np.ndarray, branch: np.ndarray) -> np.ndarray:
-        """The error e (M,) of goals G (M, 18) at x (M,) on ``branch`` (M,)."""
-        return self.errors(G, x)[0][np.arange(len(x)), branch]
+    def on_branch(self, G: np.ndarray, x: np.ndarray, branch: np.ndarray, margin: bool = False) -> np.ndarray:
+        """The error e (M,) of goals G (M, 18) at x (M,) on ``branch`` (M,), or its margin (one call per branch: a branch alone costs a fraction of all four)."""
+        out = np.empty(len(x))
+        for b, errors in enumerate(self.errors):
+            mine = branch == b
+            if mine.any():
+                out[mine] = errors(G[mine], x[mine])[margin][:, 0]
+        return out
+
+
+def _maximise(f: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The x in [lo, hi] (M,) where f (unimodal there; NaN counts as -inf) is largest, by golden section; f is given both trial points of all M at once (2M,)."""
+    for _ in range(BISECTION_STEPS):
+        m1, m2 = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
+        f1, f2 = np.nan_to_num(f(np.concatenate([m1, m2])), nan=-np.inf).reshape(2, -1)
+        higher = f2 >= f1
+        lo, hi = np.where(higher, m1, lo), np.where(higher, hi, m2)
+    return 0.5 * (lo + hi)
 
 
 def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(goal, branch, lo, hi) of every bracketed root of e on the grid of ``samples`` values of x over the search's span, with the ends of each branch's domain and its turning points towards zero sampled too (module docstring).
+    """(goal, branch, lo, hi) of every bracketed root of e on the grid of ``samples`` values of x over the search's span, with the ends of each branch's domain, its turning points towards zero, and the branches that exist only between two samples (where the margin rises above zero) sampled too (module docstring).
 
-    The grid is evaluated :data:`CHUNK_GOALS` goals at a time; the ends and turning points of all
-    goals are then refined together, one batched step at a time.
+    The grid is evaluated :data:`CHUNK_GOALS` goals at a time; the ends, turning points and narrow
+    domains of all goals are then refined together, one batched step at a time.
     """
     grid = np.linspace(*solver.span, samples)
     found: tuple[list[np.ndarray], ...] = ([], [], [], [])  # goals, branches, lows, highs
-    edges: tuple[list[np.ndarray], ...] = ([], [], [], [], [])  # goals, branches, grid index before the end, whether that sample is inside, e at the sample inside
-    turns: tuple[list[np.ndarray], ...] = ([], [], [], [])  # goals, branches, grid index before the turn, sign of e there
+    edges: tuple[list[np.ndarray], ...] = ([], [], [], [], [], [])  # goals, branches, x outside the domain, x inside, e there, e one sample further in
+    turns: tuple[list[np.ndarray], ...] = ([], [], [], [], [])  # goals, branches, the interval of the turn, sign of e there
+    narrow: tuple[list[np.ndarray], ...] = ([], [], [])  # goals, branches, grid index before the margin's peak
+    pinched: tuple[list[np.ndarray], ...] = ([], [], [], [])  # goals, branches, grid index before the margin's dip, e at the 4 samples around
 
     def add(to, *values):
         for column, value in zip(to, values):
@@ -461,7 +495,7 @@ def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray,
 
     for first in range(0, len(G), CHUNK_GOALS):
         block = np.arange(first, min(len(G), first + CHUNK_GOALS))
-        e = solver.grid(G[block])[0].transpose(0, 2, 1)  # (goals, samples, 4)
+        e, m = (values.transpose(0, 2, 1) for values in solver.grid(G[block]))  # (goals, samples, 4)
         finite = np.isfinite(e)
         # sign changes between neighbours
         a, c = e[:, :-1], e[:, 1:]
@@ -469,44 +503,65 @@ def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray,
         add(found, block[g], b, grid[k], grid[k + 1])
         # the end of a branch's domain between two samples
         g, k, b = np.nonzero(finite[:, :-1] != finite[:, 1:])
-        add(edges, block[g], b, k, finite[g, k, b], np.where(finite[g, k, b], e[g, k, b], e[g, k + 1, b]))
+        inside = np.where(finite[g, k, b], k, k + 1)
+        further = np.clip(np.where(finite[g, k, b], k - 1, k + 2), 0, samples - 1)
+        add(edges, block[g], b, grid[np.where(finite[g, k, b], k + 1, k)], grid[inside], e[g, inside, b], np.where(further == inside, np.nan, e[g, further, b]))
         # two roots closer than the samples: a branch turning back towards zero between samples of one sign
         before, here, after = e[:, :-2], e[:, 1:-1], e[:, 2:]
         same = (np.sign(before) == np.sign(here)) & (np.sign(here) == np.sign(after))
         g, k, b = np.nonzero(finite[:, :-2] & finite[:, 1:-1] & finite[:, 2:] & same & (np.abs(here) <= np.minimum(np.abs(before), np.abs(after))))
-        add(turns, block[g], b, k, np.sign(e[g, k + 1, b]))
-    # the ends, by bisection on where e is defined: a root between an end and the first sample
-    # inside has no sign change on the grid
-    g, b, k, lo_inside, e_inside = (np.concatenate(column) for column in edges)
-    G_g = G[g]
-    lo, hi = grid[k], grid[k + 1]
+        add(turns, block[g], b, grid[k], grid[k + 2], np.sign(e[g, k + 1, b]))
+        # a branch whose whole domain lies between samples: its margin peaks below zero on the grid
+        outside = ~finite[:, :-2] & ~finite[:, 1:-1] & ~finite[:, 2:]
+        g, k, b = np.nonzero(outside & (m[:, 1:-1] >= m[:, :-2]) & (m[:, 1:-1] >= m[:, 2:]))
+        add(narrow, block[g], b, k)
+        # a gap in a branch's domain between samples (where two branches meet and part): its margin dips
+        g, k, b = np.nonzero(finite[:, :-2] & finite[:, 1:-1] & finite[:, 2:] & (m[:, 1:-1] <= m[:, :-2]) & (m[:, 1:-1] <= m[:, 2:]))
+        around = k[:, None] + np.array([-1, 0, 2, 3])
+        add(pinched, block[g], b, k, np.where((around >= 0) & (around < samples), e[g[:, None], np.clip(around, 0, samples - 1), b[:, None]], np.nan))
+    # the narrow domains: where the margin peaks, and if that is inside, both its ends are edges
+    g, b, k = (np.concatenate(column) for column in narrow)
+    peak = _maximise(lambda x: solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2), margin=True), grid[k], grid[k + 2])
+    e_peak = solver.on_branch(G[g], peak, b)
+    g, b, k, peak, e_peak = (v[np.isfinite(e_peak)] for v in (g, b, k, peak, e_peak))
+    add(edges, np.tile(g, 2), np.tile(b, 2), np.concatenate([grid[k], grid[k + 2]]), np.tile(peak, 2), np.tile(e_peak, 2), np.full(2 * len(g), np.nan))
+    # the gaps: where the margin dips, and if that is outside, the samples either side have an edge there
+    g, b, k = (np.concatenate(column) for column in pinched[:3])
+    dip = _maximise(lambda x: -solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2), margin=True), grid[k], grid[k + 2])
+    g, b, k, dip, e_around = (v[~np.isfinite(solver.on_branch(G[g], dip, b))] for v in (g, b, k, dip, np.concatenate(pinched[3])))
+    add(
+        edges, np.tile(g, 2), np.tile(b, 2), np.tile(dip, 2), np.concatenate([grid[k], grid[k + 2]]), np.concatenate([e_around[:, 1], e_around[:, 2]]), np.concatenate([e_around[:, 0], e_around[:, 3]])
+    )
+    # the ends, by bisection on where e is defined: a root between an end and the point inside
+    # has no sign change on the grid
+    g, b, out, inside, e_inside, e_further = (np.concatenate(column) for column in edges)
+    edge = inside.copy()
     for _ in range(BISECTION_STEPS):
-        mid = 0.5 * (lo + hi)
-        with_lo = np.isfinite(solver.on_branch(G_g, mid, b)) == lo_inside
-        lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, hi, mid)
-    edge, inside = np.where(lo_inside, lo, hi), np.where(lo_inside, grid[k], grid[k + 1])
-    e_edge = solver.on_branch(G_g, edge, b)
+        mid = 0.5 * (out + edge)
+        active = np.flatnonzero((mid != out) & (mid != edge))  # not yet at rounding
+        defined = np.isfinite(solver.on_branch(G[g[active]], mid[active], b[active]))
+        out[active], edge[active] = np.where(defined, out[active], mid[active]), np.where(defined, mid[active], edge[active])
+    e_edge = solver.on_branch(G[g], edge, b)
     crossed = np.isfinite(e_edge) & (np.sign(e_edge) != np.sign(e_inside))
     add(found, g[crossed], b[crossed], np.minimum(edge, inside)[crossed], np.maximum(edge, inside)[crossed])
     # a root at the end itself (two branches meeting there with e = 0, as at a planar home pose):
     # e behaves as sqrt near an end, so in doubles it gets only to ~1e-7 of it; kept for the polish
     at_end = ~crossed & (np.abs(e_edge) <= TOUCHING_M)
     add(found, g[at_end], b[at_end], edge[at_end], edge[at_end])
-    # the turning points (golden section) split the pairs
-    g, b, k, sign = (np.concatenate(column) for column in turns)
-    G_g = G[g]
-    lo, hi, toward = grid[k], grid[k + 2], -sign
-    for _ in range(BISECTION_STEPS):
-        m1, m2 = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
-        f = np.tile(toward, 2) * solver.on_branch(np.tile(G_g, (2, 1)), np.concatenate([m1, m2]), np.tile(b, 2))
-        f1, f2 = np.nan_to_num(f.reshape(2, -1), nan=-np.inf)
-        higher = f2 >= f1
-        lo, hi = np.where(higher, m1, lo), np.where(higher, hi, m2)
-    turning = 0.5 * (lo + hi)
-    e_turning = toward * solver.on_branch(G_g, turning, b)
+    # a turn towards zero between the end and the sample further in than the one inside (as e
+    # bends near an end, two roots may lie there)
+    sign = np.sign(e_inside)
+    turn = ~crossed & ~at_end & (np.sign(e_edge) == sign) & (np.sign(e_further) != -sign)  # not a sign change already found
+    further = np.where(np.isfinite(e_further), inside + np.sign(inside - edge) * (grid[1] - grid[0]), inside)
+    add(turns, g[turn], b[turn], np.minimum(further, edge)[turn], np.maximum(further, edge)[turn], sign[turn])
+    # the turning points split the pairs
+    g, b, lo, hi, sign = (np.concatenate(column) for column in turns)
+    toward = -sign
+    turning = _maximise(lambda x: np.tile(toward, 2) * solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2)), lo, hi)
+    e_turning = toward * solver.on_branch(G[g], turning, b)
     crossed = e_turning > 0
-    add(found, g[crossed], b[crossed], grid[k][crossed], turning[crossed])
-    add(found, g[crossed], b[crossed], turning[crossed], grid[k + 2][crossed])
+    add(found, g[crossed], b[crossed], lo[crossed], turning[crossed])
+    add(found, g[crossed], b[crossed], turning[crossed], hi[crossed])
     # a double root (e touching zero, as at a planar configuration, where two solutions coincide)
     # may miss zero by rounding either way: kept, for the polish to settle
     touching = ~crossed & (np.abs(e_turning) <= TOUCHING_M)
@@ -525,10 +580,12 @@ def solve_many(arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = Se
     e_lo = solver.on_branch(G[goal], lo, branch)
     for _ in range(BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        e_mid = solver.on_branch(G[goal], mid, branch)
-        with_lo = np.isfinite(e_mid) & (np.sign(e_mid) == np.sign(e_lo))
+        active = np.flatnonzero((mid != lo) & (mid != hi))  # not yet at rounding
+        mid = mid[active]
+        e_mid = solver.on_branch(G[goal[active]], mid, branch[active])
+        with_lo = np.isfinite(e_mid) & (np.sign(e_mid) == np.sign(e_lo[active]))
         with_hi = np.isfinite(e_mid) & ~with_lo
-        lo, e_lo, hi = np.where(with_lo, mid, lo), np.where(with_lo, e_mid, e_lo), np.where(with_hi, mid, hi)
+        lo[active], e_lo[active], hi[active] = np.where(with_lo, mid, lo[active]), np.where(with_lo, e_mid, e_lo[active]), np.where(with_hi, mid, hi[active])
     x = 0.5 * (lo + hi)
     Q = solver.configurations(G[goal], x)[0].transpose(0, 2, 1)[np.arange(len(x))[:, None], 2 * branch[:, None] + np.arange(2)]  # (M, 2, 7)
     Q, goal, x, branch = Q.reshape(-1, 7), np.repeat(goal, 2), np.repeat(x, 2), (2 * branch[:, None] + np.arange(2)).ravel()
@@ -547,8 +604,8 @@ def solve_many(arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = Se
     for n in range(len(T)):
         mine = keep & (goal == n)
         q = Q[mine]
-        unique = np.unique(np.round(q, 9), axis=0, return_index=True)[1] if len(q) else np.zeros(0, dtype=int)  # a root bracketed twice (at a sample) once
-        unique = np.sort(unique)
+        apart = np.abs(np.angle(np.exp(1j * (q[:, None] - q[None])))).max(axis=-1) > SAME_SOLUTION_RAD
+        unique = np.array([i for i in range(len(q)) if apart[i, :i].all()], dtype=int)  # a root bracketed twice (at a sample, or polished onto another) once
         out.append(SewSolutions(q[unique], x[mine][unique], branch[mine][unique], residual[mine][unique]))
     return out
 

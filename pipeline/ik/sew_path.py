@@ -30,7 +30,7 @@ from dualarm.ik import mc_path
 from dualarm.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
 from dualarm.ik.joint_path import JointPath
 from dualarm.ik.mc_path import START_WEIGHT, settings_for
-from dualarm.ik.sew import SewAngle, SewChain, into_limits, sew_chain, solve_many
+from dualarm.ik.sew import SewAngle, SewChain, SewSolutions, into_limits, sew_chain, solve_many
 from dualarm.model.robot import Robot
 from dualarm.paths.reference import CartesianReference, first_repetition_index
 from dualarm.tasks.schema import ArmAngle
@@ -43,8 +43,6 @@ AUTO_ANGLES = 36
 AUTO_SAMPLES = 64
 #: ``auto``: most grid cells the angle moves from one planned sample to the next.
 AUTO_MAX_CELLS = 3
-#: ``auto``: the cheapest starts (solution at the first sample and angle) a profile is searched from.
-AUTO_STARTS = 36
 #: ``auto``: most times the profile is planned again with more samples where the last one failed.
 AUTO_ROUNDS = 24
 #: ``auto``: the path followed and the planned solution at a planned sample differ by more than this when the path left it [rad].
@@ -76,15 +74,23 @@ def solve_sew(robot: Robot, reference: CartesianReference, q0: Mapping[str, floa
         initial = float(sew.angle(*(x[0] for x in arm.points(problem.q0[None]))))
         start = time.perf_counter()
         limits = (lower, upper, robot.limit_array("velocity", problem.chain.joint_names))
-        psi = _auto(arm, sew, problem, reference, initial, limits, spec) if spec.mode == "auto" else mc_path.arm_angles(spec, problem.hand, reference, initial)
-        q = _followed(problem.hand, problem.chain.joint_names, solve_many(arm, problem.targets, psi, sew), problem.q0, lower, upper, reference, psi, spec.max_joint_step_rad)
+        found: dict[int, SewSolutions] = {}
+        if spec.mode == "auto":
+            psi, found = _auto(arm, sew, problem, reference, initial, limits, spec)
+        else:
+            psi = mc_path.arm_angles(spec, problem.hand, reference, initial)
+        rest = [k for k in range(len(reference)) if k not in found]
+        found.update(zip(rest, solve_many(arm, problem.targets[rest], psi[rest], sew)))
+        q = _followed(problem.hand, problem.chain.joint_names, [found[k] for k in range(len(reference))], problem.q0, lower, upper, reference, psi, spec.max_joint_step_rad)
         elapsed = time.perf_counter() - start
         solutions.append(ArmSolution(q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))))
     return joint_path("sew", reference, problems, solutions, q0)
 
 
-def _auto(arm: SewChain, sew: SewAngle, problem: ArmProblem, reference: CartesianReference, initial: float, limits: tuple[np.ndarray, np.ndarray, np.ndarray], spec: ArmAngle) -> np.ndarray:
-    """``auto``: the SEW angle per sample (N,) [rad], a profile of least travel that keeps a solution inside the limits (MC-Inverse's ``auto`` for an arm without fixed branches).
+def _auto(
+    arm: SewChain, sew: SewAngle, problem: ArmProblem, reference: CartesianReference, initial: float, limits: tuple[np.ndarray, np.ndarray, np.ndarray], spec: ArmAngle
+) -> tuple[np.ndarray, dict[int, SewSolutions]]:
+    """``auto``: the SEW angle per sample (N,) [rad] and the solutions there of the first repetition's samples (by sample), a profile of least travel that keeps a solution inside the limits (MC-Inverse's ``auto`` for an arm without fixed branches).
 
     The profile is planned (:func:`_plan`) on some samples of the first repetition, at first
     :data:`AUTO_SAMPLES` evenly spaced; between them the angle is interpolated linearly. The first
@@ -115,9 +121,8 @@ def _auto(arm: SewChain, sew: SewAngle, problem: ArmProblem, reference: Cartesia
         picked = np.array(sorted(planned))
         cells, nodes = _plan(solutions, picked, angles, problem, initial, limits, closed, reference, spec)
         profile = np.interp(first, picked, np.unwrap(angles[cells]))
-        q, failure = _follow(
-            problem.hand, problem.chain.joint_names, solve_many(arm, problem.targets[first], profile, sew), problem.q0, lower, upper, reference, profile, spec.max_joint_step_rad, speed
-        )
+        found = solve_many(arm, problem.targets[first], profile, sew)
+        q, failure = _follow(problem.hand, problem.chain.joint_names, found, problem.q0, lower, upper, reference, profile, spec.max_joint_step_rad, speed)
         end = len(first) if failure is None else _where(failure)
         with np.errstate(invalid="ignore"):
             apart = np.abs(np.angle(np.exp(1j * (q[picked] - nodes)))).max(axis=1) > SAME_SOLUTION_RAD
@@ -135,7 +140,7 @@ def _auto(arm: SewChain, sew: SewAngle, problem: ArmProblem, reference: Cartesia
                 raise failure
             planned |= more
         else:
-            return profile[first_repetition_index(reference.t, reference.rep, reference.period_s)]
+            return profile[first_repetition_index(reference.t, reference.rep, reference.period_s)], dict(zip(first.tolist(), found))
     raise failure or _no_profile(problem.hand, reference, int(first[-1]), spec.max_joint_step_rad)
 
 
@@ -176,7 +181,7 @@ def _plan(
     plus per node how far it comes closer than ``margin_rad`` to a limit, plus, weighted by
     ``START_WEIGHT``, the start's distance from ``initial`` and its largest joint distance from the
     initial configuration. A start is, at an angle, the solution nearest the initial configuration
-    (the one the path takes); the :data:`AUTO_STARTS` cheapest are tried. On a ``closed`` path the
+    (the one the path takes); a profile is searched from every angle's start at once. On a ``closed`` path the
     profile ends on the solution it began with, so that every repetition repeats it.
 
     Raises:
@@ -192,7 +197,7 @@ def _plan(
         away = np.nan_to_num(np.abs(np.angle(np.exp(1j * (Q[0] - problem.q0)))).max(axis=-1), nan=np.inf)  # (G, M)
     m_start = away.argmin(axis=1)  # at each angle, the solution the path takes from the initial configuration
     start = node[0, np.arange(G), m_start] + START_WEIGHT * (np.abs(np.angle(np.exp(1j * (angles - initial)))) + away[np.arange(G), m_start])
-    g0 = np.argsort(start)[:AUTO_STARTS]
+    g0 = np.argsort(start)  # cheapest first: a tie goes to the cheaper start
     g0 = g0[np.isfinite(start[g0])]
     if not g0.size:
         raise _no_profile(problem.hand, reference, int(picked[0]), spec.max_joint_step_rad)

@@ -6,7 +6,7 @@ import pytest
 from dualarm.bench.ik import ik_geo_solutions
 from dualarm.errors import NotSRSError
 from dualarm.ik.mc_inverse import McInverse
-from dualarm.ik.sew import FIRST_JOINT_FAMILY, UPPER_ARM_FAMILY, NotSewError, SewAngle, sew_chain, solve
+from dualarm.ik.sew import FIRST_JOINT_FAMILY, UPPER_ARM_FAMILY, NotSewError, SewAngle, sew_chain, solve, solve_many
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import load_robot
 from tests.conftest import HUMANOID, OFFSET, REPO, pybullet_urdf, wrist_offset_robot
@@ -96,6 +96,26 @@ def test_every_candidate_reproduces_the_pose_and_angle_and_one_is_the_configurat
         assert _wrapped(STEREO.angle(*arm.points(found.q)) - psi).max() < 1e-9
         assert len(np.unique(np.round(found.q, 6), axis=0)) == len(found.q)  # no solution twice
         assert len(found.q) % 2 == 0
+
+
+#: Configurations (indices among `random_configurations(robot, chain, 10000, seed=0)`, as `dualarm bench ik` draws them) whose
+#: solutions a sign change on the search's grid alone does not bracket: on the offset humanoid a branch that exists only
+#: between two samples (the elbow near its reach: 129, 671, 1208, 4474, 8993, 9035; subproblem 2 at its limit: 1773, 5379,
+#: 5514, 8218); on the Panda a root between a branch's end and the first sample, with a turn (2678, 4764, 8408), and a root
+#: at a gap in a branch narrower than a sample (7129). The numpy search of the previous version missed all 14.
+HARD = {"humanoid_offset": [129, 671, 1208, 1773, 4474, 5379, 5514, 8218, 8993, 9035], "panda": [2678, 4764, 7129, 8408]}
+
+
+def test_roots_near_and_between_a_branchs_ends_are_found(arm7):
+    """At the :data:`HARD` configurations' poses and SEW angles the configuration is among the solutions (1e-9 rad), which reproduce the pose by the chain's FK (1e-9)."""
+    from dualarm.model.check import random_configurations
+
+    robot, chain, arm, _, _ = arm7
+    Q = random_configurations(robot, chain, 10000, 0)[HARD[robot.name]]
+    T = ChainKinematics.of(chain).poses(Q)
+    for q, pose, found in zip(Q, T, solve_many(arm, T, STEREO.angle(*arm.points(Q)), STEREO)):
+        assert _wrapped(found.q - q).max(axis=1).min() < 1e-9
+        assert np.abs(ChainKinematics.of(chain).poses(found.q) - pose).max() < 1e-9
 
 
 def test_candidates_agree_with_pybullet(arm7):
