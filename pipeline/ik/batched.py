@@ -18,8 +18,8 @@ import numpy as np
 
 #: Threads that share a mapped call (one per core).
 THREADS = os.cpu_count() or 1
-#: The last, partial chunk is mapped over its size rounded up to a multiple of this (few maps to build).
-REST_STEP = 64
+#: Maps over fewer items than this run serially (starting threads costs more than the items).
+THREADED_FROM = 64
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,7 @@ class Batched:
             if not all(f.sparsity_out(i).is_dense() for i in range(f.n_out())):  # the buffers hold every entry
                 args = f.mx_in()
                 f = cs.Function(f.name(), args, [cs.densify(out) for out in f(*args)])
-            mapped = f.map(size, "thread", THREADS)
+            mapped = f.map(size, "thread", THREADS) if size >= THREADED_FROM else f.map(size, "serial")
             buffer, evaluate = mapped.buffer()
             ins = [np.zeros(mapped.numel_in(i)) for i in range(mapped.n_in())]
             outs = [np.zeros(mapped.numel_out(i)) for i in range(mapped.n_out())]
@@ -59,7 +59,7 @@ class Batched:
         return self._buffers[size]
 
     def __call__(self, *inputs: np.ndarray | float) -> tuple[np.ndarray, ...]:
-        """Evaluate over N items: full chunks, then the rest in a map of its size rounded up to :data:`REST_STEP`.
+        """Evaluate over N items: full chunks, then the rest in a map of its size rounded up to a power of two (few maps to build, at most twice the work).
 
         Args:
             inputs: one per Function input of shape (r, c): N items (N, r, c), (N, r) for a column,
@@ -77,7 +77,7 @@ class Batched:
         results = [np.empty((N, f.numel_out(i))) for i in range(f.n_out())]
         for start in range(0, N, self.chunk):
             m = min(self.chunk, N - start)
-            size = self.chunk if m == self.chunk else min(self.chunk, -(-m // REST_STEP) * REST_STEP)
+            size = min(self.chunk, 1 << (m - 1).bit_length())
             evaluate, ins, outs = self._buffer(size)
             for value, array in zip(flat, ins):
                 array.reshape(size, -1)[:m] = value if len(value) == 1 else value[start : start + m]
