@@ -966,6 +966,36 @@ def bench_pipeline_command() -> None:
     out.print(table)
 
 
+@bench_app.command("trajectory")
+@user_errors
+def bench_trajectory_command() -> None:
+    """The jerk-limited timing against TOPP-RA (0.9/0.3 and 1.0/1.0) with Ruckig tracking, on the triangle, the circle, the ball game and the bowl grasp: duration and its ratio to TOPP-RA at full limits, limit ratios by finite differences, path deviation, compute time."""
+    from dualarm.bench.trajectory import bench_trajectory
+
+    with err.status("benchmarking ...") as status:
+        rows = bench_trajectory(progress=lambda text: status.update(f"benchmarking {text} ..."))
+    table = Table(title="trajectory generation on each task's joint path (ratios by finite differences of the motion's positions)", title_justify="left")
+    for column in ("task", "method", "duration s", "/ TOPP-RA 1.0/1.0", "velocity", "acceleration", "jerk", "deviation rad", "compute ms / s of motion"):
+        table.add_column(column, justify="left" if column in ("task", "method") else "right", no_wrap=column == "method")
+    for r in rows:
+        if r.failure:
+            table.add_row(r.task, r.method, "failed", *["-"] * 6)
+            continue
+        table.add_row(
+            r.task,
+            r.method,
+            f"{r.duration_s:.3f}",
+            f"{r.duration_s / r.optimal_s:.3f}" if r.optimal_s else "-",
+            *(f"{x:.6f}" for x in r.ratios),
+            f"{r.deviation_rad:.2e}",
+            f"{r.compute_s / r.duration_s * 1e3:.1f}" if r.duration_s else "-",
+        )
+    out.print(table)
+    for r in rows:
+        if r.failure:
+            out.print(f"- {r.task}, {r.method}: {r.failure}", markup=False, soft_wrap=True)
+
+
 @bench_app.command("plan")
 @user_errors
 def bench_plan_command(

@@ -207,22 +207,26 @@ class RetimeStage:
         v, a = robot.limit_array("velocity", names), robot.limit_array("acceleration", names)
         if settings.timing == "task":
             result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=True)
+        elif settings.timing == "jerk-limited":
+            result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, jerk=robot.limit_array("jerk", names))
         else:
             result = retime_path(path, settings.velocity_fraction * v, settings.acceleration_fraction * a, sample_period_s=CONTROL_PERIOD_S)
         traj = result.trajectory
-        ratios = limit_ratios(traj.t, names, {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}, self.name)
-        sink.trajectory(traj, {"velocity": v, "acceleration": a}, hand_positions(self.task, traj))
+        samples, limits = {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}
+        if settings.timing == "jerk-limited":
+            samples["jerk"], limits["jerk"] = traj.mean_jerk(), robot.limit_array("jerk", names)
+        ratios = limit_ratios(traj.t, names, samples, limits, self.name)
+        sink.trajectory(traj, limits, hand_positions(self.task, traj))
         return traj, {
             "retime.duration_s": traj.duration_s,
-            "retime.velocity_ratio_max": ratios["velocity"].ratio,
-            "retime.acceleration_ratio_max": ratios["acceleration"].ratio,
+            **{f"retime.{kind}_ratio_max": r.ratio for kind, r in ratios.items()},
             "retime.path_deviation_max_rad": result.path_deviation_max_rad,
             "retime.stretch": result.stretch,
         }
 
     def violations(self, traj: JointTrajectory) -> list[Violation]:
-        """Position, velocity and acceleration limits (the retimed trajectory's jerk is the smooth stage's to bound)."""
-        return trajectory_violations(traj, self.task.robot, jerk=False)
+        """Position, velocity and acceleration limits, and the jerk's for a jerk-limited timing (TOPP-RA's jerk is the smooth stage's to bound)."""
+        return trajectory_violations(traj, self.task.robot, jerk=self.settings.timing == "jerk-limited")
 
 
 @dataclass(frozen=True)

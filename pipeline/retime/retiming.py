@@ -7,7 +7,8 @@ every IK sample and keeps every joint within its velocity and acceleration limit
 1. :func:`plan` validates the limits (:func:`dualarm.limits.per_joint`) and the path
    (:func:`check_path`), and times the path: time-optimally by TOPP-RA
    (:func:`dualarm.retime.topp.time_optimal`, which explains the method), or with the task's own
-   timing (``keep_timing``, :func:`dualarm.retime.timing.task_timing`).
+   timing (``keep_timing``, :func:`dualarm.retime.timing.task_timing`), or jerk-limited within
+   velocity, acceleration and jerk limits (``jerk``, :func:`dualarm.retime.jerk.jerk_limited`).
 2. :func:`retime_path` samples the timing (:meth:`dualarm.retime.timing.Timing.sample`). A time-optimal
    trajectory is then checked on its samples (:func:`dualarm.limits.limit_ratios`) and slowed down
    uniformly by k = max(velocity ratio, sqrt(acceleration ratio)) should a sample still exceed a
@@ -53,7 +54,7 @@ class Retimed:
     path_deviation_max_rad: float
 
 
-def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, sample_period_s: float = 0.001, keep_timing: bool = False) -> Retimed:
+def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, sample_period_s: float = 0.001, keep_timing: bool = False, jerk: np.ndarray | None = None) -> Retimed:
     """Time a joint path within joint limits and sample it.
 
     Args:
@@ -63,6 +64,8 @@ def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray,
         acceleration: acceleration limit per active joint (n,) [rad/s^2], positive; symmetric.
         sample_period_s: sample period of the output [s].
         keep_timing: keep the path's own timing instead of the time-optimal one, and check it.
+        jerk: jerk limit per active joint (n,) [rad/s^3] (or one for all): given, the timing is
+            jerk-limited (:mod:`dualarm.retime.jerk`) instead of TOPP-RA's.
 
     Returns:
         The trajectory, rest to rest, sampled every ``sample_period_s`` plus its final time, with
@@ -74,7 +77,7 @@ def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray,
     """
     if not (np.isfinite(sample_period_s) and sample_period_s > 0):
         raise StageError(f"{STAGE}: the sample period must be a positive number of seconds, got {sample_period_s!r}", stage=STAGE)
-    timing = plan(path, velocity, acceleration, keep_timing=keep_timing)
+    timing = plan(path, velocity, acceleration, keep_timing=keep_timing, jerk=jerk)
     traj = timing.sample(sample_period_s)
     if keep_timing:
         check_limits(traj, velocity, acceleration)
@@ -83,7 +86,7 @@ def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray,
     return Retimed(traj, timing.stretch, path_deviation_max_rad(timing, path))
 
 
-def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, keep_timing: bool = False) -> Timing:
+def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, keep_timing: bool = False, jerk: np.ndarray | None = None) -> Timing:
     """The continuous trajectory :func:`retime_path` samples (checks the limits and the path first).
 
     Args:
@@ -91,6 +94,7 @@ def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, kee
         velocity: velocity limit per active joint (n,) [rad/s] (or one for all).
         acceleration: acceleration limit per active joint (n,) [rad/s^2] (or one for all).
         keep_timing: the path's own timing instead of the time-optimal one.
+        jerk: jerk limit per joint (n,) [rad/s^3] (or one for all): the jerk-limited timing.
 
     Raises:
         StageError: as :func:`retime_path`, except the ``keep_timing`` limit check, which needs samples.
@@ -98,7 +102,13 @@ def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, kee
     v = per_joint(velocity, path.joint_names, "velocity", STAGE)
     a = per_joint(acceleration, path.joint_names, "acceleration", STAGE)
     check_path(path)
-    return task_timing(path) if keep_timing else time_optimal(path, v, a)
+    if keep_timing:
+        return task_timing(path)
+    if jerk is not None:
+        from dualarm.retime.jerk import jerk_limited
+
+        return jerk_limited(path, v, a, per_joint(jerk, path.joint_names, "jerk", STAGE))
+    return time_optimal(path, v, a)
 
 
 def _within_limits(timing: Timing, traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray, period_s: float) -> tuple[Timing, JointTrajectory]:

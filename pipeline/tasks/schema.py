@@ -242,7 +242,9 @@ class Retime(_Model):
 
     Attributes:
         timing: ``optimal``: time-optimal within the limits (TOPP-RA); ``task``: the task's own
-            timing (its moves' durations), checked against the limits.
+            timing (its moves' durations), checked against the limits; ``jerk-limited``: near
+            time-optimal within the full velocity, acceleration and jerk limits, on the path
+            (:mod:`dualarm.retime.jerk`; the fractions are not used).
         velocity_fraction / acceleration_fraction: for ``optimal``, the share of the velocity and
             acceleration limits TOPP-RA may use, within :data:`FRACTION_RANGE`. The rest is the
             smooth stage's headroom: a time-optimal profile switches its acceleration instantly
@@ -250,7 +252,7 @@ class Retime(_Model):
             it catches up. The reported ratios are always against the full limits.
     """
 
-    timing: Literal["optimal", "task"] = "optimal"
+    timing: Literal["optimal", "task", "jerk-limited"] = "optimal"
     velocity_fraction: Fraction = 0.9
     acceleration_fraction: Fraction = 0.3
 
