@@ -205,16 +205,17 @@ class RetimeStage:
         settings, names = self.settings, path.joint_names
         robot = self.task.robot
         v, a = robot.limit_array("velocity", names), robot.limit_array("acceleration", names)
+        j = robot.limit_array("jerk", names) if settings.timing == "jerk-limited" else None
         if settings.timing == "task":
             result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=True)
-        elif settings.timing == "jerk-limited":
-            result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, jerk=robot.limit_array("jerk", names))
+        elif j is not None:
+            result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, jerk=j)
         else:
             result = retime_path(path, settings.velocity_fraction * v, settings.acceleration_fraction * a, sample_period_s=CONTROL_PERIOD_S)
         traj = result.trajectory
         samples, limits = {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}
-        if settings.timing == "jerk-limited":
-            samples["jerk"], limits["jerk"] = traj.mean_jerk(), robot.limit_array("jerk", names)
+        if j is not None:
+            samples["jerk"], limits["jerk"] = traj.mean_jerk(), j
         ratios = limit_ratios(traj.t, names, samples, limits, self.name)
         sink.trajectory(traj, limits, hand_positions(self.task, traj))
         return traj, {

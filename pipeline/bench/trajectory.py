@@ -71,7 +71,8 @@ class TrajectoryRow:
 
 def _ratios(q: np.ndarray, step_s: float, limits: Sequence[np.ndarray]) -> tuple[float, float, float]:
     """Velocity, acceleration and jerk ratios of positions ``q`` (M, n) sampled every ``step_s`` [s], by first, second and third differences."""
-    return tuple(float((np.abs(np.diff(q, order, axis=0)) / step_s**order / limit).max()) for order, limit in zip((1, 2, 3), limits))  # type: ignore[return-value]
+    velocity, acceleration, jerk = (float((np.abs(np.diff(q, order, axis=0)) / step_s**order / limit).max()) for order, limit in zip((1, 2, 3), limits))
+    return velocity, acceleration, jerk
 
 
 def bench_trajectory(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Callable[[str], None] = lambda text: None) -> list[TrajectoryRow]:

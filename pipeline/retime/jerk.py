@@ -37,7 +37,7 @@ Units: joint positions [rad], velocities [rad/s], accelerations [rad/s^2], jerks
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as cs
 import numpy as np
@@ -229,7 +229,7 @@ def _time_piece(q: np.ndarray, s: np.ndarray, velocity: np.ndarray, acceleration
     piece = PieceTiming(path, nodes, x[: K + 1], x[K + 1 : 2 * K + 2], x[2 * K + 2 : 3 * K + 2], x[3 * K + 2 :])
     rv, ra, rj = piece.ratios(velocity, acceleration, jerk)
     k = max(1.0, rv, np.sqrt(ra), np.cbrt(rj))
-    return PieceTiming(path, nodes, piece.sd, piece.sdd, piece.sddd, piece.dt, k * (1 + 1e-9) if k > 1 else 1.0)
+    return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0)
 
 
 @functools.lru_cache(maxsize=None)
