@@ -28,6 +28,7 @@ import typer
 from rich.console import Console
 from rich.status import Status
 from rich.table import Table
+from rich.text import Text
 
 from dualarm.errors import DualarmError, NotSRSError, StageError, Terminated, excerpt
 
@@ -221,7 +222,12 @@ def run(
     out_text: Annotated[str, typer.Option("--out", help="Directory that receives <task>/<run-id>/ (a recordings directory: runs are added, nothing in it is deleted or overwritten).")] = "recordings",
     seed: Annotated[int, typer.Option(help="Random seed (an integer >= 0), recorded in the manifest.")] = 0,
     reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
-    timing: Annotated[Optional[str], typer.Option(help="Retime: optimal (TOPP-RA) or task (the task's own timing, checked against the limits); default: the task file's retime.timing.")] = None,
+    timing: Annotated[
+        Optional[str],
+        typer.Option(
+            help="Retime: jerk-limited (on the path, within the velocity, acceleration and jerk limits), optimal (TOPP-RA, then Ruckig tracking) or task (the task's own timing, checked against the limits); default: the task file's retime.timing."
+        ),
+    ] = None,
     gui: Annotated[bool, typer.Option("--gui", help="Show the execution in a PyBullet window (needs a display).")] = False,
     execute_anyway: Annotated[
         bool, typer.Option("--execute-anyway", help="Play a trajectory that fails its validation (limits, collisions) for diagnosis; the run is then at best 'violated'.")
@@ -969,31 +975,44 @@ def bench_pipeline_command() -> None:
 @bench_app.command("trajectory")
 @user_errors
 def bench_trajectory_command() -> None:
-    """The jerk-limited timing against TOPP-RA (0.9/0.3 and 1.0/1.0) with Ruckig tracking, on the triangle, the circle, the ball game and the bowl grasp: duration and its ratio to TOPP-RA at full limits, limit ratios by finite differences, path deviation, compute time."""
+    """The jerk-limited timing against TOPP-RA (0.9/0.3 and 1.0/1.0) with Ruckig tracking, on the triangle, the circle, the ball game and the bowl grasp: duration and its ratio to TOPP-RA at full limits, limit ratios by finite differences (red above 1 + 1e-6), path deviation per joint and at the hands, compute time. Exits 1 if a method failed, 3 if a motion exceeds a limit."""
     from dualarm.bench.trajectory import bench_trajectory
+    from dualarm.limits import LIMIT_TOLERANCE
 
     with err.status("benchmarking ...") as status:
         rows = bench_trajectory(progress=lambda text: status.update(f"benchmarking {text} ..."))
-    table = Table(title="trajectory generation on each task's joint path (ratios by finite differences of the motion's positions)", title_justify="left")
-    for column in ("task", "method", "duration s", "/ TOPP-RA 1.0/1.0", "velocity", "acceleration", "jerk", "deviation rad", "compute ms / s of motion"):
-        table.add_column(column, justify="left" if column in ("task", "method") else "right", no_wrap=column == "method")
+    table = Table(
+        title="trajectory generation on each task's joint path: velocity, acceleration and jerk limit ratios by finite differences of the motion's positions (red above 1 + 1e-6); deviation from the path per joint and at the hands; compute time per second of motion",
+        title_justify="left",
+    )
+    for column in ("task", "method", "duration s", "× TOPP-RA 1.0/1.0", "v", "a", "j", "Δq rad", "Δhand µm", "ms / s"):
+        table.add_column(column, justify="left" if column in ("task", "method") else "right", no_wrap=True)
     for r in rows:
         if r.failure:
-            table.add_row(r.task, r.method, "failed", *["-"] * 6)
+            table.add_row(r.task, r.method, "failed", *["-"] * 7)
             continue
         table.add_row(
             r.task,
             r.method,
             f"{r.duration_s:.3f}",
             f"{r.duration_s / r.optimal_s:.3f}" if r.optimal_s else "-",
-            *(f"{x:.6f}" for x in r.ratios),
+            *(Text(f"{x:.6f}", style="bold red" if x > 1 + LIMIT_TOLERANCE else "") for x in r.ratios),
             f"{r.deviation_rad:.2e}",
+            f"{r.hand_deviation_m * 1e6:.3g}" if r.hand_deviation_m < 1e-3 else f"{r.hand_deviation_m * 1e6:.0f}",
             f"{r.compute_s / r.duration_s * 1e3:.1f}" if r.duration_s else "-",
         )
-    out.print(table)
-    for r in rows:
-        if r.failure:
-            out.print(f"- {r.task}, {r.method}: {r.failure}", markup=False, soft_wrap=True)
+    Console(highlight=False, emoji=False, width=max(out.width, 150), file=out.file).print(table)  # ten columns of numbers, none cut
+    exceeded = [
+        f"- {r.task}, {r.method}: its {kind} reaches {x:.7f} times the limit"
+        for r in rows
+        if not r.failure
+        for kind, x in zip(("velocity", "acceleration", "jerk"), r.ratios)
+        if x > 1 + LIMIT_TOLERANCE
+    ]
+    for line in [f"- {r.task}, {r.method}: {r.failure}" for r in rows if r.failure] + exceeded:
+        out.print(line, soft_wrap=True)
+    if any(r.failure for r in rows) or exceeded:
+        raise typer.Exit(1 if any(r.failure for r in rows) else 3)  # as a run's verdict: failed, or a limit exceeded
 
 
 @bench_app.command("plan")

@@ -42,7 +42,7 @@ ALL_STAGES = ("path", "ik", "plan", "retime", "smooth", "approach", "execute")
 #: ``approach`` runs).
 NEEDS = {"ik": ("path",), "plan": ("path",), "retime": ("ik", "plan"), "smooth": ("retime",), "approach": ("retime",), "execute": ("retime",)}
 #: Timings of the retime stage (a task's ``retime.timing``).
-TIMINGS = ("optimal", "task")
+TIMINGS = ("jerk-limited", "optimal", "task")
 
 
 @dataclass(frozen=True)
@@ -170,7 +170,7 @@ def build_stages(
     if "retime" in chosen:  # the back half's imports (toppra, ruckig, pybullet) wait until it runs
         built.append(RetimeStage(task, retime or task.spec.retime))
     if "smooth" in chosen:
-        built.append(SmoothStage(task))
+        built.append(SmoothStage(task, (retime or task.spec.retime).timing))
     if "approach" in chosen:
         built.append(ApproachStage(task))
     if "execute" in chosen:

@@ -65,6 +65,11 @@ def hand_positions(task: Task, traj: JointTrajectory, q: np.ndarray | None = Non
     return {hand: T[:, :3, 3] for hand, T in poses.items()}
 
 
+def _distance_max(hands: dict[str, np.ndarray], reference: dict[str, np.ndarray]) -> float:
+    """The largest distance between each hand's positions (M, 3) [m] and its reference's, over the hands (0 without hands) [m]."""
+    return max((float(np.linalg.norm(hands[h] - reference[h], axis=1).max()) for h in hands), default=0.0)
+
+
 @dataclass(frozen=True)
 class PathStage:
     """The task's hand motions sampled at its control period (quintic time scaling)."""
@@ -183,10 +188,12 @@ class PlanStage:
 
 @dataclass(frozen=True)
 class RetimeStage:
-    """Time the joint path (TOPP-RA, or the task's own timing), sampled every :data:`CONTROL_PERIOD_S`.
+    """Time the joint path (jerk-limited, TOPP-RA, or the task's own timing), sampled every :data:`CONTROL_PERIOD_S`.
 
-    Time-optimal retiming uses ``settings.velocity_fraction`` and ``acceleration_fraction`` of the
-    limits (headroom for the smooth stage); the task's own timing is checked against the full limits.
+    The jerk-limited timing (the default) uses the full velocity, acceleration and jerk limits;
+    TOPP-RA (``optimal``) uses ``settings.velocity_fraction`` and ``acceleration_fraction`` of the
+    velocity and acceleration limits (headroom for the smooth stage's tracking); the task's own
+    timing is checked against the full three.
     """
 
     task: Task
@@ -205,59 +212,69 @@ class RetimeStage:
         settings, names = self.settings, path.joint_names
         robot = self.task.robot
         v, a = robot.limit_array("velocity", names), robot.limit_array("acceleration", names)
-        j = robot.limit_array("jerk", names) if settings.timing == "jerk-limited" else None
-        if settings.timing == "task":
-            result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=True)
-        elif j is not None:
-            result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, jerk=j)
-        else:
+        j = robot.limit_array("jerk", names) if settings.timing != "optimal" else None
+        if settings.timing == "optimal":
             result = retime_path(path, settings.velocity_fraction * v, settings.acceleration_fraction * a, sample_period_s=CONTROL_PERIOD_S)
+        else:
+            result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=settings.timing == "task", jerk=j)
         traj = result.trajectory
         samples, limits = {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}
         if j is not None:
             samples["jerk"], limits["jerk"] = traj.mean_jerk(), j
         ratios = limit_ratios(traj.t, names, samples, limits, self.name)
-        sink.trajectory(traj, limits, hand_positions(self.task, traj))
+        sink.trajectory(traj, limits, hand_positions(self.task, traj), {"jerk": samples["jerk"]} if j is not None else {})
         return traj, {
             "retime.duration_s": traj.duration_s,
             **{f"retime.{kind}_ratio_max": r.ratio for kind, r in ratios.items()},
             "retime.path_deviation_max_rad": result.path_deviation_max_rad,
+            "retime.hand_deviation_max_m": _distance_max(hand_positions(self.task, traj, result.at_samples), hand_positions(self.task, traj, path.q)),
             "retime.stretch": result.stretch,
         }
 
     def violations(self, traj: JointTrajectory) -> list[Violation]:
-        """Position, velocity and acceleration limits, and the jerk's for a jerk-limited timing (TOPP-RA's jerk is the smooth stage's to bound)."""
-        return trajectory_violations(traj, self.task.robot, jerk=self.settings.timing == "jerk-limited")
+        """Position, velocity and acceleration limits, and the jerk's but for TOPP-RA (whose jerk is the smooth stage's to bound)."""
+        return trajectory_violations(traj, self.task.robot, jerk=self.settings.timing != "optimal")
 
 
 @dataclass(frozen=True)
 class SmoothStage:
-    """Track the retimed trajectory with jerk-limited motion (Ruckig, every :data:`CONTROL_PERIOD_S`).
+    """Track a TOPP-RA trajectory with jerk-limited motion (Ruckig, every :data:`CONTROL_PERIOD_S`); pass any other through.
 
-    Besides the limit ratios, it measures how far it departs from the retimed trajectory at the
-    same time: per joint [rad] and at the hands [m].
+    Only the ``optimal`` timing (TOPP-RA) leaves the jerk unbounded; the ``jerk-limited`` and
+    ``task`` timings are already checked within the jerk limits by the retime stage, so their
+    trajectory passes unchanged (stage ``smooth``, deviation 0). Besides the limit ratios, it
+    measures how far it departs from the retimed trajectory at the same time: per joint [rad] and
+    at the hands [m].
     """
 
     task: Task
+    timing: str = "jerk-limited"
     name: ClassVar[str] = "smooth"
 
+    @property
+    def tracks(self) -> bool:
+        """Whether it tracks the retimed trajectory (the ``optimal`` timing) rather than passing it through."""
+        return self.timing == "optimal"
+
     def settings_record(self) -> dict[str, Any]:
-        """The tracking method and its control period [s]."""
-        return {"method": "ruckig online tracking", "control_period_s": CONTROL_PERIOD_S}
+        """The tracking method (or ``pass-through``) and its control period [s]."""
+        return {"method": "ruckig online tracking" if self.tracks else f"pass-through (the {self.timing} timing is within the jerk limits)", "control_period_s": CONTROL_PERIOD_S}
 
     def __call__(self, retimed: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
-        """Track the retimed trajectory: JointTrajectory -> JointTrajectory (stage ``smooth``)."""
-        from dualarm.smooth import smooth_trajectory
+        """Track the retimed trajectory, or pass it through: JointTrajectory -> JointTrajectory (stage ``smooth``)."""
+        from dualarm.smooth import Smoothed, smooth_trajectory
 
         sink.begin(self.name)
         names = retimed.joint_names
         v, a, j = (self.task.robot.limit_array(kind, names) for kind in ("velocity", "acceleration", "jerk"))
-        result = smooth_trajectory(retimed, v, a, j, period_s=CONTROL_PERIOD_S)
+        if self.tracks:
+            result = smooth_trajectory(retimed, v, a, j, period_s=CONTROL_PERIOD_S)
+        else:
+            result = Smoothed.unchanged(retimed)
         traj = result.trajectory
         ratios = limit_ratios(traj.t, names, {"velocity": traj.qd, "acceleration": traj.qdd, "jerk": result.jerk}, {"velocity": v, "acceleration": a, "jerk": j}, self.name)
         hands = hand_positions(self.task, traj)
-        reference = hand_positions(self.task, traj, retimed.interpolate(traj.t)[0])
-        hand_deviation = max((float(np.linalg.norm(hands[h] - reference[h], axis=1).max()) for h in hands), default=0.0)
+        hand_deviation = _distance_max(hands, hand_positions(self.task, traj, retimed.interpolate(traj.t)[0]))
         sink.trajectory(traj, {"velocity": v, "acceleration": a, "jerk": j}, hands, {"jerk": result.jerk, "deviation_rad": result.deviation_rad})
         return traj, {
             "smooth.duration_s": traj.duration_s,
@@ -286,7 +303,11 @@ class ApproachStage:
 
     def settings_record(self) -> dict[str, Any]:
         """The method, the limits it uses and its sample period [s]."""
-        return {"method": "ruckig, time-optimal, rest to rest", "limits": "the task's full limits", "sample_period_s": CONTROL_PERIOD_S}
+        return {
+            "method": "straight line in joint space, jerk-limited timing (ruckig on the path parameter), time-optimal, rest to rest",
+            "limits": "the task's full limits",
+            "sample_period_s": CONTROL_PERIOD_S,
+        }
 
     def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
         """Plan the approach: JointTrajectory -> the same JointTrajectory with its ``approach``."""

@@ -55,7 +55,7 @@ def test_robot_check_bare_urdf(kuka_urdf):
         (["robot", "check", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "torso", "--tip", "foot"], "no link 'foot'"),
         (["robot", "check", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "left_hand", "--tip", "torso"], "is not below link"),
         (["run", str(TASKS / "triangle.toml"), "--stages", "path,ik,smooth", "--ik", "pinv"], "stage 'smooth' needs stage 'retime'"),
-        (["run", str(TASKS / "triangle.toml"), "--ik", "pinv", "--timing", "slow"], "unknown timing 'slow' (timings: optimal, task)"),
+        (["run", str(TASKS / "triangle.toml"), "--ik", "pinv", "--timing", "slow"], "unknown timing 'slow' (timings: jerk-limited, optimal, task)"),
         (["run", str(TASKS / "triangle.toml"), "--stages", "path,ik"], "stage 'ik' needs --ik METHOD"),
         (["run", str(TASKS / "ball_game.toml"), "--ik", "magic"], "unknown IK method 'magic'"),
         (["run", str(TASKS / "ball_game.toml"), "--ik", "tvgdd", "--scheme", "fast"], "unknown TV-GDD scheme 'fast'"),

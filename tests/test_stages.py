@@ -93,6 +93,33 @@ def test_the_approach_moves_from_the_initial_configuration_to_the_motion_start_w
     assert np.abs(_joints(executed, "position", names)[-1] - _joints(data["/execute/sample"], "position", names)[0]).max() < 0.01
 
 
+def test_the_approach_is_the_straight_jerk_limited_move_ruckig_times_in_phase(carry_box):
+    """The approach is timed as the retime stage times a path (a straight piece): every recorded sample lies on the
+    line from its first to its last configuration (1e-9 rad), and it lasts as long as Ruckig's time-optimal
+    phase-synchronised move between them (every joint on that line) within 99.8 % of each limit (the share the
+    timing uses), to 1e-6 s, and at most 0.21 % longer than at the full limits."""
+    from ruckig import InputParameter, Result, Ruckig, Synchronization, Trajectory
+
+    _, _, data = carry_box
+    names, limits = _limits(data, "approach")
+    approach = data["/approach/sample"]
+    q = _joints(approach, "position", names)
+    line = q[-1] - q[0]
+    along = (q - q[0]) @ line / (line @ line)
+    assert np.abs(q - q[0] - np.outer(along, line)).max() <= 1e-9
+    durations = []
+    for share in (0.998, 1.0):
+        inp = InputParameter(len(names))
+        inp.current_position, inp.target_position = q[0].tolist(), q[-1].tolist()
+        inp.max_velocity, inp.max_acceleration, inp.max_jerk = ((share * limits[kind]).tolist() for kind in ("velocity", "acceleration", "jerk"))
+        inp.synchronization = Synchronization.Phase
+        plan = Trajectory(len(names))
+        assert Ruckig(len(names)).calculate(inp, plan) == Result.Working
+        durations.append(plan.duration)
+    assert approach["t"].iloc[-1] == pytest.approx(durations[0], abs=1e-6)
+    assert durations[1] <= approach["t"].iloc[-1] <= 1.0021 * durations[1]
+
+
 def test_the_triangle_starts_on_its_path_so_its_approach_barely_moves(triangle):
     """triangle.toml's ``[initial]`` table (read with tomllib; unnamed joints at 0) is MC-Inverse's
     configuration at A rounded to 1e-6 rad: the approach starts there and ends where the smoothed
@@ -152,7 +179,7 @@ def test_smoothed_samples_stay_within_velocity_acceleration_and_jerk_limits(tria
     df = data["/smooth/sample"]
     t, q, qd, qdd = df["t"].to_numpy(), _joints(df, "position", names), _joints(df, "velocity", names), _joints(df, "acceleration", names)
     dt = np.diff(t)[:, None]
-    assert np.allclose(dt, 0.001)
+    assert np.allclose(dt[:-1], 0.001) and 0.0005 <= dt[-1, 0] < 0.0015  # every control period, the last step to the motion's end
     jerk = np.diff(qdd, axis=0) / dt
     for values, limit in ((qd, "velocity"), (qdd, "acceleration"), (jerk, "jerk"), (np.diff(q, axis=0) / dt, "velocity"), (np.diff(qd, axis=0) / dt, "acceleration")):
         assert (np.abs(values) / limits[limit]).max() <= SLACK, limit
@@ -163,6 +190,50 @@ def test_smoothed_samples_stay_within_velocity_acceleration_and_jerk_limits(tria
     retimed = data["/retime/sample"]
     reference = np.stack([np.interp(t, retimed["t"], retimed[f"position.{n}"]) for n in names], axis=1)
     assert metrics["smooth.path_deviation_max_rad"] == pytest.approx(np.abs(q - reference).max(), rel=1e-6, abs=1e-12)
+
+
+def test_the_default_timing_is_jerk_limited_and_the_smooth_stage_passes_it_through(triangle):
+    """The default retime is the jerk-limited timing (within the full velocity, acceleration and jerk limits): by third
+    differences of the recorded positions every 1 ms too; the smooth stage records the same samples, deviation 0."""
+    _, run, data = triangle
+    assert data.setting("retime", "timing") == "jerk-limited" and "pass-through" in str(data.setting("smooth", "method"))
+    names, limits = _limits(data, "retime")
+    retimed, smoothed = data["/retime/sample"], data["/smooth/sample"]
+    assert np.array_equal(_joints(retimed, "position", names), _joints(smoothed, "position", names))
+    q = _joints(retimed, "position", names)[:-1]  # every 1 ms (the last step, to the motion's end, is shorter or longer)
+    for order, kind in ((1, "velocity"), (2, "acceleration"), (3, "jerk")):
+        ratio = (np.abs(np.diff(q, order, axis=0)) / 1e-3**order / limits[kind]).max()
+        assert 0.9 < ratio <= SLACK, kind  # within the limit, and near it: near time-optimal
+    assert json.loads((run / "metrics.json").read_text())["smooth.path_deviation_max_rad"] == 0
+
+
+def test_the_motion_stays_on_the_ik_path_within_1e_6_rad_and_10_um_at_the_hands(triangle):
+    """Each IK sample's distance to the recorded motion (its 1 ms samples joined by the cubic through their positions
+    and velocities, resampled every 0.05 ms, then as a polyline) is at most 1e-6 rad; PyBullet's forward kinematics of
+    the nearest point puts the hand within 10 µm of where it puts it for the IK sample."""
+    from scipy.interpolate import CubicHermiteSpline
+
+    from tests.retime.test_jerk import _distance_to_polyline
+
+    task, run, data = triangle
+    names, _ = _limits(data, "retime")
+    retimed = data["/retime/sample"]
+    curve = CubicHermiteSpline(retimed["t"].to_numpy(), _joints(retimed, "position", names), _joints(retimed, "velocity", names))
+    dense = curve(np.arange(0.0, retimed["t"].iloc[-1], 5e-5))
+    ik = _joints(data["/ik/sample"], "position", names)
+    distance, nearest = _distance_to_polyline(ik, dense, nearest=True)
+    assert distance.max() <= 1e-6
+    with load_pybullet_robot(HUMANOID / "humanoid.urdf") as sim:
+        sim.set_positions(list(task.initial_q), list(task.initial_q.values()))
+        hands = []
+        for q in (ik, nearest):
+            positions = []
+            for row in q:
+                sim.set_positions(names, row)
+                positions.append(sim.link_pose("left_hand")[:3, 3])
+            hands.append(np.array(positions))
+    assert np.linalg.norm(hands[0] - hands[1], axis=1).max() <= 1e-5
+    assert json.loads((run / "metrics.json").read_text())["retime.hand_deviation_max_m"] <= 1e-5  # the stage's own measure agrees
 
 
 def test_execution_tracks_the_command_within_2_mm_by_pybullet_fk(triangle):

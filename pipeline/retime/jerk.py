@@ -1,31 +1,44 @@
-"""Jerk-limited, near time-optimal timing that stays on the joint path (``[retime] timing = "jerk-limited"``).
+"""Jerk-limited, near time-optimal timing that stays on the joint path (``[retime] timing = "jerk-limited"``, the default).
 
 All active joints (both arms) follow ONE path parameter s, the cumulative joint-space chord length
 [rad] (:func:`dualarm.retime.topp.chord_parameter`), and q(t) = P(s(t)) exactly: the trajectory
-never leaves the path, whatever the timing.
+never leaves the curve P, whatever the timing.
 
-The path is cut into pieces at its sharp turns: where the joint-space direction between
-consecutive samples turns by more than acos(:data:`TURN_COSINE`) (the corners of a polygon the
-hand draws, where the task brings the hand to rest), and at both ends. Each piece is timed rest to
-rest, so the joints' velocities are continuous across the cuts.
+Pieces (:func:`pieces`). The path is cut where the joint-space direction turns by more than
+acos(:data:`TURN_COSINE`): between a sample's steps in and out, and between chords of at least
+:data:`TURN_CHORD_RAD` before and after it (the corners of a polygon the hand draws and the
+reversals of a gesture, where the task brings the hands to rest; a chord that long is not turned
+by the IK's rounding noise, ~1e-7 rad between samples at rest). Each piece is timed rest to rest,
+so the joints' velocities and accelerations are continuous (0) across the cuts.
 
-P(s) on a piece is the interpolating spline of degree min(5, samples - 1) through its samples
-(``scipy.interpolate.make_interp_spline``): with degree 5, q'''(s) is continuous, so the joint jerk
-q''' = P'''(s) s'^3 + 3 P''(s) s' s'' + P'(s) s''' is bounded.
+The curve (:func:`fit`). P(s) on a piece is a quintic least-squares B-spline through both end
+samples and within :data:`FIT_RAD` of every other (``scipy.interpolate.make_lsq_spline``, its
+knots doubled until it fits). An interpolating spline would pass the IK's noise on to P''' (up
+to 246 rad/rad^3 on the circle, against 8 for the fit) and so to the jerk. Where no spline fits
+because samples near an end wander (a hook, ~1e-6 rad, while the task is at rest), those samples
+become straight pieces of their own; where the samples wiggle further in (TV-GDD's wrist pitch on
+the ball game, by up to 8e-5 rad with a 0.19 s period), P is the interpolating quintic, and the
+timing slows down to keep its jerk. q''' = P''' s'^3 + 3 P'' s' s'' + P' s''' is bounded.
 
-The timing of a piece is one nonlinear program (CasADi, solved by IPOPT; Debrouwere et al. 2013
-set out time-optimal path following as such a program): on :data:`NODES` + 1 fixed values of s
-(denser at both rest ends), the unknowns are the path velocity s' and acceleration s'' at each
-node, and on each interval its duration and a constant path jerk s'''; s moves between nodes by
-the exact triple integrator. The joint velocity, acceleration and jerk (the jerk with both
-neighbouring intervals' s''') are kept within :data:`MARGIN` of the limits at every node, and the
-total time is minimised. The program is built once per number of joints, the path's derivatives
-being its parameters.
+The timing of a piece. A straight piece (two samples) is timed by Ruckig on s, within the limits of
+s that keep each joint within :data:`MARGIN` of its own: exact and time-optimal. Any other is one
+nonlinear program (CasADi, solved by IPOPT; Debrouwere et al. 2013 set out time-optimal path
+following as such a program): on K + 1 values of s, the nodes, the unknowns are the path velocity
+s' and acceleration s'' at each node, and on each interval its duration and a constant path jerk
+s'''; s moves between nodes by the exact triple integrator. The joint velocity, acceleration and
+jerk (the jerk with both neighbouring intervals' s''') are kept within :data:`MARGIN` of the limits
+at every node, and the total time is minimised. The program is solved in units of the piece's
+length and its first guess's duration, where its unknowns are of order one. The solution's jerks
+are then integrated exactly, after the least change that ends the piece at rest (:func:`_exact`).
 
-Between the nodes the limits can be exceeded a little; so each piece's timing is checked
-analytically at :data:`CHECK_STEP_S` steps and on both sides of every node, and slowed down
-uniformly by k = max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) where it exceeds
-one (t -> k t scales the velocity by 1/k, the acceleration by 1/k^2, the jerk by 1/k^3).
+The check. Between the nodes the limits can be exceeded; so each timing is checked analytically
+every :data:`CHECK_STEP_S`, on both sides of every node, and where s passes each knot of P and
+three points between knots. Each interval where a limit is exceeded by more than
+:data:`REFINE_ABOVE` is halved (in s), and the program solved again from the last timing: from
+:data:`NODES` intervals (denser at both rest ends) up to :data:`MAX_NODES`. What exceeds then is
+removed by a uniform slow-down of the piece, k = max(velocity ratio, sqrt(acceleration ratio),
+cbrt(jerk ratio)) (t -> k t scales the velocity by 1/k, the acceleration by 1/k^2, the jerk by
+1/k^3).
 
 A piece equal to an earlier one (within :data:`SAME_PIECE_RAD`: a repetition) reuses its timing, so
 repeated paths give bit-identical repeated trajectories and are solved once.
@@ -41,18 +54,26 @@ from dataclasses import dataclass, replace
 
 import casadi as cs
 import numpy as np
-from scipy.interpolate import BSpline, make_interp_spline
+from ruckig import InputParameter, Result, Ruckig, Trajectory
+from scipy.interpolate import BSpline, make_interp_spline, make_lsq_spline
 
 from dualarm.errors import StageError
 from dualarm.ik.joint_path import JointPath
 from dualarm.retime.timing import STAGE, Timing, still
 from dualarm.retime.topp import chord_parameter
 
-#: The path is cut where the direction between consecutive samples turns more than acos(this).
+#: The path is cut where its direction turns more than acos(this) ...
 TURN_COSINE = 0.9
-#: Intervals of a piece's program.
+#: ... between chords at least this long before and after a sample [rad].
+TURN_CHORD_RAD = 1e-4
+#: The path's spline P passes within this of every sample [rad] (half the 1e-6 rad the path may deviate).
+FIT_RAD = 5e-7
+#: Intervals of a piece's first program ...
 NODES = 40
-#: Share of each limit the program may use at its nodes (the check takes up the rest).
+#: ... and of its last: intervals exceeding a limit by more than REFINE_ABOVE (a share) are halved up to this.
+MAX_NODES = 400
+REFINE_ABOVE = 1e-2
+#: Share of each limit a program may use at its nodes (the check takes up the rest), and a straight piece everywhere.
 MARGIN = 1 - 2e-3
 #: Time step of the analytic check of each piece's limits [s].
 CHECK_STEP_S = 1e-4
@@ -70,8 +91,8 @@ class PieceTiming:
 
     Attributes:
         path: P(s) [rad], (n,) per s.
-        s: the program's nodes (K + 1,) [rad].
-        sd, sdd: s' [rad/s] and s'' [rad/s^2] at the nodes (K + 1,).
+        s: s at each interval's start and at the end (K + 1,) [rad], from 0 to the piece's length.
+        sd, sdd: s' [rad/s] and s'' [rad/s^2] there (K + 1,), 0 at both ends.
         sddd: s''' on each interval (K,) [rad/s^3].
         dt: each interval's duration (K,) [s].
         stretch: the uniform slow-down after the check (>= 1).
@@ -117,13 +138,19 @@ class PieceTiming:
             d3 * sd[:, None] ** 3 + 3 * d2 * (sd * sdd)[:, None] + d1 * sddd[:, None],
         )
 
-    def ratios(self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> tuple[float, float, float]:
-        """The largest velocity, acceleration and jerk ratios, every :data:`CHECK_STEP_S` and on both sides of every node."""
+    def excess(self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> np.ndarray:
+        """Each interval's slow-down to meet the limits, max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) (K,), checked every :data:`CHECK_STEP_S`, on both sides of every node, and where s passes each knot of P and the points a quarter, half and three quarters between them."""
         end = self.duration_s
         nodes = self.stretch * self.starts_s
-        t = np.concatenate([np.linspace(0.0, end, max(50, int(end / CHECK_STEP_S)) + 1), np.clip(nodes - 1e-12, 0, end), np.clip(nodes + 1e-12, 0, end)])
-        _, qd, qdd, qddd = self(np.sort(t))
-        return float((np.abs(qd) / velocity).max()), float((np.abs(qdd) / acceleration).max()), float((np.abs(qddd) / jerk).max())
+        knots = np.unique(self.path.t)
+        between = np.concatenate([knots, *(knots[:-1] + share * np.diff(knots) for share in (0.25, 0.5, 0.75))])
+        passes = _passing(self, between)
+        t = np.sort(np.concatenate([np.linspace(0.0, end, max(50, int(end / CHECK_STEP_S)) + 1), *(np.clip(x + side, 0, end) for x in (nodes, passes) for side in (-1e-12, 1e-12))]))
+        _, qd, qdd, qddd = self(t)
+        worst = np.max([np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=(0, 2))
+        excess = np.zeros(len(self.dt))
+        np.maximum.at(excess, np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(self.dt) - 1), worst)
+        return excess
 
 
 def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> Timing:
@@ -143,19 +170,19 @@ def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray
     if len(kept) == 1:
         return still(path, method="jerk-limited")
     q = path.q[kept]
-    cuts = pieces(q)
+    cut = pieces(q, s)
     timings: list[PieceTiming] = []
     solved: list[tuple[np.ndarray, PieceTiming]] = []
-    for first, last in zip(cuts[:-1], cuts[1:]):
+    for first, last, curve in cut:
         samples = q[first : last + 1]
         same = next((timing for earlier, timing in solved if earlier.shape == samples.shape and np.abs(earlier - samples).max() <= SAME_PIECE_RAD), None)
         if same is None:
-            same = _time_piece(samples, s[first : last + 1] - s[first], velocity, acceleration, jerk, (int(kept[first]), int(kept[last])))
+            same = _time_piece(curve, velocity, acceleration, jerk, (int(kept[first]), int(kept[last])))
             solved.append((samples, same))
         timings.append(same)
     starts = np.concatenate([[0.0], np.cumsum([p.duration_s for p in timings])])
     evaluate = _Pieces(tuple(timings), starts)
-    passes = np.concatenate([starts[i] + _passing(timings[i], s[cuts[i] : cuts[i + 1]] - s[cuts[i]]) for i in range(len(timings))] + [starts[-1:]])
+    passes = np.concatenate([start + _passing(timing, s[first:last] - s[first]) for start, timing, (first, last, _) in zip(starts, timings, cut)] + [starts[-1:]])
     return Timing(
         method="jerk-limited",
         joint_names=path.joint_names,
@@ -168,12 +195,82 @@ def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray
     )
 
 
-def pieces(q: np.ndarray) -> np.ndarray:
-    """Where the distinct samples ``q`` (K, n) are cut: both ends and every sample where the direction turns more than acos(:data:`TURN_COSINE`) (increasing indices)."""
-    step = np.diff(q, axis=0)
-    direction = step / np.linalg.norm(step, axis=1, keepdims=True)
-    turns = np.flatnonzero(np.einsum("ij,ij->i", direction[1:], direction[:-1]) < TURN_COSINE) + 1
-    return np.concatenate([[0], turns, [len(q) - 1]])
+def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
+    """The pieces of the distinct samples ``q`` (K, n) at chord lengths ``s`` (K,) [rad], in order: each one's first and last sample and its curve P over s - s[first] (module docstring).
+
+    The path is cut at both ends and at its turns: at each sample whose step in and step out turn
+    more than acos(:data:`TURN_COSINE`), and once in each run of samples whose chords in and out turn
+    that much (at the sample that turns most), the chord in being from the last sample at least
+    :data:`TURN_CHORD_RAD` before it (or the first), the chord out to the first sample at least as
+    far after it (or the last). Then each piece gets its curve (:func:`fit`). Where none fits and
+    it misses samples within :data:`TURN_CHORD_RAD` of an end (a hook), every sample from that end
+    to the last it misses there is cut too, and the rest fitted again; where it misses only samples
+    farther in, the curve is the interpolating quintic.
+    """
+    index = np.arange(len(s))
+    before = np.clip(np.searchsorted(s, s - TURN_CHORD_RAD, side="right") - 1, 0, None)
+    after = np.minimum(np.searchsorted(s, s + TURN_CHORD_RAD, side="left"), len(s) - 1)
+    cosine = np.ones(len(s))
+    inner = (before < index) & (index < after)
+    cosine[inner] = _cosines(q[index[inner]] - q[before[inner]], q[after[inner]] - q[index[inner]])
+    runs = np.flatnonzero(np.diff(np.concatenate([[0], (cosine < TURN_COSINE).astype(int), [0]])))  # where runs of turning samples start and end
+    turns = [start + int(np.argmin(cosine[start:end])) for start, end in zip(runs[::2], runs[1::2])]
+    sharp = np.flatnonzero(_cosines(np.diff(q[:-1], axis=0), np.diff(q[1:], axis=0)) < TURN_COSINE) + 1
+    cuts = np.unique(np.concatenate([[0], turns, sharp, [len(s) - 1]])).astype(int)
+    done: list[tuple[int, int, BSpline]] = []
+    todo = list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
+    while todo:
+        first, last = todo.pop()
+        spline, miss = fit(s[first : last + 1] - s[first], q[first : last + 1])
+        hook = np.flatnonzero(miss > FIT_RAD) + first  # the samples it misses
+        start, end = hook[s[hook] - s[first] <= TURN_CHORD_RAD], hook[s[last] - s[hook] <= TURN_CHORD_RAD]
+        if spline is not None:
+            done.append((first, last, spline))
+        elif len(start) or len(end):  # hooks: cut every sample from each end to the last it misses there
+            lo = max(int(start.max()), first + 1) if len(start) else first
+            hi = max(lo, min(int(end.min()), last - 1)) if len(end) else last
+            todo += [(k, k + 1) for k in range(first, lo)] + ([(lo, hi)] if lo < hi else []) + [(k, k + 1) for k in range(hi, last)]
+        else:
+            done.append((first, last, make_interp_spline(s[first : last + 1] - s[first], q[first : last + 1], k=5)))
+    return sorted(done, key=lambda piece: piece[0])
+
+
+def fit(s: np.ndarray, q: np.ndarray) -> tuple[BSpline | None, np.ndarray]:
+    """A piece's curve P: a quintic least-squares B-spline of the samples ``q`` (m, n) over ``s`` (m,) [rad] through both end samples and within :data:`FIT_RAD` of each, and how far it misses each sample (m,) [rad].
+
+    Its interior knots are equally spaced in (s / s[-1] + i / (m - 1)) / 2, i the sample's index (so
+    denser where the samples are: where the task moves slowly, as it does where the path bends
+    tightly), and at least :data:`TURN_CHORD_RAD` apart. Their number is doubled from 1 until the
+    spline fits; with at most 6 samples the interpolating spline of degree m - 1 is P. None when no
+    spline of at most m / 2 intervals fits (the misses are then the densest one's).
+    """
+    m, k = len(s), 5
+    if m <= k + 1:
+        return make_interp_spline(s, q, k=m - 1), np.zeros(m)
+    blend = (s / s[-1] + np.linspace(0.0, 1.0, m)) / 2
+    weights = np.ones(m)
+    weights[[0, -1]] = 1e6
+    intervals, miss = 1, np.zeros(m)
+    while intervals <= max(1, m // 2):
+        inner = [s[0]]
+        for knot in np.interp(np.linspace(0.0, 1.0, intervals + 1)[1:], blend, s):
+            if knot - inner[-1] >= TURN_CHORD_RAD or knot == s[-1]:
+                inner.append(knot)
+        if inner[-2] > s[-1] - TURN_CHORD_RAD and len(inner) > 2:
+            del inner[-2]
+        spline = make_lsq_spline(s, q, np.concatenate([np.full(k, s[0]), inner, np.full(k, s[-1])]), k=k, w=weights)
+        spline.c[[0, -1]] = q[[0, -1]]  # nearly so already (their weights): through both ends exactly, so pieces meet
+        miss = np.abs(spline(s) - q).max(axis=1)
+        if miss.max() <= FIT_RAD:
+            return spline, miss
+        intervals *= 2
+    return None, miss
+
+
+def _cosines(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The cosine of the angle between each row of ``a`` and of ``b`` (M, n); 1 where one is zero (a chord back to where the path was: the turn is a sharp one between those samples, cut there)."""
+    lengths = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
+    return np.divide(np.einsum("ij,ij->i", a, b), lengths, out=np.ones(len(a)), where=lengths > 0)
 
 
 @dataclass(frozen=True)
@@ -205,41 +302,105 @@ def _passing(piece: PieceTiming, s: np.ndarray) -> np.ndarray:
     return np.where(s <= piece.s[0], 0.0, hi)
 
 
-def _time_piece(q: np.ndarray, s: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]) -> PieceTiming:
-    """One piece's timing, its samples ``q`` (m, n) at chord lengths ``s`` (m,) [rad]: its program solved (:func:`_program`), then checked and stretched (module docstring)."""
-    path = make_interp_spline(s, q, k=min(5, len(q) - 1))
-    nodes = s[-1] * (1 - np.cos(np.linspace(0.0, np.pi, NODES + 1))) / 2  # denser at both rest ends
+def _time_piece(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]) -> PieceTiming:
+    """One piece's timing along its curve ``path`` (:func:`pieces`): programs solved on nodes refined where the check finds a limit exceeded, then stretched (module docstring); the piece's ``samples`` (first, last) name it in errors."""
+    if path.k == 1:
+        return _straight(path, velocity, acceleration, jerk, samples)
+    nodes = path.t[-1] * (1 - np.cos(np.linspace(0.0, np.pi, NODES + 1))) / 2  # denser at both rest ends
+    piece = _solve(path, nodes, velocity, acceleration, jerk, samples, None)
+    excess = piece.excess(velocity, acceleration, jerk)
+    while (excess > 1 + REFINE_ABOVE).any():
+        halve = excess > 1 + REFINE_ABOVE
+        if len(nodes) - 1 + halve.sum() > MAX_NODES:
+            break
+        nodes = np.sort(np.concatenate([nodes, (nodes[:-1][halve] + nodes[1:][halve]) / 2]))
+        try:
+            piece = _solve(path, nodes, velocity, acceleration, jerk, samples, piece)
+        except StageError:  # a finer program IPOPT cannot solve: the coarser timing, stretched, stands
+            break
+        excess = piece.excess(velocity, acceleration, jerk)
+    k = float(excess.max())
+    return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0)
+
+
+def _straight(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]) -> PieceTiming:
+    """The time-optimal timing of a straight piece (two samples): Ruckig's on s, rest to rest, within the limits of s that keep every joint within :data:`MARGIN` of its own (P' is constant, P'' and P''' are 0)."""
+    direction = np.maximum(np.abs(path(0.0, 1)), 1e-300)
+    inp = InputParameter(1)
+    inp.current_position, inp.target_position = [0.0], [float(path.t[-1])]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = ([float(MARGIN * np.min(limit / direction))] for limit in (velocity, acceleration, jerk))
+    plan = Trajectory(1)
+    if Ruckig(1).calculate(inp, plan) not in (Result.Working, Result.Finished):
+        raise StageError(f"{STAGE}: jerk-limited: Ruckig did not time the straight piece from sample {samples[0]} to {samples[1]}", stage=STAGE, sample=samples[0])
+    profile = plan.profiles[0][0]
+    used = np.flatnonzero(np.asarray(profile.t) > 0)  # Ruckig's seven phases, without those of no duration
+    return _exact(path, np.asarray(profile.j)[used], np.asarray(profile.t)[used])
+
+
+def _exact(path: BSpline, sddd: np.ndarray, dt: np.ndarray) -> PieceTiming:
+    """The timing that starts at rest at s = 0 and applies the path jerks ``sddd`` (K,) [rad/s^3] for ``dt`` (K,) [s], made exact.
+
+    The solver meets its constraints to its tolerance (~1e-8); integrated as they are, the jerks
+    would end the piece with s' and s'' of that order. So they are first changed by the least
+    (in the least-squares sense) that ends the piece at rest exactly, then integrated exactly (so
+    s(t) is twice continuously differentiable), and s is scaled to end exactly at the piece's
+    length (a relative change of the solver's tolerance); the joints then meet the next piece's at
+    rest, exactly.
+    """
+    sddd, dt = np.asarray(sddd, dtype=float), np.asarray(dt, dtype=float)
+    remaining = dt.sum() - np.cumsum(dt)  # from each interval's end to the piece's end [s]
+    effect = np.stack([dt * (dt / 2 + remaining), dt])  # d(s', s'' at the end) / d(each jerk)
+    sddd = sddd - effect.T @ np.linalg.solve(effect @ effect.T, effect @ sddd)
+    s, sd, sdd = np.zeros(len(dt) + 1), np.zeros(len(dt) + 1), np.zeros(len(dt) + 1)
+    for i, (j, h) in enumerate(zip(sddd, dt)):
+        s[i + 1] = s[i] + sd[i] * h + sdd[i] * h**2 / 2 + j * h**3 / 6
+        sd[i + 1] = sd[i] + sdd[i] * h + j * h**2 / 2
+        sdd[i + 1] = sdd[i] + j * h
+    scale = path.t[-1] / s[-1]
+    return PieceTiming(path, scale * s, scale * sd, scale * sdd, scale * sddd, dt)
+
+
+def _solve(path: BSpline, nodes: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int], start: PieceTiming | None) -> PieceTiming:
+    """The program on ``nodes`` (K + 1,) [rad] along ``path`` solved (:func:`_program`), unstretched, from the timing ``start`` on coarser nodes (or from :func:`_first_guess`); StageError naming the piece's ``samples`` if IPOPT fails."""
+    K = len(nodes) - 1
     d1, d2, d3 = (path(nodes, m) for m in (1, 2, 3))
-    solver, lbg, ubg = _program(q.shape[1])
+    solver, lbg, ubg = _program(d1.shape[1], K)
     cap = MARGIN * np.min(velocity / np.maximum(np.abs(d1), 1e-12), axis=1)  # s' within every joint's velocity limit
-    sd0 = _first_guess(nodes, d1, d2, cap, MARGIN * acceleration)
-    dt0 = 2 * np.diff(nodes) / np.maximum(sd0[:-1] + sd0[1:], 1e-6)
-    sdd0 = np.append(np.diff(sd0) / dt0, 0.0)
-    K = NODES
-    lbx = np.concatenate([np.zeros(K + 1), np.full(K + 1, -np.inf), np.full(K, -np.inf), np.full(K, 1e-5)])
-    ubx = np.concatenate([cap, np.full(K + 1, np.inf), np.full(K, np.inf), np.full(K, np.inf)])
+    if start is None:
+        bends = np.min(np.cbrt(jerk / np.maximum(np.abs(d3), 1e-12)), axis=1) / 2  # s' where the path's third derivative alone asks 8 times the jerk limit
+        sd0 = _first_guess(nodes, d1, d2, np.minimum(cap, bends), MARGIN * acceleration)
+        dt0 = 2 * np.diff(nodes) / np.maximum(sd0[:-1] + sd0[1:], 1e-6)
+        sdd0 = np.append(np.diff(sd0) / dt0, 0.0)
+    else:
+        passes = _passing(start, nodes)
+        _, sd0, sdd0, _ = start.path_state(passes)
+        sd0, dt0 = np.minimum(sd0, cap), np.maximum(np.diff(passes), 1e-5)
+    # The program runs in sigma = s / L and tau = t / T (the piece's length, the first guess's duration), where its
+    # unknowns are of order one whatever the limits (a Panda's jerk limits are 5000 rad/s^3): the same program, with
+    # P's derivatives times L, L^2, L^3 and the limits times T, T^2, T^3.
+    L, T = float(nodes[-1]), float(dt0.sum())
+    speed = L / T
+    lbx = np.concatenate([np.zeros(K + 1), np.full(K + 1, -np.inf), np.full(K, -np.inf), np.full(K, 1e-5 / T)])
+    ubx = np.concatenate([cap / speed, np.full(K + 1, np.inf), np.full(K, np.inf), np.full(K, np.inf)])
     for end in (0, K):  # rest at both ends
         ubx[end] = lbx[K + 1 + end] = ubx[K + 1 + end] = 0.0
-    parameters = np.concatenate([np.diff(nodes), *(d.T.ravel() for d in (d1, d2, d3)), 1 / acceleration, 1 / jerk])
-    result = solver(x0=np.concatenate([sd0, sdd0, np.diff(sdd0) / dt0, dt0]), p=parameters, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    parameters = np.concatenate([np.diff(nodes) / L, *((d * L**m).T.ravel() for m, d in ((1, d1), (2, d2), (3, d3))), 1 / (acceleration * T**2), 1 / (jerk * T**3)])
+    x0 = np.concatenate([sd0 / speed, sdd0 * T / speed, np.diff(sdd0) / dt0 * T**2 / speed, dt0 / T])
+    result = solver(x0=x0, p=parameters, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     status = solver.stats()["return_status"]
     if status not in SOLVED:
         raise StageError(f"{STAGE}: jerk-limited: IPOPT did not time the piece from sample {samples[0]} to {samples[1]} ({status})", stage=STAGE, sample=samples[0])
     x = np.asarray(result["x"]).ravel()
-    piece = PieceTiming(path, nodes, x[: K + 1], x[K + 1 : 2 * K + 2], x[2 * K + 2 : 3 * K + 2], x[3 * K + 2 :])
-    rv, ra, rj = piece.ratios(velocity, acceleration, jerk)
-    k = max(1.0, rv, np.sqrt(ra), np.cbrt(rj))
-    return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0)
+    return _exact(path, x[2 * K + 2 : 3 * K + 2] * speed / T**2, x[3 * K + 2 :] * T)
 
 
 @functools.lru_cache(maxsize=None)
-def _program(n: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
-    """A piece's program for ``n`` joints (module docstring): the IPOPT solver and the bounds of its constraints.
+def _program(n: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
+    """A piece's program for ``n`` joints on ``K`` intervals (module docstring): the IPOPT solver and the bounds of its constraints.
 
     Variables: s' (K + 1), s'' (K + 1), s''' (K), dt (K). Parameters: the nodes' spacing (K), P', P'',
     P''' at the nodes ((K + 1) x n each, column-major), 1 / the acceleration and 1 / the jerk limits (n each).
     """
-    K = NODES
     sd, sdd, sddd, dt = cs.SX.sym("sd", K + 1), cs.SX.sym("sdd", K + 1), cs.SX.sym("sddd", K), cs.SX.sym("dt", K)
     ds = cs.SX.sym("ds", K)
     d1, d2, d3 = (cs.SX.sym(f"d{m}", K + 1, n) for m in (1, 2, 3))

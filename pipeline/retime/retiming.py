@@ -13,8 +13,9 @@ every IK sample and keeps every joint within its velocity and acceleration limit
    trajectory is then checked on its samples (:func:`dualarm.limits.limit_ratios`) and slowed down
    uniformly by k = max(velocity ratio, sqrt(acceleration ratio)) should a sample still exceed a
    limit (rounding; not seen in the tests), at most :data:`SAFEGUARD_PASSES` times. A
-   ``keep_timing`` trajectory is not slowed down but checked (:func:`check_limits`): a StageError
-   names the joint, the time and the ratio if the task's timing is too fast.
+   ``keep_timing`` trajectory is not slowed down but checked (:func:`check_limits`, its mean jerk
+   per sample period too when jerk limits are given): a StageError names the joint, the time and
+   the ratio if the task's timing is too fast.
 
 Units: joint positions [rad], velocities [rad/s], accelerations [rad/s^2], times [s].
 """
@@ -29,7 +30,7 @@ import numpy as np
 from dualarm.errors import StageError
 from dualarm.ik.joint_path import JointPath
 from dualarm.limits import LimitRatio, limit_ratios, per_joint
-from dualarm.retime.timing import STAGE, Timing, path_deviation_max_rad, task_timing
+from dualarm.retime.timing import STAGE, Timing, task_timing
 from dualarm.retime.topp import time_optimal
 from dualarm.retime.trajectory import JointTrajectory
 
@@ -47,11 +48,13 @@ class Retimed:
             samples (>= 1).
         path_deviation_max_rad: largest joint difference between the trajectory at the times it
             passes the joint-path samples (:attr:`Timing.sample_times_s`) and the samples [rad].
+        at_samples: the trajectory's joints at those times, (N, n) [rad].
     """
 
     trajectory: JointTrajectory
     stretch: float
     path_deviation_max_rad: float
+    at_samples: np.ndarray
 
 
 def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, sample_period_s: float = 0.001, keep_timing: bool = False, jerk: np.ndarray | None = None) -> Retimed:
@@ -63,9 +66,11 @@ def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray,
             number applies to every joint.
         acceleration: acceleration limit per active joint (n,) [rad/s^2], positive; symmetric.
         sample_period_s: sample period of the output [s].
-        keep_timing: keep the path's own timing instead of the time-optimal one, and check it.
+        keep_timing: keep the path's own timing instead of the time-optimal one, and check it
+            (against ``jerk`` too, when given).
         jerk: jerk limit per active joint (n,) [rad/s^3] (or one for all): given, the timing is
-            jerk-limited (:mod:`dualarm.retime.jerk`) instead of TOPP-RA's.
+            jerk-limited (:mod:`dualarm.retime.jerk`) instead of TOPP-RA's, or the task's own
+            timing is checked against it.
 
     Returns:
         The trajectory, rest to rest, sampled every ``sample_period_s`` plus its final time, with
@@ -80,10 +85,11 @@ def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray,
     timing = plan(path, velocity, acceleration, keep_timing=keep_timing, jerk=jerk)
     traj = timing.sample(sample_period_s)
     if keep_timing:
-        check_limits(traj, velocity, acceleration)
+        check_limits(traj, velocity, acceleration, jerk)
     else:
         timing, traj = _within_limits(timing, traj, velocity, acceleration, sample_period_s)
-    return Retimed(traj, timing.stretch, path_deviation_max_rad(timing, path))
+    at_samples = timing.evaluate(timing.sample_times_s)[0]
+    return Retimed(traj, timing.stretch, float(np.abs(at_samples - path.q).max()), at_samples)
 
 
 def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, keep_timing: bool = False, jerk: np.ndarray | None = None) -> Timing:
@@ -131,15 +137,18 @@ def _within_limits(timing: Timing, traj: JointTrajectory, velocity: np.ndarray, 
     return timing, traj
 
 
-def check_limits(traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray) -> None:
+def check_limits(traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray | None = None) -> None:
     """Raise a StageError naming the joint, time and ratio if ``traj`` exceeds a limit by more than :data:`dualarm.limits.LIMIT_TOLERANCE` (the ``keep_timing`` check).
 
     Args:
-        traj: the sampled trajectory (its ``qd`` [rad/s] and ``qdd`` [rad/s^2]).
+        traj: the sampled trajectory (its ``qd`` [rad/s], ``qdd`` [rad/s^2] and mean jerk per sample period [rad/s^3]).
         velocity: velocity limit per joint (n,) [rad/s] (or one for all).
         acceleration: acceleration limit per joint (n,) [rad/s^2] (or one for all).
+        jerk: jerk limit per joint (n,) [rad/s^3] (or one for all), or None: not checked.
     """
     ratios = _sample_ratios(traj, velocity, acceleration)
+    if jerk is not None:
+        ratios |= limit_ratios(traj.t, traj.joint_names, {"jerk": traj.mean_jerk()}, {"jerk": jerk}, STAGE)
     worst = max(ratios.values(), key=lambda r: (r.ratio, r.kind, r.joint, r.t_s))
     if worst.exceeded:
         raise StageError(

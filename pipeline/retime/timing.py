@@ -1,8 +1,10 @@
 """``Timing``: a continuous joint trajectory along a joint path, before sampling, and its sampling.
 
 A timing is what the retime stage plans before it samples: q(t), qd(t), qdd(t) as a function of
-time, and the time at which the trajectory passes each IK sample. Two kinds are made:
+time, and the time at which the trajectory passes each IK sample. Three kinds are made:
 
+- ``jerk-limited`` (:func:`dualarm.retime.jerk.jerk_limited`): near time-optimal within velocity,
+  acceleration and jerk limits, on the path.
 - ``topp-ra`` (:func:`dualarm.retime.topp.time_optimal`): the time-optimal trajectory along the path.
 - ``keep_timing`` (:func:`task_timing`): the task's own timing, a clamped cubic spline of q over
   the path's t (rest at both ends), which :func:`dualarm.retime.retiming.retime_path` then checks against
@@ -40,7 +42,7 @@ class Timing:
     """A continuous joint trajectory along a joint path, before sampling.
 
     Attributes:
-        method: ``topp-ra`` (time-optimal) or ``keep_timing`` (the task's own timing).
+        method: ``jerk-limited``, ``topp-ra`` (time-optimal) or ``keep_timing`` (the task's own timing).
         joint_names: the active joints, the columns of q.
         duration_s: the trajectory's duration [s]; 0 for a path that does not move.
         sample_times_s: the time at which the trajectory passes each joint-path sample (N,) [s],

@@ -30,7 +30,7 @@ Units: positions [rad], velocities [rad/s], accelerations [rad/s^2], jerks [rad/
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -67,6 +67,13 @@ class Smoothed:
     deviation_rad: np.ndarray
     lookahead_s: np.ndarray
     fallbacks: int = 0
+
+    @classmethod
+    def unchanged(cls, reference: JointTrajectory) -> Smoothed:
+        """``reference`` passed through as it is (stage ``smooth``), for a timing already within the jerk limits: its mean jerk, no deviation, no look-ahead."""
+        traj = replace(reference, stage=STAGE)
+        jerk, zeros = traj.mean_jerk(), np.zeros(traj.q.shape)
+        return cls(traj, frozen(jerk, jerk.shape, "jerk"), frozen(zeros, zeros.shape, "deviation_rad"), frozen(zeros, zeros.shape, "lookahead_s"))
 
     @property
     def path_deviation_max_rad(self) -> float:

@@ -241,10 +241,12 @@ class Retime(_Model):
     """How the retime stage times the joint path.
 
     Attributes:
-        timing: ``optimal``: time-optimal within the limits (TOPP-RA); ``task``: the task's own
-            timing (its moves' durations), checked against the limits; ``jerk-limited``: near
-            time-optimal within the full velocity, acceleration and jerk limits, on the path
-            (:mod:`dualarm.retime.jerk`; the fractions are not used).
+        timing: ``jerk-limited`` (the default): near time-optimal within the full velocity,
+            acceleration and jerk limits, exactly on the path (:mod:`dualarm.retime.jerk`; the
+            smooth stage passes it through); ``optimal``: time-optimal within the velocity and
+            acceleration limits (TOPP-RA), then tracked by the smooth stage within the jerk
+            limits, off the path by its lag; ``task``: the task's own timing (its moves'
+            durations), checked against the three limits.
         velocity_fraction / acceleration_fraction: for ``optimal``, the share of the velocity and
             acceleration limits TOPP-RA may use, within :data:`FRACTION_RANGE`. The rest is the
             smooth stage's headroom: a time-optimal profile switches its acceleration instantly
@@ -252,7 +254,7 @@ class Retime(_Model):
             it catches up. The reported ratios are always against the full limits.
     """
 
-    timing: Literal["optimal", "task", "jerk-limited"] = "optimal"
+    timing: Literal["jerk-limited", "optimal", "task"] = "jerk-limited"
     velocity_fraction: Fraction = 0.9
     acceleration_fraction: Fraction = 0.3
 

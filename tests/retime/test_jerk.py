@@ -2,16 +2,22 @@
 jerk limit, on the path, rest to rest, repetitions identical, near TOPP-RA's time. Facts are computed from the timing's
 samples by finite differences, from the analytic curve the path samples, and from toppra, independently of the method."""
 
+import re
+import shutil
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
+from typer.testing import CliRunner
 
+from dualarm.cli import app
 from dualarm.errors import InvalidArgumentError
 from dualarm.retime.retiming import plan, retime_path
 from dualarm.retime.timing import path_deviation_max_rad
 from dualarm.run import run_task
+from dualarm.tasks import load_task
 from dualarm.tasks.schema import Retime
-from tests.conftest import TASKS
+from tests.conftest import HUMANOID, TASKS
 from tests.retime.test_topp import ARMS, joint_path
 
 V = np.tile([1.0, 0.9, 1.2, 1.1, 1.5, 0.8, 1.3], 2)  # rad/s
@@ -47,16 +53,19 @@ def loop():
     return path, timing, len(one)
 
 
-def _distance_to_polyline(x: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Each point of x (M, n) to the polyline through ``points`` (P, n): to the segments either side of its 8 nearest points (near a corner the nearest may be on the other edge)."""
-    nearest = cKDTree(points).query(x, k=8)[1]
-    best = np.full(len(x), np.inf)
-    for a, b in [pair for k in range(8) for pair in ((nearest[:, k] - 1, nearest[:, k]), (nearest[:, k], nearest[:, k] + 1))]:
+def _distance_to_polyline(x: np.ndarray, points: np.ndarray, nearest: bool = False):
+    """Each point of x (M, n) to the polyline through ``points`` (P, n): to the segments either side of its 8 nearest points (near a corner the nearest may be on the other edge); with ``nearest``, also the nearest point of the polyline (M, n)."""
+    close = cKDTree(points).query(x, k=8)[1]
+    best, where = np.full(len(x), np.inf), np.array(x, dtype=float)
+    for a, b in [pair for k in range(8) for pair in ((close[:, k] - 1, close[:, k]), (close[:, k], close[:, k] + 1))]:
         a, b = np.clip(a, 0, len(points) - 1), np.clip(b, 0, len(points) - 1)
         d = points[b] - points[a]
         u = np.clip(np.einsum("ij,ij->i", x - points[a], d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(points[a] + u[:, None] * d - x, axis=1))
-    return best
+        on = points[a] + u[:, None] * d
+        distance = np.linalg.norm(on - x, axis=1)
+        better = distance < best
+        best, where[better] = np.where(better, distance, best), on[better]
+    return (best, where) if nearest else best
 
 
 def test_every_limit_holds_by_finite_differences(loop):
@@ -70,12 +79,12 @@ def test_every_limit_holds_by_finite_differences(loop):
 
 
 def test_the_trajectory_stays_on_the_curve_and_passes_every_sample(loop):
-    """Every 1 ms the joints lie on the analytic curve the path samples (1e-6 rad, to the polyline through 20,001 of its points per edge), and at its passing times on each sample (1e-9); rest at both ends."""
+    """Every 1 ms the joints lie on the analytic curve the path samples (1e-6 rad, to the polyline through 20,001 of its points per edge), and at its passing times within 1e-6 rad of each sample (the issue's budget); rest at both ends."""
     path, timing, _ = loop
     dense = np.concatenate([_edge(k, np.linspace(0.0, 1.0, 20001)) for k in range(3)])
     q = timing.evaluate(np.arange(0.0, timing.duration_s, 1e-3))[0]
     assert _distance_to_polyline(q, dense).max() < 1e-6
-    assert path_deviation_max_rad(timing, path) < 1e-9
+    assert path_deviation_max_rad(timing, path) <= 1e-6
     ends = timing.evaluate(np.array([0.0, timing.duration_s]))[1]
     assert np.abs(ends).max() < 1e-12
 
@@ -109,3 +118,82 @@ def test_the_retime_stage_reports_and_checks_the_jerk():
     for kind in ("velocity", "acceleration", "jerk"):
         assert result.metrics[f"retime.{kind}_ratio_max"] <= 1 + 1e-6
     assert result.verdict.status == "complete", result.verdict.violations
+
+
+def _fd_ratios(timing, limits=(V, A, J)) -> list[float]:
+    """Velocity, acceleration and jerk ratios of the timing's positions every :data:`STEP_S` by first, second and third differences."""
+    q = timing.evaluate(np.arange(0.0, timing.duration_s, STEP_S))[0]
+    return [float((np.abs(np.diff(q, order, axis=0)) / STEP_S**order / limit).max()) for order, limit in zip((1, 2, 3), limits)]
+
+
+def test_rounding_noise_in_the_samples_neither_breaks_a_limit_nor_slows_it_down(loop):
+    """The loop's samples with the IK's rounding noise added (uniform, 1e-7 rad per joint): within the limits by finite
+    differences, within 1e-6 rad of every sample, and as fast as without noise (0.5 %); an interpolating spline would put
+    the noise into the jerk."""
+    path, clean, _ = loop
+    noise = np.random.default_rng(0).uniform(-1e-7, 1e-7, path.q.shape)
+    noisy = joint_path(path.q + noise, path.t, ARMS, path.rep)
+    timing = plan(noisy, V, A, jerk=J)
+    assert max(_fd_ratios(timing)) <= 1 + 1e-6
+    assert path_deviation_max_rad(timing, noisy) <= 1e-6
+    assert timing.duration_s <= 1.005 * clean.duration_s
+
+
+def test_a_reversal_where_the_samples_crowd_and_wander_is_followed_within_the_limits():
+    """Out along one line, to rest, and back along another, the samples crowding near the turn (as the task slows down)
+    with 1e-6 rad of noise where they are closer than that (the IK at rest): within the limits by finite differences, and
+    within 1e-6 rad of every sample."""
+    rng = np.random.default_rng(3)
+    turn, out, back = rng.uniform(-0.5, 0.5, (3, 14))
+    sigma = 1 - np.cos(np.linspace(0.0, np.pi / 2, 150))  # 0 .. 1, dense near 0 (the turn)
+    q = np.concatenate([turn + np.outer(sigma[::-1], out - turn), turn + np.outer(sigma[1:], back - turn)])
+    q[140:160] += rng.uniform(-1e-6, 1e-6, (20, 14))
+    path = joint_path(q, 0.01 * np.arange(len(q)), ARMS)
+    timing = plan(path, V, A, jerk=J)
+    assert max(_fd_ratios(timing)) <= 1 + 1e-6
+    assert path_deviation_max_rad(timing, path) <= 1e-6
+
+
+def test_the_shipped_triangles_repetitions_repeat_to_1e_9_rad():
+    """Three repetitions of the triangle by MC-Inverse, timed jerk-limited: each repetition's motion, from when it leaves
+    corner A, equals the first's to 1e-9 rad."""
+    task = load_task(TASKS / "triangle.toml", 3)
+    path = run_task(task, "mc-inverse", stages=("path", "ik")).joint_path
+    v, a, j = (task.robot.limit_array(kind, path.joint_names) for kind in ("velocity", "acceleration", "jerk"))
+    timing = plan(path, v, a, jerk=j)
+    starts = timing.sample_times_s[np.append(0, np.searchsorted(path.rep, [1, 2]) - 1)]  # at corner A: the first sample, and the last of each repetition before
+    t = np.linspace(0.0, starts[1] - starts[0], 5001)
+    first = timing.evaluate(starts[0] + t)[0]
+    for start in starts[1:]:
+        assert np.abs(timing.evaluate(start + t)[0] - first).max() <= 1e-9
+
+
+def test_the_task_timing_is_checked_against_the_jerk_limit_in_one_line(tmp_path):
+    """The triangle at its own timing (2 s per edge) on a copy of the humanoid whose left elbow's jerk limit is 0.5
+    rad/s^3: the run fails in one line naming the joint and the jerk limit (exit 1)."""
+    robot = tmp_path / "humanoid"
+    shutil.copytree(HUMANOID, robot)
+    text = (robot / "robot.toml").read_text()
+    (robot / "robot.toml").write_text(re.sub(r"(\[limits\.jerk\][^\[]*?left_elbow = )[0-9.]+", r"\g<1>0.5", text, count=1))
+    task = tmp_path / "triangle.toml"
+    task.write_text((TASKS / "triangle.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{robot}"') + '\n[retime]\ntiming = "task"\n')
+    result = CliRunner().invoke(app, ["run", str(task), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 1, result.output
+    lines = result.output.strip().splitlines()
+    assert lines[0] == "verdict: failed" and "left_elbow" in lines[1] and "jerk limit" in lines[1] and "keep_timing" in lines[1], result.output
+
+
+@pytest.mark.parametrize("value", ["0.0", "-40.0", "inf"])
+def test_an_infeasible_jerk_limit_is_refused_in_one_line_before_running(tmp_path, value):
+    """A jerk limit no motion can keep (0, negative, infinite) in robot.toml: `dualarm run` prints one line naming the key,
+    exits 2, and leaves no run directory."""
+    robot = tmp_path / "humanoid"
+    shutil.copytree(HUMANOID, robot)
+    text = (robot / "robot.toml").read_text()
+    (robot / "robot.toml").write_text(re.sub(r"(\[limits\.jerk\][^\[]*?left_elbow = )[0-9.]+", rf"\g<1>{value}", text, count=1))
+    task = tmp_path / "triangle.toml"
+    task.write_text((TASKS / "triangle.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{robot}"'))
+    result = CliRunner().invoke(app, ["run", str(task), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 2, result.output
+    assert len(result.output.strip().splitlines()) == 1 and "limits.jerk.left_elbow" in result.output, result.output
+    assert not (tmp_path / "runs").exists()
