@@ -1,0 +1,139 @@
+"""A study's trials: each one a repeated-motion task drawn from the spec's distributions, the same on any machine.
+
+Trial ``i`` of a spec is drawn by its own generator, ``numpy.random.default_rng(SeedSequence([seed,
+i]))`` (PCG64, whose streams numpy keeps identical across platforms and versions), so it does not
+depend on which trials ran before it, on which worker, or in which order: a study can be split,
+resumed and spread over machines and still draw the same trials.
+
+A trial's task (a dict with a task file's keys, :func:`dualarm.tasks.load.task_from_dict` loads
+it) has one hand draw a closed shape ``repetitions`` times, starting at the robot's ``ready`` pose:
+
+- ``polygon``: N vertices on a circle of the shape's size, a random phase; straight edges, each
+  taking 1/N of the period; with ``changing`` orientation each vertex's is the base turned by up
+  to ``change_rad`` about each axis.
+- ``circle``: one arc of 2 pi about the centre.
+- ``figure-eight``: from the centre, one circle of half the size on each side, the second the
+  other way round.
+
+The right hand's centre and orientations are the left's mirrored through the x-z plane. The shape's
+plane is the y-z plane (the hand's shoulder frame, facing forward) with its normal
+turned from x by a random angle up to ``tilt_rad`` towards a random direction. Every move's
+duration is a whole number of control periods.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dualarm.study.spec import StudySpec
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One trial: its index, the task it runs (a task file's keys) and its features (what the study report bins by).
+
+    Attributes:
+        index: its number in the study, from 0.
+        task: the task's keys (``task_from_dict``; written as the trial's task file).
+        features: the drawn parameters: ``hand``, ``kind``, ``vertices`` (0 but for a polygon),
+            ``size_m``, ``centre_x_m``/``_y_m``/``_z_m`` (the shoulder frame, arm-scaled),
+            ``tilt_rad``, ``orientation`` (held or changing), ``repetitions``, ``period_s``.
+    """
+
+    index: int
+    task: dict[str, Any]
+    features: dict[str, Any]
+
+
+def trial(spec: StudySpec, index: int) -> Trial:
+    """Trial ``index`` of ``spec`` (module docstring); the same for the same spec, seed and index."""
+    rng = np.random.default_rng(np.random.SeedSequence([spec.seed, index]))
+    hand = str(rng.choice(spec.hands))
+    kind = str(rng.choice(spec.shape.kinds))
+    vertices = int(rng.integers(spec.shape.vertices[0], spec.shape.vertices[1] + 1)) if kind == "polygon" else 0
+    size = float(rng.uniform(*spec.shape.size_m))
+    mirror = 1.0 if hand == "left" else -1.0
+    centre = np.array([rng.uniform(*spec.centre.x), mirror * rng.uniform(*spec.centre.y), rng.uniform(*spec.centre.z)])
+    tilt, towards = float(rng.uniform(0.0, spec.shape.tilt_rad)), float(rng.uniform(0.0, 2 * math.pi))
+    orientation = str(rng.choice(spec.orientation.change))
+    repetitions = int(rng.integers(spec.repetitions[0], spec.repetitions[1] + 1))
+    period = float(rng.uniform(*spec.period_s))
+    normal = _turned_x(tilt, towards)
+    up = np.array([0.0, 0.0, 1.0]) - normal[2] * normal
+    u = up / np.linalg.norm(up)
+    v = np.cross(normal, u)
+    base = np.array(spec.orientation.rpy) if hand == "left" else _mirrored(spec.orientation.rpy)
+    cp = spec.control_period_s
+
+    def steps(duration: float) -> float:  # a whole number of control periods, at least one
+        return max(1, round(duration / cp)) * cp
+
+    def point(p: np.ndarray) -> list[float]:
+        return [round(float(x), 12) for x in p]
+
+    waypoints: dict[str, Any]
+    moves: list[dict[str, Any]]
+    if kind == "polygon":
+        phase = float(rng.uniform(0.0, 2 * math.pi))
+        corners = [centre + size * (math.cos(phase + 2 * math.pi * k / vertices) * u + math.sin(phase + 2 * math.pi * k / vertices) * v) for k in range(vertices)]
+        turns = rng.uniform(-spec.orientation.change_rad, spec.orientation.change_rad, (vertices, 3)) if orientation == "changing" else np.zeros((vertices, 3))
+        waypoints = {f"V{k}": {"position": point(c), "rpy": point(base + turns[k])} for k, c in enumerate(corners)}
+        moves = [{"duration_s": steps(period / vertices), hand: {"to": f"V{(k + 1) % vertices}"}} for k in range(vertices)]
+        start = "V0"
+    elif kind == "circle":
+        waypoints = {"P0": {"position": point(centre + size * u), "rpy": point(base)}}
+        moves = [{"duration_s": steps(period), hand: {"arc_center": point(centre), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi}}]
+        start = "P0"
+    else:  # figure-eight: two circles of half the size through the centre, the second the other way round
+        waypoints = {"C": {"position": point(centre), "rpy": point(base)}}
+        moves = [
+            {"duration_s": steps(period / 2), hand: {"arc_center": point(centre + size / 2 * u), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi}},
+            {"duration_s": steps(period / 2), hand: {"arc_center": point(centre - size / 2 * u), "arc_axis": point(-normal), "arc_angle_rad": 2 * math.pi}},
+        ]
+        start = "C"
+    task = {
+        "name": f"{spec.name}-{index:06d}",
+        "title": f"{spec.name}, trial {index}: the {hand} hand draws a {kind} {repetitions} times",
+        "source": f"dualarm study {spec.name} (seed {spec.seed}), trial {index}",
+        "robot": spec.robot,
+        "control_period_s": cp,
+        "repetitions": repetitions,
+        "initial": "ready",
+        "frame": f"{hand}.shoulder",
+        "scale": "arm",
+        "waypoints": waypoints,
+        "start": {hand: start},
+        "moves": moves,
+    }
+    features = {
+        "hand": hand,
+        "kind": kind,
+        "vertices": vertices,
+        "size_m": size,
+        "centre_x_m": float(centre[0]),
+        "centre_y_m": float(centre[1]),
+        "centre_z_m": float(centre[2]),
+        "tilt_rad": tilt,
+        "orientation": orientation,
+        "repetitions": repetitions,
+        "period_s": sum(move["duration_s"] for move in moves),
+    }
+    return Trial(index, task, features)
+
+
+def _mirrored(rpy: tuple[float, float, float]) -> np.ndarray:
+    """The orientation (extrinsic x-y-z Euler angles [rad]) mirrored through the x-z plane, M R M with M = diag(1, -1, 1): the right hand's of the left's."""
+    mirror = np.diag([1.0, -1.0, 1.0])
+    return np.asarray(Rotation.from_matrix(mirror @ Rotation.from_euler("xyz", rpy).as_matrix() @ mirror).as_euler("xyz"))
+
+
+def _turned_x(angle: float, towards: float) -> np.ndarray:
+    """The x axis turned by ``angle`` [rad] about the axis (0, cos(towards), sin(towards)) of the y-z plane (Rodrigues)."""
+    axis = np.array([0.0, math.cos(towards), math.sin(towards)])
+    x = np.array([1.0, 0.0, 0.0])
+    return x * math.cos(angle) + np.cross(axis, x) * math.sin(angle) + axis * (axis @ x) * (1 - math.cos(angle))
