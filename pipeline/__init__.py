@@ -23,6 +23,10 @@ The pipeline
     with each :class:`Violation`, judged against :class:`Checks` -- in a :class:`RunResult`), :func:`record_run`
     (MCAP + Rerun files), sinks :class:`Sink`, :class:`NullSink`, :class:`MetricsSink`,
     :class:`Recorder`; reading runs back into pandas: :func:`read_run`, :func:`read_runs`.
+Studies (the MC-Inverse paper's open question: when, and how often, is repeated motion inconsistent?)
+    :func:`load_study` (a spec file) -> :class:`StudySpec`; :func:`run_study` (every generated trial
+    with every method, on Dask); :func:`read_study` (its rows, pandas);
+    :func:`write_study_report` (P(inconsistent) per method and condition, from ``trials.parquet``).
 Contracts between stages
     :class:`CartesianReference`, :class:`JointPath`, :class:`JointTrajectory`, :class:`ExecutionLog`.
 Errors
@@ -30,7 +34,7 @@ Errors
 
 The code lives in the repository's ``pipeline/`` folder; its sub-packages follow the data flow
 (``model``, ``tasks``, ``paths``, ``ik``, ``plan``, ``retime``, ``smooth``, ``execute``,
-``record``, ``report``), with the stages in :mod:`dualarm.stages` and the driver in :mod:`dualarm.run`.
+``record``, ``report``, ``study``), with the stages in :mod:`dualarm.stages` and the driver in :mod:`dualarm.run`.
 """
 
 import lazy_loader

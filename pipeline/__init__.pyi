@@ -59,6 +59,11 @@ from .run import run_task as run_task
 from .smooth.approach import approach_trajectory as approach_trajectory
 from .smooth.smoothing import Smoothed as Smoothed
 from .smooth.smoothing import smooth_trajectory as smooth_trajectory
+from .study.report import write_study_report as write_study_report
+from .study.run import read_study as read_study
+from .study.run import run_study as run_study
+from .study.spec import StudySpec as StudySpec
+from .study.spec import load_study as load_study
 from .tasks.load import Task as Task
 from .tasks.load import load_task as load_task
 from .tasks.load import task_from_dict as task_from_dict

@@ -660,6 +660,72 @@ def consistency(
     raise typer.Exit(_worst(result.table["status"]))
 
 
+@app.command()
+@user_errors
+def study(
+    spec_or_report: Annotated[str, typer.Argument(metavar="SPEC.toml | report", help="A study spec file (studies/inconsistency.toml) to run, or the word report.")],
+    directory_text: Annotated[Optional[str], typer.Argument(metavar="[DIR]", help="With report: the study's directory.")] = None,
+    scheduler: Annotated[Optional[str], typer.Option(help="An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the trials on; default a LocalCluster on this machine.")] = None,
+    workers: Annotated[Optional[int], typer.Option(min=1, help="The LocalCluster's worker processes (one thread each; default one per core).")] = None,
+    out_text: Annotated[Optional[str], typer.Option("--out", help="The study's directory (default studies/results/<name>).")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Run only the trials not yet in --out (a study stopped or crashed half-way).")] = False,
+    record: Annotated[str, typer.Option(help="metrics (no recordings, the default), ik or full: each trial's runs in DIR/runs (full runs every stage).")] = "metrics",
+) -> None:
+    """Run a study: every generated trial of SPEC.toml with every method, on Dask (dualarm study SPEC.toml); or write a study's report (dualarm study report DIR).
+
+    A run writes DIR/trials.parquet (one row per trial and method: the trial's features, every ik.* metric, the verdict, wall time, worker), one task file per trial in DIR/tasks, and prints per method P(inconsistent) and P(failed) with 95 % Wilson intervals. A report writes DIR/report.md, its tables (csv) and figures from DIR/trials.parquet alone.
+
+    Exits 0 when every trial has its rows (a method that failed a trial is the study's data, counted in the table), 1 when a row is an error (an exception other than dualarm's, or a trial whose worker died 3 times), 2 on a bad spec or --out (another study's directory, or this study's without --resume).
+    """
+    from dualarm.study import load_study
+    from dualarm.study.report import method_rates, write_study_report
+    from dualarm.study.run import run_study
+
+    if spec_or_report == "report":
+        if directory_text is None:
+            raise DualarmError("dualarm study report DIR: give the study's directory")
+        out.print(str(write_study_report(_out_path(directory_text, "DIR"))), markup=False, soft_wrap=True)
+        return
+    if directory_text is not None:
+        raise DualarmError(f"unexpected argument '{excerpt(directory_text)}': dualarm study SPEC.toml [--out DIR], or dualarm study report DIR")
+    spec, base = load_study(spec_or_report)
+    level = _record(record)
+    directory = _out_path(out_text, "--out") if out_text is not None else Path("studies") / "results" / spec.name
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    columns = (TextColumn(f"study {spec.name}", markup=False), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[text]}", markup=False), TimeElapsedColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=err, transient=not err.is_terminal) as bar:
+        task = bar.add_task("trials", total=None, text="starting the cluster")
+
+        def on_trial(done: int, failed: int, total: int, errors: int) -> None:
+            seconds = bar.tasks[task].elapsed or 1e-9
+            bar.update(task, completed=done, total=total, text=f"{failed} with a failed method, {errors} errors, {done / seconds:.2f} trials/s")
+
+        result = run_study(spec, base, directory, scheduler=scheduler, workers=workers, resume=resume, record=level, progress=on_trial)
+    rates = method_rates(result.results)
+    table = Table(
+        title=f"study {spec.name}: {result.results['trial'].nunique()} trials ({result.ran} now in {result.seconds:.1f} s on {result.workers} workers, after {result.startup_s:.1f} s starting them)",
+        title_justify="left",
+    )
+    for column in ("method", "trials", "P(inconsistent) [95 %]", "P(failed) [95 %]", "errors"):
+        table.add_column(column, justify="left" if column == "method" else "right")
+    for r in rates.itertuples():
+        table.add_row(
+            str(r.method),
+            str(r.trials),
+            f"{r.p_inconsistent:.3f} [{r.p_inconsistent_low:.3f}, {r.p_inconsistent_high:.3f}]",
+            Text(f"{r.p_failed:.3f} [{r.p_failed_low:.3f}, {r.p_failed_high:.3f}]", style="yellow" if r.failed else ""),
+            Text(str(r.errors), style="red" if r.errors else ""),
+        )
+    out.print(table)
+    out.print(f"{directory / 'trials.parquet'} (dualarm study report {directory})", markup=False, soft_wrap=True)
+    errors = result.results[result.results["status"] == "error"]
+    if len(errors):
+        first = errors.iloc[0]
+        err.print(f"error: {len(errors)} rows are errors, the first trial {first['trial']} {first['method']}: {first['error']}", markup=False, soft_wrap=True)
+        raise typer.Exit(1)
+
+
 def _worst(statuses) -> int:
     """The exit code of several runs' verdicts: 1 if one failed, else 3 if one was violated, else 0."""
     from dualarm.verdict import EXIT_CODES
@@ -970,6 +1036,41 @@ def bench_pipeline_command() -> None:
     for r in timings:
         table.add_row(r.task, r.ik, *(f"{r.seconds.get(p, 0.0) / r.total_s:.1%}" for p in PARTS), f"{r.total_s:.2f}", f"{r.motion_s:.2f}", f"{r.total_s / r.motion_s:.2f}x" if r.motion_s else "-")
     out.print(table)
+
+
+@bench_app.command("study")
+@user_errors
+def bench_study_command(
+    spec_file: Annotated[Path, typer.Argument(help="A study spec (default the example, studies/inconsistency.toml).")] = Path("studies/inconsistency.toml"),
+    workers: Annotated[int, typer.Option(min=1, help="Workers of the scaling, two-node and whole runs.")] = 2,
+    scaling_trials: Annotated[int, typer.Option(min=1, help="Trials of the scaling and two-node runs (the spec's first).")] = 100,
+    whole: Annotated[bool, typer.Option(help="Also run every trial of the spec (the example: 1,000 trials x 7 methods).")] = True,
+) -> None:
+    """A study on Dask: trials per second per worker on 1 and on --workers workers (LocalCluster), the same trials on workers started apart on 127.0.0.1 (two nodes) compared row by row, and the whole study's time with the trials' sizes.
+
+    Exits 1 when the two-node run's rows differ from the LocalCluster's (but for times, workers and TRAC-IK's rows, whose timeout is wall-clock).
+    """
+    from dualarm.bench.study import StudyBench, bench_study, trial_sizes
+    from dualarm.study import load_study
+
+    spec, base = load_study(spec_file)
+    with err.status("benchmarking ...") as status:
+        bench = bench_study(spec, base, workers=workers, scaling_trials=scaling_trials, whole=whole, progress=lambda text: _update(status, f"benchmarking: {text} ..."))
+    table = Table(title=f"study {spec.name} on this machine ({os.cpu_count()} cores)", title_justify="left")
+    for column in ("run", "workers", "trials", "startup s", "trials s", "trials/s per worker", "x 1 worker"):
+        table.add_column(column, justify="left" if column == "run" else "right")
+    runs = [("LocalCluster", bench.one), ("LocalCluster", bench.many), ("workers started apart", bench.nodes)] + ([("whole study", bench.whole)] if bench.whole else [])
+    for name, r in runs:
+        table.add_row(name, str(r.workers), str(r.ran), f"{r.startup_s:.1f}", f"{r.seconds:.1f}", f"{StudyBench.rate(r):.3f}", f"{StudyBench.rate(r) / StudyBench.rate(bench.one):.3f}")
+    out.print(table)
+    for what, value in trial_sizes((bench.whole or bench.many).results).items():
+        out.print(f"{what}: {value}", markup=False, soft_wrap=True)
+    if bench.whole is not None:
+        out.print(f"whole study: {bench.whole.ran} trials x {len(spec.methods)} methods in {(bench.whole.startup_s + bench.whole.seconds) / 60:.1f} min, cluster start included", markup=False)
+    if bench.nodes_differ:
+        err.print(f"the two-node run's rows differ from the LocalCluster's in: {', '.join(bench.nodes_differ)}", markup=False, soft_wrap=True)
+        raise typer.Exit(1)
+    out.print(f"two nodes: {bench.compared_rows} rows identical bit for bit to the LocalCluster's (times, workers and TRAC-IK's rows left out)", markup=False)
 
 
 @bench_app.command("trajectory")

@@ -21,7 +21,7 @@ import numpy as np
 from dualarm.errors import StageError
 from dualarm.ik.joint_path import JointPath
 from dualarm.ik.mc_path import arm_angle_profiles
-from dualarm.ik.metrics import arm_angles, consistency_metrics, ik_metrics
+from dualarm.ik.metrics import arm_angles, condition_metrics, consistency_metrics, ik_metrics
 from dualarm.limits import limit_ratios
 from dualarm.methods import Method, refuse_unsuited
 from dualarm.paths import CartesianReference, build_reference
@@ -140,7 +140,7 @@ class IkStage:
         sink.joint_path(path, robot.limit_array("velocity", path.joint_names), angles)
         profiles = arm_angle_profiles(path, robot, self.settings) if self.method.name == "mc-inverse" else ()
         self.arm_angle_profile.update({p.hand: p.record() for p in profiles})
-        return path, {**ik_metrics(path, robot), **consistency_metrics(path, reference, angles), **{k: v for p in profiles for k, v in p.metrics().items()}}
+        return path, {**ik_metrics(path, robot), **condition_metrics(path, robot), **consistency_metrics(path, reference, angles), **{k: v for p in profiles for k, v in p.metrics().items()}}
 
     def violations(self, path: JointPath) -> list[Violation]:
         """Failed samples, hands off the asked pose (the orientation when the method solved it), position limits; velocity limits when no retime stage follows (``retimed`` False)."""

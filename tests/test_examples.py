@@ -54,6 +54,10 @@ def test_example_runs(path: Path, tmp_path: Path, wheel_env: Path):
     elif path.stem.startswith("05"):
         assert number(r"hand tracking error (\S+) m", out) < 1e-3
         assert not list(tmp_path.iterdir()), "a run in memory writes no file"
+    elif path.stem.startswith("06"):
+        assert number(r"mc-inverse, (\d+) trials solved", out) >= 1
+        assert number(r"between repetitions (\S+) rad", out) < 1e-9
+        assert "report: report.md" in out
 
 
 def test_readme_shows_the_first_two_examples_as_they_are():

@@ -16,8 +16,15 @@ from dataclasses import dataclass, field
 import casadi as cs
 import numpy as np
 
-#: Threads that share a mapped call (one per core).
-THREADS = os.cpu_count() or 1
+
+def _threads() -> int:
+    """One per core, or ``OMP_NUM_THREADS`` when it is set to a whole number (a Dask nanny sets it to 1 in its worker, as a study's workers are one core each: more threads per worker only make the workers wait for each other)."""
+    given = os.environ.get("OMP_NUM_THREADS", "")
+    return int(given) if given.isdigit() and int(given) > 0 else os.cpu_count() or 1
+
+
+#: Threads that share a mapped call (:func:`_threads`).
+THREADS = _threads()
 #: Maps over fewer items than this run serially (starting threads costs more than the items).
 THREADED_FROM = 64
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 
 import casadi as cs
 import numpy as np
@@ -136,7 +136,7 @@ class IkfastStyle:
 
     @classmethod
     def of(cls, chain: Chain, resolution_rad: float = DEFAULT_RESOLUTION_RAD) -> "IkfastStyle":
-        """Derive the solver for ``chain`` with theta_3 discretised at ``resolution_rad`` [rad].
+        """The solver for ``chain`` with theta_3 discretised at ``resolution_rad`` [rad]; derived once per chain and resolution in a process, then kept.
 
         Raises:
             NotSRSError: the chain is not S-R-S, or consecutive shoulder or wrist axes are not
@@ -144,6 +144,11 @@ class IkfastStyle:
         """
         if not resolution_rad > 0:
             raise ValueError(f"resolution_rad must be positive, got {resolution_rad}")
+        return _solver(chain, float(resolution_rad))
+
+    @classmethod
+    def _derive(cls, chain: Chain, resolution_rad: float) -> "IkfastStyle":
+        """Derive the solver (see :meth:`of`)."""
         mc = McInverse.of(chain)  # validates the chain
         k, tip0 = zero_axes(chain)
         return cls(
@@ -197,3 +202,8 @@ class IkfastResult:
     q: np.ndarray
     ok: bool
     free_value: float
+
+
+@cache
+def _solver(chain: Chain, resolution_rad: float) -> IkfastStyle:
+    return IkfastStyle._derive(chain, resolution_rad)

@@ -84,11 +84,16 @@ class McInverse:
 
     @classmethod
     def of(cls, chain: Chain, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> "McInverse":
-        """Derive the solver for ``chain``; ``vertical`` is V of eq (1) in the chain base frame.
+        """The solver for ``chain``; ``vertical`` is V of eq (1) in the chain base frame. Derived once per chain and vertical in a process, then kept (a study's worker derives it once, not per trial).
 
         Raises:
             NotSRSError: the chain is not S-R-S, or consecutive shoulder or wrist axes are not perpendicular.
         """
+        return _solver(chain, (float(vertical[0]), float(vertical[1]), float(vertical[2])))
+
+    @classmethod
+    def _derive(cls, chain: Chain, vertical: tuple[float, float, float]) -> "McInverse":
+        """Derive the solver (see :meth:`of`)."""
         kin = SrsKinematics.of(chain, vertical)
         geo = kin.geometry
         movable = [j for j in chain.joints if j.movable]
@@ -211,7 +216,7 @@ def nearest_candidate(q: np.ndarray, reason: np.ndarray, seed: np.ndarray) -> in
 
 @cache
 def _solver(chain: Chain, vertical: tuple[float, float, float]) -> McInverse:
-    return McInverse.of(chain, vertical)
+    return McInverse._derive(chain, vertical)
 
 
 def mc_inverse(robot: Robot, hand: str, pose: np.ndarray, psi: float, q: Mapping[str, float] | str | None = None, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> McSolution:

@@ -46,6 +46,26 @@ def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
     }
 
 
+def condition_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
+    """Where along the path the arms are: ``ik.joint_limit_margin_min_rad``, the least distance of a joint to its nearer position limit over the samples and joints (negative beyond a limit; joints without limits left out), and ``ik.manipulability_min``, the least Yoshikawa manipulability sqrt(det(J J^T)), the product of J's singular values, over the samples and the hands whose arm joints are all in the path (J the arm chain's 6 x n geometric Jacobian, rows [v; w]: m^3 per rad^3 of the linear rows). A study's report bins P(inconsistent) by both."""
+    from dualarm.model.kinematics import ChainKinematics
+
+    lower, upper = robot.lower_upper(path.joint_names)
+    margin = np.minimum(path.q - lower, upper - path.q)
+    bounded = np.isfinite(margin).all(axis=0)
+    metrics = {"ik.joint_limit_margin_min_rad": float(margin[:, bounded].min())} if bounded.any() and len(path.q) else {}
+    least = []
+    for hand in path.hands:
+        chain = robot.hand_chain(hand)
+        if not set(chain.joint_names) <= set(path.joint_names):
+            continue
+        J = ChainKinematics.of(chain).jacobians(path.q[:, [path.joint_names.index(n) for n in chain.joint_names]])
+        least.append(float(np.sqrt(np.clip(np.linalg.det(J @ J.transpose(0, 2, 1)), 0.0, None)).min()))
+    if least:
+        metrics["ik.manipulability_min"] = min(least)
+    return metrics
+
+
 def _orientation_metrics(path: JointPath) -> dict[str, float]:
     """``ik.orientation_*`` of :func:`ik_metrics`; the errors only when measured (not NaN)."""
     angle = path.hand_orientation_error_rad

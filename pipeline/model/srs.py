@@ -176,7 +176,11 @@ class SrsKinematics:
 
     @classmethod
     def of(cls, chain: Chain, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> "SrsKinematics":
-        """Build for ``chain`` (raises NotSRSError if it is not S-R-S)."""
+        """The Functions for ``chain`` (raises NotSRSError if it is not S-R-S); built once per chain and vertical in a process, then kept."""
+        return _srs_kinematics(chain, (float(vertical[0]), float(vertical[1]), float(vertical[2])))
+
+    @classmethod
+    def _build(cls, chain: Chain, vertical: tuple[float, float, float]) -> "SrsKinematics":
         geometry = srs_geometry(chain)
         frames = chain_frames(chain)
         S = cs.SX(geometry.shoulder)
@@ -190,3 +194,8 @@ class SrsKinematics:
         """Psi at N configurations (N, 7) [rad] -> (N,) [rad], one mapped call."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         return np.asarray(self.psi.map(Q.shape[0])(Q.T)).ravel()
+
+
+@functools.lru_cache(maxsize=None)
+def _srs_kinematics(chain: Chain, vertical: tuple[float, float, float]) -> SrsKinematics:
+    return SrsKinematics._build(chain, vertical)

@@ -63,8 +63,8 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-def write_whole(path: Path, text: str) -> Path:
-    """Write ``text`` beside ``path``, then rename it into place: a file that exists is complete. Creates ``path``'s directory; returns ``path``.
+def write_whole(path: Path, text: str | bytes) -> Path:
+    """Write ``text`` (or bytes) beside ``path``, then rename it into place: a file that exists is complete. Creates ``path``'s directory; returns ``path``.
 
     Nothing is left beside ``path`` when the write fails or is interrupted.
 
@@ -79,7 +79,7 @@ def write_whole(path: Path, text: str) -> Path:
     except OSError as exc:
         raise _os_error(path.parent, "cannot create the directory", exc) from None
     try:
-        partial.write_text(text)
+        partial.write_bytes(text) if isinstance(text, bytes) else partial.write_text(text)
         os.replace(partial, path)
     except BaseException as exc:
         with contextlib.suppress(OSError):
@@ -159,6 +159,10 @@ KINDS: Mapping[str, Layout] = {
             "joints_*.png",
         ),
         dirs={"*": "report"},
+    ),
+    "study": Layout(
+        files=("study.json", "trials.parquet", "report.md", "*.png", "*.csv"),
+        dirs={"parts": Layout(files=("trial-*.parquet",)), "tasks": Layout(files=("*.toml",)), "runs": "recordings"},
     ),
     "reproduction": Layout(
         files=("parts.json", "report.md", "table_i.json", *LEGACY_MARKERS),

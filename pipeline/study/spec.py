@@ -26,7 +26,7 @@ from pydantic import Field, ValidationError, model_validator
 
 from dualarm.errors import TaskFileError, excerpt
 from dualarm.methods import IK_METHODS
-from dualarm.tasks.schema import FINITE, MAX_NAME_CHARS, Range, _Model
+from dualarm.tasks.schema import CONTROL_PERIOD_RANGE_S, FINITE, MAX_NAME_CHARS, Range, _Model
 
 #: Most trials one study may draw.
 MAX_TRIALS = 1_000_000
@@ -74,11 +74,21 @@ class Shape(_Model):
 
 
 class Centre(_Model):
-    """Where a shape's centre is drawn (uniformly in a box), in the drawing hand's shoulder frame [m] (module docstring)."""
+    """Where a shape's centre is drawn (uniformly in a box), in the drawing hand's shoulder frame [m] (module docstring).
+
+    Attributes:
+        x, y, z: the box, [low, high] each [m].
+        reachable: draw the trial again (up to :data:`~dualarm.study.trials.MAX_DRAWS` times)
+            until every pose of its shape is within reach of the arm: the analytic S-R-S solution
+            (MC-Inverse's) is inside the joint limits for some arm angle of a 5 degree
+            grid and some branch (:func:`~dualarm.study.trials.within_reach`); so the box holds the
+            reachable workspace's part. Needs S-R-S arms; ``false`` keeps every first draw.
+    """
 
     x: tuple[Metres, Metres] = (0.25, 0.40)
     y: tuple[Metres, Metres] = (-0.15, 0.10)
     z: tuple[Metres, Metres] = (-0.40, -0.15)
+    reachable: bool = True
 
     @model_validator(mode="after")
     def _check(self) -> Centre:
@@ -146,7 +156,7 @@ class StudySpec(_Model):
     hands: tuple[Literal["left", "right"], ...] = ("left", "right")
     repetitions: tuple[Annotated[int, Field(strict=True), Range(*REPETITIONS_RANGE)], Annotated[int, Field(strict=True), Range(*REPETITIONS_RANGE)]] = (5, 20)
     period_s: tuple[Annotated[float, FINITE, Range(*PERIOD_RANGE_S, " s")], Annotated[float, FINITE, Range(*PERIOD_RANGE_S, " s")]] = (3.0, 6.0)
-    control_period_s: Annotated[float, FINITE, Range(0.001, 0.05, " s")] = 0.01
+    control_period_s: Annotated[float, FINITE, Range(*CONTROL_PERIOD_RANGE_S, " s")] = 0.01
     shape: Shape = Shape()
     centre: Centre = Centre()
     orientation: Orientation = Orientation()

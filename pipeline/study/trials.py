@@ -1,9 +1,11 @@
 """A study's trials: each one a repeated-motion task drawn from the spec's distributions, the same on any machine.
 
 Trial ``i`` of a spec is drawn by its own generator, ``numpy.random.default_rng(SeedSequence([seed,
-i]))`` (PCG64, whose streams numpy keeps identical across platforms and versions), so it does not
-depend on which trials ran before it, on which worker, or in which order: a study can be split,
-resumed and spread over machines and still draw the same trials.
+i, draw]))`` (PCG64, whose streams numpy keeps identical across platforms and versions), so it does
+not depend on which trials ran before it, on which worker, or in which order: a study can be split,
+resumed and spread over machines and still draw the same trials. With ``[centre] reachable`` (the
+default), :func:`reachable_trial` draws again (``draw`` 1, 2, ...) until the shape is within the
+arm's reach (:func:`within_reach`), up to :data:`MAX_DRAWS` times.
 
 A trial's task (a dict with a task file's keys, :func:`dualarm.tasks.load.task_from_dict` loads
 it) has one hand draw a closed shape ``repetitions`` times, starting at the robot's ``ready`` pose:
@@ -25,12 +27,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from functools import cache
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dualarm.study.spec import StudySpec
+
+if TYPE_CHECKING:
+    from dualarm.model.robot import Robot
+    from dualarm.tasks.load import Task
 
 
 @dataclass(frozen=True)
@@ -42,7 +50,8 @@ class Trial:
         task: the task's keys (``task_from_dict``; written as the trial's task file).
         features: the drawn parameters: ``hand``, ``kind``, ``vertices`` (0 but for a polygon),
             ``size_m``, ``centre_x_m``/``_y_m``/``_z_m`` (the shoulder frame, arm-scaled),
-            ``tilt_rad``, ``orientation`` (held or changing), ``repetitions``, ``period_s``.
+            ``tilt_rad``, ``orientation`` (held or changing), ``repetitions``, ``period_s``,
+            ``draw`` (see :func:`reachable_trial`, which adds ``reachable``).
     """
 
     index: int
@@ -50,9 +59,9 @@ class Trial:
     features: dict[str, Any]
 
 
-def trial(spec: StudySpec, index: int) -> Trial:
-    """Trial ``index`` of ``spec`` (module docstring); the same for the same spec, seed and index."""
-    rng = np.random.default_rng(np.random.SeedSequence([spec.seed, index]))
+def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
+    """Draw ``draw`` of trial ``index`` of ``spec`` (module docstring); the same for the same spec, seed, index and draw."""
+    rng = np.random.default_rng(np.random.SeedSequence([spec.seed, index, draw]))
     hand = str(rng.choice(spec.hands))
     kind = str(rng.choice(spec.shape.kinds))
     vertices = int(rng.integers(spec.shape.vertices[0], spec.shape.vertices[1] + 1)) if kind == "polygon" else 0
@@ -122,8 +131,87 @@ def trial(spec: StudySpec, index: int) -> Trial:
         "orientation": orientation,
         "repetitions": repetitions,
         "period_s": sum(move["duration_s"] for move in moves),
+        "draw": draw,
     }
     return Trial(index, task, features)
+
+
+#: Most draws of one trial with ``[centre] reachable``.
+MAX_DRAWS = 50
+#: The arm-angle grid step of :func:`within_reach` [rad] (5 degrees).
+REACH_STEP_RAD = np.pi / 36
+#: Most poses of a repetition :func:`within_reach` checks (evenly spaced).
+REACH_POSES = 64
+
+
+def reachable_trial(spec: StudySpec, index: int, base_dir: str | Path = ".") -> tuple[Trial, Task]:
+    """Trial ``index`` of ``spec`` and its task: the first draw within reach (:func:`within_reach`) with ``[centre] reachable``, else draw 0.
+
+    Its feature ``reachable`` says whether the trial kept is within reach: false after
+    :data:`MAX_DRAWS` draws none of which was (the last is kept), or without the check.
+
+    Raises:
+        UnreachablePoseError: the draw kept has a waypoint beyond the arm's span (the task
+            loader's check), so it has no task.
+        NotSRSError: ``[centre] reachable`` on a robot whose drawing arm is not S-R-S.
+    """
+    from dualarm.errors import UnreachablePoseError
+    from dualarm.tasks.load import task_from_dict
+
+    robot = study_robot(spec.robot, str(base_dir))
+    draws = MAX_DRAWS if spec.centre.reachable else 1
+    for draw in range(draws):
+        drawn = trial(spec, index, draw)
+        drawn.features["reachable"] = False
+        try:
+            task = task_from_dict(drawn.task, robot=robot)
+        except UnreachablePoseError:  # a waypoint out of the arm's span (the task file's own check)
+            if draw == draws - 1:
+                raise
+            continue
+        if spec.centre.reachable and within_reach(task):
+            drawn.features["reachable"] = True
+            break
+    return drawn, task
+
+
+@cache
+def study_robot(robot: str, base_dir: str) -> Robot:
+    """A spec's ``robot`` (a directory relative to ``base_dir``, or a shipped robot's name), loaded once per process: a study's worker parses its URDF once, not once per trial.
+
+    Raises:
+        RobotModelError: no such robot, or its description is unusable.
+    """
+    from dualarm.data import find_robot
+    from dualarm.model.robot import load_robot
+
+    return load_robot(find_robot(robot, Path(base_dir)).resolve())
+
+
+def within_reach(task: Task) -> bool:
+    """Whether every hand pose of the task's first repetition (at most :data:`REACH_POSES` of them, evenly spaced, with its first and last) has an analytic S-R-S solution inside the joint limits, for some branch at some arm angle of a :data:`REACH_STEP_RAD` grid.
+
+    Raises:
+        NotSRSError: an arm of the task is not S-R-S.
+    """
+    from dualarm.errors import UnreachablePoseError
+    from dualarm.ik.arms import arm_problems
+    from dualarm.ik.mc_inverse import VALID, McInverse
+    from dualarm.paths.build import build_reference
+
+    try:
+        reference = build_reference(task)
+    except UnreachablePoseError:  # a sample beyond the arm's span (the path builder's own check)
+        return False
+    first = np.flatnonzero(reference.rep == 0)
+    picked = first[np.unique(np.linspace(0, len(first) - 1, min(len(first), REACH_POSES)).round().astype(int))]
+    grid = -np.pi + REACH_STEP_RAD * np.arange(round(2 * np.pi / REACH_STEP_RAD))
+    for arm in arm_problems(task.robot, reference, task.initial_q):
+        solver = McInverse.of(arm.chain)  # the arm angle's vertical does not matter: the grid covers every angle
+        _, reason = solver.solve_many(np.repeat(arm.targets[picked], len(grid), axis=0), np.tile(grid, len(picked)))
+        if not (reason == VALID).reshape(len(picked), -1).any(axis=1).all():
+            return False
+    return True
 
 
 def _mirrored(rpy: tuple[float, float, float]) -> np.ndarray:

@@ -91,3 +91,24 @@ def test_orientation_metrics_of_a_pose_level_method_and_of_an_unmeasured_path(ca
     assert m["ik.orientation_solved"] == 1.0 and m["ik.orientation_error_max_rad"] < 1e-6
     unmeasured = ik_metrics(_with(path, path.q), task.robot)
     assert "ik.orientation_error_max_rad" not in unmeasured and "ik.orientation_error_mean_rad" not in unmeasured
+
+
+def test_condition_metrics_against_finite_differences_and_the_limits():
+    """The least joint-limit margin, from the robot's limits sample by sample, and the least manipulability sqrt(det(J J^T)),
+    from the singular values of Jacobians by central differences of the arm's forward kinematics (dualarm.model.check), on
+    MC-Inverse's triangle."""
+    from dualarm.ik.metrics import condition_metrics
+    from dualarm.model.check import finite_difference_jacobians
+    from dualarm.model.kinematics import ChainKinematics
+    from dualarm.run import run_task
+
+    result = run_task("triangle", "mc-inverse", stages=("path", "ik"))
+    path, robot = result.joint_path, result.task.robot
+    metrics = condition_metrics(path, robot)
+    margins = [min(q - robot.lower_upper([name])[0][0], robot.lower_upper([name])[1][0] - q) for name, column in zip(path.joint_names, path.q.T) for q in column]
+    assert metrics["ik.joint_limit_margin_min_rad"] == min(margins)
+    chain = robot.hand_chain("left")
+    J = finite_difference_jacobians(ChainKinematics.of(chain), path.q[:, [path.joint_names.index(n) for n in chain.joint_names]])
+    singular = np.linalg.svd(J, compute_uv=False)
+    np.testing.assert_allclose(metrics["ik.manipulability_min"], singular.prod(axis=1).min(), rtol=1e-6)
+    assert metrics == {k: result.metrics[k] for k in metrics}

@@ -63,7 +63,7 @@ def test_trials_are_the_same_whatever_order_they_are_drawn_in():
     assert kinds == {"polygon", "circle", "figure-eight"} and {t.features["hand"] for t in forwards} == {"left", "right"}
     for t in forwards:
         f = t.features
-        assert 5 <= f["repetitions"] <= 20 and (f["vertices"] == 0) == (f["kind"] != "polygon") and 0.05 <= f["size_m"] <= 0.15
+        assert spec.repetitions[0] <= f["repetitions"] <= spec.repetitions[1] and (f["vertices"] == 0) == (f["kind"] != "polygon") and 0.05 <= f["size_m"] <= 0.15
 
 
 def _circle_fit(points: np.ndarray) -> tuple[np.ndarray, float, float]:

@@ -1,0 +1,149 @@
+"""``dualarm bench study``: a study's throughput on Dask, from 1 to 2 workers and on two workers started apart, and the whole example study's time.
+
+1. **Scaling.** The spec's first ``scaling_trials`` trials on a ``LocalCluster`` of 1 worker, then of
+   ``workers``: trials per second per worker, from the submission of the trials to the last result
+   (each worker's first trial includes its imports and the CasADi Functions it builds), and the ratio
+   of the two (the target: within 10 %).
+2. **Two nodes.** The same trials on a scheduler and ``workers`` ``dask worker`` processes started
+   apart on 127.0.0.1, as separate nodes would be (:func:`loopback_cluster`), compared row by row with
+   the ``LocalCluster``'s: equal bit for bit but for the columns that vary from run to run
+   (:data:`~dualarm.study.run.VARYING`) and TRAC-IK's rows (its timeout is wall-clock).
+3. **The whole study.** Every trial of the spec on the ``LocalCluster`` of ``workers``, and the
+   trials' sizes (shapes, repetitions, IK samples per trial).
+
+Each run goes to a temporary directory, removed afterwards. Never used by the test suite: wall-clock
+numbers depend on the machine.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from dualarm.errors import DualarmError
+from dualarm.study.run import VARYING, StudyRun, run_study
+from dualarm.study.spec import StudySpec
+
+#: The method whose rows are not compared between runs (its timeout is wall-clock: not repeatable).
+UNREPEATABLE = ("trac-ik",)
+
+
+@dataclass(frozen=True)
+class StudyBench:
+    """What :func:`bench_study` measured.
+
+    Attributes:
+        one, many: the scaling runs on 1 and on ``workers`` workers.
+        nodes: the run on the workers started apart.
+        nodes_differ: the columns in which the two-node run's rows differ from the ``LocalCluster``'s
+            (but for :data:`~dualarm.study.run.VARYING` and TRAC-IK's rows); empty when identical.
+        compared_rows: the rows compared.
+        whole: the whole study, or None when not asked.
+    """
+
+    one: StudyRun
+    many: StudyRun
+    nodes: StudyRun
+    nodes_differ: tuple[str, ...]
+    compared_rows: int
+    whole: StudyRun | None
+
+    @staticmethod
+    def rate(run: StudyRun) -> float:
+        """Trials per second per worker."""
+        return run.ran / run.seconds / max(run.workers, 1)
+
+
+@contextmanager
+def loopback_cluster(workers: int = 2, directory: Path | None = None) -> Iterator[str]:
+    """A Dask scheduler and ``workers`` ``dask worker`` processes (one thread each, named ``node-a``, ``node-b``, ...) started apart on 127.0.0.1, as separate nodes; yields the scheduler's address, and stops them all at the end.
+
+    Raises:
+        DualarmError: the scheduler did not write its address, or the workers did not join, within 60 s.
+    """
+    from distributed import Client
+
+    with tempfile.TemporaryDirectory(dir=directory) as tmp:
+        file = Path(tmp) / "scheduler.json"
+        scheduler = [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file", str(file)]
+        processes = [subprocess.Popen(scheduler, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+        try:
+            deadline = time.monotonic() + 60
+            while not (file.is_file() and file.stat().st_size):
+                if time.monotonic() > deadline or processes[0].poll() is not None:
+                    raise DualarmError("the Dask scheduler did not start within 60 s")
+                time.sleep(0.1)
+            address = json.loads(file.read_text())["address"]
+            for k in range(workers):
+                name = f"node-{chr(ord('a') + k)}"
+                command = [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--nworkers", "1", "--name", name, "--host", "127.0.0.1", "--no-dashboard"]
+                processes.append(subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            with Client(address, timeout="60s") as client:
+                try:
+                    client.wait_for_workers(workers, timeout=60)
+                except TimeoutError:
+                    raise DualarmError(f"{workers} Dask workers did not join the scheduler within 60 s") from None
+            yield address
+        finally:
+            for process in reversed(processes):
+                process.terminate()
+            for process in processes:
+                try:
+                    process.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+
+
+def differing_columns(a: pd.DataFrame, b: pd.DataFrame) -> tuple[str, ...]:
+    """The columns in which two runs' rows of the same trials differ (NaN equals NaN), but for :data:`~dualarm.study.run.VARYING` and the :data:`UNREPEATABLE` methods' rows."""
+    keep_a, keep_b = (r[~r["method"].isin(UNREPEATABLE)].reset_index(drop=True) for r in (a, b))
+    if len(keep_a) != len(keep_b) or list(keep_a.columns) != list(keep_b.columns):
+        return ("rows or columns",)
+    return tuple(c for c in keep_a.columns if c not in VARYING and not keep_a[c].equals(keep_b[c]))
+
+
+def bench_study(spec: StudySpec, base_dir: Path, *, workers: int = 2, scaling_trials: int = 100, whole: bool = True, progress: Callable[[str], None] | None = None) -> StudyBench:
+    """Run the benchmark (module docstring) on ``spec``: its first ``scaling_trials`` trials on 1 and ``workers`` workers and on a loopback cluster, then (``whole``) every trial."""
+    say = progress or (lambda text: None)
+    first = spec.model_copy(update={"trials": min(scaling_trials, spec.trials)})
+    with tempfile.TemporaryDirectory(prefix="dualarm-bench-study-") as tmp:
+        out = Path(tmp)
+        say(f"{first.trials} trials on 1 worker")
+        one = run_study(first, base_dir, out / "one", workers=1)
+        say(f"{first.trials} trials on {workers} workers")
+        many = run_study(first, base_dir, out / "many", workers=workers)
+        say(f"{first.trials} trials on {workers} workers started apart")
+        with loopback_cluster(workers, out) as address:
+            nodes = run_study(first, base_dir, out / "nodes", scheduler=address)
+        kept = many.results[~many.results["method"].isin(UNREPEATABLE)]
+        differ = differing_columns(many.results, nodes.results)
+        done = None
+        if whole:
+            say(f"the whole study: {spec.trials} trials on {workers} workers")
+            done = run_study(spec, base_dir, out / "whole", workers=workers)
+    return StudyBench(one, many, nodes, differ, len(kept), done)
+
+
+def trial_sizes(results: pd.DataFrame) -> dict[str, str]:
+    """The trials' sizes, from one method's rows: shapes (share of each kind), repetitions, IK samples per trial and per repetition (range and mean)."""
+    rows = results.drop_duplicates("trial")
+    samples = results.groupby("trial")["path.samples"].max().dropna() if "path.samples" in results.columns else pd.Series(dtype=float)
+    per_rep = (samples / rows.set_index("trial")["repetitions"]).dropna()
+    shares = rows["kind"].value_counts(normalize=True)
+    return {
+        "shapes": ", ".join(f"{kind} {share:.0%}" for kind, share in shares.items()),
+        "repetitions": f"{rows['repetitions'].min()}-{rows['repetitions'].max()} (mean {rows['repetitions'].mean():.2f})",
+        "IK samples per trial": f"{samples.min():.0f}-{samples.max():.0f} (mean {samples.mean():.0f})" if len(samples) else "-",
+        "IK samples per repetition": f"{per_rep.min():.0f}-{per_rep.max():.0f} (mean {per_rep.mean():.1f})" if len(per_rep) else "-",
+        "cores": str(os.cpu_count()),
+    }

@@ -1,0 +1,208 @@
+"""Running a study on Dask (dualarm.study.run): a small study on a LocalCluster and on a separately started scheduler and
+workers, resume, a killed worker, a failing trial, and the refusals.
+
+Every row is checked against the same trial run again alone, in this process, from the task file the study wrote
+(dualarm.run_task): the study's rows are the pipeline's own numbers, wherever they ran.
+"""
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from dualarm.bench.study import loopback_cluster
+from dualarm.errors import OutputError, StageError, TaskFileError, UnreachablePoseError
+from dualarm.run import run_task
+from dualarm.study.run import PARTS, RESULTS, TASKS, VARYING, connect, read_study, run_study, run_trial
+from dualarm.study.spec import study_from_toml
+from dualarm.study.trials import reachable_trial, trial, within_reach
+from dualarm.tasks.load import load_task
+
+REPO = Path(__file__).resolve().parents[2]
+SPEC = """
+name = "small"
+methods = ["pinv", "dls-svd", "pybullet"]
+trials = 4
+repetitions = [2, 3]
+period_s = [1.0, 1.5]
+control_period_s = 0.02
+"""
+
+
+def _same(a: pd.DataFrame, b: pd.DataFrame) -> None:
+    """Bit for bit, but for the columns that differ from run to run (VARYING)."""
+    keep = [c for c in a.columns if c not in VARYING]
+    pd.testing.assert_frame_equal(a[keep].reset_index(drop=True), b[keep].reset_index(drop=True), check_exact=True)
+
+
+@pytest.fixture(scope="module")
+def local(tmp_path_factory) -> tuple[Path, pd.DataFrame]:
+    """The small study on a LocalCluster of 2 workers."""
+    out = tmp_path_factory.mktemp("study") / "small"
+    result = run_study(study_from_toml(SPEC), REPO, out, workers=2)
+    assert result.ran == 4 and result.workers == 2
+    return out, result.results
+
+
+def test_a_study_on_a_local_cluster_writes_a_row_per_trial_and_method(local):
+    out, rows = local
+    assert len(rows) == 4 * 3 and set(rows["worker"]) <= {"0", "1"}
+    pd.testing.assert_frame_equal(pd.read_parquet(out / RESULTS), rows)
+    pd.testing.assert_frame_equal(read_study(out), rows)
+    assert sorted(p.name for p in (out / PARTS).iterdir()) == [f"trial-{i:06d}.parquet" for i in range(4)]
+    assert (rows["reachable"]).all()
+
+
+def test_each_row_is_the_trial_run_alone_from_its_task_file(local):
+    out, rows = local
+    for _, row in rows.iterrows():
+        task = load_task(out / TASKS / f"small-{row['trial']:06d}.toml")
+        try:
+            alone = run_task(task, row["method"], stages=("path", "ik"))
+        except StageError as exc:
+            assert row["status"] == "failed" and row["error"] == str(exc)
+            continue
+        for name, value in alone.metrics.items():
+            if name not in VARYING:
+                assert row[name] == value, (row["trial"], row["method"], name)
+        failed = alone.metrics["ik.failed_reps"] > 0
+        assert row["failed"] == failed
+        assert row["inconsistent"] == (alone.metrics["ik.rep_joint_deviation_max_rad"] > 0.01 or failed)
+
+
+def test_resume_runs_only_the_trials_missing(local, tmp_path):
+    out, rows = local
+    copy = tmp_path / "small"
+    subprocess.run(["cp", "-r", str(out), str(copy)], check=True)
+    for i in (1, 3):
+        (copy / PARTS / f"trial-{i:06d}.parquet").unlink()
+    with pytest.raises(OutputError, match="--resume"):
+        run_study(study_from_toml(SPEC), REPO, copy, workers=1)
+    again = run_study(study_from_toml(SPEC), REPO, copy, workers=1, resume=True)
+    assert again.ran == 2
+    _same(again.results, rows)
+
+
+def test_another_study_into_the_same_directory_is_refused(local):
+    out, _ = local
+    other = study_from_toml(SPEC.replace("trials = 4", "trials = 5"))
+    with pytest.raises(OutputError, match="holds study 'small' of another spec"):
+        run_study(other, REPO, out, resume=True)
+
+
+def test_the_cli_refuses_a_bad_spec_in_one_line(tmp_path):
+    spec = tmp_path / "bad.toml"
+    spec.write_text('name = "s"\ntrials = 10\nrepetitions = [9, 3]\n')
+    done = subprocess.run([sys.executable, "-c", "from dualarm.cli import app; app()", "study", str(spec), "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().count("\n") == 0 and "repetitions: the low end 9 is above the high end 3" in done.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_separately_started_scheduler_and_workers_give_the_same_rows(local, tmp_path):
+    """A scheduler and two `dask worker` processes on 127.0.0.1, started apart as two nodes would be."""
+    _, rows = local
+    with loopback_cluster(2, tmp_path) as address:
+        result = run_study(study_from_toml(SPEC), REPO, tmp_path / "cluster", scheduler=address)
+    assert result.workers == 2 and set(result.results["worker"]) == {"node-a", "node-b"}
+    _same(result.results, rows)
+
+
+def test_an_unreachable_scheduler_is_one_line():
+    with pytest.raises(Exception, match="no Dask scheduler answers there"):
+        with connect("tcp://127.0.0.1:9"):
+            pass
+
+
+def test_a_killed_worker_has_its_trial_retried_on_another(local, tmp_path):
+    """A worker process killed while it runs a trial: the scheduler gives the trial to another, and the rows are the same."""
+    _, rows = local
+    from distributed import Client, LocalCluster
+
+    killed: list[str] = []
+    with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None, silence_logs=40) as cluster, Client(cluster) as client:
+
+        def kill_one_busy_worker() -> None:
+            for _ in range(600):
+                busy = {w: keys for w, keys in client.processing().items() if keys}
+                started = [w for w, state in client.run(lambda dask_worker: [t.key for t in dask_worker.state.tasks.values() if t.state == "executing"]).items() if state]
+                if busy and started:
+                    pids = client.run(os.getpid)
+                    killed.append(started[0])
+                    os.kill(pids[started[0]], 9)
+                    return
+                time.sleep(0.05)
+
+        killer = threading.Thread(target=kill_one_busy_worker)
+        killer.start()
+        result = run_study(study_from_toml(SPEC), REPO, tmp_path / "killed", scheduler=cluster.scheduler_address)
+        killer.join()
+    assert killed, "no worker was killed mid-trial"
+    assert (result.results["status"] != "error").all()
+    _same(result.results, rows)
+
+
+def test_a_method_that_raises_is_its_rows_error_not_a_lost_trial(monkeypatch):
+    """A bug in one method (an exception that is not dualarm's) is that row's error, and the other methods still run."""
+
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr("dualarm.ik.pinv.solve_pinv", broken)
+    result = run_trial(study_from_toml(SPEC), str(REPO), 0)
+    by_method = {r["method"]: r for r in result.rows}
+    assert by_method["pinv"]["status"] == "error" and by_method["pinv"]["error"] == "ZeroDivisionError: a bug"
+    assert by_method["pinv"]["failed"] and by_method["pinv"]["inconsistent"]
+    assert by_method["dls-svd"]["status"] in ("complete", "violated") and by_method["pybullet"]["status"] in ("complete", "violated")
+
+
+def test_a_shape_out_of_reach_fails_mc_inverse_in_its_row_and_is_drawn_again_when_checked():
+    """With [centre] reachable = false a shape far out is kept and fails MC-Inverse (a `failed` row, its message); with the
+    check, every draw before the one kept is out of reach (the analytic check) and the one kept is within."""
+    far = SPEC.replace('["pinv", "dls-svd", "pybullet"]', '["mc-inverse"]') + "[centre]\nx = [0.8, 0.9]\ny = [0.0, 0.1]\nz = [-0.2, -0.1]\n"
+    unchecked = study_from_toml(far + "reachable = false\n")
+    with pytest.raises(UnreachablePoseError, match="cannot reach"):
+        reachable_trial(unchecked, 0, REPO)
+    row = run_trial(unchecked, str(REPO), 0).rows[0]
+    assert row["status"] == "failed" and row["failed"] and row["inconsistent"] and "cannot reach" in row["error"] and not row["reachable"]
+    near = study_from_toml(far.replace("x = [0.8, 0.9]", "x = [0.1, 0.2]") + "reachable = false\n")
+    drawn, task = reachable_trial(near, 0, REPO)
+    assert not within_reach(task), "the trial is within reach: move it"
+    row = run_trial(near, str(REPO), 0).rows[0]
+    assert row["status"] == "failed" and "MC-Inverse" in row["error"]
+    checked = study_from_toml(SPEC + "[centre]\nx = [0.35, 0.55]\n")
+    draws = [reachable_trial(checked, i, REPO) for i in range(3)]
+    assert all(d.features["reachable"] and within_reach(t) for d, t in draws)
+    assert any(d.features["draw"] > 0 for d, _ in draws)
+    for i, (d, _) in enumerate(draws):
+        for earlier in range(d.features["draw"]):
+            assert not within_reach(load_task_dict(trial(checked, i, earlier).task))
+
+
+def load_task_dict(task: dict):
+    from dualarm.tasks.load import task_from_dict
+
+    return task_from_dict(task, base_dir=REPO)
+
+
+def test_duckdb_reads_the_table_as_pandas_does(local):
+    """The README's query: DuckDB on DIR/trials.parquet, against the same rates from pandas."""
+    import duckdb
+
+    out, rows = local
+    query = f"""select method, avg(inconsistent::int) as p, median("ik.rep_joint_deviation_max_rad") as deviation from '{out / RESULTS}' group by method order by method"""
+    got = duckdb.sql(query).df().set_index("method")
+    expected = rows.groupby("method").agg(p=("inconsistent", "mean"), deviation=("ik.rep_joint_deviation_max_rad", "median"))
+    pd.testing.assert_frame_equal(got, expected, check_names=False, check_index_type=False)
+
+
+def test_a_robot_the_reach_check_cannot_use_is_refused_before_anything_is_written(tmp_path):
+    spec = study_from_toml(SPEC.replace('name = "small"', 'name = "small"\nrobot = "humanoid_offset"'))
+    with pytest.raises(TaskFileError, match=r"centre.reachable: the reach check needs S-R-S arms .*set \[centre\] reachable = false"):
+        run_study(spec, REPO, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
