@@ -403,7 +403,9 @@ def _write_trial(directory: Path, spec: StudySpec, result: TrialResult) -> None:
 
 
 def _consolidate(directory: Path, rows: list[dict[str, Any]]) -> pd.DataFrame:
-    """Write ``trials.parquet`` from ``rows`` (whole, then renamed); returns them as a table."""
-    table = _ordered(pd.DataFrame(rows)) if rows else pd.DataFrame(columns=list(COLUMNS))
+    """Write ``trials.parquet`` from ``rows`` (whole, then renamed); returns them as a table. Without rows nothing is written: a study that ran no trial (its cluster unreachable) leaves no empty table that looks like results."""
+    if not rows:
+        return pd.DataFrame(columns=list(COLUMNS))
+    table = _ordered(pd.DataFrame(rows))
     write_whole(directory / RESULTS, table.to_parquet(index=False))
     return table

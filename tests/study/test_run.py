@@ -113,10 +113,13 @@ def test_a_separately_started_scheduler_and_workers_give_the_same_rows(local, tm
     _same(result.results, rows)
 
 
-def test_an_unreachable_scheduler_is_one_line():
+def test_an_unreachable_scheduler_is_one_line_and_leaves_no_table(tmp_path):
     with pytest.raises(Exception, match="no Dask scheduler answers there"):
         with connect("tcp://127.0.0.1:9"):
             pass
+    with pytest.raises(Exception, match="no Dask scheduler answers there"):
+        run_study(study_from_toml(SPEC), REPO, tmp_path / "out", scheduler="tcp://127.0.0.1:9")
+    assert not (tmp_path / "out" / RESULTS).exists()
 
 
 def test_a_killed_worker_has_its_trial_retried_on_another(local, tmp_path):
