@@ -380,7 +380,14 @@ def reproduce(
         ),
     ] = None,
     only: Annotated[Optional[str], typer.Option(help="Comma-separated parts to run (default: all): ball-game-tvgdd, ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp.")] = None,
-    jobs: Annotated[int, typer.Option(min=1, help="Parts run at once, each in its own process (default: 2, or 1 on a 1-core machine).")] = min(2, os.cpu_count() or 1),
+    jobs: Annotated[
+        int,
+        typer.Option("--jobs", "--workers", min=1, help="Parts run at once: the worker processes of a Dask LocalCluster (default: 2, or 1 on a 1-core machine, which runs the parts in this process)."),
+    ] = min(2, os.cpu_count() or 1),
+    scheduler: Annotated[
+        Optional[str],
+        typer.Option(help="An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the parts on instead of a LocalCluster; --out must be on a file system its workers share."),
+    ] = None,
     robot_dir: Annotated[
         Optional[Path],
         typer.Option(
@@ -417,12 +424,12 @@ def reproduce(
             if fraction >= 1.0:
                 bar.stop_task(tasks[name])
 
-        results = run_parts(out_dir, names, jobs, on_progress, robot)
+        results = run_parts(out_dir, names, jobs, on_progress, robot, scheduler)
         report_task = bar.add_task("report", total=1.0, part="report", text="reading the recordings back")
         claims = reproduction_claims(out_dir)
         report_path = write_reproduction_report(out_dir, claims)
         bar.update(report_task, completed=1.0, text="done")
-    table = Table(title=f"time of each part ({jobs} at a time)", title_justify="left")
+    table = Table(title=f"time of each part ({'on ' + scheduler if scheduler else f'{jobs} at a time'})", title_justify="left")
     for column in ("part", "status", "seconds"):
         table.add_column(column, justify="right" if column == "seconds" else "left")
     for r in results:
@@ -1045,24 +1052,41 @@ def bench_study_command(
     workers: Annotated[int, typer.Option(min=1, help="Workers of the scaling, two-node and whole runs.")] = 2,
     scaling_trials: Annotated[int, typer.Option(min=1, help="Trials of the scaling and two-node runs (the spec's first).")] = 100,
     whole: Annotated[bool, typer.Option(help="Also run every trial of the spec (the example: 1,000 trials x 7 methods).")] = True,
+    whole_out: Annotated[
+        Optional[str], typer.Option("--out", help="Keep the whole study's directory here (as dualarm study --out writes it; dualarm study report reads it); default a temporary directory.")
+    ] = None,
 ) -> None:
-    """A study on Dask: trials per second per worker on 1 and on --workers workers (LocalCluster), the same trials on workers started apart on 127.0.0.1 (two nodes) compared row by row, and the whole study's time with the trials' sizes.
+    """A study on Dask: trials per second per worker on 1 and on --workers workers (LocalCluster), per method; the same trials in plain processes without Dask (what the machine gives) and on workers started apart on 127.0.0.1 (two nodes) compared row by row; the whole study's time with the trials' sizes; the hypervisor's share of CPU time (steal) during each run.
 
     Exits 1 when the two-node run's rows differ from the LocalCluster's (but for times, workers and TRAC-IK's rows, whose timeout is wall-clock).
     """
-    from dualarm.bench.study import StudyBench, bench_study, trial_sizes
+    from dualarm.bench.study import StudyBench, bench_study, method_seconds, trial_sizes
     from dualarm.study import load_study
 
     spec, base = load_study(spec_file)
     with err.status("benchmarking ...") as status:
-        bench = bench_study(spec, base, workers=workers, scaling_trials=scaling_trials, whole=whole, progress=lambda text: _update(status, f"benchmarking: {text} ..."))
+        kept = _out_path(whole_out, "--out") if whole_out is not None else None
+        bench = bench_study(spec, base, workers=workers, scaling_trials=scaling_trials, whole=whole, whole_out=kept, progress=lambda text: _update(status, f"benchmarking: {text} ..."))
     table = Table(title=f"study {spec.name} on this machine ({os.cpu_count()} cores)", title_justify="left")
-    for column in ("run", "workers", "trials", "startup s", "trials s", "trials/s per worker", "x 1 worker"):
+    for column in ("run", "workers", "trials", "startup s", "trials s", "trials/s per worker", "x 1 worker", "steal"):
         table.add_column(column, justify="left" if column == "run" else "right")
-    runs = [("LocalCluster", bench.one), ("LocalCluster", bench.many), ("workers started apart", bench.nodes)] + ([("whole study", bench.whole)] if bench.whole else [])
-    for name, r in runs:
-        table.add_row(name, str(r.workers), str(r.ran), f"{r.startup_s:.1f}", f"{r.seconds:.1f}", f"{StudyBench.rate(r):.3f}", f"{StudyBench.rate(r) / StudyBench.rate(bench.one):.3f}")
+    runs = [("LocalCluster", "one", bench.one), ("LocalCluster", "many", bench.many), ("workers started apart", "nodes", bench.nodes)] + (
+        [("whole study", "whole", bench.whole)] if bench.whole else []
+    )
+    for name, key, r in runs:
+        rate = StudyBench.rate(r)
+        table.add_row(name, str(r.workers), str(r.ran), f"{r.startup_s:.1f}", f"{r.seconds:.1f}", f"{rate:.3f}", f"{rate / StudyBench.rate(bench.one):.3f}", f"{bench.steal[key]:.1%}")
+    for key, p in (("plain_one", bench.plain_one), ("plain_many", bench.plain_many)):
+        table.add_row(
+            "plain processes, no Dask", str(len(p.trials)), str(sum(p.trials)), "-", f"{max(p.seconds):.1f}", f"{p.rate:.3f}", f"{p.rate / bench.plain_one.rate:.3f}", f"{bench.steal[key]:.1%}"
+        )
     out.print(table)
+    methods = Table(title=f"mean time per trial on 1 and on {bench.many.workers} workers (LocalCluster)", title_justify="left")
+    for column in ("method", "1 worker s", f"{bench.many.workers} workers s", "ratio"):
+        methods.add_column(column, justify="left" if column == "method" else "right")
+    for method, row in method_seconds(bench.one, bench.many).iterrows():
+        methods.add_row(str(method), f"{row.one_s:.3f}", f"{row.many_s:.3f}", f"{row.ratio:.2f}")
+    out.print(methods)
     for what, value in trial_sizes((bench.whole or bench.many).results).items():
         out.print(f"{what}: {value}", markup=False, soft_wrap=True)
     if bench.whole is not None:

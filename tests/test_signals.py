@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -67,9 +68,9 @@ def test_a_signalled_run_is_kept_as_failed(tmp_path, signum, code, line, error):
 
 
 def _workers(pid: int) -> dict[int, str]:
-    """The reproduction's worker processes (spawned children of ``pid``): pid -> its start time, which tells a pid's later owner apart."""
+    """The reproduction's worker processes (spawned children of ``pid``, by any of its threads: Dask's nannies start them from its event loop's): pid -> its start time, which tells a pid's later owner apart."""
     found = {}
-    for child in Path(f"/proc/{pid}/task/{pid}/children").read_text().split():
+    for child in " ".join(p.read_text() for p in Path(f"/proc/{pid}/task").glob("*/children")).split():
         cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
         if b"multiprocessing.spawn" in cmdline:
             found[int(child)] = Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1].split()[19]
@@ -96,16 +97,21 @@ def test_an_interrupted_reproduction_stops_its_workers(tmp_path, signum, group, 
         start_new_session=True,
         preexec_fn=_default_sigint,
     )
-    _wait_for(lambda: bool(_stagings(out / "runs")), process)
-    os.killpg(process.pid, signal.SIGSTOP)
-    workers = _workers(process.pid)
-    assert len(workers) == 2 and _stagings(out / "runs")
-    if group:
-        os.killpg(process.pid, signum)
-    else:
-        process.send_signal(signum)
-    os.killpg(process.pid, signal.SIGCONT)
-    stdout, stderr = process.communicate(timeout=PATIENCE_S)
+    try:
+        _wait_for(lambda: bool(_stagings(out / "runs")), process)
+        os.killpg(process.pid, signal.SIGSTOP)
+        workers = _workers(process.pid)
+        assert len(workers) == 2 and _stagings(out / "runs")
+        if group:
+            os.killpg(process.pid, signum)
+        else:
+            process.send_signal(signum)
+        os.killpg(process.pid, signal.SIGCONT)
+        stdout, stderr = process.communicate(timeout=PATIENCE_S)
+    finally:  # a failed assertion must not leave the stopped group behind
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.communicate()
 
     assert process.returncode == code, stderr
     assert _error_lines(stderr) == [line] and "Traceback" not in stderr + stdout
@@ -117,7 +123,7 @@ def test_an_interrupted_reproduction_stops_its_workers(tmp_path, signum, group, 
 
 def test_a_signal_while_the_rerun_stream_is_built_is_raised_after_it():
     """The signal arrives inside the block (as it did inside ``rr.RecordingStream()``): the block completes, then the handler raises."""
-    from dualarm.record.recorder import _signals_held
+    from dualarm.interrupt import held
 
     def handler(signum, frame):
         raise RuntimeError(signum)
@@ -126,9 +132,59 @@ def test_a_signal_while_the_rerun_stream_is_built_is_raised_after_it():
     finished = []
     try:
         with pytest.raises(RuntimeError, match=str(int(signal.SIGTERM))):
-            with _signals_held():
+            with held():
                 signal.raise_signal(signal.SIGTERM)
                 finished.append(True)
         assert finished == [True] and signal.getsignal(signal.SIGTERM) is handler
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def _in_thread(target) -> list:
+    """Run ``target`` in a thread; returns what it appends (and an exception's type name when it raises), and the thread."""
+    seen: list = []
+
+    def run():
+        try:
+            target(seen)
+        except BaseException as exc:
+            seen.append(type(exc).__name__)
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    return seen, thread
+
+
+def test_a_stop_raises_terminated_in_the_thread_running_the_work_and_waits_for_a_held_block():
+    """dualarm.interrupt: stop(token) raises Terminated in the thread inside stoppable(token) (and in no other work), at once outside held() and at the block's end inside it; work started under a stopped token stops at once."""
+    from dualarm.interrupt import held, stop, stoppable
+
+    events = {name: threading.Event() for name in ("busy", "holding", "release")}
+
+    def busy(seen):
+        with stoppable("busy"):
+            events["busy"].set()
+            while True:
+                time.sleep(0.001)
+
+    def holding(seen):
+        with stoppable("holding"):
+            with held():
+                events["holding"].set()
+                events["release"].wait(60)
+                seen.append("block ended")
+            seen.append("after the block")
+
+    busy_seen, busy_thread = _in_thread(busy)
+    held_seen, held_thread = _in_thread(holding)
+    assert events["busy"].wait(60) and events["holding"].wait(60)
+    assert stop(["busy"]) == 1
+    busy_thread.join(60)
+    assert busy_seen == ["Terminated"] and not busy_thread.is_alive()
+    assert stop(["holding"]) == 1 and held_thread.is_alive()
+    events["release"].set()
+    held_thread.join(60)
+    assert held_seen == ["block ended", "Terminated"]
+    late_seen, late_thread = _in_thread(busy)
+    late_thread.join(60)
+    assert late_seen == ["Terminated"] and stop(["busy"]) == 0

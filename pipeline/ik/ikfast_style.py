@@ -172,17 +172,29 @@ class IkfastStyle:
         """
         return self._batched.candidates(poses, theta3)
 
-    def nearest(self, pose: np.ndarray, previous: np.ndarray) -> "IkfastResult":
-        """The valid candidate over all free values nearest ``previous`` (7,) [rad] (Euclidean joint distance) for one hand pose (4x4, chain base frame) [m]: one mapped call over the F x 8 candidates."""
-        previous = np.asarray(previous, dtype=float)
+    def valid_candidates(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The valid candidates of one hand pose (4x4, chain base frame) [m] over all free values, in one mapped call over the F x 8 candidates.
+
+        Returns:
+            q (M, 7) [rad], in the order of the free values, then of the candidates, and the free
+            value each was solved at (M,) [rad].
+        """
         F = len(self.free_values)
         q, reason = self._batched.candidates(np.broadcast_to(np.asarray(pose, dtype=float), (F, 4, 4)), self.free_values)
-        q, valid = q.reshape(-1, 7), (reason == VALID).ravel()
-        if not valid.any():
+        valid = (reason == VALID).ravel()
+        return q.reshape(-1, 7)[valid], np.repeat(self.free_values, CANDIDATES)[valid]
+
+    def nearest(self, pose: np.ndarray, previous: np.ndarray, candidates: tuple[np.ndarray, np.ndarray] | None = None) -> "IkfastResult":
+        """The valid candidate over all free values nearest ``previous`` (7,) [rad] (Euclidean joint distance, the first of equals) for one hand pose (4x4, chain base frame) [m].
+
+        ``candidates``: the pose's :meth:`valid_candidates`, if known (they do not depend on ``previous``).
+        """
+        previous = np.asarray(previous, dtype=float)
+        q, free = self.valid_candidates(pose) if candidates is None else candidates
+        if not len(q):
             return IkfastResult(q=previous.copy(), ok=False, free_value=float("nan"))
-        distance = np.where(valid, np.einsum("ij,ij->i", q - previous, q - previous), np.inf)
-        best = int(np.argmin(distance))
-        return IkfastResult(q=q[best].copy(), ok=True, free_value=float(self.free_values[best // CANDIDATES]))
+        best = int(np.argmin(np.einsum("ij,ij->i", q - previous, q - previous)))
+        return IkfastResult(q=q[best].copy(), ok=True, free_value=float(free[best]))
 
     @cached_property
     def _batched(self) -> BatchedCandidates:

@@ -242,15 +242,19 @@ def _cheapest_profile(node: np.ndarray, steps: np.ndarray, start: np.ndarray, cl
     or, when there is none, the first sample that no profile reaches.
     """
     n, G = node.shape
-    shifts = np.arange(-AUTO_MAX_CELLS, AUTO_MAX_CELLS + 1)
-    move = np.abs(shifts) * (2 * np.pi / G)
+    W = AUTO_MAX_CELLS
+    shifts = np.arange(-W, W + 1)
+    step_cost = steps + np.abs(shifts) * (2 * np.pi / G)  # the change of psi, then the joints'
 
     def forward(cost: np.ndarray, keep: bool) -> tuple[np.ndarray | int, np.ndarray | None]:
         back = np.zeros((n, *cost.shape), np.int8) if keep else None
+        best, option = np.empty(cost.shape), np.empty(cost.shape)
         for k in range(1, n):
-            best = np.full(cost.shape, np.inf)
-            for j, (d, m) in enumerate(zip(shifts, move)):
-                option = np.roll(cost, d, axis=-1) + (m + steps[k - 1, :, j])
+            # cell g reached from cell g - d: the cost wrapped around the grid, shifted by d
+            wrapped = np.concatenate([cost[..., G - W :], cost, cost[..., :W]], axis=-1)
+            best.fill(np.inf)
+            for j, d in enumerate(shifts):
+                np.add(wrapped[..., W - d : W - d + G], step_cost[k - 1, :, j], out=option)
                 if back is not None:
                     back[k][option < best] = j
                 np.minimum(best, option, out=best)

@@ -38,6 +38,9 @@ from dualarm.settings import as_record
 
 #: The methods of this module.
 POINTWISE_METHODS = ("trac-ik", "pybullet", "dls-svd", "ikfast-style")
+#: Memory an arm's ikfast-style run may keep poses' candidates in [bytes] (a pose's valid candidates:
+#: up to 8 per free value, 4,340 taking 240 kB on the humanoid; a repetition of the triangle task, 600 poses).
+MEMO_BYTES = 256 * 2**20
 
 #: A solver of one arm: (target pose in the arm base frame (4, 4) [m], seed (7,) [rad]) -> (q, ok).
 ArmSolver = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, bool]]
@@ -121,9 +124,17 @@ def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str,
         from dualarm.ik.ikfast_style import IkfastStyle
 
         ikfast = IkfastStyle.of(arm.chain, settings.resolution_rad)
+        # A pose's candidates do not depend on the seed: a pose met again (each repetition repeats
+        # the first's poses bit for bit) reuses them; the oldest are dropped beyond MEMO_BYTES.
+        seen: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
         def solve_ikfast(target: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, bool]:
-            result = ikfast.nearest(target, seed)
+            key = target.tobytes()
+            if key not in seen:
+                seen[key] = ikfast.valid_candidates(target)
+                while sum(q.nbytes for q, _ in seen.values()) > MEMO_BYTES:
+                    del seen[next(iter(seen))]
+            result = ikfast.nearest(target, seed, seen[key])
             return result.q, result.ok
 
         yield solve_ikfast

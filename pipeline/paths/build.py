@@ -91,7 +91,7 @@ def _check_closed(task: Task, hand: str, ref: HandReference) -> None:
 
 
 def build_reference(task: Task) -> CartesianReference:
-    """Sample the task's hand motions at its control period.
+    """Sample the task's hand motions at its control period: the moves once, then again for each further repetition, the same samples bit for bit (a method that moves differently in one repetition does so on the very same targets).
 
     Raises:
         TaskFileError: a repeated path does not close on itself.
@@ -103,22 +103,23 @@ def build_reference(task: Task) -> CartesianReference:
     current = {h: task.start_pose(h) for h in driven}
     # per hand, a list of (position, rotation, linear velocity, angular velocity) pieces
     pieces = {h: [(T[None, :3, 3], T[None, :3, :3], np.zeros((1, 3)), np.zeros((1, 3)))] for h, T in current.items()}
-    rep, segment = [np.zeros(1, int)], [np.zeros(1, int)]
-    for r in range(spec.repetitions):
-        for i, move in enumerate(spec.moves):
-            steps = int(round(move.duration_s / period))
-            tau = np.arange(1, steps + 1) / steps
-            for h in driven:
-                piece = _segment(move.for_hand(h), current[h], task, tau, move.duration_s)
-                pieces[h].append(piece)
-                current[h] = np.eye(4)
-                current[h][:3, :3], current[h][:3, 3] = piece[1][-1], piece[0][-1]
-            rep.append(np.full(steps, r))
-            segment.append(np.full(steps, i))
-    hands = {h: HandReference(*(np.concatenate(column) for column in zip(*pieces[h]))) for h in driven}
+    segment = []
+    for i, move in enumerate(spec.moves):  # one repetition: the others are copies of it, the same targets bit for bit
+        steps = int(round(move.duration_s / period))
+        tau = np.arange(1, steps + 1) / steps
+        for h in driven:
+            piece = _segment(move.for_hand(h), current[h], task, tau, move.duration_s)
+            pieces[h].append(piece)
+            current[h] = np.eye(4)
+            current[h][:3, :3], current[h][:3, 3] = piece[1][-1], piece[0][-1]
+        segment.append(np.full(steps, i))
+    reps = spec.repetitions
+    hands = {h: HandReference(*(np.concatenate([start, *(moves * reps)]) for start, *moves in zip(*pieces[h]))) for h in driven}
     if spec.object is not None:
         hands[spec.object.slave] = _slave_from_master(task, hands[spec.object.master])
-    rep_index, seg_index = np.concatenate(rep), np.concatenate(segment)
+    once = np.concatenate(segment) if segment else np.zeros(0, int)  # a task without moves: its start alone
+    rep_index = np.r_[0, np.repeat(np.arange(reps), len(once))]
+    seg_index = np.r_[0, np.tile(once, reps)]
     n = len(rep_index)
     if spec.repetitions > 1:
         for h in driven:

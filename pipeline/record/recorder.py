@@ -14,11 +14,8 @@ sent before any data.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import signal
-import threading
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -46,6 +43,7 @@ from foxglove.messages import (
 )
 
 from dualarm.ik.joint_path import JointPath
+from dualarm.interrupt import held
 from dualarm.model.kinematics import joint_transforms
 from dualarm.model.poses import pose_matrix, quaternion_xyzw
 from dualarm.model.robot import Robot
@@ -60,23 +58,6 @@ from dualarm.tasks.load import hand_poses
 
 if TYPE_CHECKING:  # pybullet is imported only by runs that execute
     from dualarm.execute.simulate import ExecutionLog
-
-
-@contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM held back until the block ends, then raised again: a signal's exception raised inside ``rr.RecordingStream()`` leaves a half-built stream whose ``__del__`` prints a traceback."""
-    if threading.current_thread() is not threading.main_thread():  # signal handlers run in the main thread only
-        yield
-        return
-    held: list[int] = []
-    previous = {signum: signal.signal(signum, lambda signum, frame: held.append(signum)) for signum in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        for held_signal in dict.fromkeys(held):
-            signal.raise_signal(held_signal)
 
 
 #: MCAP topic family of each stage.
@@ -173,7 +154,7 @@ class Recorder(NullSink):
         self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
         self._channels: dict[str, foxglove.Channel] = {}
         self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
-        with _signals_held():  # the layout first, so that the viewer never shows a default one while loading
+        with held():  # the layout first, so that the viewer never shows a default one while loading
             self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
             self._rr.save(directory / "run.rrd")
             self._rr.send_blueprint(blueprint(robot, self.stages), make_active=True, make_default=True)

@@ -4,7 +4,7 @@ Each part is a function ``(out, robot, progress) -> outputs`` that runs one expe
 robot directory ``robot`` with the same code as the command that reproduces it alone
 (:func:`command`), writes under ``out`` and returns the paths it wrote (run directories, tables),
 relative to ``out``. ``progress(fraction, text)`` reports how far it is. Parts are independent,
-so they can run in separate processes. On a robot other than the humanoid a part may be not
+so they can run as separate Dask tasks. On a robot other than the humanoid a part may be not
 available (:func:`unavailable`): its task does not load there, or it needs what the robot lacks.
 """
 

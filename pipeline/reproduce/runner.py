@@ -7,30 +7,29 @@ files afterwards (:mod:`dualarm.reproduce.report`). The directory is claimed as 
 nothing else at any depth, is emptied first; any other non-empty directory is refused, naming an
 entry dualarm did not write; one another reproduction is writing is refused (locked).
 
-Parts run in worker processes when ``jobs > 1``. Ctrl-C (SIGINT) and SIGTERM reach the main
-process only (the workers ignore SIGINT); it stops the workers with SIGTERM, which a worker turns
-into :class:`~dualarm.errors.Terminated`, so that its run is recorded as failed, and waits for
-them before the interruption goes on.
+Parts run as tasks on a Dask cluster (:mod:`dualarm.cluster`): a ``LocalCluster`` of ``jobs``
+worker processes, or an existing cluster given by its scheduler's address, whose workers write
+into the directory themselves (it must be on a file system they share). Ctrl-C (SIGINT) and
+SIGTERM are this process's to handle (a ``LocalCluster``'s workers ignore SIGINT): it stops the
+parts running on the workers with :class:`~dualarm.errors.Terminated`, so that their runs are
+recorded as failed, and waits for them before the interruption goes on.
 """
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import json
-import multiprocessing
 import os
-import signal
-import sys
-import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+import uuid
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from queue import Empty
-from typing import Any
+from queue import SimpleQueue
 
+from dualarm.cluster import connect, stop_tasks
 from dualarm.errors import DualarmError, Terminated, excerpt
+from dualarm.interrupt import stop_requested, stoppable
 from dualarm.record.run_dir import MARKER, OutputDir, claim_output_dir, write_whole
 from dualarm.reproduce.experiments import BY_NAME, PARTS, ROBOT, Outputs, unavailable
 
@@ -104,116 +103,86 @@ def _run_part(name: str, out: Path, robot: Path, report: Callable[[float, str], 
     return PartResult(name, status, error, time.perf_counter() - start, outputs)
 
 
-#: Whether this worker received SIGTERM.
-_terminating = False
+#: The Dask event topic of a reproduction's progress (followed by its token).
+PROGRESS_TOPIC = "dualarm-reproduce-progress"
 
 
-def _stop_on_sigterm(signum: int, frame: object) -> None:
-    """A worker's SIGTERM handler: raise :class:`Terminated` once (a second SIGTERM must not cut short the recording of the failed run)."""
-    global _terminating
-    _terminating = True
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    raise Terminated()
+def _unseen(worker: object, out: Path) -> str:
+    """Why a worker cannot run a part: it does not see ``out``."""
+    return f"worker {excerpt(worker, 40)} does not see {excerpt(out)}: with --scheduler, --out must be on a file system the workers share"
 
 
-def _unraisable(unraisable: Any) -> None:
-    """A worker's ``sys.unraisablehook``: silent for :class:`Terminated` raised where Python cannot raise it (a ``__del__``: the worker raises it again between stages), Python's own hook otherwise."""
-    if not issubclass(unraisable.exc_type, Terminated):
-        sys.__unraisablehook__(unraisable)
+def _part_task(name: str, out: Path, robot: Path, topic: str) -> PartResult:
+    """Run part ``name`` as a Dask task: its progress logged to ``topic``, stoppable under its key (:func:`dualarm.cluster.stop_tasks`), its run then recorded as failed."""
+    from distributed import get_worker
 
-
-def _worker(name: str, out: Path, robot: Path, queue: Any) -> None:
-    """A worker process: run part ``name``; put ``("progress", name, fraction, text)`` while it runs, then ``("result", PartResult)``.
-
-    Ctrl-C is the main process's to handle; SIGTERM ends the part with :class:`Terminated` (its
-    run recorded as failed) and the process with exit code 143, without a traceback.
-    """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _stop_on_sigterm)
-    sys.unraisablehook = _unraisable
+    worker = get_worker()
+    if not (out / MARKER).is_file():  # --scheduler: a worker on another machine, without out's file system
+        return PartResult(name, "failed", _unseen(worker.name, out), 0.0, {})
 
     def report(fraction: float, text: str) -> None:
-        if _terminating:  # Terminated was swallowed by a library (CasADi turns it into a failed solve): raise it again between stages
+        if stop_requested():  # Terminated was swallowed by a library (CasADi turns it into a failed solve): raise it again between stages
             raise Terminated()
-        queue.put(("progress", name, fraction, text))
+        worker.log_event(topic, (name, fraction, text))
 
-    queue.put(("result", _run_part(name, out, robot, report)))
-
-
-@contextlib.contextmanager
-def _sigint_ignored() -> Iterator[None]:
-    """Ignore SIGINT while a worker starts, so that it inherits SIGINT ignored from its first instruction (a Ctrl-C in these milliseconds is lost; called outside the main thread, nothing changes)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    start = time.perf_counter()
     try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
+        with stoppable(str(worker.get_current_task())):
+            return _run_part(name, out, robot, report)
+    except Terminated as exc:
+        return PartResult(name, "failed", f"Terminated: {exc}", time.perf_counter() - start, {})
 
 
-def _run_in_workers(out: Path, names: Sequence[str], robot: Path, jobs: int, on_progress: OnProgress) -> dict[str, PartResult]:
-    """Run ``names`` in worker processes, ``jobs`` at a time, the longest first.
+def _run_on_cluster(out: Path, names: Sequence[str], robot: Path, jobs: int, scheduler: str | None, on_progress: OnProgress) -> tuple[dict[str, PartResult], int]:
+    """Run ``names`` as Dask tasks (the longest first) on the cluster at ``scheduler``, else a ``LocalCluster`` of ``jobs`` workers; returns the results and the number of workers.
 
-    A process per part rather than a pool: a pool worker that dies loses its task for good
-    (``multiprocessing.Pool`` then waits forever) and ``ProcessPoolExecutor`` cannot stop its
-    workers before Python 3.14; here a worker that dies is a failed part, and on any exception in
-    this process (Ctrl-C, SIGTERM) every worker is sent SIGTERM and waited for before it goes on.
+    Ctrl-C or SIGTERM in this process stops the parts running on the workers (their runs are
+    recorded as failed) and waits for them before the interruption goes on. A part whose worker
+    died :data:`~dualarm.cluster.ALLOWED_FAILURES` times is failed.
+
+    Raises:
+        DualarmError: ``scheduler`` cannot be reached, or a worker does not see ``out``.
     """
-    context = multiprocessing.get_context("spawn")  # no fork of a process with live threads
-    queue = context.Queue()
-    waiting = sorted(names, key=lambda n: -BY_NAME[n].seconds)
-    running: dict[str, Any] = {}
-    started: dict[str, float] = {}
     results: dict[str, PartResult] = {}
-
-    def receive(timeout: float | None, report: bool = True) -> None:
-        """Take the workers' messages (waiting up to ``timeout`` [s] for the first); progress goes to ``on_progress`` when ``report``."""
-        with contextlib.suppress(Empty):
-            while True:
-                message = queue.get(timeout=timeout) if timeout else queue.get_nowait()
-                timeout = None
-                if message[0] == "progress":
-                    if report:
-                        on_progress(*message[1:])
-                else:
-                    results[message[1].name] = message[1]
-
-    try:
-        while waiting or running:
-            while waiting and len(running) < jobs:
-                name = waiting.pop(0)
-                process = context.Process(target=_worker, args=(name, out, robot, queue), name=f"dualarm reproduce {name}")
-                running[name], started[name] = process, time.perf_counter()
-                with _sigint_ignored():
-                    process.start()
-            receive(0.2)
-            for name, process in list(running.items()):
-                if process.exitcode is None:
-                    continue
-                process.join()
-                receive(None)  # what it put before it ended
-                if name not in results:
-                    results[name] = PartResult(name, "failed", f"its worker process ended with exit code {process.exitcode}", time.perf_counter() - started[name], {})
-                del running[name]
-                on_progress(name, 1.0, results[name].status)
-    except BaseException:
-        started_processes = [p for p in running.values() if p.pid is not None]
-        for process in started_processes:
-            process.terminate()  # SIGTERM: the worker records its run as failed and exits
-        for process in started_processes:
-            while process.is_alive():
-                process.join(0.1)
-                receive(None, report=False)  # keep its queue flowing, so that it can exit
-        raise
-    finally:
-        queue.close()
-    return results
+    with connect(scheduler, jobs) as client:
+        workers = client.scheduler_info(n_workers=-1)["workers"]
+        blind = [workers[w]["name"] for w, sees in client.run(os.path.isfile, str(out / MARKER)).items() if not sees]
+        if blind:
+            raise DualarmError(_unseen(blind[0], out))
+        topic = f"{PROGRESS_TOPIC}-{uuid.uuid4().hex}"
+        messages: SimpleQueue[tuple[str, float, str]] = SimpleQueue()
+        client.subscribe_topic(topic, lambda event: messages.put(event[1]))
+        futures = {client.submit(_part_task, n, out, robot, topic, priority=round(BY_NAME[n].seconds), pure=False, key=f"reproduce-{n}-{uuid.uuid4().hex}"): n for n in names}
+        submitted = time.perf_counter()
+        pending = set(futures)
+        try:
+            while pending:
+                time.sleep(0.2)
+                done = {f for f in pending if f.done()}
+                pending -= done
+                while not messages.empty():
+                    if (message := messages.get())[0] not in results:  # a part's last messages may come after its result
+                        on_progress(*message)
+                for future in done:
+                    name = futures[future]
+                    try:
+                        results[name] = future.result()
+                    except Exception as exc:  # its worker died ALLOWED_FAILURES times
+                        results[name] = PartResult(name, "failed", f"{type(exc).__name__}: {excerpt(str(exc), 200)}", time.perf_counter() - submitted, {})
+                    on_progress(name, 1.0, results[name].status)
+        except BaseException:
+            stop_tasks(client, futures)
+            raise
+        return results, len(workers)
 
 
-def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgress, robot: Path = ROBOT) -> list[PartResult]:
-    """Run the parts ``names`` on the robot directory ``robot`` into ``out`` (after :func:`prepare`), ``jobs`` processes at a time (the longest first; ``jobs = 1`` runs them in this process), and write :data:`PARTS_FILE`.
+def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgress, robot: Path = ROBOT, scheduler: str | None = None) -> list[PartResult]:
+    """Run the parts ``names`` on the robot directory ``robot`` into ``out`` (after :func:`prepare`) and write :data:`PARTS_FILE`.
+
+    The parts run as Dask tasks, the longest first: on the cluster at ``scheduler``
+    (``tcp://HOST:PORT``; ``out`` must be on a file system its workers share), else on a
+    ``LocalCluster`` of ``jobs`` worker processes; ``jobs = 1`` without ``scheduler`` runs them in
+    this process, one after the other.
 
     A part the robot cannot run (:func:`~dualarm.reproduce.experiments.unavailable`) is not
     started: its status is :data:`NOT_AVAILABLE` and its error says why. Returns the results in
@@ -221,6 +190,7 @@ def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgres
 
     Raises:
         RobotModelError: ``robot`` is not a robot directory (before any part runs).
+        DualarmError: ``scheduler`` cannot be reached, or a worker does not see ``out``.
     """
     from dualarm.model.robot import load_robot
 
@@ -232,16 +202,19 @@ def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgres
             results[name] = PartResult(name, NOT_AVAILABLE, reason, 0.0, {})
             on_progress(name, 1.0, NOT_AVAILABLE)
     runnable = [n for n in names if n not in results]
-    if jobs == 1:
+    workers = jobs
+    if jobs == 1 and scheduler is None:
         for name in runnable:
             results[name] = _run_part(name, out, robot, functools.partial(on_progress, name))
             on_progress(name, 1.0, results[name].status)
     elif runnable:
-        results.update(_run_in_workers(out, runnable, robot, jobs, on_progress))
+        ran, workers = _run_on_cluster(out, runnable, robot, jobs, scheduler, on_progress)
+        results.update(ran)
     ordered = [results[n] for n in names]
     index = {
         "robot": {"name": name_of_robot, "directory": str(robot)},
-        "jobs": jobs,
+        "jobs": workers,
+        "scheduler": scheduler,
         "cpu_count": os.cpu_count(),
         "wall_time_s": time.perf_counter() - started,
         "parts": [asdict(r) for r in ordered],

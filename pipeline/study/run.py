@@ -26,7 +26,7 @@ A row (:data:`COLUMNS`, then the trial's features and every ``path.*`` and ``ik.
 
 - ``status``: the run's verdict, ``complete`` or ``violated`` (:mod:`dualarm.verdict`); ``failed``
   when the method raised (a :class:`~dualarm.errors.DualarmError`: no path, an unreachable start);
-  ``error`` for any other exception, or a trial whose worker died :data:`ALLOWED_FAILURES` times.
+  ``error`` for any other exception, or a trial whose worker died :data:`~dualarm.cluster.ALLOWED_FAILURES` times.
 - ``failed``: the method raised, or a repetition holds a failed IK sample (``ik.failed_reps``).
 - ``inconsistent``: the spec's definition (``[inconsistent]``): ``ik.rep_joint_deviation_max_rad``
   above ``joint_deviation_rad``, or (``failed_repetition``) ``failed``.
@@ -34,21 +34,18 @@ A row (:data:`COLUMNS`, then the trial's features and every ``path.*`` and ``ik.
 
 from __future__ import annotations
 
-import ctypes
 import json
 import math
-import os
-import sys
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager, nullcontext
+from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
-from functools import cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import pandas as pd
 
+from dualarm.cluster import LOCAL, connect, worker_name
 from dualarm.errors import DualarmError, NotSRSError, OutputError, RobotModelError, TaskFileError, excerpt
 from dualarm.quiet import c_output_silenced
 from dualarm.record.run_dir import claim_output_dir, write_whole
@@ -57,33 +54,14 @@ from dualarm.study.spec import StudySpec
 from dualarm.study.trials import MAX_DRAWS, Trial, reachable_trial, study_robot, trial
 from dualarm.version import __version__
 
-if TYPE_CHECKING:
-    from distributed import Client
-
 #: The files and directories of a study's directory (module docstring).
 SPEC_FILE, RESULTS, PARTS, TASKS, RUNS = "study.json", "trials.parquet", "parts", "tasks", "runs"
 #: How often ``trials.parquet`` is rewritten while the study runs [s].
 CONSOLIDATE_S = 30.0
 #: The stages a trial's method runs, unless it is recorded ``full`` (then every stage runs).
 STUDY_STAGES = ("path", "ik")
-#: Times a trial may take a worker down with it before it is a row with ``status = error``
-#: (Dask's ``distributed.scheduler.allowed-failures``).
-ALLOWED_FAILURES = 3
-#: Dask settings of the ``LocalCluster`` (:func:`connect`): a trial that took down
-#: :data:`ALLOWED_FAILURES` workers is an error; no statistical profiler in the workers (it samples
-#: every thread's stack every 10 ms: 5 % of a trial here); and the workers' environment without the
-#: ``MALLOC_TRIM_THRESHOLD_`` Dask puts there (see :func:`_undo_malloc_trim`, which covers other clusters' workers).
-LOCAL_CLUSTER_CONFIG = {
-    "distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
-    "distributed.worker.profile.enabled": False,
-    "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
-}
 #: The first columns of every row, in order; the trial's features and the metrics follow.
 COLUMNS = ("study", "seed", "robot", "trial", "method", "status", "failed", "inconsistent", "error", "violations", "wall_s", "worker")
-#: The ``worker`` of a trial run outside Dask.
-LOCAL = "local"
-#: glibc's ``mallopt`` parameters (malloc.h).
-M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
 #: The columns that differ from run to run of one study (times and where it ran): a comparison of two runs leaves them out.
 VARYING = ("wall_s", "worker", "ik.solve_time_mean_s", "ik.solve_time_median_s", "ik.solve_time_total_s")
 
@@ -135,8 +113,7 @@ def run_trial(spec: StudySpec, base_dir: str, index: int, record: str = "metrics
 
     from dualarm.errors import UnreachablePoseError
 
-    _undo_malloc_trim()
-    worker = _worker_name()
+    worker = worker_name()
     # In a worker, what C libraries print (CasADi's warnings, PyBullet's banners) would reach the study's terminal.
     with c_output_silenced() if worker != LOCAL else nullcontext():
         try:
@@ -192,36 +169,6 @@ def _method_row(spec: StudySpec, drawn: Trial, task: Any, method: str, record: s
     return {**row, **drawn.features, **metrics}
 
 
-@cache
-def _undo_malloc_trim() -> None:
-    """Once per process: give glibc's allocator back the thresholds Dask's nanny took away.
-
-    A nanny starts its worker with ``MALLOC_TRIM_THRESHOLD_=65536``, which also fixes glibc's mmap
-    threshold at 128 kB: every array above it (MC-Inverse's arm-angle search allocates MBs per
-    sample) is mapped and unmapped again. Measured on this machine: MC-Inverse 4.6x slower and a
-    trial's sys time 40 % of its wall time. Sets the mmap threshold to 32 MiB and the trim
-    threshold to 64 MiB (glibc's dynamic ceilings) with ``mallopt``; nothing elsewhere.
-    """
-    if "MALLOC_TRIM_THRESHOLD_" not in os.environ or not sys.platform.startswith("linux"):
-        return
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        libc.mallopt(M_MMAP_THRESHOLD, 32 * 2**20)
-        libc.mallopt(M_TRIM_THRESHOLD, 64 * 2**20)
-    except (OSError, AttributeError):  # not glibc
-        pass
-
-
-def _worker_name() -> str:
-    """The Dask worker running this task (its name), or :data:`LOCAL` outside one."""
-    try:
-        from distributed import get_worker
-
-        return str(get_worker().name)
-    except (ImportError, ValueError):
-        return LOCAL
-
-
 def _task_file(drawn: Trial, base_dir: str) -> dict[str, Any]:
     """The trial's task as a file in ``DIR/tasks``: its robot, if a directory, made absolute (it was relative to the spec)."""
     beside = Path(base_dir) / drawn.task["robot"]
@@ -234,7 +181,7 @@ def _identity(spec: StudySpec, index: int, method: str) -> dict[str, Any]:
 
 
 def error_rows(spec: StudySpec, index: int, error: str) -> tuple[dict[str, Any], ...]:
-    """The rows of a trial that produced none (its worker died :data:`ALLOWED_FAILURES` times): ``status = error``, without features (its draw is not known here)."""
+    """The rows of a trial that produced none (its worker died :data:`~dualarm.cluster.ALLOWED_FAILURES` times): ``status = error``, without features (its draw is not known here)."""
     rest = {"status": "error", "failed": True, "inconsistent": spec.inconsistent.failed_repetition, "error": excerpt(error, 400), "violations": "", "wall_s": math.nan, "worker": ""}
     return tuple({**_identity(spec, index, m), **rest} for m in spec.methods)
 
@@ -266,7 +213,7 @@ def _ordered(rows: pd.DataFrame) -> pd.DataFrame:
     return rows[[*COLUMNS, *features, *metrics]]
 
 
-def _claim(directory: Path, spec: StudySpec, resume: bool) -> Any:
+def claim_study_dir(directory: Path, spec: StudySpec, resume: bool) -> Any:
     """Claim ``directory`` for ``spec``: refuse another study's directory, and one with results unless ``resume``; returns the claim (a lock held while it lives)."""
     claimed = claim_output_dir(directory, "study")
     recorded = {"spec": spec.model_dump(mode="json"), "dualarm_version": __version__}
@@ -283,32 +230,6 @@ def _claim(directory: Path, spec: StudySpec, resume: bool) -> Any:
     else:
         write_whole(file, json.dumps(recorded, indent=2) + "\n")
     return claimed
-
-
-@contextmanager
-def connect(scheduler: str | None = None, workers: int | None = None) -> Iterator[Client]:
-    """A Dask client: of the cluster at ``scheduler`` (``tcp://HOST:PORT``), else of a new ``LocalCluster`` of ``workers`` processes (default one per core), one thread each; closed at the end.
-
-    Raises:
-        DualarmError: ``scheduler`` cannot be reached (within 30 s), or ``workers`` < 1.
-    """
-    import dask
-    from distributed import Client, LocalCluster
-
-    if scheduler is not None:  # its own allowed-failures holds (Dask's default is 3 too)
-        try:
-            client = Client(scheduler, timeout="30s")
-        except (OSError, TimeoutError, ValueError, TypeError) as exc:
-            raise DualarmError(f"--scheduler {excerpt(scheduler)}: no Dask scheduler answers there ({type(exc).__name__}: {excerpt(str(exc), 120)})") from None
-        with client:
-            yield client
-        return
-    n = workers if workers is not None else os.cpu_count() or 1
-    if n < 1:
-        raise DualarmError(f"--workers {n}: give at least 1 worker")
-    with dask.config.set(LOCAL_CLUSTER_CONFIG):
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40) as cluster, Client(cluster) as client:
-            yield client
 
 
 def run_study(
@@ -353,7 +274,7 @@ def run_study(
             except NotSRSError as exc:
                 raise TaskFileError(f"centre.reachable: the reach check needs S-R-S arms ({exc}); set [centre] reachable = false") from None
     directory = Path(out)
-    claim = _claim(directory, spec, resume)
+    claim = claim_study_dir(directory, spec, resume)
     done = read_study(directory)
     finished = set(done.groupby("trial")["method"].nunique().loc[lambda n: n == len(spec.methods)].index) if len(done) else set()
     todo = [i for i in range(spec.trials) if i not in finished]

@@ -141,3 +141,23 @@ def test_out_of_reach_pose_keeps_the_seed(humanoid):
     result = ik.nearest(far, seed)
     assert not result.ok
     assert np.array_equal(result.q, seed) and np.isnan(result.free_value)
+
+
+def test_a_repeated_path_is_solved_as_each_pose_alone(humanoid):
+    """Along the circle task (its poses met again in each repetition, their candidates then reused): every sample is :meth:`IkfastStyle.nearest` of its pose from the previous solution, computed here without reuse."""
+    from pathlib import Path
+
+    from dualarm.ik.pointwise import arm_problems, solve_pointwise
+    from dualarm.paths import build_reference
+    from dualarm.tasks import load_task
+
+    reference = build_reference(load_task(Path(__file__).resolve().parents[2] / "tasks" / "circle.toml"))
+    path = solve_pointwise("ikfast-style", humanoid, reference, "ready")
+    (arm,) = arm_problems(humanoid, reference, humanoid.configuration("ready", "q0"))
+    ik = IkfastStyle.of(arm.chain)
+    seed = arm.q0
+    index = [path.joint_names.index(j) for j in arm.chain.joint_names]
+    for k, target in enumerate(arm.targets):
+        result = ik.nearest(target, seed)
+        assert result.ok and np.array_equal(np.asarray(path.q)[k, index], result.q), k
+        seed = result.q

@@ -503,3 +503,29 @@ def test_carry_box_rotating_master_slave_velocity(tmp_path: Path):
     np.testing.assert_allclose(right.linear_velocity[1:-1], central_velocity(right.position, dt), rtol=0, atol=1e-3 * vmax)
     np.testing.assert_allclose(right.angular_velocity[1:-1], central_angular_velocity(right.rotation, dt), rtol=0, atol=1e-3 * wmax)
     np.testing.assert_allclose(left.angular_velocity[1:-1], central_angular_velocity(left.rotation, dt), rtol=0, atol=1e-3 * wmax)
+
+
+@pytest.mark.parametrize("name", ["circle", "carry_box"])
+def test_every_repetition_is_the_one_repetition_path_bit_for_bit(name):
+    """The path repeated R times is the path of the task with one repetition, its moves then again R - 1 times: the same targets, not merely within rounding."""
+    many = build_reference(load_task(TASKS / f"{name}.toml"))
+    once = build_reference(load_task(TASKS / f"{name}.toml", repetitions=1))
+    R, n = int(many.rep.max()) + 1, len(once) - 1
+    assert R > 1 and len(many) == 1 + R * n
+    for hand in many.hands:
+        for field in ("position", "rotation", "linear_velocity", "angular_velocity"):
+            ours, first = getattr(many.hands[hand], field), getattr(once.hands[hand], field)
+            assert np.array_equal(ours[0], first[0])
+            for r in range(R):
+                assert np.array_equal(ours[1 + r * n : 1 + (r + 1) * n], first[1:]), (hand, field, r)
+    assert np.array_equal(many.rep, np.r_[0, np.repeat(np.arange(R), n)]) and np.array_equal(many.segment[1:], np.tile(once.segment[1:], R))
+
+
+def test_a_task_without_moves_is_its_start_alone():
+    """The bowl grasp is planned, not drawn: its reference is the start pose of each hand, one sample."""
+    task = load_task(TASKS / "bowl_grasp.toml")
+    assert not task.spec.moves
+    reference = build_reference(task)
+    assert len(reference) == 1 and list(reference.rep) == [0] and list(reference.segment) == [0]
+    for hand, ref in reference.hands.items():
+        assert np.array_equal(ref.poses[0], task.start_pose(hand))

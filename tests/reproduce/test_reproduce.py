@@ -3,7 +3,7 @@
 Every "ours" figure of the report is recomputed here from the recordings with numpy, from the
 solvers' own arrays, or from PyBullet (independent forward kinematics); every "paper" figure is
 checked against the papers' text (see docs/papers.md), copied here by hand. One reproduction of the
-cheap parts (Table I, the ball game with pinv and TV-GDD, two at a time in a process pool) is
+cheap parts (Table I, the ball game with pinv and TV-GDD, two at a time on a Dask LocalCluster) is
 shared by most tests.
 """
 
@@ -164,7 +164,7 @@ def wrapped(a) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def repro(tmp_path_factory):
-    """`dualarm reproduce --only table-i,ball-game-pinv,ball-game-tvgdd --jobs 2` (a process pool)."""
+    """`dualarm reproduce --only table-i,ball-game-pinv,ball-game-tvgdd --jobs 2` (a Dask LocalCluster of two workers)."""
     out = tmp_path_factory.mktemp("reproduce") / "reproduction"
     result = reproduce(out, ",".join(CHOSEN), 2)
     assert result.exit_code == 0, (result.output, result.exception)
@@ -787,3 +787,49 @@ def test_a_claim_resting_on_a_violated_mc_inverse_run_is_contradicted(carry_box_
     assert mc.contradicted and mc.agrees is False and mc.verdict.startswith("mc-inverse: violated (ik: velocity of ")
     box = next(c for c in consistency_claims("carry_box", carry_box_runs) if "MC-Inverse repeats" in c.claim)
     assert not box.contradicted and box.verdict == "mc-inverse: complete"
+
+
+def test_on_a_separately_started_cluster_the_parts_are_those_of_a_local_one(repro, tmp_path):
+    """`--scheduler`: a scheduler and two `dask worker` processes started apart on 127.0.0.1 (two nodes sharing the file system) run the parts; Table I and the pinv run's metrics are the shared reproduction's (a LocalCluster)."""
+    from dualarm.bench.study import loopback_cluster
+    from dualarm.study.run import VARYING
+
+    out = tmp_path / "cluster"
+    with loopback_cluster(2, tmp_path) as address:
+        result = runner.invoke(app, ["reproduce", "--out", str(out), "--only", "table-i,ball-game-pinv", "--scheduler", address])
+    assert result.exit_code == 0, (result.output, result.exception)
+    index = json.loads((out / "parts.json").read_text())
+    assert index["scheduler"] == address and index["jobs"] == 2
+    assert [p["status"] for p in index["parts"]] == ["complete", "complete"]
+    assert json.loads((out / "table_i.json").read_text()) == json.loads((repro.out / "table_i.json").read_text())
+    (run,) = index["parts"][0]["outputs"]["runs"]
+    ours, local = (json.loads((d / "metrics.json").read_text()) for d in (out / run, repro.out / repro.parts["ball-game-pinv"]["outputs"]["runs"][0]))
+    assert {k: v for k, v in ours.items() if k not in VARYING} == {k: v for k, v in local.items() if k not in VARYING}
+
+
+def test_a_worker_that_does_not_see_out_is_refused_in_one_line(tmp_path):
+    """A worker in its own mount namespace, where a tmpfs hides ``out``'s directory (a node without the shared file system): exit 2, one line naming the worker and why."""
+    import subprocess
+    import sys
+
+    from distributed import Client
+
+    from dualarm.bench.study import loopback_cluster
+
+    hidden = tmp_path / "hidden"
+    hidden.mkdir()
+    if subprocess.run(["unshare", "--mount", "true"], capture_output=True).returncode != 0:
+        pytest.skip("needs unshare --mount (root, Linux)")
+    with loopback_cluster(0, tmp_path) as address:
+        worker = f"mount -t tmpfs none {shlex.quote(str(hidden))} && exec {shlex.quote(sys.executable)} -m distributed.cli.dask_worker {address} --nthreads 1 --name elsewhere --no-dashboard"
+        process = subprocess.Popen(["unshare", "--mount", "--propagation", "private", "sh", "-c", worker], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            with Client(address, timeout="60s") as client:
+                client.wait_for_workers(1, timeout=60)
+            result = runner.invoke(app, ["reproduce", "--out", str(hidden / "repro"), "--only", "table-i", "--scheduler", address])
+        finally:
+            process.terminate()
+            process.wait(timeout=30)
+    assert result.exit_code == 2, result.output
+    assert error_lines(result) == [f"error: worker elsewhere does not see {hidden / 'repro'}: with --scheduler, --out must be on a file system the workers share"]
+    assert not (hidden / "repro" / "parts.json").exists()

@@ -16,9 +16,10 @@ import pandas as pd
 import pytest
 
 from dualarm.bench.study import loopback_cluster
+from dualarm.cluster import connect
 from dualarm.errors import OutputError, StageError, TaskFileError, UnreachablePoseError
 from dualarm.run import run_task
-from dualarm.study.run import PARTS, RESULTS, TASKS, VARYING, connect, read_study, run_study, run_trial
+from dualarm.study.run import PARTS, RESULTS, TASKS, VARYING, read_study, run_study, run_trial
 from dualarm.study.spec import study_from_toml
 from dualarm.study.trials import reachable_trial, trial, within_reach
 from dualarm.tasks.load import load_task
@@ -209,3 +210,21 @@ def test_a_robot_the_reach_check_cannot_use_is_refused_before_anything_is_writte
     with pytest.raises(TaskFileError, match=r"centre.reachable: the reach check needs S-R-S arms .*set \[centre\] reachable = false"):
         run_study(spec, REPO, tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def _affinity() -> list[list[int]]:
+    """The cores of every thread of this process, as the OS has them."""
+    return [sorted(os.sched_getaffinity(int(t))) for t in os.listdir("/proc/self/task")]
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2 or not Path("/proc/self/task").exists(), reason="needs 2 cores and Linux's per-thread affinity")
+def test_local_workers_are_each_pinned_to_a_core_of_their_own():
+    """A LocalCluster of 2 workers: every thread of worker i, and a task's thread, runs on core i only (read back from the OS); the client's process is left alone."""
+    cores = sorted(os.sched_getaffinity(0))[:2]
+    with connect(workers=2) as client:
+        threads = client.run(_affinity)
+        tasks = [client.submit(lambda: sorted(os.sched_getaffinity(0)), pure=False, workers=[w]).result() for w in threads]
+        names = {w: info["name"] for w, info in client.scheduler_info(n_workers=-1)["workers"].items()}
+    assert {names[w]: {tuple(a) for a in affinity} for w, affinity in threads.items()} == {0: {(cores[0],)}, 1: {(cores[1],)}}
+    assert sorted(tasks) == [[cores[0]], [cores[1]]]
+    assert len(os.sched_getaffinity(0)) >= 2
