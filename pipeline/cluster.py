@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import logging
 import os
 import signal
 import sys
@@ -93,6 +94,18 @@ def local_cores(workers: int) -> tuple[int, ...]:
     return cores if workers <= len(cores) else ()
 
 
+def _without_gc_diagnosis() -> None:
+    """Remove the garbage-collection callback a Dask scheduler or worker installs in its process (it logs GC times at INFO level only).
+
+    A stop's or a signal's exception raised inside it (the callback runs wherever a collection
+    starts) leaves its timer broken, and its next call prints "Exception ignored in: ...
+    GCDiagnosis._gc_callback" with a traceback (seen in the interrupted-reproduction test).
+    """
+    from distributed.gc import disable_gc_diagnosis
+
+    disable_gc_diagnosis(force=True)
+
+
 class WorkerSetup(WorkerPlugin):
     """What each worker does once, as it starts (a Dask ``WorkerPlugin``; its ``setup`` runs in the worker's main thread).
 
@@ -114,6 +127,7 @@ class WorkerSetup(WorkerPlugin):
         """Set ``worker``'s process up (class docstring)."""
         _undo_malloc_trim()
         sys.unraisablehook = _unraisable
+        _without_gc_diagnosis()
         if self.local and threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, signal.SIG_IGN)
         if self.cores and isinstance(worker.name, int):
@@ -153,8 +167,12 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
     if n < 1:
         raise DualarmError(f"--workers {n}: give at least 1 worker")
     with dask.config.set(LOCAL_CLUSTER_CONFIG):
-        # dashboard ":0": the scheduler's HTTP routes on a free port (on 8787, a warning when it is taken); bokeh's dashboard is not installed
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=40) as cluster, Client(cluster) as client:
+        # dashboard ":0": the scheduler's HTTP routes on a free port (on 8787, a warning when it is taken); bokeh's dashboard is not installed.
+        # Dask's own logs silenced up to ERROR: a task's failure comes back as its exception (a failed row or part), and an
+        # interrupted command's workers, stopped as the scheduler closes, logged "Failed to communicate with scheduler
+        # during heartbeat" with a traceback (seen once in CI, under SIGTERM).
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
+            _without_gc_diagnosis()  # this process's, which the LocalCluster's scheduler installed
             client.register_plugin(WorkerSetup(local=True, cores=local_cores(n)))
             yield client
 

@@ -74,17 +74,19 @@ def stop_requested() -> bool:
 
 
 @contextmanager
-def held() -> Iterator[None]:
+def held() -> Iterator[list[int]]:
     """SIGINT and SIGTERM (in the main thread), or a :func:`stop` (in another), held back until the block ends, then raised.
 
     A signal's exception raised inside ``rr.RecordingStream()`` leaves a half-built stream whose
-    ``__del__`` prints a traceback.
+    ``__del__`` prints a traceback; one raised inside Dask's garbage-collection callback leaves it
+    broken, and its next call prints one. Yields the signals held so far (a list the block may
+    watch, to end early; always empty outside the main thread).
     """
     if threading.current_thread() is threading.main_thread():
         signals: list[int] = []
         previous = {signum: signal.signal(signum, lambda signum, frame: signals.append(signum)) for signum in (signal.SIGINT, signal.SIGTERM)}
         try:
-            yield
+            yield signals
         finally:
             for signum, handler in previous.items():
                 signal.signal(signum, handler)
@@ -95,7 +97,7 @@ def held() -> Iterator[None]:
     with _lock:
         _holding.add(thread)
     try:
-        yield
+        yield []
     finally:
         with _lock:
             _holding.discard(thread)

@@ -59,7 +59,7 @@ def test_a_signalled_run_is_kept_as_failed(tmp_path, signum, code, line, error):
     stdout, stderr = process.communicate(timeout=PATIENCE_S)
 
     assert process.returncode == code, stderr
-    assert _error_lines(stderr) == [line] and "Traceback" not in stderr + stdout
+    assert _error_lines(stderr) == [line] and "Traceback" not in stderr + stdout, stderr
     (run,) = (out / "triangle").iterdir()
     manifest = json.loads((run / "manifest.json").read_text())
     assert manifest["status"] == "failed" and manifest["error"].startswith(error) and manifest["run_id"] == run.name
@@ -114,7 +114,7 @@ def test_an_interrupted_reproduction_stops_its_workers(tmp_path, signum, group, 
             process.communicate()
 
     assert process.returncode == code, stderr
-    assert _error_lines(stderr) == [line] and "Traceback" not in stderr + stdout
+    assert _error_lines(stderr) == [line] and "Traceback" not in stderr + stdout, stderr
     assert not [pid for pid, started in workers.items() if _alive(pid, started)]
     assert not _partials(out)
     runs = list((out / "runs" / "ball_game").iterdir())

@@ -29,7 +29,7 @@ from queue import SimpleQueue
 
 from dualarm.cluster import connect, stop_tasks
 from dualarm.errors import DualarmError, Terminated, excerpt
-from dualarm.interrupt import stop_requested, stoppable
+from dualarm.interrupt import held, stop_requested, stoppable
 from dualarm.record.run_dir import MARKER, OutputDir, claim_output_dir, write_whole
 from dualarm.reproduce.experiments import BY_NAME, PARTS, ROBOT, Outputs, unavailable
 
@@ -156,20 +156,22 @@ def _run_on_cluster(out: Path, names: Sequence[str], robot: Path, jobs: int, sch
         submitted = time.perf_counter()
         pending = set(futures)
         try:
-            while pending:
-                time.sleep(0.2)
-                done = {f for f in pending if f.done()}
-                pending -= done
-                while not messages.empty():
-                    if (message := messages.get())[0] not in results:  # a part's last messages may come after its result
-                        on_progress(*message)
-                for future in done:
-                    name = futures[future]
-                    try:
-                        results[name] = future.result()
-                    except Exception as exc:  # its worker died ALLOWED_FAILURES times
-                        results[name] = PartResult(name, "failed", f"{type(exc).__name__}: {excerpt(str(exc), 200)}", time.perf_counter() - submitted, {})
-                    on_progress(name, 1.0, results[name].status)
+            # Ctrl-C and SIGTERM are raised here, between polls, not inside Dask's code in this process (its scheduler's)
+            with held() as signalled:
+                while pending and not signalled:
+                    time.sleep(0.2)
+                    done = {f for f in pending if f.done()}
+                    pending -= done
+                    while not messages.empty():
+                        if (message := messages.get())[0] not in results:  # a part's last messages may come after its result
+                            on_progress(*message)
+                    for future in done:
+                        name = futures[future]
+                        try:
+                            results[name] = future.result()
+                        except Exception as exc:  # its worker died ALLOWED_FAILURES times
+                            results[name] = PartResult(name, "failed", f"{type(exc).__name__}: {excerpt(str(exc), 200)}", time.perf_counter() - submitted, {})
+                        on_progress(name, 1.0, results[name].status)
         except BaseException:
             stop_tasks(client, futures)
             raise
