@@ -50,7 +50,6 @@ def stoppable(token: str) -> Iterator[None]:
     finally:
         with _lock:
             del _running[thread]
-            _pending.discard(thread)
             _raise_in(thread, None)  # a stop that came as the block ended is not raised outside it
 
 
