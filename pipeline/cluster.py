@@ -32,6 +32,8 @@ if TYPE_CHECKING:
 
 __all__ = ["ALLOWED_FAILURES", "LOCAL", "WORKER_ENVIRON", "WorkerSetup", "connect", "local_cores", "pin_to_core", "stop_tasks", "worker_name"]
 
+#: How long a client tries to reach a scheduler named by its address [s] (Dask retries a refused connection until then).
+CONNECT_TIMEOUT_S = 30.0
 #: Times a task may take a worker down with it before it fails (Dask's ``distributed.scheduler.allowed-failures``).
 ALLOWED_FAILURES = 3
 #: The environment a ``LocalCluster``'s worker starts with: what Dask's nanny sets, but for
@@ -149,14 +151,14 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
     """A Dask client: of the cluster at ``scheduler`` (``tcp://HOST:PORT``), else of a new ``LocalCluster`` of ``workers`` processes (default one per core), one thread each; closed at the end.
 
     Raises:
-        DualarmError: ``scheduler`` cannot be reached (within 30 s), or ``workers`` < 1.
+        DualarmError: ``scheduler`` cannot be reached (within :data:`CONNECT_TIMEOUT_S`), or ``workers`` < 1.
     """
     import dask
     from distributed import Client, LocalCluster
 
     if scheduler is not None:  # its own allowed-failures holds (Dask's default is 3 too)
         try:
-            client = Client(scheduler, timeout="30s")
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError, TypeError) as exc:
             raise DualarmError(f"--scheduler {excerpt(scheduler)}: no Dask scheduler answers there ({type(exc).__name__}: {excerpt(str(exc), 120)})") from None
         with client:

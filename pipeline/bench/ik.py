@@ -5,21 +5,23 @@ forward kinematics of a configuration drawn uniformly within the joint limits (f
 every pose is reachable, and its arm angle psi is that configuration's (eq 1 of MC-Inverse; on an
 arm of the SEW solver's family, its stereographic SEW angle, :mod:`dualarm.ik.sew`).
 
-On an S-R-S arm the analytic rows are MC-Inverse's; on an arm of the SEW family they are:
+On an S-R-S arm the analytic rows are MC-Inverse's and IK-Geo's (an S-R-S arm is of the SEW
+solver's R-2R-R-3R family); on an arm of the SEW family they are:
 
 - SEW called singly: :func:`dualarm.ik.sew.solve` per pose, on the first :data:`SEW_SINGLE_POSES`
   poses only (each call runs the whole search with its per-step overhead).
 - SEW batched: :func:`dualarm.ik.sew.solve_many` over all poses in one call; time per pose.
 - IK-Geo, the peer (the ``ik-geo`` package): with one joint fixed at the original configuration's
   (q7 on the Panda's family, q1 on the R-2R-R-3R family), the other six are IK-Geo's
-  ``spherical_two_intersecting`` robot (:func:`ik_geo_call`); one call per pose (the robot
-  built in the call, since it depends on the fixed joint; its answer turned into rows after).
+  ``spherical_two_intersecting`` robot (:func:`ik_geo_problem`); one ``get_ik`` call per pose on
+  inputs prepared before the timing (on the Panda's family the robot is built in the call, since it
+  depends on the fixed joint; its answer turned into rows after).
 
 Success for SEW and IK-Geo: the original configuration among the exact solutions to
 :data:`SEW_MATCH_TOLERANCE_RAD` (near a double root a solution is determined only so far).
 
 - MC-Inverse called singly: one Python call of :meth:`McInverse.solve` per pose (all 8
-  candidates); time per call.
+  candidates, its input checks included); time per call.
 - MC-Inverse batched: :meth:`McInverse.solve_many` over all poses in one call, after one warm-up
   call (the first builds the mapped Function); time per pose, the call's time divided by the
   poses, over :data:`BATCH_REPEATS` calls (mapped calls spread over the machine's cores, see
@@ -77,8 +79,9 @@ IK_GEO = "IK-Geo (one joint fixed)"
 SEW_SINGLE_POSES = 100
 #: Largest joint difference that counts as finding the original configuration, for SEW and IK-Geo [rad].
 SEW_MATCH_TOLERANCE_RAD = 1e-6
-#: Targets of the issue: batched MC-Inverse time per pose [s] and DLS-SVD success rate [1].
-TARGET_BATCHED_S = 5e-6
+#: Targets: MC-Inverse time per pose called singly and batched [s] (issue 22), DLS-SVD success rate [1].
+TARGET_SINGLE_S = 5e-6
+TARGET_BATCHED_S = 1e-6
 TARGET_DLS_SUCCESS = 0.999
 
 #: ``progress(name, done, total)``: ``done`` of ``total`` poses of the solver ``name`` measured.
@@ -171,8 +174,8 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
             of the poses, and when it ends.
 
     Returns:
-        Rows in the order MC-Inverse single, MC-Inverse batched (or SEW single, SEW batched,
-        IK-Geo), DLS-SVD, TRAC-IK, PyBullet.
+        Rows in the order MC-Inverse single, MC-Inverse batched (or SEW single, SEW batched),
+        IK-Geo, DLS-SVD, TRAC-IK, PyBullet.
 
     Raises:
         ValueError: ``poses`` below 1.
@@ -204,7 +207,7 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
         row, ok = _timed(name, poses, solve, report)
         return replace(row, success_rate=float(np.mean(ok)))
 
-    rows = _mc_rows(mc, T, psi, Q, per_pose, report) if mc is not None else _sew_rows(robot, arm, T, psi, Q, report)
+    rows = _mc_rows(mc, T, psi, Q, per_pose, report) + _ik_geo_rows(robot, arm, T, Q, report) if mc is not None else _sew_rows(robot, arm, T, psi, Q, report)
 
     # 3. Iterative solvers from perturbed seeds.
     dls = DlsSolver.of(robot, chain.base, [chain.tip])
@@ -271,7 +274,7 @@ def _mc_rows(mc: "McInverse", T: np.ndarray, psi: np.ndarray, Q: np.ndarray, per
 
 def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndarray, report: Progress) -> list[IkBenchRow]:
     """SEW called singly (the first :data:`SEW_SINGLE_POSES` poses) and batched, and IK-Geo with one joint fixed (the module docstring)."""
-    from dualarm.ik.sew import UPPER_ARM_FAMILY, sew_chain, solve, solve_many
+    from dualarm.ik.sew import sew_chain, solve, solve_many
     from dualarm.ik.sew_path import sew_angle_of
     from dualarm.tasks.schema import ArmAngle
 
@@ -279,13 +282,10 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
     sew_arm, sew = sew_chain(chain), sew_angle_of(ArmAngle())
     poses = len(Q)
 
-    def found(q_all: np.ndarray, q: np.ndarray) -> bool:
-        return bool(len(q_all)) and float(np.abs(np.angle(np.exp(1j * (np.asarray(q_all) - q)))).max(axis=1).min()) <= SEW_MATCH_TOLERANCE_RAD
-
     rows = []
     single = min(poses, SEW_SINGLE_POSES)
     row, answers = _timed(SEW_SINGLE, single, lambda i: solve(sew_arm, T[i], float(psi[i]), sew).q, report)
-    success = float(np.mean([found(a, q) for a, q in zip(answers, Q)]))
+    success = float(np.mean([_found(a, q) for a, q in zip(answers, Q)]))
     rows.append(replace(row, success_rate=success, note=f"the first {single} poses; original q among the solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad"))
 
     report(SEW_BATCHED, 0, poses)
@@ -294,15 +294,34 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
     elapsed = (time.perf_counter() - start) / poses
     report(SEW_BATCHED, poses, poses)
     counts = np.array([len(b.q) for b in batched])
-    success = float(np.mean([found(b.q, q) for b, q in zip(batched, Q)]))
+    success = float(np.mean([_found(b.q, q) for b, q in zip(batched, Q)]))
     rows.append(IkBenchRow(SEW_BATCHED, poses, elapsed, elapsed, success, f"one call; {counts.min()}-{counts.max()} solutions per pose (median {np.median(counts):.0f})"))
 
-    row, answers = _timed(IK_GEO, poses, lambda i: ik_geo_call(sew_arm, T[i], Q[i]), report)
-    success = float(np.mean([found(np.array(ik_geo_rows(sew_arm, a, q)).reshape(-1, 7), q) for a, q in zip(answers, Q)]))
+    return rows + _ik_geo_rows(robot, arm, T, Q, report)
+
+
+def _ik_geo_rows(robot: Robot, arm: str, T: np.ndarray, Q: np.ndarray, report: Progress) -> list[IkBenchRow]:
+    """IK-Geo with one joint fixed at the original configuration's, one call per pose (the module docstring): the analytic peer, on an S-R-S arm (an R-2R-R-3R arm whose first three axes meet) as on the SEW family."""
+    import ik_geo
+
+    from dualarm.ik.sew import UPPER_ARM_FAMILY, sew_chain
+
+    sew_arm = sew_chain(robot.hand_chain(arm))
+    problems = [ik_geo_problem(sew_arm, T[i], Q[i]) for i in range(len(Q))]  # made before the timing, as the other rows' poses
+    if sew_arm.family == UPPER_ARM_FAMILY:  # the robot depends on the fixed joint: built in each call
+        row, answers = _timed(IK_GEO, len(Q), lambda i: ik_geo.Robot.spherical_two_intersecting(*problems[i][:2]).get_ik(*problems[i][2:]), report)
+    else:
+        robot_6r = ik_geo.Robot.spherical_two_intersecting(*problems[0][:2])
+        row, answers = _timed(IK_GEO, len(Q), lambda i: robot_6r.get_ik(*problems[i][2:]), report)
+    success = float(np.mean([_found(np.array(ik_geo_rows(sew_arm, a, q)).reshape(-1, 7), q) for a, q in zip(answers, Q)]))
     fixed = "q7, joints 6..1" if sew_arm.family == UPPER_ARM_FAMILY else "q1, joints 2..7"
-    note = f"ik-geo's spherical_two_intersecting with {fixed} fixed at the original's; original q among its exact solutions"
-    rows.append(replace(row, success_rate=success, note=note))
-    return rows
+    note = f"ik-geo's spherical_two_intersecting with {fixed} fixed at the original's; original q among its exact solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad"
+    return [replace(row, success_rate=success, note=note)]
+
+
+def _found(q_all: np.ndarray, q: np.ndarray) -> bool:
+    """Whether ``q`` (7,) [rad] is among the rows of ``q_all`` to :data:`SEW_MATCH_TOLERANCE_RAD` (angles compared modulo 2 pi)."""
+    return bool(len(q_all)) and float(np.abs(np.angle(np.exp(1j * (np.asarray(q_all) - q)))).max(axis=1).min()) <= SEW_MATCH_TOLERANCE_RAD
 
 
 def ik_geo_solutions(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list[np.ndarray]:
@@ -311,16 +330,23 @@ def ik_geo_solutions(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list[np.n
 
 
 def ik_geo_call(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list:
-    """IK-Geo's answer (its list of (6 joints, least-squares flag)) for the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,).
+    """IK-Geo's answer (its list of (6 joints, least-squares flag)) for the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,): :func:`ik_geo_problem`'s robot built and solved."""
+    import ik_geo
+
+    axes, offsets, R, p = ik_geo_problem(arm, T, q)
+    return ik_geo.Robot.spherical_two_intersecting(axes, offsets).get_ik(R, p)
+
+
+def ik_geo_problem(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> tuple[list, list, list, list]:
+    """IK-Geo's 6R robot (its axes and offsets) and the rotation and position it solves, for the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,).
 
     Both SEW families are IK-Geo's ``spherical_two_intersecting`` 6R (the ``ik-geo`` package: axes
     1 and 2 meet, axes 4-6 meet) once one joint is fixed: 3R-R-2R-R with q7 fixed, joints 6..1
-    reversed (joints 6, 5 meet; 3, 2, 1 meet at the shoulder), the pose inverted; R-2R-R-3R with q1
-    fixed, joints 2..7 (2, 3 meet; 5, 6, 7 meet), joint 1's turn about its axis through S undone.
+    reversed (joints 6, 5 meet; 3, 2, 1 meet at the shoulder), the pose inverted, the robot
+    depending on q7; R-2R-R-3R (an S-R-S arm among them) with q1 fixed, joints 2..7 (2, 3 meet; 5,
+    6, 7 meet), joint 1's turn about its axis through S undone, the robot the same for every q1.
     ik-geo reads a rotation's rows as its columns.
     """
-    import ik_geo
-
     from dualarm.ik.sew import UPPER_ARM_FAMILY
 
     S, E, C, W = arm.shoulder, arm.elbow, arm.crossing, arm.wrist
@@ -328,11 +354,11 @@ def ik_geo_call(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list:
         R67 = _rotation(arm.axes[6], float(q[6]))
         P = [C - (W + R67 @ arm.tool), np.zeros(3), E - C, S - E, np.zeros(3), np.zeros(3), -S]  # from the 6R's tip at q = 0
         R06 = T[:3, :3] @ arm.tool_rotation.T @ R67.T
-        return ik_geo.Robot.spherical_two_intersecting((-arm.axes[:6][::-1]).tolist(), np.array(P).tolist()).get_ik(R06.tolist(), (-R06.T @ T[:3, 3]).tolist())
+        return (-arm.axes[:6][::-1]).tolist(), np.array(P).tolist(), R06.tolist(), (-R06.T @ T[:3, 3]).tolist()
     R1 = _rotation(arm.axes[0], float(q[0]))
     P = [C, np.zeros(3), E - C, W - E, np.zeros(3), np.zeros(3), arm.tool]
     R = R1.T @ T[:3, :3] @ arm.tool_rotation.T  # the 6R's rotation, without the tip's at q = 0
-    return ik_geo.Robot.spherical_two_intersecting(arm.axes[1:].tolist(), np.array(P).tolist()).get_ik(R.T.tolist(), (R1.T @ (T[:3, 3] - S) + S).tolist())
+    return arm.axes[1:].tolist(), np.array(P).tolist(), R.T.tolist(), (R1.T @ (T[:3, 3] - S) + S).tolist()
 
 
 def _rotation(k: np.ndarray, angle: float) -> np.ndarray:

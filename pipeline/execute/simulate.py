@@ -242,6 +242,9 @@ class _Player:
         self_contacts, environment_contacts, expected_contacts = (np.zeros(K, int) for _ in range(3))
         events: list[ContactEvent] = []
         link_name = {i: n for n, i in sim.link_index.items()}
+        targets = np.hstack([command, np.broadcast_to(held, (K, len(held)))]).tolist()  # one list per step, made at once
+        target_velocities = np.hstack([command_velocity, np.zeros((K, len(held)))]).tolist()
+        position_gains, velocity_gains = [settings.position_gain] * len(index), [settings.velocity_gain] * len(index)
         start = time.monotonic()
         for k in range(K):
             if k == 0:  # the state the motion starts from: measured, with its contacts, before any step
@@ -251,11 +254,11 @@ class _Player:
                     body,
                     index,
                     pb.POSITION_CONTROL,
-                    targetPositions=[*command[k], *held],
-                    targetVelocities=[*command_velocity[k], *np.zeros(len(held))],
+                    targetPositions=targets[k],
+                    targetVelocities=target_velocities[k],
                     forces=effort,
-                    positionGains=[settings.position_gain] * len(index),
-                    velocityGains=[settings.velocity_gain] * len(index),
+                    positionGains=position_gains,
+                    velocityGains=velocity_gains,
                     physicsClientId=client,
                 )
                 pb.stepSimulation(physicsClientId=client)

@@ -1,4 +1,4 @@
-"""Evaluating a CasADi Function over many inputs in mapped calls.
+"""Evaluating a CasADi Function over many inputs in mapped calls, or on one input without CasADi's Python call path.
 
 A per-item Function (an analytic IK solver's ``(T (4x4) hand pose [m], x (scalar)) -> (Q (7xC)
 [rad], reason (1xC))`` with x the arm angle or a free joint value, or a piece of the SEW search) is
@@ -110,3 +110,28 @@ class BatchedCandidates(Batched):
         poses = np.asarray(poses, dtype=float).reshape(-1, 4, 4)
         Q, reason = self(poses, np.broadcast_to(np.asarray(x, dtype=float), poses.shape[:1]))
         return Q.transpose(0, 2, 1), reason[:, 0].astype(int)
+
+
+class Single:
+    """``function`` on one input through a ``FunctionBuffer``: the inputs copied into preallocated arrays, every output written into one array, no conversion of CasADi types (a plain call costs ~30 µs more). Not thread-safe: one set of arrays."""
+
+    def __init__(self, function: cs.Function):
+        self._buffer, self._evaluate = function.buffer()
+        self._ins = [np.zeros(function.numel_in(i)) for i in range(function.n_in())]
+        self._views = [a.reshape(function.size_in(i)[::-1]).T for i, a in enumerate(self._ins)]  # (r, c) over column-major storage
+        sizes = [function.numel_out(i) for i in range(function.n_out())]
+        self._out = np.zeros(sum(sizes))
+        for i, array in enumerate(self._ins):
+            self._buffer.set_arg(i, array.data)
+        for i, start in enumerate(np.cumsum([0, *sizes[:-1]])):
+            self._buffer.set_res(i, self._out[start : start + sizes[i]].data)
+
+    def __call__(self, *inputs: np.ndarray | float) -> np.ndarray:
+        """Evaluate on one value per Function input (of its shape, or a number for a scalar); returns the outputs one after the other, each flat in column-major order, in a new array."""
+        for flat, view, value in zip(self._ins, self._views, inputs):
+            if flat.size == 1:
+                flat[0] = value
+            else:
+                view[...] = value
+        self._evaluate()
+        return self._out.copy()

@@ -66,6 +66,7 @@ import casadi as cs
 import numpy as np
 
 from dualarm.arrays import frozen
+from dualarm.compiled import compiled
 from dualarm.errors import StageError
 from dualarm.model.kinematics import chain_frames, geometric_jacobian
 from dualarm.model.robot import Robot
@@ -263,12 +264,14 @@ class DlsSolver:
             J[:, columns] = Jc
             blocks.append(J)
         # J^T column-major is J row-major: the buffer fills a C-ordered (6 h, n) array.
-        evaluate = cs.Function(
-            f"dls_{base}_{'_'.join(tips)}",
-            [x],
-            [cs.vertcat(*dx), cs.vertcat(*position_errors, *angles), cs.densify(cs.vertcat(*blocks).T)],
-            ["x"],
-            ["dx", "errors", "JT"],
+        evaluate = compiled(
+            cs.Function(
+                f"dls_{base}_{'_'.join(tips)}",
+                [x],
+                [cs.vertcat(*dx), cs.vertcat(*position_errors, *angles), cs.densify(cs.vertcat(*blocks).T)],
+                ["x"],
+                ["dx", "errors", "JT"],
+            )
         )
         lower, upper = robot.lower_upper(names)
         return cls(

@@ -33,6 +33,7 @@ from functools import cache, cached_property
 import casadi as cs
 import numpy as np
 
+from dualarm.compiled import compiled
 from dualarm.ik.batched import BatchedCandidates
 from dualarm.ik.mc_inverse import (
     CANDIDATES,
@@ -100,7 +101,7 @@ def _candidates(kin: SrsKinematics, k: list[np.ndarray], tip0: np.ndarray, lower
                 outside = cs.logic_or(cs.mmax(q - upper) > 0, cs.mmax(lower - q) > 0)
                 reasons.append(cs.if_else(out_of_reach, OUT_OF_REACH, cs.if_else(singular, SINGULAR, cs.if_else(outside, OUTSIDE_LIMITS, VALID))))
                 columns.append(q)
-    return cs.Function("ikfast_style", [T, theta3], [cs.horzcat(*columns), cs.horzcat(*reasons)], ["T", "theta3"], ["Q", "reason"], {"cse": True})
+    return compiled(cs.Function("ikfast_style", [T, theta3], [cs.horzcat(*columns), cs.horzcat(*reasons)], ["T", "theta3"], ["Q", "reason"], {"cse": True}))
 
 
 @dataclass(frozen=True)

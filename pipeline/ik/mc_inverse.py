@@ -24,8 +24,8 @@ The solver requires consecutive shoulder axes and consecutive wrist axes to be p
 in every S-R-S arm of the papers. A chain that is not S-R-S is refused with the axes at fault
 named.
 
-Everything is one CasADi Function, ``(T (4x4), psi) -> (Q (7x8), reason (1x8))``, which can be
-mapped over a whole path in one call.
+Everything is one CasADi Function, ``(T (4x4), psi) -> (Q (7x8), reason (1x8))``, compiled to
+machine code (:mod:`dualarm.compiled`), which can be mapped over a whole path in one call.
 """
 
 from __future__ import annotations
@@ -37,9 +37,10 @@ from functools import cache, cached_property
 import casadi as cs
 import numpy as np
 
-from dualarm.arrays import finite_array, joint_vector, rigid_transforms
+from dualarm.arrays import RIGID_TOLERANCE, finite_array, joint_vector, rigid_transforms
+from dualarm.compiled import compiled
 from dualarm.errors import InvalidArgumentError, NoSolutionFound, NotSRSError
-from dualarm.ik.batched import BatchedCandidates
+from dualarm.ik.batched import Batched, BatchedCandidates, Single
 from dualarm.ik.subproblems import elbow, euler, into_limits, rotate, rotation, triad, zero_axes
 from dualarm.model.robot import Chain, Robot
 from dualarm.model.srs import SrsKinematics
@@ -53,6 +54,9 @@ VALID, OUT_OF_REACH, SINGULAR, OUTSIDE_LIMITS = 0, 1, 2, 3
 #: SINGULAR: the elbow is straight, the shoulder-wrist line is vertical (no reference plane), or a
 #: shoulder or wrist middle joint aligns the outer two axes; the solution is not isolated there.
 REASONS = {VALID: "valid", OUT_OF_REACH: "out of reach", SINGULAR: "singular", OUTSIDE_LIMITS: "outside limits"}
+
+#: Poses per mapped call of :meth:`McInverse.margins_on_grid` (each at every angle of the grid).
+GRID_CHUNK = 64
 
 #: Sine below which an elbow, shoulder or wrist counts as singular (the solution is not isolated).
 SINGULAR_SINE = 1e-7
@@ -69,13 +73,19 @@ class McInverse:
         lower, upper: joint limits [rad], (7,).
         candidates: Function ``(T (4x4) hand pose in the chain base frame [m], psi [rad]) ->
             (Q (7x8) [rad], reason (1x8))``, column j the candidate with index j (see
-            :data:`CANDIDATES`), reason one of :data:`REASONS`.
+            :data:`CANDIDATES`), reason one of :data:`REASONS`; compiled (:mod:`dualarm.compiled`).
+        checked: the same with a third output, whether the inputs pass :meth:`solve`'s checks
+            (finite, a rigid transform): the one-pose call.
+        with_margins: ``(T, psi) -> (Q (7x8) [rad], margin (1x8) [rad])``, margin each valid
+            candidate's distance to its nearest joint limit, -inf for the others.
     """
 
     kinematics: SrsKinematics
     lower: np.ndarray
     upper: np.ndarray
     candidates: cs.Function
+    checked: cs.Function
+    with_margins: cs.Function
 
     @property
     def chain(self) -> Chain:
@@ -137,19 +147,35 @@ class McInverse:
                     outside = cs.logic_or(cs.mmax(q - upper) > 0, cs.mmax(lower - q) > 0)
                     reasons.append(cs.if_else(out_of_reach, OUT_OF_REACH, cs.if_else(singular, SINGULAR, cs.if_else(outside, OUTSIDE_LIMITS, VALID))))
                     columns.append(q)
-        candidates = cs.Function("mc_inverse", [T, psi], [cs.horzcat(*columns), cs.horzcat(*reasons)], ["T", "psi"], ["Q", "reason"], {"cse": True})
-        return cls(kinematics=kin, lower=lower, upper=upper, candidates=candidates)
+        outputs = [cs.horzcat(*columns), cs.horzcat(*reasons)]
+        candidates = cs.Function("mc_inverse", [T, psi], outputs, ["T", "psi"], ["Q", "reason"], {"cse": True})
+        # the one-pose call's input check, in the same compiled call (rigid_transforms' tests, finite_array's for psi)
+        finite = cs.logic_all(cs.fabs(cs.vertcat(cs.vec(T), psi)) < cs.inf)
+        orthogonal = cs.mmax(cs.fabs(R.T @ R - np.eye(3))) <= RIGID_TOLERANCE
+        row = cs.mmax(cs.fabs(T[3, :] - cs.DM([[0, 0, 0, 1]]))) <= RIGID_TOLERANCE
+        accepted = cs.logic_and(cs.logic_and(finite, orthogonal), cs.logic_and(row, cs.det(R) >= 0))
+        checked = cs.Function("mc_inverse_checked", [T, psi], [*outputs, accepted], ["T", "psi"], ["Q", "reason", "accepted"], {"cse": True})
+        # each valid candidate's distance to its nearest joint limit, for the arm-angle search (mc_path._auto)
+        margins = [cs.if_else(r == VALID, cs.mmin(cs.fmin(q - cs.DM(lower), cs.DM(upper) - q)), -cs.inf) for q, r in zip(columns, reasons)]
+        with_margins = cs.Function("mc_inverse_margins", [T, psi], [outputs[0], cs.horzcat(*margins)], ["T", "psi"], ["Q", "margin"], {"cse": True})
+        return cls(kinematics=kin, lower=lower, upper=upper, candidates=compiled(candidates), checked=compiled(checked), with_margins=compiled(with_margins))
 
     def solve(self, pose: np.ndarray, psi: float) -> "McSolution":
         """All 8 candidates for one hand pose (4x4, chain base frame) [m] at arm angle ``psi`` [rad].
 
+        One compiled call that also checks the inputs; only inputs it does not accept go through
+        the checks that name what is wrong. Not thread-safe (one buffer per solver).
+
         Raises:
             InvalidArgumentError: ``pose`` is not a 4x4 rigid transform, or ``psi`` is not finite.
         """
-        T = rigid_transforms(pose, "pose")
-        psi = float(finite_array(psi, "psi", ()))
-        Q, reason = self.candidates(T, psi)
-        return McSolution(q=np.asarray(Q).T.copy(), reason=np.asarray(reason).ravel().astype(int), joint_names=self.chain.joint_names)
+        T = pose if isinstance(pose, np.ndarray) and pose.shape == (4, 4) and pose.dtype.kind in "fiu" else None
+        if T is None or not isinstance(psi, (int, float, np.number)):  # not the arrays this call takes as they are
+            T, psi = rigid_transforms(pose, "pose"), float(finite_array(psi, "psi", ()))
+        out = self._one(T, psi)  # Q (7x8, column-major: candidate by candidate), reason (8), accepted
+        if not out[-1]:
+            rigid_transforms(T, "pose"), finite_array(psi, "psi", ())  # raise, naming the fault
+        return McSolution(q=out[:-9].reshape(CANDIDATES, -1), reason=out[-9:-1].astype(int), joint_names=self.chain.joint_names)
 
     def solve_many(self, poses: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Candidates for N poses (N, 4, 4) [m] at arm angles (N,) [rad], in mapped calls.
@@ -159,9 +185,29 @@ class McInverse:
         """
         return self._batched.candidates(poses, psi)
 
+    def margins_on_grid(self, poses: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Candidates for N poses (N, 4, 4) [m], each at every arm angle of a grid (G,) [rad], with each candidate's distance to its nearest joint limit, -inf where it is not valid: q (N, G, 8, 7) [rad], margin (N, G, 8) [rad].
+
+        One mapped call per chunk of poses, each pose passed once for its G angles.
+        """
+        psi = np.asarray(psi, dtype=float).ravel()
+        G = len(psi)
+        if G not in self._grids:  # with_margins mapped over the grid, the pose shared (not mapped)
+            self._grids[G] = Batched(self.with_margins.map(f"mc_inverse_margins_{G}", "serial", G, [0], []), chunk=GRID_CHUNK)
+        q, margin = self._grids[G](np.asarray(poses, dtype=float).reshape(-1, 4, 4), psi[None])
+        return q.transpose(0, 2, 1).reshape(len(q), G, CANDIDATES, -1), margin.reshape(len(q), G, CANDIDATES)
+
     @cached_property
     def _batched(self) -> BatchedCandidates:
         return BatchedCandidates(self.candidates)
+
+    @cached_property
+    def _grids(self) -> dict[int, Batched]:
+        return {}
+
+    @cached_property
+    def _one(self) -> Single:
+        return Single(self.checked)
 
 
 @dataclass(frozen=True)

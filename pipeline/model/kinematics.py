@@ -17,6 +17,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dualarm.arrays import rigid_transforms
+from dualarm.compiled import compiled
+from dualarm.ik.batched import Batched
 from dualarm.model.poses import invert
 from dualarm.model.robot import Chain, Robot
 from dualarm.model.urdf import JointSpec
@@ -75,6 +77,22 @@ def chain_frames(chain: Chain) -> ChainFrames:
     return ChainFrames(q=q, before=tuple(before), after=tuple(after), tip=T)
 
 
+def link_frames(joints: tuple[JointSpec, ...], root: str, q: Mapping[str, cs.SX | float]) -> dict[str, cs.SX]:
+    """Every link's frame in the ``root`` link's frame (4x4 SX), each joint of the tree ``joints`` at ``q[name]`` (a symbol or a value [rad or m]; joints not named at 0)."""
+    frames = {root: cs.SX.eye(4)}
+    children: dict[str, list[JointSpec]] = {}
+    for joint in joints:
+        children.setdefault(joint.parent, []).append(joint)
+    pending = [root]
+    while pending:
+        parent = pending.pop()
+        for joint in children.get(parent, []):
+            T = frames[parent] @ origin_matrix(joint)
+            frames[joint.child] = T @ _motion(joint, q.get(joint.name, 0.0)) if joint.movable else T
+            pending.append(joint.child)
+    return frames
+
+
 def geometric_jacobian(frames: ChainFrames, chain: Chain) -> cs.SX:
     """6 x n geometric Jacobian of the tip origin: rows [linear velocity; angular velocity] in the base frame."""
     p_tip = frames.tip[:3, 3]
@@ -117,9 +135,10 @@ class ChainKinematics:
         return cls(chain=chain, fk=fk, jacobian=jac)
 
     @cached_property
-    def _fk_flat(self) -> cs.Function:
+    def _fk_many(self) -> Batched:
+        """The tip pose as a column (16, column-major), compiled and mapped (:mod:`dualarm.ik.batched`)."""
         q = cs.SX.sym("q", self.chain.dof)
-        return cs.Function("fk_flat", [q], [cs.reshape(self.fk(q), 16, 1)])
+        return Batched(compiled(cs.Function(f"fk_flat_{self.chain.tip}", [q], [cs.reshape(self.fk(q), 16, 1)])))
 
     def pose(self, q: np.ndarray) -> np.ndarray:
         """Tip pose at one configuration ``q`` (n,) [rad] as a 4x4 array."""
@@ -128,8 +147,10 @@ class ChainKinematics:
     def poses(self, Q: np.ndarray) -> np.ndarray:
         """Tip poses at N configurations ``Q`` (N, n) [rad], evaluated with ``Function.map``; (N, 4, 4)."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
-        flat = np.asarray(self._fk_flat.map(Q.shape[0])(Q.T))  # (16, N), column-major 4x4 per column
-        return flat.T.reshape(-1, 4, 4).transpose(0, 2, 1)
+        if self.chain.dof == 0:  # a fixed chain: one pose
+            return np.repeat(self.pose(np.zeros(0))[None], len(Q), axis=0)
+        (flat,) = self._fk_many(Q)  # (N, 16), column-major 4x4 per row
+        return flat.reshape(-1, 4, 4).transpose(0, 2, 1)
 
     def jacobians(self, Q: np.ndarray) -> np.ndarray:
         """Geometric Jacobians at N configurations (N, n) [rad]; (N, 6, n)."""

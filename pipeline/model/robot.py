@@ -6,6 +6,7 @@ import os
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -62,7 +63,7 @@ class Chain:
     joints: tuple[JointSpec, ...]
     hand: str | None = None
 
-    @property
+    @cached_property
     def joint_names(self) -> tuple[str, ...]:
         """Names of the movable joints, base to tip; the order of ``q``."""
         return tuple(j.name for j in self.joints if j.movable)

@@ -114,7 +114,8 @@ def test_a_separately_started_scheduler_and_workers_give_the_same_rows(local, tm
     _same(result.results, rows)
 
 
-def test_an_unreachable_scheduler_is_one_line_and_leaves_no_table(tmp_path):
+def test_an_unreachable_scheduler_is_one_line_and_leaves_no_table(tmp_path, monkeypatch):
+    monkeypatch.setattr("dualarm.cluster.CONNECT_TIMEOUT_S", 2.0)  # Dask retries a refused connection until the timeout (30 s for users)
     with pytest.raises(Exception, match="no Dask scheduler answers there"):
         with connect("tcp://127.0.0.1:9"):
             pass
