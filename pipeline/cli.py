@@ -1149,18 +1149,18 @@ def bench_plan_command(
     trials: Annotated[int, typer.Option(min=1, help=f"Trials per planner (interleaved; at most {MAX_TRIALS}).")] = 30,
     seed: Annotated[int, typer.Option(help="Seed of the first trial (an integer >= 0).")] = 0,
 ) -> None:
-    """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals: planning times and their ratio, collision checks and the time of one check."""
+    """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals: planning times and their ratio, collision checks and the time of one check; then the time of one check by PyBullet's narrow phase (the reference) and by the planners' closed-form checker, on the same configurations."""
     from dualarm.bench.plan import bench_plan
     from dualarm.plan.trials import PAPER_PLANNING_TIME_S
 
     _seed(seed)
     _within(trials, "--trials", 1, MAX_TRIALS)
     with err.status("benchmarking ...") as status:
-        rows = bench_plan(task, trials, seed, progress=lambda text: status.update(f"benchmarking {text} ..."))
+        bench = bench_plan(task, trials, seed, progress=lambda text: status.update(f"benchmarking {text} ..."))
     table = Table(title=f"planning {task} ({trials} trials each, interleaved)", title_justify="left")
     for column in ("planner", "success", "median ms", "p95 ms", "mean ms", "checks (median)", "µs / check", "path rad (median)", "paper mean / ours"):
         table.add_column(column, justify="left" if column == "planner" else "right", no_wrap=column == "planner")
-    for r in rows:
+    for r in bench.planners:
         table.add_row(
             r.planner,
             f"{r.success_rate:.0%}",
@@ -1173,8 +1173,16 @@ def bench_plan_command(
             f"{PAPER_PLANNING_TIME_S / r.mean_s:.0f}x",
         )
     out.print(table)
-    mcikrrt, ompl = rows[0], rows[1]
+    mcikrrt, ompl = bench.planners[0], bench.planners[1]
     out.print(f"median planning time, ompl-rrtconnect / mcikrrt: {ompl.median_s / mcikrrt.median_s:.2f}x", markup=False)
+    checks = Table(title=f"one collision check, the same {bench.configurations} configurations of planner-like edges (fastest of the rounds)", title_justify="left")
+    for column in ("checker", "configurations given", "per call", "µs / check", "pybullet / this"):
+        checks.add_column(column, justify="left" if column in ("checker", "configurations given") else "right", no_wrap=True)
+    reference = bench.checkers[0].check_time_s
+    for c in bench.checkers:
+        checks.add_row(c.checker, c.batch, str(c.batch_size), f"{c.check_time_s * 1e6:.2f}", f"{reference / c.check_time_s:.1f}x")
+    out.print(checks)
+    out.print(f"verdicts that differ between the two checkers: {bench.disagreements} of {bench.configurations}", markup=False)
 
 
 @robot_app.command("check")

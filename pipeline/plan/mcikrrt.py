@@ -26,8 +26,10 @@ Read as follows where the text leaves room:
 - NearNeighbor is the tree node nearest in Euclidean joint distance [rad].
 - Connect steps from the near node toward the target, ``step_rad`` (Euclidean) at a time, adding
   each collision-free step as a node, until it reaches the target or a step collides (RRT-Connect's
-  CONNECT, Kuffner & LaValle 2000). Each step's configuration and the segment to it are checked
-  at the checker's resolution.
+  CONNECT, Kuffner & LaValle 2000). Each step's configuration is checked, then, when it is free,
+  the segment to it at the checker's resolution, its configurations in one batch (checking the
+  step and its segment in one batch measured slower: on the bowl grasp, 98 % of the steps that
+  collide do so at their end).
 - dTheta_min is ``connect_tolerance_rad``; as Connect stops exactly at its target, a successful
   connection has distance 0.
 - SmoothSolution is shortcutting: ``smoothing_iterations`` times, two random waypoints of the path
@@ -58,7 +60,7 @@ class Checker(Protocol):
         ...
 
     def segment_free(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """Whether the straight joint-space segment from ``a`` to ``b`` [rad] is collision-free."""
+        """Whether the straight joint-space segment from ``a`` to ``b`` [rad] is collision-free (the ends not checked), its configurations in one batch."""
         ...
 
 

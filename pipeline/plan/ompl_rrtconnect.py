@@ -1,11 +1,11 @@
 """The OMPL baseline: RRTConnect from the ``ompl`` package on the same problem as MCIKRRT.
 
 Same joints and limits (a ``RealVectorStateSpace``), the same collision checker as the state
-validity checker, the same edge resolution (``setStateValidityCheckingResolution`` as a fraction
-of the space's extent, so OMPL's motion checker steps at most ``resolution_rad``, Euclidean, hence
-at most that in every joint), the same Connect step (``setRange``), and the same goal
-configurations: the goals MCIKRRT's goal sampler draws with the same seed, handed to OMPL as
-``GoalStates`` (the time to draw them is part of OMPL's planning time). Shortcutting is OMPL's
+validity checker, the same edge checks (a ``MotionValidator`` written here in place of OMPL's
+discrete one: a motion's end state, then its segment's configurations at the checker's resolution
+in one batch, as MCIKRRT's Connect checks a step), the same Connect step (``setRange``), and the
+same goal configurations: the goals MCIKRRT's goal sampler draws with the same seed, handed to OMPL
+as ``GoalStates`` (the time to draw them is part of OMPL's planning time). Shortcutting is OMPL's
 own ``PathSimplifier.reduceVertices`` (random vertex pairs joined when the segment is free, the
 same number of attempts as MCIKRRT's SmoothSolution).
 
@@ -42,13 +42,29 @@ def _seed_once(seed: int) -> None:
         _seeded = True
 
 
+def _vector(state, n: int) -> np.ndarray:
+    """An OMPL real-vector state as an array of its ``n`` values."""
+    return np.fromiter((state[i] for i in range(n)), float, n)
+
+
+class _SegmentValidator(ob.MotionValidator):
+    """OMPL's motion check by ``checker``: the end state, then the segment's configurations at the checker's resolution in one batch (the start state is valid already)."""
+
+    def __init__(self, si, checker: Checker, n: int):
+        super().__init__(si)
+        self._checker, self._n = checker, n
+
+    def checkMotion(self, s1, s2) -> bool:  # noqa: N802 (OMPL's name)
+        a, b = _vector(s1, self._n), _vector(s2, self._n)
+        return self._checker.free(b) and self._checker.segment_free(a, b)
+
+
 def ompl_rrtconnect(
     start: np.ndarray,
     lower: np.ndarray,
     upper: np.ndarray,
     checker: Checker,
     goals: Sequence[np.ndarray],
-    resolution_rad: float,
     seed: int,
     settings: PlannerSettings = PlannerSettings(),
     goal_time_s: float = 0.0,
@@ -71,8 +87,9 @@ def ompl_rrtconnect(
         bounds.setHigh(i, float(upper[i]))
     space.setBounds(bounds)
     si = ob.SpaceInformation(space)
-    si.setStateValidityChecker(lambda s: checker.free(np.fromiter((s[i] for i in range(n)), float, n)))
-    si.setStateValidityCheckingResolution(resolution_rad / space.getMaximumExtent())
+    si.setStateValidityChecker(lambda s: checker.free(_vector(s, n)))
+    validator = _SegmentValidator(si, checker, n)  # kept referenced while OMPL uses it
+    si.setMotionValidator(validator)
     si.setup()
 
     def state(q: np.ndarray):

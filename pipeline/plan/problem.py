@@ -117,7 +117,7 @@ class PlanningProblem:
                 sampler()
             goal_time = time.perf_counter() - started
             if sampler.goals:  # the goals' collision checks count too
-                result = ompl_rrtconnect(self.start, self.lower, self.upper, self.checker, sampler.goals, settings.resolution_rad, seed, settings.planner, goal_time)
+                result = ompl_rrtconnect(self.start, self.lower, self.upper, self.checker, sampler.goals, seed, settings.planner, goal_time)
                 result = replace(result, collision_checks=self.checker.checks - checks)
             else:
                 result = PlanResult(False, np.empty((0, len(self.start))), 0.0, goal_time, 0, 0, self.checker.checks - checks)

@@ -262,18 +262,20 @@ class Recorder(NullSink):
         for k in range(len(path)):
             t, rep = float(path.t[k]), int(path.rep[k])
             sample.log(
-                encode({
-                    "t": t,
-                    "rep": rep,
-                    "method": path.method,
-                    "status": int(path.status[k]),
-                    "solve_time_s": float(path.solve_time_s[k]),
-                    "position": dict(zip(names, path.q[k].tolist())),
-                    "velocity": dict(zip(names, path.qd[k].tolist())),
-                    "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist())),
-                    **({"hand_orientation_error_rad": dict(zip(path.hands, angle[k].tolist())), "task_space": path.task_space} if measured else {}),
-                    "arm_angle_rad": {hand: float(psi[k]) for hand, psi in arm_angles.items()},
-                }),
+                encode(
+                    {
+                        "t": t,
+                        "rep": rep,
+                        "method": path.method,
+                        "status": int(path.status[k]),
+                        "solve_time_s": float(path.solve_time_s[k]),
+                        "position": dict(zip(names, path.q[k].tolist())),
+                        "velocity": dict(zip(names, path.qd[k].tolist())),
+                        "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist())),
+                        **({"hand_orientation_error_rad": dict(zip(path.hands, angle[k].tolist())), "task_space": path.task_space} if measured else {}),
+                        "arm_angle_rad": {hand: float(psi[k]) for hand, psi in arm_angles.items()},
+                    }
+                ),
                 log_time=_ns(t),
             )
             if bounds is not None:
@@ -355,13 +357,15 @@ class Recorder(NullSink):
         for k in range(len(traj)):
             t = float(traj.t[k])
             channel.log(
-                encode({
-                    "t": t,
-                    "rep": int(traj.rep[k]),
-                    "position": dict(zip(names, traj.q[k].tolist())),
-                    **{key: dict(zip(names, v[k].tolist())) for key, v in series.items()},
-                    "hand_position": {hand: _vec(p[k]) for hand, p in hand_positions.items()},
-                }),
+                encode(
+                    {
+                        "t": t,
+                        "rep": int(traj.rep[k]),
+                        "position": dict(zip(names, traj.q[k].tolist())),
+                        **{key: dict(zip(names, v[k].tolist())) for key, v in series.items()},
+                        "hand_position": {hand: _vec(p[k]) for hand, p in hand_positions.items()},
+                    }
+                ),
                 log_time=_ns(t),
             )
         self._animation(stage, traj.t, names, traj.q, traj.fixed)
@@ -404,18 +408,20 @@ class Recorder(NullSink):
         for k in range(len(log.t)):
             t = float(log.t[k])
             channel.log(
-                encode({
-                    "t": t,
-                    "rep": int(log.rep[k]),
-                    "position": dict(zip(names, log.q[k].tolist())),
-                    "velocity": dict(zip(names, log.qd[k].tolist())),
-                    "command": dict(zip(names, log.q_command[k].tolist())),
-                    "hand_position": {hand: _vec(p[k]) for hand, p in positions.items()},
-                    "hand_error_m": {hand: float(e[k]) for hand, e in log.hand_error_m.items()},
-                    "self_contacts": int(log.self_contacts[k]),
-                    "environment_contacts": int(log.environment_contacts[k]),
-                    "expected_contacts": int(log.expected_contacts[k]),
-                }),
+                encode(
+                    {
+                        "t": t,
+                        "rep": int(log.rep[k]),
+                        "position": dict(zip(names, log.q[k].tolist())),
+                        "velocity": dict(zip(names, log.qd[k].tolist())),
+                        "command": dict(zip(names, log.q_command[k].tolist())),
+                        "hand_position": {hand: _vec(p[k]) for hand, p in positions.items()},
+                        "hand_error_m": {hand: float(e[k]) for hand, e in log.hand_error_m.items()},
+                        "self_contacts": int(log.self_contacts[k]),
+                        "environment_contacts": int(log.environment_contacts[k]),
+                        "expected_contacts": int(log.expected_contacts[k]),
+                    }
+                ),
                 log_time=_ns(t),
             )
         touching = self._json(contacts, schemas.CONTACT)
@@ -470,16 +476,18 @@ class Recorder(NullSink):
             encode = _encoder(hr.position, quats, hr.linear_velocity, hr.angular_velocity)
             for k in range(len(ref)):
                 channel.log(
-                    encode({
-                        "t": float(ref.t[k]),
-                        "rep": int(ref.rep[k]),
-                        "segment": int(ref.segment[k]),
-                        "frame_id": frame,
-                        "position": _vec(hr.position[k]),
-                        "orientation": _quat(quats[k]),
-                        "linear_velocity": _vec(hr.linear_velocity[k]),
-                        "angular_velocity": _vec(hr.angular_velocity[k]),
-                    }),
+                    encode(
+                        {
+                            "t": float(ref.t[k]),
+                            "rep": int(ref.rep[k]),
+                            "segment": int(ref.segment[k]),
+                            "frame_id": frame,
+                            "position": _vec(hr.position[k]),
+                            "orientation": _quat(quats[k]),
+                            "linear_velocity": _vec(hr.linear_velocity[k]),
+                            "angular_velocity": _vec(hr.angular_velocity[k]),
+                        }
+                    ),
                     log_time=_ns(ref.t[k]),
                 )
             self._rr.log(

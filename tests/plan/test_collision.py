@@ -1,6 +1,6 @@
 """The planners' collision checker (dualarm.plan.collision) against independent queries:
-PyBullet's getClosestPoints on the UN-inflated robot, analytic capsule distances from the URDF,
-and the URDF text itself."""
+PyBullet's getClosestPoints on the UN-inflated robot, the reference checker (PyBullet's narrow phase
+on the inflated robot), analytic capsule distances from the URDF, and the URDF text itself."""
 
 from __future__ import annotations
 
@@ -13,12 +13,18 @@ from scipy.spatial.transform import Rotation
 
 from dualarm.errors import StageError
 from dualarm.execute.world import TOUCHING_M, add_environment, load_pybullet_robot, pb
-from dualarm.plan.collision import CollisionChecker, bisection_order, inflated_urdf
+from dualarm.model.robot import load_robot
+from dualarm.plan.collision import BOX_ROUNDING_M, CollisionChecker, PyBulletChecker, bisection_order, inflated_urdf
+from dualarm.plan.distances import distance_functions
 from dualarm.tasks import load_task
-from tests.conftest import TASKS
+from dualarm.tasks.schema import EnvironmentObject
+from tests.conftest import HUMANOID, TASKS
 
 #: Configurations whose nearest distance is this close to a threshold are boundary cases [m].
 BOUNDARY_M = 1e-4
+#: Agreement of the checker's distances with PyBullet's closest points [m]: the same geometry, both
+#: exact (PyBullet reports link poses in single precision, ~1e-7 m).
+DISTANCE_M = 1e-6
 
 
 @pytest.fixture(scope="module")
@@ -186,6 +192,186 @@ def test_unchecked_pairs_are_parents_and_touching_neighbours(task, names, refere
     assert ("left_upper_arm", "torso") not in expected and ("pelvis", "torso") in expected
     with make_checker(task, names, margin_m) as checker:
         assert checker.unchecked_pairs == expected
+
+
+# --- the closed-form checker's own distances, batches and PyBullet fallback ----------------------
+
+#: Besides the bowl grasp's objects: a tilted box, a sphere and a tilted cylinder in the arms' reach.
+EXTRA = [
+    EnvironmentObject(name="crate", shape="box", size_m=(0.12, 0.3, 0.08), pose={"position": (0.3, 0.25, 1.15), "rpy": (0.3, -0.5, 0.9)}),
+    EnvironmentObject(name="ball", shape="sphere", radius_m=0.06, pose={"position": (0.25, -0.3, 1.2)}),
+    EnvironmentObject(name="post", shape="cylinder", radius_m=0.03, height_m=0.3, pose={"position": (0.35, -0.15, 1.1), "rpy": (0.4, 0.2, 0.0)}),
+]
+
+
+def pybullet_distance(sim, bodies: dict[str, int], a: str, b: str) -> float:
+    """PyBullet's signed distance between link ``a`` and link or object ``b`` (getClosestPoints) [m]."""
+    other, link = (bodies[b], -1) if b in bodies else (sim.body, sim.link_index[b])
+    return nearest(sim, other, sim.link_index[a], link, 10.0)
+
+
+def random_configurations(task, names, count: int, seed: int) -> np.ndarray:
+    lower, upper = task.robot.lower_upper(names)
+    return lower + np.random.default_rng(seed).random((count, len(names))) * (upper - lower)
+
+
+def near_contact(checker, Q: np.ndarray, count: int) -> np.ndarray:
+    """``count`` configurations on the boundary of the free space: bisection (50 halvings) on the segments from free configurations of ``Q`` to colliding ones."""
+    free = checker.free_many(Q)
+    out = []
+    for a, b in zip(Q[free][:count], Q[~free][:count]):
+        for _ in range(50):
+            mid = (a + b) / 2
+            a, b = (mid, b) if checker.free(mid) else (a, mid)
+        out.append(b)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("margin_m", [0.0, 0.01])
+def test_distances_agree_with_closest_points(task, names, margin_m):
+    """Every pair the broad phase keeps has PyBullet's distance (un-inflated robot) to DISTANCE_M, over random configurations and configurations on the boundary of contact; a pair it drops is at least its threshold apart; a cylinder's bounding capsule is no nearer than the cylinder."""
+    environment = [*task.spec.environment, *EXTRA]
+    sim = load_pybullet_robot(task.robot.urdf.path)
+    bodies = {name: body for body, name in add_environment(sim, environment).items()}
+    try:
+        with CollisionChecker(task.robot, names, {}, environment, task.spec.expected_contacts, margin_m=margin_m) as checker:
+            Q = random_configurations(task, names, 2000, 31)
+            Q = np.vstack([Q, near_contact(checker, Q, 60)])
+            D = checker.distances(Q)
+            assert D.shape == (len(Q), len(checker.pairs)) and checker.checks == 2000 + 60 * 50  # distances are not checks
+            threshold = np.array([2 * margin_m if b in sim.link_index else margin_m for _, b in checker.pairs])
+            compared, penetrating, at_contact = 0, 0, 0
+            for q, d in zip(Q, D):
+                sim.set_positions(names, q)
+                for (a, b), mine, limit in zip(checker.pairs, d, threshold):
+                    theirs = pybullet_distance(sim, bodies, a, b)
+                    if not np.isfinite(mine):
+                        assert theirs >= limit - DISTANCE_M, (a, b)
+                    elif b in ("bowl", "post"):  # its bounding capsule
+                        assert mine <= theirs + DISTANCE_M, (a, b)
+                    else:
+                        assert mine == pytest.approx(theirs, abs=DISTANCE_M), (a, b)
+                        compared += 1
+                        penetrating += theirs < 0
+                        at_contact += abs(theirs - limit) < 1e-6
+            assert compared > 5000 and penetrating > 500 and at_contact >= 50
+            assert {n for pair in checker.pairs for n in pair} >= {"table", "panel", "bowl", "crate", "ball", "post", "head", "pelvis"}
+    finally:
+        sim.close()
+
+
+def test_verdicts_equal_free_and_the_pybullet_checker(task, names):
+    """free_many is free of each configuration, on random configurations and on the boundary of contact; and the reference checker's verdict on the random ones, but for those within DISTANCE_M of a threshold."""
+    environment = [*task.spec.environment, *EXTRA]
+    args = (task.robot, names, {}, environment, task.spec.expected_contacts)
+    with CollisionChecker(*args, margin_m=0.01) as checker, PyBulletChecker(*args, margin_m=0.01) as reference:
+        Q = random_configurations(task, names, 3000, 37)
+        free = checker.free_many(Q)
+        assert free.dtype == bool and free.shape == (len(Q),)
+        boundary = near_contact(checker, Q, 100)
+        assert np.concatenate([free, checker.free_many(boundary)]).tolist() == [checker.free(q) for q in np.vstack([Q, boundary])]
+        objects = {o.name for o in environment}
+        limits = np.array([0.01 if b in objects else 0.02 for _, b in checker.pairs])
+        clear = np.abs(checker.distances(Q) - limits).min(axis=1) > DISTANCE_M
+        assert clear.mean() > 0.99 and 0.2 < free.mean() < 0.8
+        assert np.array_equal(free[clear], reference.free_many(Q[clear]))
+        assert checker.free_many(np.empty((0, len(names)))).shape == (0,)
+
+
+def test_cylinders_are_checked_by_pybullet_where_their_capsule_is_near(task, names, reference):
+    """Without allowed contacts, the palms reach the bowl (a cylinder): in every configuration where a bounding capsule comes within the margin, the bowl's contacts are PyBullet's closest points on the un-inflated robot, and the verdict the reference checker's."""
+    sim, objects = reference
+    bowl_body = {name: body for body, name in objects.items()}["bowl"]
+    args = (task.robot, names, {}, task.spec.environment, ())
+    with CollisionChecker(*args, margin_m=0.01) as checker, PyBulletChecker(*args, margin_m=0.01) as pybullet:
+        Q = random_configurations(task, names, 3000, 13)
+        bowl = [k for k, (_, b) in enumerate(checker.pairs) if b == "bowl"]
+        Q = Q[(checker.distances(Q)[:, bowl] < 0.01).any(axis=1)]
+        assert len(Q) >= 40
+        free = checker.free_many(Q)
+        others = np.array([b != "bowl" for _, b in checker.pairs])
+        limits = np.array([0.01 if b in objects.values() else 0.02 for _, b in checker.pairs])[others]
+        touching = 0
+        for q, free_q in zip(Q, free):
+            mine = {c.a: c.depth_m for c in checker.contacts(q) if c.b == "bowl"}
+            sim.set_positions(names, q)
+            on_boundary = np.abs(checker.distances(q[None])[0, others] - limits).min() < BOUNDARY_M
+            for link in {a for a, b in checker.pairs if b == "bowl"}:
+                d = nearest(sim, bowl_body, sim.link_index[link], -1, 10.0)
+                on_boundary |= abs(d - 0.01) < BOUNDARY_M
+                if abs(d - 0.01) > BOUNDARY_M:
+                    assert (link in mine) == (d < 0.01), link
+                if link in mine:
+                    assert mine[link] == pytest.approx(0.01 - d, abs=DISTANCE_M), link
+            touching += bool(mine)
+            if not on_boundary:
+                assert free_q == pybullet.free(q)
+        assert 10 <= touching < len(Q)
+
+
+def test_a_link_without_capsules_is_checked_by_pybullet(task, names, reference, tmp_path):
+    """The head as a box: every pair of the head is PyBullet's, in every configuration; the verdicts and contacts are the reference checker's."""
+    text = (HUMANOID / "humanoid.urdf").read_text()
+    head = text.index("<collision>", text.index('<link name="head">'))
+    end = text.index("</collision>", head)
+    (tmp_path / "humanoid.urdf").write_text(text[:head] + '<collision><geometry><box size="0.18 0.2 0.16"/></geometry>' + text[end:])
+    (tmp_path / "robot.toml").write_text((HUMANOID / "robot.toml").read_text())
+    robot = load_robot(tmp_path)
+    args = (robot, names, {}, task.spec.environment, task.spec.expected_contacts)
+    with CollisionChecker(*args, margin_m=0.01) as checker, PyBulletChecker(*args, margin_m=0.01) as pybullet:
+        assert not any("head" in pair for pair in checker.pairs)
+        Q = random_configurations(task, names, 400, 41)
+        assert np.array_equal(checker.free_many(Q), pybullet.free_many(Q))
+        heads = 0
+        for q in Q[:150]:
+            mine, theirs = as_found(reference[0], checker.contacts(q)), as_found(reference[0], pybullet.contacts(q))
+            assert mine.keys() == theirs.keys()
+            assert all(mine[k] == pytest.approx(theirs[k], abs=DISTANCE_M) for k in mine)
+            heads += any("head" in k for k in mine)
+        assert heads >= 3
+
+
+def test_an_object_on_a_link_no_joint_moves_collides_everywhere(task, names, reference):
+    """A block inside the pelvis (which no planned joint moves): every configuration collides, with the block's depth, computed once."""
+    sim, _ = reference
+    block = EnvironmentObject(name="block", shape="box", size_m=(0.1, 0.1, 0.1), pose={"position": (0.05, 0.0, 0.5)})
+    with CollisionChecker(task.robot, names, {}, [*task.spec.environment, block], task.spec.expected_contacts, margin_m=0.01) as checker:
+        assert ("pelvis", "block") not in checker.pairs
+        Q = random_configurations(task, names, 50, 43)
+        assert not checker.free_many(Q).any()
+        depth = {(c.a, c.b): c.depth_m for c in checker.contacts(Q[0])}[("pelvis", "block")]
+    bodies = add_environment(sim, [block])
+    try:
+        assert depth == pytest.approx(0.01 - nearest(sim, next(iter(bodies)), sim.link_index["pelvis"], -1, 1.0), abs=DISTANCE_M)
+    finally:
+        pb.removeBody(next(iter(bodies)), physicsClientId=sim.client)
+
+
+def test_pybullet_rounds_box_edges_by_its_margin():
+    """PyBullet's box is its half-extents less BOX_ROUNDING_M grown by a ball of that radius: capsules and spheres around and into a box, at PyBullet's distances."""
+    f = distance_functions()
+    client = pb.connect(pb.DIRECT)
+    try:
+        h = np.array([0.25, 0.5, 0.02])
+        box = pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_BOX, halfExtents=h.tolist(), physicsClientId=client), physicsClientId=client)
+        capsule = pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_CAPSULE, radius=0.04, height=0.19, physicsClientId=client), physicsClientId=client)
+        sphere = pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_SPHERE, radius=0.05, physicsClientId=client), physicsClientId=client)
+        rng = np.random.default_rng(17)
+        inner = (np.eye(3), np.zeros(3), h - BOX_ROUNDING_M)
+        signs = set()
+        for k in range(300):
+            position, rotation = rng.uniform(-h - 0.1, h + 0.1), Rotation.random(random_state=k)
+            pb.resetBasePositionAndOrientation(capsule, position.tolist(), rotation.as_quat().tolist(), physicsClientId=client)
+            pb.resetBasePositionAndOrientation(sphere, position.tolist(), [0, 0, 0, 1], physicsClientId=client)
+            axis = rotation.as_matrix()[:, 2] * 0.095
+            mine = float(f["segment_box"](position - axis, position + axis, *inner)) - 0.04 - BOX_ROUNDING_M
+            assert mine == pytest.approx(min(p[8] for p in pb.getClosestPoints(capsule, box, 10.0, physicsClientId=client)), abs=DISTANCE_M)
+            mine = float(f["point_box"](position, *inner)) - 0.05 - BOX_ROUNDING_M
+            assert mine == pytest.approx(min(p[8] for p in pb.getClosestPoints(sphere, box, 10.0, physicsClientId=client)), abs=DISTANCE_M)
+            signs.add(np.sign(mine))
+        assert signs == {-1.0, 1.0}
+    finally:
+        pb.disconnect(client)
 
 
 # --- the distances the checker relies on are the real geometry -----------------------------------
