@@ -18,7 +18,7 @@ run: install
 	$(BIN)/dualarm reproduce
 
 test: install
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadfile
 
 # ruff (lint and format) and mypy; CI runs this before the tests, pre-commit on every commit.
 lint: install typecheck

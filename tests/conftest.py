@@ -1,9 +1,11 @@
 """Shared fixtures: the repository's robot and task directories, and PyBullet's own view of a URDF."""
 
 import contextlib
+import shutil
 import subprocess
 import sys
 import sysconfig
+import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +17,19 @@ REPO = Path(__file__).resolve().parents[1]
 HUMANOID = REPO / "robots" / "humanoid"
 OFFSET = REPO / "robots" / "humanoid_offset"
 TASKS = REPO / "tasks"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """A short base temporary directory, made for this run: a one-line message quotes a long path shortened (:func:`dualarm.errors.excerpt`), and the tests match whole paths, written for pytest's own base (``/tmp/pytest-of-USER/pytest-N``, 31 characters here); pytest-xdist adds ``popen-gwN/`` to it, which made 56 of those paths too long."""
+    if config.option.basetemp is None and not hasattr(config, "workerinput"):  # the controller's; the workers get theirs below it
+        config.option.basetemp = config._dualarm_basetemp = tempfile.mkdtemp(prefix="dt-")  # type: ignore[attr-defined]
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """The base temporary directory made in :func:`pytest_configure` removed when every test passed (kept, to look into, otherwise)."""
+    made = getattr(session.config, "_dualarm_basetemp", None)
+    if made is not None and exitstatus == 0:
+        shutil.rmtree(made, ignore_errors=True)
 
 
 def wrist_offset_robot(directory: Path) -> Path:

@@ -273,7 +273,14 @@ def _manifest_edit(key: str, value: object, fault: str) -> Callable[[Path], str]
     return edit
 
 
-_DELETE = object()
+class _Deleted:
+    """The value of a key taken out of the manifest (its repr names the test case the same in every process)."""
+
+    def __repr__(self) -> str:
+        return "<deleted>"
+
+
+_DELETE = _Deleted()
 JSON_DAMAGE = [_json_list, _string_values, _binary, _truncated, _directory, _fifo, _missing, _empty]
 CASES = [
     *[("manifest.json", d) for d in JSON_DAMAGE],
