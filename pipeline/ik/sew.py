@@ -54,6 +54,7 @@ from typing import TypeVar
 import casadi as cs
 import numpy as np
 
+from dualarm.compiled import compiled
 from dualarm.errors import NotSRSError
 from dualarm.ik.batched import Batched
 from dualarm.ik.subproblems import rotate, rotation, subproblem2, turn
@@ -169,7 +170,7 @@ class SewAngle:
 @functools.lru_cache(maxsize=None)
 def _angle_function(sew: SewAngle) -> Batched:
     S, E, W = (cs.SX.sym(name, 3) for name in "SEW")
-    return Batched(cs.Function("sew_angle", [S, E, W], [sew.symbolic(S, E, W)]))
+    return Batched(compiled(cs.Function("sew_angle", [S, E, W], [sew.symbolic(S, E, W)])))
 
 
 # ----------------------------------------------------------------------------- the arm
@@ -241,7 +242,7 @@ class SewChain:
 
         def build() -> Batched:
             q = cs.SX.sym("q", 7)
-            return Batched(cs.Function("sew_fk", [q], list(self.symbolic(q)), {"cse": True}))
+            return Batched(compiled(cs.Function("sew_fk", [q], list(self.symbolic(q)), {"cse": True})))
 
         Q = np.asarray(Q, dtype=float).reshape(-1, 7)
         E, W, T = self.cached("fk", build)(Q)
@@ -442,16 +443,16 @@ class _Solver:
     def of(cls, arm: SewChain, sew: SewAngle, samples: int) -> "_Solver":
         span, search = SEARCHES[arm.family]
         T, psi, g, x, q = cs.SX.sym("T", 4, 4), cs.SX.sym("psi"), cs.SX.sym("g", GOAL_SIZE), cs.SX.sym("x"), cs.SX.sym("q", 7)
-        goal = cs.Function("sew_goal", [T, psi], [_goal(arm, sew, T, psi)], {"cse": True})
+        goal = compiled(cs.Function("sew_goal", [T, psi], [_goal(arm, sew, T, psi)], {"cse": True}))
         errors, margins, configurations = search(arm, g, x)
-        e = cs.Function("sew_errors", [g, x], [cs.vertcat(*errors), cs.vertcat(*margins)], {"cse": True})
-        on_branch = tuple(Batched(cs.Function(f"sew_errors_{b}", [g, x], [errors[b], margins[b]], {"cse": True})) for b in range(len(errors)))
-        Q = cs.Function("sew_configurations", [g, x], [cs.horzcat(*(c for rows in configurations for c in rows))], {"cse": True})
+        e = compiled(cs.Function("sew_errors", [g, x], [cs.vertcat(*errors), cs.vertcat(*margins)], {"cse": True}))
+        on_branch = tuple(Batched(compiled(cs.Function(f"sew_errors_{b}", [g, x], [errors[b], margins[b]], {"cse": True}))) for b in range(len(errors)))
+        Q = compiled(cs.Function("sew_configurations", [g, x], [cs.horzcat(*(c for rows in configurations for c in rows))], {"cse": True}))
         E, W, got = arm.symbolic(q)
         D = T[:3, :3].T @ got[:3, :3]
         angle = sew.symbolic(cs.DM(arm.shoulder), E, W) - psi
         F = cs.vertcat(got[:3, 3] - T[:3, 3], 0.5 * cs.vertcat(D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]), cs.atan2(cs.sin(angle), cs.cos(angle)))
-        equations = cs.Function("sew_equations", [T, psi, q], [F, cs.jacobian(F, q)], {"cse": True})
+        equations = compiled(cs.Function("sew_equations", [T, psi, q], [F, cs.jacobian(F, q)], {"cse": True}))
         gm = cs.MX.sym("g", GOAL_SIZE)
         grid = cs.Function("sew_grid", [gm], e.map(samples)(gm, cs.DM(np.linspace(*span, samples)).T))
         return cls(span, Batched(goal), Batched(grid, CHUNK_GOALS), on_branch, Batched(Q), Batched(equations))
