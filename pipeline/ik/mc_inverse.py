@@ -174,7 +174,8 @@ class McInverse:
             T, psi = rigid_transforms(pose, "pose"), float(finite_array(psi, "psi", ()))
         out = self._one(T, psi)  # Q (7x8, column-major: candidate by candidate), reason (8), accepted
         if not out[-1]:
-            rigid_transforms(T, "pose"), finite_array(psi, "psi", ())  # raise, naming the fault
+            rigid_transforms(T, "pose")  # raise, naming the fault (where numpy accepts at the tolerance's edge, the result stands)
+            finite_array(psi, "psi", ())
         return McSolution(q=out[:-9].reshape(CANDIDATES, -1), reason=out[-9:-1].astype(int), joint_names=self.chain.joint_names)
 
     def solve_many(self, poses: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
