@@ -1034,8 +1034,8 @@ def bench_ik_command(
 @bench_app.command("pipeline")
 @user_errors
 def bench_pipeline_command() -> None:
-    """Each stage's share of a whole recorded run, on the triangle and the circle (MC-Inverse) and the ball game (TV-GDD)."""
-    from dualarm.bench.pipeline import PARTS, bench_pipeline
+    """Each stage's share of a whole recorded run, on the triangle and the circle (MC-Inverse) and the ball game (TV-GDD), and MC-Inverse's auto arm-angle search alone."""
+    from dualarm.bench.pipeline import PARTS, SEARCH_REPEATS, bench_pipeline
 
     with err.status("benchmarking ...") as status:
         timings = bench_pipeline(progress=lambda text: status.update(f"benchmarking {text} ..."))
@@ -1045,6 +1045,9 @@ def bench_pipeline_command() -> None:
     for r in timings:
         table.add_row(r.task, r.ik, *(f"{r.seconds.get(p, 0.0) / r.total_s:.1%}" for p in PARTS), f"{r.total_s:.2f}", f"{r.motion_s:.2f}", f"{r.total_s / r.motion_s:.2f}x" if r.motion_s else "-")
     out.print(table)
+    for r in timings:
+        for hand, (seconds, samples, angles) in r.search.items():
+            out.print(f"{r.task}, {hand} arm: the auto arm-angle search alone {seconds * 1e3:.0f} ms (median of {SEARCH_REPEATS}; {samples} samples x {angles} angles x 8 branches)", markup=False)
 
 
 @bench_app.command("study")

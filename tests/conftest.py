@@ -1,6 +1,7 @@
 """Shared fixtures: the repository's robot and task directories, and PyBullet's own view of a URDF."""
 
 import contextlib
+import json
 import shutil
 import subprocess
 import sys
@@ -97,13 +98,29 @@ SHIPPED = {"triangle": "mc-inverse", "circle": "mc-inverse", "ball_game": "tvgdd
 
 
 @pytest.fixture(scope="session")
-def shipped_runs(tmp_path_factory) -> dict[str, Path]:
-    """Task name -> the run directory of a one-repetition run of that shipped task through every stage."""
+def shipped_runs(tmp_path_factory, worker_id) -> dict[str, Path]:
+    """Task name -> the run directory of a one-repetition run of that shipped task through every stage.
+
+    Made once per test session: under pytest-xdist, the first worker to ask makes them in the
+    session's base directory, under a file lock, and the others read their directories from there
+    (the pattern of pytest-xdist's documentation).
+    """
+    from filelock import FileLock
+
     from dualarm.run import record_run
     from dualarm.tasks import load_task
 
-    out = tmp_path_factory.mktemp("shipped")
-    return {name: record_run(load_task(name, 1), method, out_dir=out).directory for name, method in SHIPPED.items()}
+    def make(out: Path) -> dict[str, Path]:
+        return {name: record_run(load_task(name, 1), method, out_dir=out).directory for name, method in SHIPPED.items()}
+
+    if worker_id == "master":  # not under xdist
+        return make(tmp_path_factory.mktemp("shipped"))
+    shared = tmp_path_factory.getbasetemp().parent / "shipped"
+    made = shared / "runs.json"
+    with FileLock(shared.with_suffix(".lock")):
+        if not made.is_file():
+            made.write_text(json.dumps({name: str(run) for name, run in make(shared).items()}))
+    return {name: Path(run) for name, run in json.loads(made.read_text()).items()}
 
 
 @dataclass

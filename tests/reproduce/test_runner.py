@@ -50,8 +50,12 @@ def test_an_unknown_part_is_quoted_short():
     assert len(message) < 250 and "x" * 38 + "..." in message and "table-i" in message
 
 
-def test_a_part_that_takes_its_workers_down_is_failed_and_the_others_go_on(tmp_path):
-    """On a scheduler and two `dask worker`s started apart: each worker that starts ball-game-pinv is killed (SIGKILL) as the part reports progress; Dask retries it on another until its allowed failures are spent, then it is a failed part (KilledWorker); table-i completes."""
+def test_a_part_that_takes_its_workers_down_is_failed_and_the_others_go_on(tmp_path, monkeypatch):
+    """On a scheduler and two `dask worker`s started apart: each worker that starts ball-game-pinv is killed (SIGKILL) as the part reports progress; Dask retries it on another until its allowed failures are spent, then it is a failed part (KilledWorker); table-i completes.
+
+    The scheduler allows one failure (Dask's default is 3): one retry shows the retry, and each
+    further one costs a worker's restart.
+    """
     from distributed import Client
 
     from dualarm.bench.study import loopback_cluster
@@ -59,6 +63,7 @@ def test_a_part_that_takes_its_workers_down_is_failed_and_the_others_go_on(tmp_p
     out = tmp_path / "repro"
     claimed = prepare(out)
     killed: list[int] = []
+    monkeypatch.setenv("DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES", "1")  # read by the scheduler's process
     with loopback_cluster(2, tmp_path) as address, Client(address) as client:
 
         def on_progress(name: str, fraction: float, text: str) -> None:
