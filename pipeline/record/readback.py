@@ -52,7 +52,7 @@ from mcap.data_stream import RecordBuilder
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
 from mcap.reader import SeekingReader, make_reader
 from mcap.records import Chunk, DataEnd, Footer, Header
-from mcap.stream_reader import MAGIC_SIZE, CRCValidationError, StreamReader, breakup_chunk
+from mcap.stream_reader import MAGIC_SIZE, CRCValidationError, StreamReader, get_chunk_data_stream
 from mcap.summary import Summary
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, TypeAdapter, ValidationError
@@ -318,8 +318,8 @@ def _verify_crcs(data: bytes) -> None:
     data_end = _encoded(data_ends[0])
     if data[footer.summary_start - len(data_end) : footer.summary_start] != data_end:
         raise McapError("damaged DataEnd record (it is not where the footer says the data section ends)")
-    for chunk in chunks:
-        breakup_chunk(chunk, validate_crc=True)
+    for chunk in chunks:  # decompressed and its CRC checked; its records are not parsed, as the CRC covers each of their bytes as written (parsing them in pure Python took 20 s of a reproduction report's 46 s in a profile)
+        get_chunk_data_stream(chunk, validate_crc=True)
 
 
 def _stored_manifest(reader: SeekingReader) -> dict[str, object]:
