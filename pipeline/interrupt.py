@@ -79,11 +79,14 @@ def held() -> Iterator[list[int]]:
     A signal's exception raised inside ``rr.RecordingStream()`` leaves a half-built stream whose
     ``__del__`` prints a traceback; one raised inside Dask's garbage-collection callback leaves it
     broken, and its next call prints one. Yields the signals held so far (a list the block may
-    watch, to end early; always empty outside the main thread).
+    watch, to end early; always empty outside the main thread). A signal that is ignored stays
+    ignored (SIGINT in a command started in the background): held, it would end a block that
+    watches the list, and raising it afterwards would do nothing.
     """
     if threading.current_thread() is threading.main_thread():
         signals: list[int] = []
-        previous = {signum: signal.signal(signum, lambda signum, frame: signals.append(signum)) for signum in (signal.SIGINT, signal.SIGTERM)}
+        caught = [signum for signum in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(signum) is not signal.SIG_IGN]
+        previous = {signum: signal.signal(signum, lambda signum, frame: signals.append(signum)) for signum in caught}
         try:
             yield signals
         finally:

@@ -140,6 +140,20 @@ def test_a_signal_while_the_rerun_stream_is_built_is_raised_after_it():
         signal.signal(signal.SIGTERM, previous)
 
 
+def test_an_ignored_signal_stays_ignored_in_a_held_block():
+    """A command started in the background ignores SIGINT: inside held() it is neither held (a reproduction's loop watching the list ended on it, its parts unfinished, and a KeyError's traceback followed) nor raised after."""
+    from dualarm.interrupt import held
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with held() as signals:
+            signal.raise_signal(signal.SIGINT)
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        assert signals == [] and signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _in_thread(target) -> list:
     """Run ``target`` in a thread; returns what it appends (and an exception's type name when it raises), and the thread."""
     seen: list = []
