@@ -65,8 +65,6 @@ def bench_pipeline(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Cal
 def search_seconds(task) -> dict[str, tuple[float, int, int]]:
     """Each arm's ``auto`` arm-angle search on ``task``'s path (none unless its ``[arm_angle]`` mode is ``auto``): hand -> (median of :data:`SEARCH_REPEATS` calls [s], samples of the first repetition, grid angles)."""
     from dualarm.ik import mc_path
-    from dualarm.ik.arms import arm_problems
-    from dualarm.ik.mc_inverse import McInverse
     from dualarm.paths.build import build_reference
 
     spec = mc_path.settings_for(task)
@@ -75,9 +73,8 @@ def search_seconds(task) -> dict[str, tuple[float, int, int]]:
     reference = build_reference(task)
     samples = int(np.sum(reference.rep == reference.rep[0]))
     searches = {}
-    for arm in arm_problems(task.robot, reference, task.robot.configuration(task.initial_q, "q0")):
-        solver = McInverse.of(arm.chain, tuple(np.asarray(spec.vertical) / np.linalg.norm(spec.vertical)))
-        inputs = (solver, arm.targets, reference, float(solver.kinematics.arm_angles(arm.q0)[0]), arm.q0, spec, arm.hand)
+    for arm, solver, initial in mc_path.arm_solvers(task.robot, reference, task.robot.configuration(task.initial_q, "q0"), spec):
+        inputs = (solver, arm.targets, reference, initial, arm.q0, spec, arm.hand)
         mc_path._auto(*inputs)  # loads the compiled Function
         times = []
         for _ in range(SEARCH_REPEATS):

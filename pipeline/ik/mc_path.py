@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dualarm.errors import NoSolutionFound, StageError
-from dualarm.ik.arms import ArmSolution, arm_problems, joint_path
+from dualarm.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
 from dualarm.ik.joint_path import JointPath
 from dualarm.ik.mc_inverse import OUTSIDE_LIMITS, REASONS, VALID, McInverse, branch_label, nearest_candidate
 from dualarm.model.robot import Robot
@@ -88,12 +88,10 @@ def solve_mc_inverse(robot: Robot, reference: CartesianReference, q0: Mapping[st
     """
     spec = settings
     q0 = robot.configuration(q0, "q0")
-    vertical = tuple(np.asarray(spec.vertical) / np.linalg.norm(spec.vertical))
-    problems = arm_problems(robot, reference, q0)
+    arms = arm_solvers(robot, reference, q0, spec)
     solutions = []
-    for arm in problems:
-        solver = McInverse.of(arm.chain, vertical)
-        psi = arm_angles(spec, arm.hand, reference, float(solver.kinematics.arm_angles(arm.q0)[0]))
+    for arm, solver, initial in arms:
+        psi = arm_angles(spec, arm.hand, reference, initial)
         start = time.perf_counter()
         branch = None
         if spec.mode == "auto":
@@ -102,7 +100,17 @@ def solve_mc_inverse(robot: Robot, reference: CartesianReference, q0: Mapping[st
         elapsed = time.perf_counter() - start
         q = _kept_branch(arm.hand, solver, arm.q0, reference, psi, candidates, reasons, spec.max_joint_step_rad, branch)
         solutions.append(ArmSolution(q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))))
-    return joint_path("mc-inverse", reference, problems, solutions, q0)
+    return joint_path("mc-inverse", reference, [arm for arm, _, _ in arms], solutions, q0)
+
+
+def arm_solvers(robot: Robot, reference: CartesianReference, q0: Mapping[str, float], spec: ArmAngle) -> list[tuple[ArmProblem, McInverse, float]]:
+    """Each arm of ``reference`` (:func:`~dualarm.ik.arms.arm_problems` at the configuration ``q0``), its MC-Inverse solver with ``spec.vertical`` as the arm angle's reference direction, and its initial configuration's arm angle [rad]."""
+    vertical = tuple(np.asarray(spec.vertical) / np.linalg.norm(spec.vertical))
+    arms = []
+    for arm in arm_problems(robot, reference, q0):
+        solver = McInverse.of(arm.chain, vertical)
+        arms.append((arm, solver, float(solver.kinematics.arm_angles(arm.q0)[0])))
+    return arms
 
 
 def _kept_branch(

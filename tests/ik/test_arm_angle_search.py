@@ -12,7 +12,6 @@ import pytest
 
 from dualarm.errors import StageError
 from dualarm.ik import mc_path
-from dualarm.ik.arms import arm_problems
 from dualarm.ik.mc_inverse import VALID, McInverse
 from dualarm.paths import build_reference
 from dualarm.paths.reference import first_repetition_index
@@ -82,9 +81,7 @@ def plain_search(solver: McInverse, targets, reference, preferred, q0, spec):
 
 def _search_inputs(task, reference):
     spec = mc_path.settings_for(task)
-    (arm,) = [a for a in arm_problems(task.robot, reference, task.robot.configuration(task.initial_q, "q0")) if a.hand == "left"]
-    solver = McInverse.of(arm.chain, tuple(np.asarray(spec.vertical) / np.linalg.norm(spec.vertical)))
-    preferred = float(solver.kinematics.arm_angles(arm.q0)[0])
+    ((arm, solver, preferred),) = [a for a in mc_path.arm_solvers(task.robot, reference, task.robot.configuration(task.initial_q, "q0"), spec) if a[0].hand == "left"]
     return solver, arm.targets, reference, preferred, arm.q0, spec
 
 
