@@ -26,7 +26,7 @@ from pydantic import Field, ValidationError, model_validator
 
 from dualarm.errors import TaskFileError, excerpt
 from dualarm.methods import IK_METHODS
-from dualarm.tasks.schema import CONTROL_PERIOD_RANGE_S, FINITE, MAX_NAME_CHARS, Range, _Model
+from dualarm.tasks.schema import CONTROL_PERIOD_RANGE_S, FINITE, MAX_NAME_CHARS, Pose, Range, Size, _Model
 
 #: Most trials one study may draw.
 MAX_TRIALS = 1_000_000
@@ -120,6 +120,28 @@ class Orientation(_Model):
         return self
 
 
+class Carry(_Model):
+    """A master-slave carry, the trials whose ``hands`` draw is ``both`` (MC-Inverse section IV, eq (11); the carry_box task's grasp by default).
+
+    The left (master) hand draws the trial's shape as the left hand alone would (its centre in the
+    left shoulder's frame, ``[centre]``), and the right (slave) hand holds a box with it: its pose
+    follows the master's by eq (11), T_slave = T_master master_to_object inverse(slave_to_object).
+
+    Attributes:
+        rpy: the master hand's base orientation, extrinsic x-y-z Euler angles [rad], in place of
+            ``[orientation] rpy`` (palm facing right, onto the box, by default). With ``changing``
+            orientation each polygon vertex turns it, and the box and the slave hand turn with it.
+        size_m: the box [m].
+        master_to_object, slave_to_object: the box's pose in each hand's frame (eq (11)'s
+            ^{T_l}T_obj and ^{T_r}T_obj) [m], [rad]; not scaled by the arm's length.
+    """
+
+    rpy: tuple[Radians, Radians, Radians] = (1.5707963267948966, 0.0, 0.0)
+    size_m: tuple[Size, Size, Size] = (0.15, 0.24, 0.15)
+    master_to_object: Pose = Pose(position=(0.0, 0.0, 0.12), rpy=(-1.5707963267948966, 0.0, 0.0))
+    slave_to_object: Pose = Pose(position=(0.0, 0.0, 0.12), rpy=(1.5707963267948966, 0.0, 0.0))
+
+
 class Inconsistent(_Model):
     """When a method's trial counts as inconsistent.
 
@@ -142,7 +164,8 @@ class StudySpec(_Model):
         methods: the IK methods every trial runs.
         trials: how many trials.
         seed: the trials' seed: the same spec and seed give the same trials on any machine.
-        hands: drawn uniformly per trial: the hand that draws.
+        hands: drawn uniformly per trial: the hand that draws (``left``, ``right``), or ``both``:
+            the left draws and the right carries a box with it (:class:`Carry`).
         repetitions: [low, high] (uniform integer).
         period_s: one repetition's duration [s], [low, high] (uniform, rounded to the control period).
         control_period_s: the generated tasks' control period [s].
@@ -153,13 +176,14 @@ class StudySpec(_Model):
     methods: tuple[str, ...] = IK_METHODS
     trials: Annotated[int, Field(strict=True), Range(1, MAX_TRIALS)]
     seed: Annotated[int, Field(strict=True), Range(0, 2**63 - 1)] = 0
-    hands: tuple[Literal["left", "right"], ...] = ("left", "right")
+    hands: tuple[Literal["left", "right", "both"], ...] = ("left", "right")
     repetitions: tuple[Annotated[int, Field(strict=True), Range(*REPETITIONS_RANGE)], Annotated[int, Field(strict=True), Range(*REPETITIONS_RANGE)]] = (5, 20)
     period_s: tuple[Annotated[float, FINITE, Range(*PERIOD_RANGE_S, " s")], Annotated[float, FINITE, Range(*PERIOD_RANGE_S, " s")]] = (3.0, 6.0)
     control_period_s: Annotated[float, FINITE, Range(*CONTROL_PERIOD_RANGE_S, " s")] = 0.01
     shape: Shape = Shape()
     centre: Centre = Centre()
     orientation: Orientation = Orientation()
+    carry: Carry = Carry()
     inconsistent: Inconsistent = Inconsistent()
 
     @model_validator(mode="after")
@@ -172,7 +196,7 @@ class StudySpec(_Model):
         if len(set(self.methods)) != len(self.methods):
             raise ValueError("methods: a method is named twice")
         if not self.hands:
-            raise ValueError("hands: name at least one of left, right")
+            raise ValueError("hands: name at least one of left, right, both")
         _ordered(self.repetitions, "repetitions")
         _ordered(self.period_s, "period_s")
         return self

@@ -17,6 +17,10 @@ it) has one hand draw a closed shape ``repetitions`` times, starting at the robo
 - ``figure-eight``: from the centre, one circle of half the size on each side, the second the
   other way round.
 
+With ``hands`` drawn ``both``, the left (master) hand draws the shape at the left hand's centre,
+from ``[carry] rpy``, and the task's ``[object]`` has the right (slave) hand hold a box with it
+(MC-Inverse eq (11); :class:`~dualarm.study.spec.Carry`).
+
 The right hand's centre and orientations are the left's mirrored through the x-z plane. The shape's
 plane is the y-z plane (the hand's shoulder frame, facing forward) with its normal
 turned from x by a random angle up to ``tilt_rad`` towards a random direction. Every move's
@@ -63,10 +67,11 @@ def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
     """Draw ``draw`` of trial ``index`` of ``spec`` (module docstring); the same for the same spec, seed, index and draw."""
     rng = np.random.default_rng(np.random.SeedSequence([spec.seed, index, draw]))
     hand = str(rng.choice(spec.hands))
+    drawing = "left" if hand == "both" else hand  # a carry's master hand draws
     kind = str(rng.choice(spec.shape.kinds))
     vertices = int(rng.integers(spec.shape.vertices[0], spec.shape.vertices[1] + 1)) if kind == "polygon" else 0
     size = float(rng.uniform(*spec.shape.size_m))
-    mirror = 1.0 if hand == "left" else -1.0
+    mirror = 1.0 if drawing == "left" else -1.0
     centre = np.array([rng.uniform(*spec.centre.x), mirror * rng.uniform(*spec.centre.y), rng.uniform(*spec.centre.z)])
     tilt, towards = float(rng.uniform(0.0, spec.shape.tilt_rad)), float(rng.uniform(0.0, 2 * math.pi))
     orientation = str(rng.choice(spec.orientation.change))
@@ -76,7 +81,7 @@ def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
     up = np.array([0.0, 0.0, 1.0]) - normal[2] * normal
     u = up / np.linalg.norm(up)
     v = np.cross(normal, u)
-    base = np.array(spec.orientation.rpy) if hand == "left" else _mirrored(spec.orientation.rpy)
+    base = np.array(spec.carry.rpy) if hand == "both" else np.array(spec.orientation.rpy) if hand == "left" else _mirrored(spec.orientation.rpy)
     cp = spec.control_period_s
 
     def steps(duration: float) -> float:  # a whole number of control periods, at least one
@@ -92,33 +97,43 @@ def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
         corners = [centre + size * (math.cos(phase + 2 * math.pi * k / vertices) * u + math.sin(phase + 2 * math.pi * k / vertices) * v) for k in range(vertices)]
         turns = rng.uniform(-spec.orientation.change_rad, spec.orientation.change_rad, (vertices, 3)) if orientation == "changing" else np.zeros((vertices, 3))
         waypoints = {f"V{k}": {"position": point(c), "rpy": point(base + turns[k])} for k, c in enumerate(corners)}
-        moves = [{"duration_s": steps(period / vertices), hand: {"to": f"V{(k + 1) % vertices}"}} for k in range(vertices)]
+        moves = [{"duration_s": steps(period / vertices), drawing: {"to": f"V{(k + 1) % vertices}"}} for k in range(vertices)]
         start = "V0"
     elif kind == "circle":
         waypoints = {"P0": {"position": point(centre + size * u), "rpy": point(base)}}
-        moves = [{"duration_s": steps(period), hand: {"arc_center": point(centre), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi}}]
+        moves = [{"duration_s": steps(period), drawing: {"arc_center": point(centre), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi}}]
         start = "P0"
     else:  # figure-eight: two circles of half the size through the centre, the second the other way round
         waypoints = {"C": {"position": point(centre), "rpy": point(base)}}
         moves = [
-            {"duration_s": steps(period / 2), hand: {"arc_center": point(centre + size / 2 * u), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi}},
-            {"duration_s": steps(period / 2), hand: {"arc_center": point(centre - size / 2 * u), "arc_axis": point(-normal), "arc_angle_rad": 2 * math.pi}},
+            {"duration_s": steps(period / 2), drawing: {"arc_center": point(centre + size / 2 * u), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi}},
+            {"duration_s": steps(period / 2), drawing: {"arc_center": point(centre - size / 2 * u), "arc_axis": point(-normal), "arc_angle_rad": 2 * math.pi}},
         ]
         start = "C"
     task = {
         "name": f"{spec.name}-{index:06d}",
-        "title": f"{spec.name}, trial {index}: the {hand} hand draws a {kind} {repetitions} times",
+        "title": f"{spec.name}, trial {index}: " + ("the left hand carries a box with the right along" if hand == "both" else f"the {hand} hand draws") + f" a {kind} {repetitions} times",
         "source": f"dualarm study {spec.name} (seed {spec.seed}), trial {index}",
         "robot": spec.robot,
         "control_period_s": cp,
         "repetitions": repetitions,
         "initial": "ready",
-        "frame": f"{hand}.shoulder",
+        "frame": f"{drawing}.shoulder",
         "scale": "arm",
         "waypoints": waypoints,
-        "start": {hand: start},
+        "start": {drawing: start},
         "moves": moves,
     }
+    if hand == "both":  # eq (11): the right hand follows the left's pose through the box
+        carry = spec.carry
+        task["object"] = {
+            "name": "box",
+            "size_m": list(carry.size_m),
+            "master": "left",
+            "slave": "right",
+            "master_to_object": carry.master_to_object.model_dump(),
+            "slave_to_object": carry.slave_to_object.model_dump(),
+        }
     features = {
         "hand": hand,
         "kind": kind,

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from dualarm.errors import TaskFileError
 from dualarm.run import run_task
@@ -35,6 +36,9 @@ def test_the_example_spec_loads():
         ('name = "s"\ntrials = 10\n[centre]\nx = [0.4, nan]\n', "centre.x[1]: Input should be a finite number"),
         ('name = "s"\ntrials = 10\ncolour = "red"\n', "colour"),
         ('name = "s"\ntrials = 10\n[inconsistent]\njoint_deviation_rad = 0\n', "inconsistent.joint_deviation_rad"),
+        ('name = "s"\ntrials = 10\nhands = ["left", "all"]\n', "hands[1]: Input should be 'left', 'right' or 'both'"),
+        ('name = "s"\ntrials = 10\n[carry]\nsize_m = [0.1, 0.2]\n', "carry.size_m"),
+        ('name = "s"\ntrials = 10\n[carry]\nmaster_to_object = { rpy = [0, 0, 0] }\n', "carry.master_to_object.position: missing"),
         ('name = "s"\ntrials = 10.5\n', "trials"),
         ('name = "s"\ntrials = \n', "not valid TOML"),
     ],
@@ -60,7 +64,7 @@ def test_trials_are_the_same_whatever_order_they_are_drawn_in():
     other = spec.model_copy(update={"seed": 1})
     assert sum(trial(other, i).task == forwards[i].task for i in range(40)) == 0
     kinds = {t.features["kind"] for t in forwards}
-    assert kinds == {"polygon", "circle", "figure-eight"} and {t.features["hand"] for t in forwards} == {"left", "right"}
+    assert kinds == {"polygon", "circle", "figure-eight"} and {t.features["hand"] for t in forwards} == {"left", "right", "both"}
     for t in forwards:
         f = t.features
         assert spec.repetitions[0] <= f["repetitions"] <= spec.repetitions[1] and (f["vertices"] == 0) == (f["kind"] != "polygon") and 0.05 <= f["size_m"] <= 0.15
@@ -75,19 +79,37 @@ def _circle_fit(points: np.ndarray) -> tuple[np.ndarray, float, float]:
     return centre, radius, float(np.abs(np.linalg.norm(points - centre, axis=1) - radius).max())
 
 
-@pytest.mark.parametrize("index", range(8))
+def _pose(position, rpy) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = Rotation.from_euler("xyz", rpy).as_matrix(), position
+    return T
+
+
+@pytest.mark.parametrize("index", range(12))
 def test_each_trial_is_a_valid_task_drawing_its_shape(index):
     """The path stage's reference of one repetition (the hand's positions, robot base frame), split by the task's moves:
     closed, in one plane (1e-9 m) whose normal is within tilt_rad of x; a circle's samples on one circle; a polygon's edges
     straight and its vertices on one circle; a figure-eight's two loops circles of equal radius touching at its start,
-    crossed without turning back."""
+    crossed without turning back. In a carry (``both``), the left hand draws and the right hand's every pose is the left's
+    times the spec's master_to_object and inverse(slave_to_object) (eq 11, composed here with scipy)."""
     spec, base = load_study(EXAMPLE)
     t = trial(spec, index)
     f = t.features
     assert task_from_dict(t.task, base_dir=base).spec.repetitions == f["repetitions"]
     task = task_from_dict({**t.task, "repetitions": 1}, base_dir=base)
     reference = run_task(task, None, stages=("path",)).reference
-    p = reference.hands[f["hand"]].position
+    drawing = "left" if f["hand"] == "both" else f["hand"]
+    assert set(reference.hands) == ({"left", "right"} if f["hand"] == "both" else {drawing})
+    if f["hand"] == "both":
+        carry = spec.carry
+        grip = _pose(carry.master_to_object.position, carry.master_to_object.rpy) @ np.linalg.inv(_pose(carry.slave_to_object.position, carry.slave_to_object.rpy))
+        left, right = reference.hands["left"], reference.hands["right"]
+        for k in range(len(reference.t)):
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = left.rotation[k], left.position[k]
+            assert np.allclose(T @ grip, np.block([[right.rotation[k], right.position[k][:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]), atol=1e-12)
+        assert np.allclose(np.linalg.norm(left.position - right.position, axis=1), 0.24, atol=1e-12)  # the palms hold the box's 0.24 m
+    p = reference.hands[drawing].position
     assert np.linalg.norm(p[0] - p[-1]) < 1e-9
     centred = p - p.mean(axis=0)
     _, _, (a, b, normal) = np.linalg.svd(centred)
