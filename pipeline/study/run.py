@@ -51,7 +51,7 @@ from dualarm.quiet import c_output_silenced
 from dualarm.record.run_dir import claim_output_dir, write_whole
 from dualarm.record.sink import record_level
 from dualarm.study.spec import StudySpec
-from dualarm.study.trials import MAX_DRAWS, Trial, reachable_trial, study_robot, trial
+from dualarm.study.trials import ARMS, MAX_DRAWS, Trial, reachable_trial, study_robot, trial
 from dualarm.version import __version__
 
 #: The files and directories of a study's directory (module docstring).
@@ -265,10 +265,14 @@ def run_study(
         robot = study_robot(spec.robot, str(Path(base_dir).resolve()))
     except RobotModelError as exc:
         raise TaskFileError(f"robot: {exc}") from None
+    arms = dict.fromkeys(arm for hand in spec.hands for arm in ARMS[hand])
+    for arm in arms:
+        if arm not in robot.hands:
+            raise TaskFileError(f"hands: robot '{excerpt(robot.name, 40)}' has no {arm} hand (hands: {', '.join(robot.hands)})")
     if spec.centre.reachable:
         from dualarm.ik.mc_inverse import McInverse
 
-        for hand in spec.hands:
+        for hand in arms:
             try:
                 McInverse.of(robot.hand_chain(hand))
             except NotSRSError as exc:

@@ -63,6 +63,10 @@ class Trial:
     features: dict[str, Any]
 
 
+#: The arms a trial of each ``hands`` draw drives.
+ARMS = {"left": ("left",), "right": ("right",), "both": ("left", "right")}
+
+
 def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
     """Draw ``draw`` of trial ``index`` of ``spec`` (module docstring); the same for the same spec, seed, index and draw."""
     rng = np.random.default_rng(np.random.SeedSequence([spec.seed, index, draw]))

@@ -213,6 +213,15 @@ def test_a_robot_the_reach_check_cannot_use_is_refused_before_anything_is_writte
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("hands", ['["both"]', '["right", "left"]'])
+def test_a_hand_the_robot_does_not_have_is_refused_before_anything_is_written(tmp_path, hands):
+    """The Panda drives one hand, `right`: a carry (both) or a left-hand trial is refused in one line, naming the key."""
+    spec = study_from_toml(SPEC.replace('name = "small"', f'name = "small"\nrobot = "panda"\nhands = {hands}'))
+    with pytest.raises(TaskFileError, match=r"^hands: robot 'panda' has no left hand \(hands: right\)$"):
+        run_study(spec, REPO, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
 def _affinity() -> list[list[int]]:
     """The cores of every thread of this process, as the OS has them."""
     return [sorted(os.sched_getaffinity(int(t))) for t in os.listdir("/proc/self/task")]
