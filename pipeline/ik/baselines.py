@@ -72,6 +72,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -290,6 +291,11 @@ class TracIkSolver:
         return BaselineResult(q, ok, position, orientation)
 
 
+#: Most PyBullet solvers (each its own client) :meth:`PyBulletIkSolver.shared` keeps open in a process.
+SHARED_PYBULLET_SOLVERS = 8
+_shared_pybullet: OrderedDict[tuple[object, ...], PyBulletIkSolver] = OrderedDict()
+
+
 @dataclass(frozen=True, eq=False)
 class PyBulletIkSolver:
     """PyBullet's damped-least-squares IK for one chain, in its own DIRECT client (build with :meth:`of`; close with :meth:`close` or use as a context manager).
@@ -466,6 +472,19 @@ class PyBulletIkSolver:
             if inside.size:
                 q[i] = inside[np.argmin(np.abs(inside - seed[i]))]
         return np.clip(q, self.lower, self.upper)
+
+    @classmethod
+    def shared(cls, robot: Robot, base: str, tip: str, *, locked: Mapping[str, float] | None = None, **settings: float) -> "PyBulletIkSolver":
+        """:meth:`of`'s solver, built once per robot, chain, locked joints and settings in a process and kept open (a study's worker loads the robot into PyBullet once, not per trial); the least recently used beyond :data:`SHARED_PYBULLET_SOLVERS` are closed. Not to be closed by the caller.
+
+        Every answer is :meth:`of`'s: :meth:`solve` sets the chain's joints to its seed, and nothing changes the others.
+        """
+        key = (robot, base, tip, tuple(sorted((locked or {}).items())), tuple(sorted(settings.items())))
+        solver = _shared_pybullet.pop(key, None) or cls.of(robot, base, tip, locked=locked, **settings)  # type: ignore[arg-type]
+        _shared_pybullet[key] = solver
+        while len(_shared_pybullet) > SHARED_PYBULLET_SOLVERS:
+            _shared_pybullet.popitem(last=False)[1].close()
+        return solver
 
     def close(self) -> None:
         """Disconnect the PyBullet client."""

@@ -59,6 +59,7 @@ numpy.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -219,7 +220,7 @@ class DlsSolver:
 
     @classmethod
     def of(cls, robot: Robot, base: str, tips: Sequence[str], settings: DlsSettings = DlsSettings()) -> "DlsSolver":
-        """Build the solver for ``tips`` of ``robot`` in the frame of link ``base``.
+        """The solver for ``tips`` of ``robot`` in the frame of link ``base``; built once per robot, base, tips and settings in a process, then kept (a study's worker builds it once, not per trial).
 
         Args:
             robot: the robot.
@@ -231,7 +232,11 @@ class DlsSolver:
             StageError: no tips, repeated tips, or a tip whose chain from ``base`` has no movable joint.
             RobotModelError: a link name the URDF does not have or no chain between ``base`` and a tip.
         """
-        tips = tuple(tips)
+        return _solver(robot, base, tuple(tips), settings)
+
+    @classmethod
+    def _build(cls, robot: Robot, base: str, tips: tuple[str, ...], settings: DlsSettings) -> "DlsSolver":
+        """Build the solver (see :meth:`of`)."""
         if not tips:
             raise StageError("DLS solver: no tips given (give at least one tip link, e.g. 'left_hand')")
         if len(set(tips)) != len(tips):
@@ -397,3 +402,12 @@ class DlsSolver:
             orientation_error_rad=float(errors[h:].max()),
             reason=reason,
         )
+
+
+#: Most DLS solvers a process keeps (:meth:`DlsSolver.of`).
+KEPT_SOLVERS = 32
+
+
+@functools.lru_cache(maxsize=KEPT_SOLVERS)
+def _solver(robot: Robot, base: str, tips: tuple[str, ...], settings: DlsSettings) -> DlsSolver:
+    return DlsSolver._build(robot, base, tips, settings)

@@ -21,8 +21,7 @@ consistency report counts the repetitions with a failure.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -96,20 +95,19 @@ class IkfastStyleSettings:
             raise InvalidArgumentError("resolution_rad", f"must be a positive number, not {self.resolution_rad!r}")
 
 
-@contextmanager
-def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str, float], settings: Any) -> Iterator[ArmSolver]:
+def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str, float], settings: Any) -> ArmSolver:
     """The method's solver for one arm."""
     base, tip = arm.chain.base, arm.chain.tip
     if method == "trac-ik":
         from dualarm.ik.baselines import TracIkSolver
 
         solver = TracIkSolver.of(robot, base, tip, **as_record(settings))
-        yield lambda target, seed: _pair(solver.solve(target, seed))
+        return lambda target, seed: _pair(solver.solve(target, seed))
     elif method == "pybullet":
         from dualarm.ik.baselines import PyBulletIkSolver
 
-        with PyBulletIkSolver.of(robot, base, tip, locked=locked, **as_record(settings)) as pb_solver:
-            yield lambda target, seed: _pair(pb_solver.solve(target, seed))
+        pb_solver = PyBulletIkSolver.shared(robot, base, tip, locked=locked, **as_record(settings))
+        return lambda target, seed: _pair(pb_solver.solve(target, seed))
     elif method == "dls-svd":
         from dualarm.ik.dls import DlsSolver
 
@@ -119,7 +117,7 @@ def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str,
             result = dls.solve([target], seed)
             return result.q, result.converged
 
-        yield solve
+        return solve
     else:
         from dualarm.ik.ikfast_style import IkfastStyle
 
@@ -137,7 +135,7 @@ def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str,
             result = ikfast.nearest(target, seed, seen[key])
             return result.q, result.ok
 
-        yield solve_ikfast
+        return solve_ikfast
 
 
 def _pair(result: Any) -> tuple[np.ndarray, bool]:
@@ -178,14 +176,14 @@ def solve_pointwise(
         q, ok, times = np.empty((N, arm.chain.dof)), np.zeros(N, bool), np.zeros(N)
         seed = arm.q0
         locked = {n: v for n, v in q0.items() if n not in arm.chain.joint_names}
-        with _arm_solver(method, robot, arm, locked, settings) as solve:
-            for k in range(N):
-                start = time.perf_counter()
-                answer, ok[k] = solve(arm.targets[k], seed)
-                times[k] = time.perf_counter() - start
-                seed = q[k] = answer if ok[k] else seed
-                if progress is not None and k % 50 == 0:
-                    progress(a * N + k, len(problems) * N)
+        solve = _arm_solver(method, robot, arm, locked, settings)
+        for k in range(N):
+            start = time.perf_counter()
+            answer, ok[k] = solve(arm.targets[k], seed)
+            times[k] = time.perf_counter() - start
+            seed = q[k] = answer if ok[k] else seed
+            if progress is not None and k % 50 == 0:
+                progress(a * N + k, len(problems) * N)
         solutions.append(ArmSolution(q=q, ok=ok, solve_time_s=times))
     return joint_path(method, reference, problems, solutions, q0)
 

@@ -8,6 +8,7 @@ the Jacobian is block diagonal, as in TV-GDD eq (13).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -70,6 +71,13 @@ class HandStack:
     rotations: cs.Function
     errors: cs.Function
 
+    @functools.cached_property
+    def start_solver(self) -> cs.Function:
+        """IPOPT's problem of :func:`start_configuration`, built once per stack: min |theta - initial|^2 s.t. e(theta, p) = 0, the first reference sample p its parameter."""
+        nlp = {"x": self.theta, "p": self.target, "f": cs.sumsqr(self.theta - self.initial), "g": self.error}
+        options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "constr_viol_tol": 1e-12}}
+        return cs.nlpsol("start_configuration", "ipopt", nlp, options)
+
     @property
     def n(self) -> int:
         """Number of active joints."""
@@ -97,14 +105,26 @@ def active_joints(robot: Robot, hands: Sequence[str], frame: str, free_waist: bo
     return tuple(names)
 
 
+#: Most hand stacks a process keeps (:func:`hand_stack`).
+KEPT_STACKS = 32
+
+
 def hand_stack(robot: Robot, hands: Sequence[str], q0: Mapping[str, float], *, frame: str | None = None, free_waist: bool = False, task_space: str = "position") -> HandStack:
     """The stacked kinematics of ``hands`` in ``frame`` (default the robot's root link), the joints that are not active at their values in ``q0`` [rad], with the task rows of ``task_space`` (``position`` or ``pose``).
+
+    Built once per robot and arguments in a process, then kept (a study's worker builds it once, not per trial).
 
     Raises:
         InvalidArgumentError: an unknown task space.
     """
     check_task_space(task_space)
-    frame = frame or robot.urdf.root
+    return _stack(robot, tuple(hands), tuple(q0.items()), frame or robot.urdf.root, free_waist, task_space)
+
+
+@functools.lru_cache(maxsize=KEPT_STACKS)
+def _stack(robot: Robot, hands: tuple[str, ...], q0_items: tuple[tuple[str, float], ...], frame: str, free_waist: bool, task_space: str) -> HandStack:
+    """Build :func:`hand_stack`'s stack."""
+    q0 = dict(q0_items)
     names = active_joints(robot, hands, frame, free_waist)
     fixed = {n: v for n, v in q0.items() if n not in names}
     theta = cs.SX.sym("theta", len(names))
@@ -180,10 +200,8 @@ def start_configuration(stack: HandStack, reference: CartesianReference, lower: 
     r0 = stacked_reference(stack, reference)[0][0]
     if _on_start(stack, stack.initial, r0):
         return stack.initial
-    nlp = {"x": stack.theta, "f": cs.sumsqr(stack.theta - stack.initial), "g": stack.errors(stack.theta, r0)}
-    options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "constr_viol_tol": 1e-12}}
-    solver = cs.nlpsol("start_configuration", "ipopt", nlp, options)
-    theta = np.asarray(solver(x0=stack.initial, lbx=lower, ubx=upper, lbg=0, ubg=0)["x"]).ravel()
+    solver = stack.start_solver
+    theta = np.asarray(solver(x0=stack.initial, p=r0, lbx=lower, ubx=upper, lbg=0, ubg=0)["x"]).ravel()
     if not solver.stats()["success"] or not _on_start(stack, theta, r0):
         e = np.abs(np.asarray(stack.errors(theta, r0)).ravel())
         p = 3 * len(stack.hands)

@@ -74,9 +74,12 @@ class Chain:
         return len(self.joint_names)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Robot:
     """A robot description.
+
+    Compared and hashed by identity: a loaded robot is one object, and the solvers a process builds
+    once for it (a study's worker, not once per trial) are kept by it.
 
     Attributes:
         name: robot name.
@@ -144,15 +147,19 @@ class Robot:
     def with_limits(self, **overrides: float | Mapping[str, float] | None) -> "Robot":
         """The same robot with some limits replaced: ``kind=value`` for every joint, or ``kind={joint: value}`` for some (kinds ``velocity``, ``acceleration``, ``jerk``; None keeps the robot's).
 
-        A task's ``[limits]`` table is applied so.
+        A task's ``[limits]`` table is applied so. With nothing to replace (every override None) it is
+        this robot itself, so that what a process builds for it once is found again.
 
         Raises:
             InvalidArgumentError: an unknown kind or joint, or a value that is not a positive finite number.
         """
-        limits = dict(self.limits)
-        for kind, value in overrides.items():
+        for kind in overrides:
             if kind not in ("velocity", "acceleration", "jerk"):
                 raise InvalidArgumentError(kind, "not a limit that can be overridden (velocity, acceleration, jerk)")
+        if all(value is None for value in overrides.values()):
+            return self
+        limits = dict(self.limits)
+        for kind, value in overrides.items():
             if value is None:
                 continue
             table = value if isinstance(value, Mapping) else dict.fromkeys(limits, value)

@@ -166,6 +166,23 @@ def test_pybullet_keeps_the_waist_locked_where_asked(humanoid, samples, pybullet
             assert position < PYBULLET_FK_TOLERANCE and orientation < PYBULLET_FK_TOLERANCE
 
 
+def test_a_shared_pybullet_solver_answers_as_a_new_one_does(humanoid, samples):
+    """PyBulletIkSolver.shared is kept open per process and reused (a study's worker loads the robot once): after solving
+    other targets from other seeds, with the waist locked elsewhere by another shared solver, it returns what a solver built
+    afresh returns, bit for bit; the same arguments give the same solver."""
+    Q, targets, seeds = samples
+    waist = {"waist_yaw": 0.3, "waist_pitch": -0.2, "waist_roll": 0.1}
+    shared = PyBulletIkSolver.shared(humanoid, BASE, TIP)
+    assert PyBulletIkSolver.shared(humanoid, BASE, TIP) is shared and PyBulletIkSolver.shared(humanoid, BASE, TIP, locked=waist) is not shared
+    for T, seed in zip(targets[10:20], seeds[::-1][:10]):
+        shared.solve(T, seed)
+        PyBulletIkSolver.shared(humanoid, BASE, TIP, locked=waist).solve(T, seed)
+    with PyBulletIkSolver.of(humanoid, BASE, TIP) as fresh:
+        for T, seed in zip(targets[:10], seeds[:10]):
+            a, b = shared.solve(T, seed), fresh.solve(T, seed)
+            assert np.array_equal(a.q, b.q) and a.ok == b.ok
+
+
 def test_a_root_link_with_inertia_and_a_base_com_offset(kuka_urdf, capfd):
     """The KUKA iiwa's root link has an inertia (KDL warns on stdout unless a dummy root is
     added) and a centre-of-mass offset (PyBullet moves its targets by it if given

@@ -213,6 +213,36 @@ def test_a_robot_the_reach_check_cannot_use_is_refused_before_anything_is_writte
     assert not (tmp_path / "out").exists()
 
 
+def test_a_worker_builds_its_solvers_once_not_per_trial(monkeypatch):
+    """Trials run one after another in one process, as on a worker: after the first, the later trials load the robot into
+    PyBullet, build DLS's Function, the hand stacks and IPOPT's start problem no more (counted at the libraries' calls)."""
+    import casadi
+
+    from dualarm.ik import baselines, dls, stack
+
+    spec = study_from_toml(SPEC.replace('"pybullet"]', '"pybullet", "tvgdd"]') + 'hands = ["left"]\n')
+    calls = {"pybullet": 0, "dls": 0, "nlpsol": 0}
+
+    def counted(name, function):
+        def call(*args, **kwargs):
+            calls[name] += 1
+            return function(*args, **kwargs)
+
+        return call
+
+    monkeypatch.setattr(baselines, "load_pybullet_robot", counted("pybullet", baselines.load_pybullet_robot))
+    monkeypatch.setattr(dls.DlsSolver, "_build", counted("dls", dls.DlsSolver._build))
+    monkeypatch.setattr(casadi, "nlpsol", counted("nlpsol", casadi.nlpsol))
+    for cache in (dls._solver, stack._stack):
+        cache.cache_clear()
+    run_trial(spec, str(REPO), 0)
+    first, stacks = dict(calls), stack._stack.cache_info().misses
+    assert first["pybullet"] == first["dls"] == 1 and first["nlpsol"] >= 1 and stacks >= 1
+    for index in (1, 2):
+        run_trial(spec, str(REPO), index)
+    assert calls == first and stack._stack.cache_info().misses == stacks
+
+
 @pytest.mark.parametrize("hands", ['["both"]', '["right", "left"]'])
 def test_a_hand_the_robot_does_not_have_is_refused_before_anything_is_written(tmp_path, hands):
     """The Panda drives one hand, `right`: a carry (both) or a left-hand trial is refused in one line, naming the key."""
