@@ -75,6 +75,7 @@ import xml.etree.ElementTree as ET
 from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -474,13 +475,13 @@ class PyBulletIkSolver:
         return np.clip(q, self.lower, self.upper)
 
     @classmethod
-    def shared(cls, robot: Robot, base: str, tip: str, *, locked: Mapping[str, float] | None = None, **settings: float) -> "PyBulletIkSolver":
+    def shared(cls, robot: Robot, base: str, tip: str, *, locked: Mapping[str, float] | None = None, **settings: Any) -> "PyBulletIkSolver":
         """:meth:`of`'s solver, built once per robot, chain, locked joints and settings in a process and kept open (a study's worker loads the robot into PyBullet once, not per trial); the least recently used beyond :data:`SHARED_PYBULLET_SOLVERS` are closed. Not to be closed by the caller.
 
         Every answer is :meth:`of`'s: :meth:`solve` sets the chain's joints to its seed, and nothing changes the others.
         """
         key = (robot, base, tip, tuple(sorted((locked or {}).items())), tuple(sorted(settings.items())))
-        solver = _shared_pybullet.pop(key, None) or cls.of(robot, base, tip, locked=locked, **settings)  # type: ignore[arg-type]
+        solver = _shared_pybullet.pop(key, None) or cls.of(robot, base, tip, locked=locked, **settings)
         _shared_pybullet[key] = solver
         while len(_shared_pybullet) > SHARED_PYBULLET_SOLVERS:
             _shared_pybullet.popitem(last=False)[1].close()
