@@ -46,8 +46,8 @@ FEATURES = {
     "hand": "hand",
     "repetitions": "repetitions",
     "period_s": "one repetition's duration [s]",
-    "ik.joint_limit_margin_min_rad": "closest approach to a joint limit along the path [rad]",
-    "ik.manipulability_min": "least manipulability along the path",
+    "ik.joint_limit_margin_min_rad": "closest approach to a joint limit along the path [rad] (trials with a path)",
+    "ik.manipulability_min": "least manipulability along the path (trials with a path)",
 }
 #: The confidence of every interval.
 CONFIDENCE = 0.95
