@@ -63,7 +63,7 @@ class Trial:
     features: dict[str, Any]
 
 
-#: The arms a trial of each ``hands`` draw drives.
+#: The arms a trial of each ``hands`` draw drives; a carry's master (the hand that draws) first.
 ARMS = {"left": ("left",), "right": ("right",), "both": ("left", "right")}
 
 
@@ -71,7 +71,7 @@ def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
     """Draw ``draw`` of trial ``index`` of ``spec`` (module docstring); the same for the same spec, seed, index and draw."""
     rng = np.random.default_rng(np.random.SeedSequence([spec.seed, index, draw]))
     hand = str(rng.choice(spec.hands))
-    drawing = "left" if hand == "both" else hand  # a carry's master hand draws
+    drawing = ARMS[hand][0]  # a carry's master hand draws
     kind = str(rng.choice(spec.shape.kinds))
     vertices = int(rng.integers(spec.shape.vertices[0], spec.shape.vertices[1] + 1)) if kind == "polygon" else 0
     size = float(rng.uniform(*spec.shape.size_m))
@@ -133,8 +133,8 @@ def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
         task["object"] = {
             "name": "box",
             "size_m": list(carry.size_m),
-            "master": "left",
-            "slave": "right",
+            "master": ARMS[hand][0],
+            "slave": ARMS[hand][1],
             "master_to_object": carry.master_to_object.model_dump(),
             "slave_to_object": carry.slave_to_object.model_dump(),
         }

@@ -79,9 +79,9 @@ def _circle_fit(points: np.ndarray) -> tuple[np.ndarray, float, float]:
     return centre, radius, float(np.abs(np.linalg.norm(points - centre, axis=1) - radius).max())
 
 
-def _pose(position, rpy) -> np.ndarray:
+def _matrix(rotation, position) -> np.ndarray:
     T = np.eye(4)
-    T[:3, :3], T[:3, 3] = Rotation.from_euler("xyz", rpy).as_matrix(), position
+    T[:3, :3], T[:3, 3] = rotation, position
     return T
 
 
@@ -102,12 +102,10 @@ def test_each_trial_is_a_valid_task_drawing_its_shape(index):
     assert set(reference.hands) == ({"left", "right"} if f["hand"] == "both" else {drawing})
     if f["hand"] == "both":
         carry = spec.carry
-        grip = _pose(carry.master_to_object.position, carry.master_to_object.rpy) @ np.linalg.inv(_pose(carry.slave_to_object.position, carry.slave_to_object.rpy))
+        master, slave = (_matrix(Rotation.from_euler("xyz", grip.rpy).as_matrix(), grip.position) for grip in (carry.master_to_object, carry.slave_to_object))
         left, right = reference.hands["left"], reference.hands["right"]
         for k in range(len(reference.t)):
-            T = np.eye(4)
-            T[:3, :3], T[:3, 3] = left.rotation[k], left.position[k]
-            assert np.allclose(T @ grip, np.block([[right.rotation[k], right.position[k][:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]), atol=1e-12)
+            assert np.allclose(_matrix(left.rotation[k], left.position[k]) @ master @ np.linalg.inv(slave), _matrix(right.rotation[k], right.position[k]), atol=1e-12)
         assert np.allclose(np.linalg.norm(left.position - right.position, axis=1), 0.24, atol=1e-12)  # the palms hold the box's 0.24 m
     p = reference.hands[drawing].position
     assert np.linalg.norm(p[0] - p[-1]) < 1e-9
