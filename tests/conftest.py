@@ -75,7 +75,7 @@ def wheel_env(tmp_path_factory) -> Path:
 
 
 def still_path_fields(n: int, *, joint: str = "a", hand: str = "left", method: str = "x", period_s: float = 0.01, **fields) -> dict:
-    """The fields of a one-joint, one-hand :class:`~dualarm.ik.joint_path.JointPath` of ``n`` samples at rest at 0, every sample solved; ``fields`` replace any of them."""
+    """The fields of a one-joint, one-hand :class:`~dualarm.contracts.joint_path.JointPath` of ``n`` samples at rest at 0, every sample solved; ``fields`` replace any of them."""
     import numpy as np
 
     return {

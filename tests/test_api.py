@@ -40,6 +40,26 @@ def test_import_is_light():
     assert done.stdout.strip() == "[]"
 
 
+@pytest.mark.parametrize("module", ["dualarm.contracts", "dualarm.stages"])
+def test_the_contracts_and_the_stages_import_no_heavy_library(module):
+    """Stages import what they run on first use; the products passed between them are numpy alone."""
+    heavy = ("casadi", "toppra", "ruckig", "pybullet", "matplotlib", "rerun", "pandas", "scipy")
+    code = f"import sys, {module}; print(sorted(m for m in {heavy!r} if m in sys.modules))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"
+
+
+def test_every_registry_solver_is_exported_and_agrees_with_its_module():
+    from dualarm.ik.pose_level.pointwise import SETTINGS
+    from dualarm.plan.problem import PLANNERS
+
+    for m in dualarm.METHODS.values():
+        assert m.solve.__name__ in dualarm.__all__ and getattr(dualarm, m.solve.__name__) is m.solve, m.name
+        if m.name in SETTINGS:
+            assert SETTINGS[m.name] is m.settings_type
+    assert PLANNERS == dualarm.methods.PLANNERS
+
+
 def test_registry_matches_the_cli():
     from dualarm.methods import IK_METHODS, PLANNERS
 
@@ -58,7 +78,7 @@ def robot():
 
 
 def test_frame_helpers_against_pybullet(robot):
-    from dualarm.execute.world import load_pybullet_robot
+    from dualarm.sim.world import load_pybullet_robot
 
     q = dict(robot.home("ready"))
     q.update(waist_yaw=0.3, waist_pitch=-0.2)

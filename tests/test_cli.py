@@ -98,8 +98,8 @@ def test_ik_srs_json_lists_8_candidates_that_pybullet_confirms(humanoid):
 
     import numpy as np
 
-    from dualarm.execute.world import load_pybullet_robot
     from dualarm.model.poses import pose_matrix
+    from dualarm.sim.world import load_pybullet_robot
 
     pose = [0.147, 0.404, 0.455, 0.937, 0.560, -0.377]
     result = runner.invoke(app, ["ik", "srs", str(HUMANOID), "--arm", "left", "--pose", *map(str, pose), "--arm-angle", "2.2", "--json", "--frame", "chain"])
@@ -220,7 +220,7 @@ def test_table_cells_are_printed_as_they_are(tmp_path):
 
 def test_a_long_user_string_is_cut(tmp_path):
     """A 100 000-character stage name: one line of at most a few hundred characters."""
-    from dualarm.cli import MAX_LINE
+    from dualarm.cli.app import MAX_LINE
 
     result = runner.invoke(app, ["run", TRIANGLE, "--ik", "pinv", "--stages", "path," + "x" * 100_000])
     lines = [line for line in result.stderr.splitlines() if line.strip()]

@@ -6,12 +6,12 @@ import casadi as cs
 import numpy as np
 import pytest
 
-from dualarm import compiled as compiled_module
 from dualarm.arrays import RIGID_TOLERANCE
-from dualarm.compiled import compiled
 from dualarm.errors import InvalidArgumentError
-from dualarm.ik.mc_inverse import McInverse
+from dualarm.ik.analytic.mc_inverse import McInverse
 from dualarm.model.kinematics import ChainKinematics
+from dualarm.numerics import compiled as compiled_module
+from dualarm.numerics.compiled import compiled
 
 
 @pytest.fixture

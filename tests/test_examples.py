@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("[0-9][0-9]_*.py"))
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = sorted((REPO / "examples").glob("[0-9][0-9]_*.py"))
 
 
 def run_example(python: Path, path: Path, cwd: Path) -> str:
@@ -60,18 +61,41 @@ def test_example_runs(path: Path, tmp_path: Path, wheel_env: Path):
         assert "report: report.md" in out
 
 
-def test_readme_shows_the_first_two_examples_as_they_are():
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
+#: The pages a reader sees: the README, the documentation site's sources and the data READMEs.
+DOCS = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md")), REPO / "tasks" / "README.md", REPO / "reports" / "README.md"]
+
+
+def python_blocks(doc: Path) -> list[str]:
+    return re.findall(r"^ *```python\n(.*?)^ *```", doc.read_text(), re.S | re.M)
+
+
+def test_docs_show_the_first_two_examples_as_they_are():
+    """The Python page (docs/python.md) shows examples 01 and 02, the README 01; every copy is the file."""
+    shown = {doc: python_blocks(doc) for doc in DOCS}
     for path in EXAMPLES[:2]:
-        assert path.read_text().rstrip() + "\n" in blocks, f"README's copy of {path.name} differs from the file"
+        assert path.read_text().rstrip() + "\n" in shown[REPO / "docs" / "python.md"], f"docs/python.md's copy of {path.name} differs from the file"
+    assert EXAMPLES[0].read_text().rstrip() + "\n" in shown[REPO / "README.md"], f"README's copy of {EXAMPLES[0].name} differs from the file"
+    for path in EXAMPLES:
+        first = path.read_text().splitlines()[0]
+        for doc, blocks in shown.items():
+            for block in blocks:
+                if block.splitlines()[:1] == [first]:
+                    assert block == path.read_text().rstrip() + "\n", f"{doc.relative_to(REPO)}'s copy of {path.name} differs from the file"
 
 
 def test_readme_links_only_inside_the_repository():
-    repo = Path(__file__).resolve().parents[1]
-    for doc in [repo / "README.md", *(repo / "docs").glob("*.md"), repo / "tasks" / "README.md", repo / "reports" / "README.md"]:
+    for doc in DOCS:
         for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", doc.read_text()):
             if "://" not in target:
-                assert (doc.parent / target).resolve().is_relative_to(repo), f"{doc.name} links outside the repository: {target}"
+                assert (doc.parent / target).resolve().is_relative_to(REPO), f"{doc.name} links outside the repository: {target}"
                 assert (doc.parent / target).exists(), f"{doc.name} links to a missing file: {target}"
         assert "../shared" not in doc.read_text(), f"{doc.name} points at ../shared"
+
+
+def test_docs_link_only_to_pages():
+    """The site's pages link to pages of the site, never to files outside docs/ (mkdocs --strict refuses them)."""
+    docs = REPO / "docs"
+    for doc in sorted(docs.rglob("*.md")):
+        for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", doc.read_text()):
+            if "://" not in target:
+                assert (doc.parent / target).resolve().is_relative_to(docs), f"{doc.relative_to(REPO)} links outside docs/: {target}"

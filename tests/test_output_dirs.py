@@ -18,7 +18,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from dualarm.cli import COMPARE_HEADER, app
+from dualarm.cli import app
+from dualarm.cli.runs import COMPARE_HEADER
 from dualarm.run import record_run
 from tests.conftest import TASKS
 

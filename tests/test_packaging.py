@@ -1,4 +1,4 @@
-"""The distribution: the package list matches the tree, and a wheel installed into a fresh virtual
+"""The distribution: an editable install is a plain path, and a wheel installed into a fresh virtual
 environment (the ``wheel_env`` fixture) works from another directory: shipped robots and tasks are
 package data."""
 
@@ -6,20 +6,25 @@ from __future__ import annotations
 
 import json
 import subprocess
-import tomllib
+import sys
+import sysconfig
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def test_every_package_of_the_tree_is_listed():
-    config = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
-    listed = set(config["packages"])
-    tree = {
-        "dualarm" + "".join(f".{part}" for part in d.relative_to(REPO / "pipeline").parts) for d in [REPO / "pipeline", *(REPO / "pipeline").rglob("*")] if d.is_dir() and (d / "__init__.py").is_file()
-    }
-    assert tree | {"dualarm.data.robots", "dualarm.data.tasks"} == listed
-    assert config["package-dir"] == {"dualarm": "pipeline", "dualarm.data.robots": "robots", "dualarm.data.tasks": "tasks"}
+def test_an_editable_install_is_a_plain_path_that_mypy_follows(tmp_path: Path):
+    """The folder is the import name: the editable install adds ``pipeline/`` to the path (no import
+    hook), so mypy run on a user's script outside the repository finds ``dualarm`` by itself and reports
+    a wrong argument type to :func:`dualarm.solve_tvgdd`."""
+    site = Path(sysconfig.get_paths()["purelib"])
+    assert not list(site.glob("__editable__*dualarm*")), "an import-hook finder, not a plain path"
+    assert (REPO / "pipeline") in {Path(line.strip()) for pth in site.glob("*.pth") for line in pth.read_text().splitlines()}
+    script = tmp_path / "user_script.py"
+    script.write_text("import dualarm\n\nrobot = dualarm.load_robot('humanoid')\ndualarm.solve_tvgdd(robot, 'not a reference')\n")
+    done = subprocess.run([sys.executable, "-m", "mypy", "--no-incremental", "--follow-imports=silent", str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert 'Argument 2 to "solve_tvgdd" has incompatible type "str"; expected "CartesianReference"' in done.stdout, done.stdout
 
 
 def test_wheel_holds_the_data_and_the_stub(wheel_env: Path, tmp_path: Path):

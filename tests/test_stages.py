@@ -17,9 +17,9 @@ import pytest
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from dualarm.execute.world import load_pybullet_robot
 from dualarm.record.readback import read_run
 from dualarm.run import record_run
+from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 

@@ -13,18 +13,19 @@ import pytest
 from typer.testing import CliRunner
 
 from dualarm.cli import app
+from dualarm.contracts.joint_path import JointPath
+from dualarm.contracts.trajectory import JointTrajectory
+from dualarm.contracts.verdict import EXIT_CODES, Checks, Verdict, Violation
 from dualarm.errors import StageError
 from dualarm.execute.simulate import ExecutionSettings
-from dualarm.execute.world import load_pybullet_robot, pb
-from dualarm.ik.joint_path import JointPath
 from dualarm.record.readback import read_run
 from dualarm.record.sink import NullSink
-from dualarm.retime.trajectory import JointTrajectory
 from dualarm.run import run_task
+from dualarm.sim.world import load_pybullet_robot, pb
 from dualarm.stages import ExecuteStage
 from dualarm.tasks import load_task
 from dualarm.tasks.load import task_from_dict
-from dualarm.verdict import EXIT_CODES, Checks, Verdict, Violation, ik_violations
+from dualarm.violations import ik_violations
 from tests.conftest import still_path_fields
 
 #: The right hand draws a square across the chest; DLS-SVD swings the right upper arm into the

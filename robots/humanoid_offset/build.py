@@ -13,7 +13,7 @@ centimetres. This robot is the humanoid (``robots/humanoid``) with two of them o
   (TRAC-IK, DLS-SVD and PyBullet IK were all violated there too).
 
 The wrist stays spherical, so each arm is of the SEW solver's R-2R-R-3R family
-(:mod:`dualarm.ik.sew`). Everything else (limits, masses, shapes, robot.toml's chains, limits and
+(:mod:`dualarm.ik.analytic.sew`). Everything else (limits, masses, shapes, robot.toml's chains, limits and
 home poses) is the humanoid's. Run from anywhere: ``python robots/humanoid_offset/build.py``.
 """
 

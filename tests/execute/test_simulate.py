@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
+from dualarm.contracts.trajectory import JointTrajectory
 from dualarm.errors import StageError
 from dualarm.execute.simulate import ExecutionSettings, execute_trajectory
-from dualarm.execute.world import add_environment, load_pybullet_robot, pb
-from dualarm.ik.mc_path import settings_for, solve_mc_inverse
+from dualarm.ik.analytic.mc_path import settings_for, solve_mc_inverse
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.paths import build_reference
-from dualarm.retime.trajectory import JointTrajectory
+from dualarm.sim.world import add_environment, load_pybullet_robot, pb
 from dualarm.tasks import load_task
 from dualarm.tasks.schema import EnvironmentObject
 from tests.conftest import TASKS

@@ -8,12 +8,12 @@ import pybullet as pb
 import pytest
 
 from dualarm.errors import StageError
-from dualarm.execute.world import load_pybullet_robot
-from dualarm.ik.mc_inverse import McInverse, mc_inverse, sweep_arm_angle
-from dualarm.ik.mc_path import settings_for, solve_mc_inverse
+from dualarm.ik.analytic.mc_inverse import McInverse, mc_inverse, sweep_arm_angle
+from dualarm.ik.analytic.mc_path import settings_for, solve_mc_inverse
 from dualarm.model.kinematics import to_arm_frame
 from dualarm.model.poses import pose_matrix
 from dualarm.paths import build_reference
+from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 

@@ -1,6 +1,6 @@
 """MC-Inverse's ``auto`` arm-angle search against the plain search it replaced: every start followed at once, the grid's candidates solved one pose and angle at a time in the virtual machine's mapped call.
 
-The search (:func:`dualarm.ik.mc_path._auto`) bounds each start's profile and follows only the
+The search (:func:`dualarm.ik.analytic.mc_path._auto`) bounds each start's profile and follows only the
 starts that can still win, on candidates from the compiled grid call; the result must be the same
 profile and branch, bit for bit, and the same failure.
 """
@@ -10,11 +10,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from dualarm.contracts.reference import first_repetition_index
 from dualarm.errors import StageError
-from dualarm.ik import mc_path
-from dualarm.ik.mc_inverse import VALID, McInverse
+from dualarm.ik.analytic import mc_path
+from dualarm.ik.analytic.mc_inverse import VALID, McInverse
 from dualarm.paths import build_reference
-from dualarm.paths.reference import first_repetition_index
 from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from dualarm.errors import RobotModelError
-from dualarm.execute.world import load_pybullet_robot
-from dualarm.ik.baselines import BaselineResult, PyBulletIkSolver, TracIkSolver
+from dualarm.ik.pose_level.baselines import BaselineResult, PyBulletIkSolver, TracIkSolver
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import robot_from_urdf
+from dualarm.sim.world import load_pybullet_robot
 
 BASE, TIP = "torso", "left_hand"
 N = 50
@@ -205,7 +205,7 @@ def test_kdl_gets_a_root_link_without_inertia(kuka_urdf, humanoid):
     """KDL warns about (and ignores) a root link with an inertia: TRAC-IK gets a dummy root."""
     from xml.etree import ElementTree as ET
 
-    from dualarm.ik.baselines import _xml_for_kdl
+    from dualarm.ik.pose_level.baselines import _xml_for_kdl
 
     kuka = robot_from_urdf(kuka_urdf, "lbr_iiwa_link_0", "lbr_iiwa_link_7")
     for robot in (kuka, humanoid):

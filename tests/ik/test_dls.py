@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from dualarm.describe.check import JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, finite_difference_jacobians
 from dualarm.errors import RobotModelError, StageError
-from dualarm.execute.world import load_pybullet_robot
-from dualarm.ik.dls import DlsSettings, DlsSolver
-from dualarm.model.check import JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, finite_difference_jacobians, pose_errors
+from dualarm.ik.pose_level.dls import DlsSettings, DlsSolver
 from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.poses import pose_errors
+from dualarm.sim.world import load_pybullet_robot
 
 #: The three chain sets of the issue: one arm, waist + arm, both arms on the shared waist.
 CHAIN_SETS = {

@@ -4,7 +4,7 @@ import casadi as cs
 import numpy as np
 import pytest
 
-from dualarm.ik.gesture import position_bounds, velocity_bounds
+from dualarm.ik.velocity.gesture import position_bounds, velocity_bounds
 
 
 def test_sigmoid_bounds_closed_form():

@@ -4,11 +4,12 @@ kinematics (adam-robotics), reachability per free value, nearest-solution select
 import numpy as np
 import pytest
 
-from dualarm.ik.ikfast_style import IkfastStyle
-from dualarm.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID
-from dualarm.model.check import adam_poses, pose_errors, random_configurations
+from dualarm.describe.check import adam_poses
+from dualarm.ik.analytic.ikfast_style import IkfastStyle
+from dualarm.ik.analytic.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID
 from dualarm.model.kinematics import ChainKinematics
-from dualarm.model.robot import robot_from_urdf
+from dualarm.model.poses import pose_errors
+from dualarm.model.robot import random_configurations, robot_from_urdf
 
 #: Largest joint difference [rad] between IK(FK(q)) and q. The KUKA URDF writes pi/2 as
 #: 1.57079632679, so its axes meet and are perpendicular only to ~5e-12; near a wrist singularity
@@ -147,7 +148,7 @@ def test_a_repeated_path_is_solved_as_each_pose_alone(humanoid):
     """Along the circle task (its poses met again in each repetition, their candidates then reused): every sample is :meth:`IkfastStyle.nearest` of its pose from the previous solution, computed here without reuse."""
     from pathlib import Path
 
-    from dualarm.ik.pointwise import arm_problems, solve_pointwise
+    from dualarm.ik.pose_level.pointwise import arm_problems, solve_pointwise
     from dualarm.paths import build_reference
     from dualarm.tasks import load_task
 

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from dualarm.errors import NotSRSError
-from dualarm.execute.world import load_pybullet_robot
-from dualarm.ik.ikfast_style import IkfastStyle
-from dualarm.ik.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID, McInverse
-from dualarm.model.check import pose_errors
+from dualarm.ik.analytic.ikfast_style import IkfastStyle
+from dualarm.ik.analytic.mc_inverse import OUT_OF_REACH, OUTSIDE_LIMITS, SINGULAR, VALID, McInverse
 from dualarm.model.kinematics import ChainKinematics
+from dualarm.model.poses import pose_errors
 from dualarm.model.robot import Chain, robot_from_urdf
 from dualarm.model.urdf import JointSpec
+from dualarm.sim.world import load_pybullet_robot
 
 
 def _roundtrip(mc: McInverse, samples: int, seed: int):

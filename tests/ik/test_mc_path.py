@@ -5,12 +5,12 @@ import re
 import numpy as np
 import pytest
 
+from dualarm.describe.check import adam_poses
 from dualarm.errors import StageError
-from dualarm.ik.mc_inverse import McInverse
-from dualarm.ik.mc_path import settings_for, solve_mc_inverse
-from dualarm.model.check import adam_poses, pose_errors
+from dualarm.ik.analytic.mc_inverse import McInverse
+from dualarm.ik.analytic.mc_path import settings_for, solve_mc_inverse
 from dualarm.model.kinematics import ChainKinematics
-from dualarm.model.poses import invert
+from dualarm.model.poses import invert, pose_errors
 from dualarm.paths import build_reference
 from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS

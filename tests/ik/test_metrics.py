@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from dualarm.ik.joint_path import JointPath
-from dualarm.ik.mc_inverse import McInverse
-from dualarm.ik.mc_path import settings_for, solve_mc_inverse
+from dualarm.contracts.joint_path import JointPath
+from dualarm.ik.analytic.mc_inverse import McInverse
+from dualarm.ik.analytic.mc_path import settings_for, solve_mc_inverse
 from dualarm.ik.metrics import arm_angles, consistency_metrics
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.paths import build_reference
@@ -75,8 +75,8 @@ def test_orientation_metrics_of_a_pose_level_method_and_of_an_unmeasured_path(ca
     """MC-Inverse reaches every asked orientation (PyBullet agrees to 1e-6 rad at every 50th sample), so its orientation error is ~0 and it counts as solving the orientation; a path that measured no orientation (a planner's, NaN) gets no orientation error keys rather than NaN in metrics.json."""
     from scipy.spatial.transform import Rotation
 
-    from dualarm.execute.world import load_pybullet_robot
     from dualarm.ik.metrics import ik_metrics
+    from dualarm.sim.world import load_pybullet_robot
 
     task, ref, path = carry
     with load_pybullet_robot(task.robot.urdf.path) as sim:
@@ -95,10 +95,10 @@ def test_orientation_metrics_of_a_pose_level_method_and_of_an_unmeasured_path(ca
 
 def test_condition_metrics_against_finite_differences_and_the_limits():
     """The least joint-limit margin, from the robot's limits sample by sample, and the least manipulability sqrt(det(J J^T)),
-    from the singular values of Jacobians by central differences of the arm's forward kinematics (dualarm.model.check), on
+    from the singular values of Jacobians by central differences of the arm's forward kinematics (dualarm.describe.check), on
     MC-Inverse's triangle."""
+    from dualarm.describe.check import finite_difference_jacobians
     from dualarm.ik.metrics import condition_metrics
-    from dualarm.model.check import finite_difference_jacobians
     from dualarm.model.kinematics import ChainKinematics
     from dualarm.run import run_task
 

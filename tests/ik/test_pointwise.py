@@ -4,8 +4,8 @@ scored by independent forward kinematics."""
 import numpy as np
 import pytest
 
-from dualarm.ik.pointwise import POINTWISE_METHODS, solve_pointwise
-from dualarm.model.check import pybullet_poses
+from dualarm.describe.check import pybullet_poses
+from dualarm.ik.pose_level.pointwise import POINTWISE_METHODS, solve_pointwise
 from dualarm.paths import build_reference
 from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS

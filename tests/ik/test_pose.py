@@ -12,19 +12,19 @@ from scipy.optimize import linprog
 from scipy.spatial.transform import Rotation
 
 import dualarm
+from dualarm.contracts.joint_path import JointPath
 from dualarm.errors import InvalidArgumentError, StageError
-from dualarm.execute.world import load_pybullet_robot
-from dualarm.ik.joint_path import JointPath
-from dualarm.ik.mc_path import settings_for as mc_settings_for
-from dualarm.ik.mc_path import solve_mc_inverse
+from dualarm.ik.analytic.mc_path import settings_for as mc_settings_for
+from dualarm.ik.analytic.mc_path import solve_mc_inverse
 from dualarm.ik.metrics import ik_metrics
 from dualarm.ik.orientation import orientation_errors, rotation_vector
-from dualarm.ik.pinv import PinvSettings, solve_pinv
-from dualarm.ik.pinv import settings_for as pinv_settings_for
-from dualarm.ik.pointwise import solve_pybullet
-from dualarm.ik.stack import hand_stack, reference_stack, stacked_reference, start_configuration
-from dualarm.ik.tvgdd import FEASIBILITY_TOLERANCE, TvgddSettings, build_problem, joint_bounds, settings_for, solve_tvgdd
+from dualarm.ik.pose_level.pointwise import solve_pybullet
+from dualarm.ik.velocity.pinv import PinvSettings, solve_pinv
+from dualarm.ik.velocity.pinv import settings_for as pinv_settings_for
+from dualarm.ik.velocity.stack import hand_stack, reference_stack, stacked_reference, start_configuration
+from dualarm.ik.velocity.tvgdd import FEASIBILITY_TOLERANCE, TvgddSettings, build_problem, joint_bounds, settings_for, solve_tvgdd
 from dualarm.paths import build_reference
+from dualarm.sim.world import load_pybullet_robot
 from tests.conftest import still_path_fields
 
 #: Sample stride of the PyBullet checks along a path.

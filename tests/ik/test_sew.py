@@ -5,10 +5,11 @@ import pytest
 
 from dualarm.bench.ik import ik_geo_solutions
 from dualarm.errors import NotSRSError
-from dualarm.ik.mc_inverse import McInverse
-from dualarm.ik.sew import FIRST_JOINT_FAMILY, UPPER_ARM_FAMILY, NotSewError, SewAngle, sew_chain, solve, solve_many
+from dualarm.ik.analytic.mc_inverse import McInverse
+from dualarm.ik.analytic.sew import SewAngle, solve, solve_many
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import load_robot
+from dualarm.model.sew import FIRST_JOINT_FAMILY, UPPER_ARM_FAMILY, NotSewError, sew_chain
 from tests.conftest import HUMANOID, OFFSET, REPO, pybullet_urdf, wrist_offset_robot
 
 PANDA = REPO / "robots" / "panda"
@@ -108,7 +109,7 @@ HARD = {"humanoid_offset": [129, 671, 1208, 1773, 4474, 5379, 5514, 8218, 8993, 
 
 def test_roots_near_and_between_a_branchs_ends_are_found(arm7):
     """At the :data:`HARD` configurations' poses and SEW angles the configuration is among the solutions (1e-9 rad), which reproduce the pose by the chain's FK (1e-9)."""
-    from dualarm.model.check import random_configurations
+    from dualarm.model.robot import random_configurations
 
     robot, chain, arm, _, _ = arm7
     Q = random_configurations(robot, chain, 10000, 0)[HARD[robot.name]]

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dualarm.ik.sew import sew_chain
-from dualarm.ik.sew_path import settings_for, sew_angle_of
+from dualarm.ik.analytic.sew_path import settings_for, sew_angle_of
+from dualarm.model.sew import sew_chain
 from dualarm.report.consistency import run_consistency
 from dualarm.tasks import load_task
 from tests.conftest import OFFSET, TASKS, pybullet_urdf
@@ -25,7 +25,7 @@ def test_auto_sew_repeats_the_circle_on_the_offset_humanoid(circle):
 
 def test_the_sew_angle_repeats_as_pybullet_measures_it(circle):
     """The SEW angle of the recorded joints, S, E and W carried by PyBullet's link frames (E fixed in the upper arm, W in the wrist pitch link), is the same at the same time of each repetition (1e-6: PyBullet's float32)."""
-    from dualarm.paths.reference import first_repetition_index
+    from dualarm.contracts.reference import first_repetition_index
     from dualarm.record.readback import read_run
 
     run = read_run(circle.table.set_index("method").loc["sew", "run"])

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from dualarm.errors import StageError
-from dualarm.execute.world import load_pybullet_robot
 from dualarm.ik.metrics import ik_metrics
-from dualarm.ik.pinv import settings_for as pinv_settings_for
-from dualarm.ik.pinv import solve_pinv
-from dualarm.ik.tvgdd import settings_for, solve_tvgdd
+from dualarm.ik.velocity.pinv import settings_for as pinv_settings_for
+from dualarm.ik.velocity.pinv import solve_pinv
+from dualarm.ik.velocity.tvgdd import settings_for, solve_tvgdd
 from dualarm.paths import build_reference
 from dualarm.run import record_run
+from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS
 
@@ -136,8 +136,8 @@ def test_infeasible_step_fails_the_run_naming_step_time_and_joint(tmp_path):
 
 def test_rollout_in_one_call_equals_the_step_loop(ball_game, tvgdd_path):
     """The mapaccum rollout (used by the benchmark) integrates exactly what the per-step loop does."""
-    from dualarm.ik.stack import hand_stack, stacked_reference
-    from dualarm.ik.tvgdd import build_problem, joint_bounds
+    from dualarm.ik.velocity.stack import hand_stack, stacked_reference
+    from dualarm.ik.velocity.tvgdd import build_problem, joint_bounds
 
     task, ref = ball_game
     settings = settings_for(task)
@@ -162,7 +162,7 @@ def test_one_hand_off_the_path_start_begins_on_it(tmp_path):
     """triangle, started from robot.toml's ``ready``: one hand (7 DOF), whose initial configuration is
     then 0.16 m off the path start. The IK (position task space here; pose in tests/ik/test_pose.py)
     starts from the nearest configuration that puts the hand there (checked with PyBullet)."""
-    from dualarm.ik.stack import hand_stack, start_configuration
+    from dualarm.ik.velocity.stack import hand_stack, start_configuration
 
     task = load_task(_triangle_from_ready(tmp_path))
     assert task.initial_q == task.robot.home("ready")

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 import quadprog
 
-from dualarm.execute.world import load_pybullet_robot
-from dualarm.ik.stack import hand_stack, stacked_reference
-from dualarm.ik.tvgdd import TvgddSettings, build_problem, joint_bounds, lvi_solve, settings_for
-from dualarm.model.check import PYBULLET_TOLERANCE
+from dualarm.describe.check import PYBULLET_TOLERANCE
+from dualarm.ik.velocity.stack import hand_stack, stacked_reference
+from dualarm.ik.velocity.tvgdd import TvgddSettings, build_problem, joint_bounds, lvi_solve, settings_for
 from dualarm.paths import build_reference
+from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
 from tests.conftest import TASKS
 
@@ -87,8 +87,8 @@ def pose_instances():
     """Every QP instance along one triangle repetition in pose task space (6 rows on 7 joints;
     RMP, nu = 10, from MC-Inverse's start, as in tests/ik/test_pose.py): the upper-arm roll presses
     on its bound on 268 of the 601 steps."""
-    from dualarm.ik.mc_path import settings_for as mc_settings_for
-    from dualarm.ik.mc_path import solve_mc_inverse
+    from dualarm.ik.analytic.mc_path import settings_for as mc_settings_for
+    from dualarm.ik.analytic.mc_path import solve_mc_inverse
 
     task = load_task(TASKS / "triangle.toml", 1)
     ref = build_reference(task)
@@ -157,10 +157,10 @@ def test_lvi_backend_follows_the_casadi_one_in_pose_mode():
     samples (the upper-arm roll presses on its bound from step 278 on): the same joint path."""
     from dataclasses import replace
 
-    from dualarm.ik.mc_path import settings_for as mc_settings_for
-    from dualarm.ik.mc_path import solve_mc_inverse
-    from dualarm.ik.tvgdd import solve_tvgdd
-    from dualarm.paths.reference import CartesianReference, HandReference
+    from dualarm.contracts.reference import CartesianReference, HandReference
+    from dualarm.ik.analytic.mc_path import settings_for as mc_settings_for
+    from dualarm.ik.analytic.mc_path import solve_mc_inverse
+    from dualarm.ik.velocity.tvgdd import solve_tvgdd
 
     task = load_task(TASKS / "triangle.toml", 1)
     full = build_reference(task)

@@ -20,11 +20,11 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from dualarm.execute.world import load_pybullet_robot, pb
-from dualarm.model.init import init_robot
+from dualarm.describe.init import init_robot
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import load_robot
 from dualarm.quiet import c_output_silenced
+from dualarm.sim.world import load_pybullet_robot, pb
 from tests.conftest import HUMANOID, REPO
 
 runner = CliRunner()

@@ -3,19 +3,10 @@
 import numpy as np
 import pytest
 
-from dualarm.model.check import (
-    FK_TOLERANCE,
-    JACOBIAN_TOLERANCE,
-    PYBULLET_TOLERANCE,
-    adam_poses,
-    check_chain,
-    finite_difference_jacobians,
-    pose_errors,
-    pybullet_poses,
-    random_configurations,
-)
+from dualarm.describe.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, adam_poses, check_chain, finite_difference_jacobians, pybullet_poses
 from dualarm.model.kinematics import ChainKinematics
-from dualarm.model.robot import robot_from_urdf
+from dualarm.model.poses import pose_errors
+from dualarm.model.robot import random_configurations, robot_from_urdf
 
 
 @pytest.mark.parametrize("chain_name", ["left_arm", "right_arm", "waist"])

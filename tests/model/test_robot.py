@@ -6,8 +6,8 @@ import shutil
 import pytest
 
 from dualarm.errors import RobotModelError
-from dualarm.execute.world import load_pybullet_robot, pb
 from dualarm.model.robot import load_robot, robot_from_urdf
+from dualarm.sim.world import load_pybullet_robot, pb
 from tests.conftest import HUMANOID
 
 

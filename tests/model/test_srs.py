@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from dualarm.describe.check import PYBULLET_TOLERANCE
 from dualarm.errors import NotSRSError
-from dualarm.execute.world import load_pybullet_robot
-from dualarm.model.check import PYBULLET_TOLERANCE, random_configurations
-from dualarm.model.robot import Chain, robot_from_urdf
+from dualarm.model.robot import Chain, random_configurations, robot_from_urdf
 from dualarm.model.srs import SrsKinematics, arm_angle, srs_geometry
 from dualarm.model.urdf import JointSpec
+from dualarm.sim.world import load_pybullet_robot
 
 
 @pytest.mark.parametrize("side", ["left", "right"])

@@ -5,8 +5,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pybullet as pb
 
-from dualarm.execute.world import load_pybullet_robot
 from dualarm.model.urdf import viewer_urdf
+from dualarm.sim.world import load_pybullet_robot
 from tests.conftest import HUMANOID
 
 URDF = HUMANOID / "humanoid.urdf"

@@ -7,8 +7,8 @@ import pytest
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from dualarm.ik.sew import sew_chain
-from dualarm.ik.sew_path import settings_for, sew_angle_of
+from dualarm.ik.analytic.sew_path import settings_for, sew_angle_of
+from dualarm.model.sew import sew_chain
 from dualarm.report.consistency import run_consistency
 from dualarm.tasks import load_task
 from tests.conftest import REPO, pybullet_urdf, wrist_offset_robot

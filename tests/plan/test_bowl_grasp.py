@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from dualarm.cli import app
 from dualarm.errors import StageError
 from dualarm.plan.collision import CollisionChecker
-from dualarm.plan.mcikrrt import PlannerSettings
+from dualarm.plan.mcikrrt import TreeSearchSettings
 from dualarm.plan.problem import PlanningProblem, PlanningSettings
 from dualarm.record.readback import read_run
 from dualarm.tasks import load_task
@@ -139,7 +139,7 @@ def test_ompl_without_goals_names_the_wta(tmp_path):
         'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 0.0, 0.93] }', 'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 1.50, 0.93] }'
     )
     (tmp_path / "far.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
-    settings = PlanningSettings(planner=PlannerSettings(timeout_s=0.3))
+    settings = PlanningSettings(planner=TreeSearchSettings(timeout_s=0.3))
     with PlanningProblem(load_task(tmp_path / "far.toml"), settings) as problem:
         result = problem.solve("ompl-rrtconnect", 0)
     assert not result.success and result.goals == 0

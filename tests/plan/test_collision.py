@@ -12,10 +12,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dualarm.errors import StageError
-from dualarm.execute.world import TOUCHING_M, add_environment, load_pybullet_robot, pb
 from dualarm.model.robot import load_robot
 from dualarm.plan.collision import BOX_ROUNDING_M, CollisionChecker, PyBulletChecker, bisection_order, inflated_urdf
 from dualarm.plan.distances import distance_functions
+from dualarm.sim.world import TOUCHING_M, add_environment, load_pybullet_robot, pb
 from dualarm.tasks import load_task
 from dualarm.tasks.schema import EnvironmentObject
 from tests.conftest import HUMANOID, TASKS
@@ -635,7 +635,7 @@ def test_checker_rejects_bad_settings(task, names):
 @pytest.mark.parametrize(("gap_m", "contact"), [(0.005, False), (-0.001, True)])
 def test_a_point_pybullet_reports_across_a_gap_is_not_a_contact(gap_m, contact):
     """Two convex hulls (the shape PyBullet gives a mesh) 5 mm apart: PyBullet still returns a contact point, at a positive distance; in_contact, the rule of the checker and of the execution, counts it only when the hulls overlap."""
-    from dualarm.execute.world import in_contact
+    from dualarm.sim.world import in_contact
 
     client = pb.connect(pb.DIRECT)
     try:

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from dualarm.errors import StageError
-from dualarm.plan.mcikrrt import PlannerSettings, mcikrrt, path_length, shortcut
+from dualarm.plan.mcikrrt import TreeSearchSettings, mcikrrt, path_length, shortcut
 
 WALL = (0.45, 0.55)  # x band of the wall
 GAP = (0.49, 0.51)  # the only opening, in y
@@ -51,7 +51,7 @@ def goal_sampler(rng, goals):
     return sample
 
 
-def plan(seed, checker=None, settings=PlannerSettings(step_rad=0.1, timeout_s=10.0)):
+def plan(seed, checker=None, settings=TreeSearchSettings(step_rad=0.1, timeout_s=10.0)):
     goals = []
     checker = checker or WallChecker()
     result = mcikrrt(START, LOWER, UPPER, checker, goal_sampler(np.random.default_rng([seed, 0]), goals), np.random.default_rng([seed, 1]), settings)
@@ -82,7 +82,7 @@ def test_same_seed_same_path():
 
 
 def test_no_passage_times_out():
-    result, goals, _ = plan(0, WallChecker(gap=None), PlannerSettings(step_rad=0.1, timeout_s=0.3))
+    result, goals, _ = plan(0, WallChecker(gap=None), TreeSearchSettings(step_rad=0.1, timeout_s=0.3))
     assert not result.success
     assert "timeout" in result.reason
     assert result.path.shape == (0, 2)
@@ -106,6 +106,6 @@ def test_shortcut_keeps_ends_and_never_lengthens():
 
 def test_settings_are_checked():
     with pytest.raises(StageError, match="goal probability"):
-        PlannerSettings(goal_probability=1.5)
+        TreeSearchSettings(goal_probability=1.5)
     with pytest.raises(StageError, match="timeout"):
-        PlannerSettings(timeout_s=0)
+        TreeSearchSettings(timeout_s=0)

@@ -21,8 +21,9 @@ from typer.testing import CliRunner
 
 from dualarm.cli import app
 from dualarm.errors import RecordingError, UnreachablePoseError
-from dualarm.record.readback import RUN_ID, TASK_NAME, read_run
+from dualarm.record.readback import read_run
 from dualarm.record.run_dir import new_run_id
+from dualarm.record.verify import RUN_ID, TASK_NAME
 from dualarm.run import record_run
 from dualarm.tasks import load_task
 from tests.conftest import HUMANOID, TASKS

@@ -12,9 +12,10 @@ import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
+from dualarm.contracts.run import ALL_STAGES
 from dualarm.errors import InvalidArgumentError
 from dualarm.record.foxglove_layout import STAGES, foxglove_layout
-from dualarm.run import ALL_STAGES, record_run
+from dualarm.run import record_run
 from dualarm.tasks import load_task
 from tests.conftest import SHIPPED
 

@@ -14,11 +14,11 @@ import pytest
 from mcap.reader import make_reader
 from scipy.spatial.transform import Rotation
 
-from dualarm.execute.world import load_pybullet_robot
-from dualarm.ik.joint_path import JointPath
-from dualarm.ik.pinv import settings_for
+from dualarm.contracts.joint_path import JointPath
+from dualarm.ik.velocity.pinv import settings_for
 from dualarm.record.recorder import Recorder
 from dualarm.run import record_run
+from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
 from tests.conftest import TASKS, still_path_fields
 

@@ -16,9 +16,9 @@ from typer.testing import CliRunner
 
 from dualarm.cli import app
 from dualarm.errors import TaskFileError, UnreachablePoseError
-from dualarm.execute.world import load_pybullet_robot
 from dualarm.record.readback import read_run, read_runs
 from dualarm.run import record_run
+from dualarm.sim.world import load_pybullet_robot
 from tests.conftest import HUMANOID, TASKS
 
 TRIANGLE = TASKS / "triangle.toml"

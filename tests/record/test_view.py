@@ -135,7 +135,7 @@ def test_stage_hands_the_native_viewer_the_recording_and_a_blueprint_rerun_reads
     writes of one blueprint print alike.
     """
     from dualarm.model.robot import load_robot
-    from dualarm.record.recorder import blueprint
+    from dualarm.record.rerun_sink import blueprint
 
     kept = _stand_in(tmp_path, monkeypatch)
     ids = itertools.count(1)

@@ -16,9 +16,9 @@ from typer.testing import CliRunner
 
 from dualarm.cli import app
 from dualarm.errors import RecordingError, excerpt
-from dualarm.ik.pinv import settings_for as pinv_settings_for
-from dualarm.ik.pinv import solve_pinv
-from dualarm.ik.tvgdd import settings_for, solve_tvgdd
+from dualarm.ik.velocity.pinv import settings_for as pinv_settings_for
+from dualarm.ik.velocity.pinv import solve_pinv
+from dualarm.ik.velocity.tvgdd import settings_for, solve_tvgdd
 from dualarm.paths import build_reference
 from dualarm.record.readback import RunData, read_run
 from dualarm.report.compare import COLUMNS, compare_runs

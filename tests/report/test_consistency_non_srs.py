@@ -9,8 +9,9 @@ from typer.testing import CliRunner
 
 from dualarm.cli import app
 from dualarm.errors import NotSRSError
-from dualarm.ik.sew import SewAngle, sew_chain
+from dualarm.ik.analytic.sew import SewAngle
 from dualarm.model.robot import load_robot
+from dualarm.model.sew import sew_chain
 from dualarm.record.readback import read_run
 from dualarm.report import figures
 from dualarm.report.consistency import run_consistency

@@ -15,10 +15,10 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from dualarm.execute.world import load_pybullet_robot
+from dualarm.contracts.verdict import Checks
 from dualarm.record.readback import read_run
 from dualarm.report.consistency import COLUMNS, POSITION_ONLY
-from dualarm.verdict import Checks
+from dualarm.sim.world import load_pybullet_robot
 from tests.conftest import HUMANOID, TASKS
 
 runner = CliRunner()

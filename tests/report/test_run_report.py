@@ -7,7 +7,7 @@ import pandas as pd
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from dualarm.ik.pinv import settings_for, solve_pinv
+from dualarm.ik.velocity.pinv import settings_for, solve_pinv
 from dualarm.paths import build_reference
 from dualarm.record.readback import read_run
 from dualarm.report.run_report import excursions, write_report

@@ -306,7 +306,7 @@ def test_tvgdd_hand_error_and_time_claims_from_the_recording(repro):
 
 def test_tvgdd_recorded_hand_errors_are_pybullets(repro):
     """The hand_error_m columns behind Fig. 8's claims: |reference - f(q)| with f from PyBullet."""
-    from dualarm.execute.world import load_pybullet_robot
+    from dualarm.sim.world import load_pybullet_robot
 
     run = _run_of(repro, "ball-game-tvgdd")
     sample = run["/ik/sample"]
@@ -330,7 +330,7 @@ def test_tvgdd_recorded_hand_errors_are_pybullets(repro):
 
 
 def test_tvgdd_bound_execution_claims_from_the_recording(repro):
-    from dualarm.execute.world import load_pybullet_robot
+    from dualarm.sim.world import load_pybullet_robot
 
     rows = claim_rows(repro.report)["TV-GDD"]
     run = _run_of(repro, "ball-game-tvgdd")
@@ -378,7 +378,7 @@ def test_tvgdd_bound_execution_claims_from_the_recording(repro):
 
 
 def test_pinv_excursion_claims_equal_the_solvers_arrays(repro):
-    from dualarm.ik.pinv import settings_for, solve_pinv
+    from dualarm.ik.velocity.pinv import settings_for, solve_pinv
     from dualarm.paths import build_reference
     from dualarm.tasks import load_task
 
@@ -405,9 +405,9 @@ def test_pinv_excursion_claims_equal_the_solvers_arrays(repro):
 
 
 def test_table_i_candidates_reach_the_analogue_pose_in_pybullet(repro):
-    from dualarm.execute.world import load_pybullet_robot
     from dualarm.reproduce.claims import PAPER_TABLE_I as QUOTED
     from dualarm.reproduce.experiments import TABLE_I_SOLUTION_1
+    from dualarm.sim.world import load_pybullet_robot
 
     data = json.loads((repro.out / "table_i.json").read_text())
     joints, candidates = data["chain"]["joints"], data["candidates"]
@@ -696,7 +696,7 @@ def test_consistency_claims_show_the_deviations_of_the_recordings(carry_box_runs
 
 def test_recorded_arm_angles_are_eq1_of_pybullets_frames(carry_box_runs):
     """The arm_angle_rad columns behind the Δψ figures, against eq (1) implemented here."""
-    from dualarm.execute.world import load_pybullet_robot
+    from dualarm.sim.world import load_pybullet_robot
 
     run = next(r for r in carry_box_runs if r.manifest["settings"]["ik"]["method"] == "trac-ik")
     sample, start = run["/ik/sample"], run["/task/joint_state"].iloc[0]

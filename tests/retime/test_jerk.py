@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from dualarm.cli import app
 from dualarm.errors import InvalidArgumentError
-from dualarm.retime.retiming import plan, retime_path
+from dualarm.retime.stage import plan, retime_path
 from dualarm.retime.timing import path_deviation_max_rad
 from dualarm.run import run_task
 from dualarm.tasks import load_task

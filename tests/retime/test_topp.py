@@ -7,14 +7,14 @@ import toppra
 import toppra.algorithm
 import toppra.constraint
 
+from dualarm.contracts.joint_path import JointPath
+from dualarm.contracts.trajectory import JointTrajectory
 from dualarm.errors import InvalidArgumentError, StageError
-from dualarm.ik.joint_path import JointPath
 from dualarm.limits import LimitRatio, limit_ratios
 from dualarm.retime import topp
-from dualarm.retime.retiming import plan, retime_path
+from dualarm.retime.stage import plan, retime_path
 from dualarm.retime.timing import path_deviation_max_rad
 from dualarm.retime.topp import chord_parameter, gridpoints
-from dualarm.retime.trajectory import JointTrajectory
 
 DT = 1e-3
 ARM = tuple(f"left_j{i}" for i in range(1, 8))

@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
+from dualarm.contracts.trajectory import JointTrajectory
 from dualarm.errors import InvalidArgumentError, StageError
 from dualarm.limits import limit_ratios
-from dualarm.retime.trajectory import JointTrajectory
 from dualarm.smooth import Smoothed, smooth_trajectory
 
 V, A, J = 1.0, 3.0, 30.0  # [rad/s], [rad/s^2], [rad/s^3]

@@ -158,7 +158,7 @@ def test_a_method_that_raises_is_its_rows_error_not_a_lost_trial(monkeypatch):
     def broken(*args, **kwargs):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr("dualarm.ik.pinv.solve_pinv", broken)
+    monkeypatch.setattr("dualarm.ik.velocity.pinv.solve_pinv", broken)
     result = run_trial(study_from_toml(SPEC), str(REPO), 0)
     by_method = {r["method"]: r for r in result.rows}
     assert by_method["pinv"]["status"] == "error" and by_method["pinv"]["error"] == "ZeroDivisionError: a bug"
@@ -218,7 +218,8 @@ def test_a_worker_builds_its_solvers_once_not_per_trial(monkeypatch):
     PyBullet, build DLS's Function, the hand stacks and IPOPT's start problem no more (counted at the libraries' calls)."""
     import casadi
 
-    from dualarm.ik import baselines, dls, stack
+    from dualarm.ik.pose_level import baselines, dls
+    from dualarm.ik.velocity import stack
 
     spec = study_from_toml(SPEC.replace('"pybullet"]', '"pybullet", "tvgdd"]') + 'hands = ["left"]\n')
     calls = {"pybullet": 0, "dls": 0, "nlpsol": 0}

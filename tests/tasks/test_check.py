@@ -4,10 +4,10 @@ import os
 
 import numpy as np
 import pytest
+from tests.conftest import HUMANOID, TASKS
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from tests.conftest import HUMANOID, TASKS
 
 runner = CliRunner()
 
@@ -21,10 +21,10 @@ def test_shipped_tasks_check_out(name):
 
 def test_the_reported_intervals_hold_in_a_single_solve(humanoid):
     """A psi in the middle of each reported interval of waypoint A gives, for that branch, joints inside the robot's limits that reach the pose by the chain's FK."""
-    from dualarm.ik.mc_inverse import mc_inverse
+    from dualarm.ik.analytic.mc_inverse import mc_inverse
     from dualarm.model.kinematics import hand_pose
     from dualarm.model.poses import pose_matrix
-    from dualarm.tasks.check import check_task
+    from dualarm.task_check import check_task
 
     result = check_task(TASKS / "triangle.toml")
     a = next(w for w in result.waypoints if w.key == "waypoints.A")

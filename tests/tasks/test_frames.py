@@ -6,10 +6,10 @@ import numpy as np
 import pybullet as pb
 import pytest
 from scipy.spatial.transform import Rotation
+from tests.conftest import HUMANOID, REPO, TASKS, PyBulletURDF, pybullet_urdf
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from tests.conftest import HUMANOID, REPO, TASKS, PyBulletURDF, pybullet_urdf
 
 DUAL_IIWA = REPO / "robots" / "dual_iiwa"
 runner = CliRunner()

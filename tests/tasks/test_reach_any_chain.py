@@ -6,11 +6,12 @@ import numpy as np
 import pybullet as pb
 import pybullet_data
 import pytest
+from tests.conftest import TASKS
 
 from dualarm.errors import UnreachablePoseError
 from dualarm.model.kinematics import hand_pose
-from dualarm.tasks.load import NumericReach, arm_reach, load_task
-from tests.conftest import TASKS
+from dualarm.tasks.load import load_task
+from dualarm.tasks.reach import NumericReach, arm_reach
 
 TASK = Path(__file__).parents[1] / "panda" / "panda_triangle.toml"
 ARM = tuple(f"panda_joint{i}" for i in range(1, 8))

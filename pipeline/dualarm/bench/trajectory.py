@@ -1,0 +1,122 @@
+"""``dualarm bench trajectory``: the jerk-limited timing against TOPP-RA with Ruckig tracking, on the same joint paths.
+
+Each task's joint path is made once (its IK method, or its planner), then timed three ways, each
+timed on its own call (the motion the robot would execute):
+
+- ``jerk-limited``: :func:`dualarm.retime.jerk.jerk_limited` within the full velocity, acceleration and
+  jerk limits; the motion is q(t) = P(s(t)) on the path.
+- ``TOPP-RA 0.9/0.3 + tracking`` (today's pipeline): TOPP-RA at 90 % of the velocity and 30 % of the
+  acceleration limits, then tracked by Ruckig per joint within the full limits (the smooth stage).
+- ``TOPP-RA 1.0/1.0 + tracking``: the same at the full limits.
+
+Per row: the motion's duration and its ratio to TOPP-RA's at the full velocity and acceleration
+limits with jerk unlimited (the bound any jerk-limited motion pays over); the velocity,
+acceleration and jerk limit ratios of the motion by finite differences of its positions sampled
+every :data:`STEP_S` (the jerk-limited timing evaluated there; the tracked motion at its 1 ms
+control period); its deviation from the path, per joint and at the hands (forward kinematics;
+the tracked motion: from the retimed reference at the same time, as the smooth stage reports it;
+the jerk-limited motion: from the IK samples at the times it passes them); and the compute time
+per second of motion.
+
+Never used by the test suite: wall-clock numbers depend on the machine.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from dualarm.contracts.joint_path import JointPath
+from dualarm.errors import StageError
+from dualarm.retime.stage import plan, retime_path
+from dualarm.retime.timing import path_deviation_max_rad
+from dualarm.run import run_task
+from dualarm.tasks import Task, load_task
+
+#: (task file, IK method or planner) of the benchmark.
+DEFAULT_RUNS = (("tasks/triangle.toml", "mc-inverse"), ("tasks/circle.toml", "mc-inverse"), ("tasks/ball_game.toml", "tvgdd"), ("tasks/bowl_grasp.toml", "mcikrrt"))
+#: The methods, in the table's order.
+METHODS = ("jerk-limited", "TOPP-RA 0.9/0.3 + tracking", "TOPP-RA 1.0/1.0 + tracking")
+#: Finite-difference step of the jerk-limited motion's limit ratios [s].
+STEP_S = 2.5e-4
+#: Control period of the tracked motions [s].
+PERIOD_S = 1e-3
+
+
+@dataclass(frozen=True)
+class TrajectoryRow:
+    """One method on one task.
+
+    Attributes:
+        task, method: what was timed.
+        duration_s: the motion's duration [s].
+        optimal_s: TOPP-RA's duration at the full velocity and acceleration limits, jerk unlimited [s].
+        ratios: the velocity, acceleration and jerk limit ratios by finite differences.
+        deviation_rad: the joint deviation from the path [rad] (module docstring).
+        hand_deviation_m: the hands' deviation from the path [m] (module docstring).
+        compute_s: wall-clock time of the timing (and tracking) [s].
+        failure: why the method gave no motion (its one-line error), else None; the other fields are then NaN.
+    """
+
+    task: str
+    method: str
+    duration_s: float
+    optimal_s: float
+    ratios: tuple[float, float, float]
+    deviation_rad: float
+    hand_deviation_m: float
+    compute_s: float
+    failure: str | None = None
+
+
+def _ratios(q: np.ndarray, step_s: float, limits: Sequence[np.ndarray]) -> tuple[float, float, float]:
+    """Velocity, acceleration and jerk ratios of positions ``q`` (M, n) sampled every ``step_s`` [s], by first, second and third differences."""
+    velocity, acceleration, jerk = (float((np.abs(np.diff(q, order, axis=0)) / step_s**order / limit).max()) for order, limit in zip((1, 2, 3), limits))
+    return velocity, acceleration, jerk
+
+
+def _hand_distance(task: Task, names: tuple[str, ...], q: np.ndarray, reference: np.ndarray, fixed: Mapping[str, float]) -> float:
+    """The largest distance between where the configurations ``q`` and ``reference`` (M, n) [rad] put each driven hand (forward kinematics) [m]."""
+    at, to = (task.hand_poses(names, x, fixed) for x in (q, reference))
+    return max((float(np.linalg.norm(at[hand][:, :3, 3] - to[hand][:, :3, 3], axis=1).max()) for hand in at), default=0.0)
+
+
+def bench_trajectory(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Callable[[str], None] = lambda text: None) -> list[TrajectoryRow]:
+    """Make each task's joint path, then time it by each of :data:`METHODS` (module docstring)."""
+    from dualarm.methods import METHODS as REGISTRY
+    from dualarm.smooth import smooth_trajectory
+
+    rows = []
+    for task_file, method in runs:
+        task = load_task(task_file)
+        progress(f"{task.name}: joint path ({method})")
+        kind = "plan" if REGISTRY[method].kind == "planner" else "ik"
+        path: JointPath = run_task(task, method, stages=("path", kind)).joint_path  # type: ignore[assignment]
+        names = path.joint_names
+        v, a, j = (task.robot.limit_array(k, names) for k in ("velocity", "acceleration", "jerk"))
+        optimal = plan(path, v, a).duration_s
+        progress(f"{task.name}: jerk-limited")
+        start = time.perf_counter()
+        try:
+            timing = plan(path, v, a, jerk=j)
+        except StageError as error:
+            rows.append(TrajectoryRow(task.name, METHODS[0], np.nan, optimal, (np.nan,) * 3, np.nan, np.nan, np.nan, str(error)))
+        else:
+            timing.sample(PERIOD_S)
+            compute = time.perf_counter() - start
+            q = timing.evaluate(np.arange(0.0, timing.duration_s, STEP_S))[0]
+            hands = _hand_distance(task, names, timing.evaluate(timing.sample_times_s)[0], path.q, path.fixed)
+            rows.append(TrajectoryRow(task.name, METHODS[0], timing.duration_s, optimal, _ratios(q, STEP_S, (v, a, j)), path_deviation_max_rad(timing, path), hands, compute))
+        for name, share in zip(METHODS[1:], ((0.9, 0.3), (1.0, 1.0))):
+            progress(f"{task.name}: {name}")
+            start = time.perf_counter()
+            retimed = retime_path(path, share[0] * v, share[1] * a, sample_period_s=PERIOD_S).trajectory
+            smoothed = smooth_trajectory(retimed, v, a, j, period_s=PERIOD_S)
+            compute = time.perf_counter() - start
+            q = smoothed.trajectory.q[:-1]  # every period, without the final sample (the last step may be shorter)
+            hands = _hand_distance(task, names, smoothed.trajectory.q, retimed.interpolate(smoothed.trajectory.t)[0], path.fixed)
+            rows.append(TrajectoryRow(task.name, name, smoothed.trajectory.duration_s, optimal, _ratios(q, PERIOD_S, (v, a, j)), smoothed.path_deviation_max_rad, hands, compute))
+    return rows

@@ -1,0 +1,199 @@
+"""``dualarm robot init`` and ``dualarm robot poses``: a robot directory written from any URDF, and the hands' poses at its home poses.
+
+:func:`init_robot` reads a URDF and writes a robot directory: a copy of the URDF whose mesh paths
+point into the directory's own ``meshes/`` folder (so the directory is self-contained: it works
+when moved, when shipped in the wheel, and when a recording attaches the URDF), the meshes it uses,
+and ``robot.toml`` (robots/README.md documents every key). Everything robot.toml needs is derived
+from the URDF, and every choice is returned as a line of :attr:`RobotInit.notes` to be printed:
+
+- the arm chains: from the tips given, else proposed from the tree. An arm's tip is the link below
+  the last revolute joint of a branch, followed down through fixed joints while the branch does not
+  split (so a Panda's tip is ``panda_hand``, above its prismatic fingers). Two tips whose branches
+  below their common root each hold at least :data:`MIN_ARM_DOF` revolute joints make two arms (the
+  pair with the most); ``left`` is the arm whose first joint lies further along +y of the root link
+  (x forward, y left). Otherwise the URDF is one arm: the tip with the most revolute joints below
+  the root, driving hand ``left`` (chain ``left_arm``), the hand single-arm tasks use.
+- the torso: ``--torso``, else the arms' common root (one arm: the link its first movable joint
+  hangs from). Each arm's chain starts at ``--left-base``/``--right-base``, else at the torso.
+- the waist: the movable joints from the root link to the torso (a chain ``waist`` when there are any).
+- locked joints: movable joints between the torso and an arm's base (a clavicle) belong to no chain
+  and are held at :data:`lock_value` (0 clipped into the limits) by every home pose.
+- S-R-S or not, per arm (:func:`dualarm.model.srs.srs_geometry`'s verdict, with the miss distance).
+- limits: velocity from the URDF (:data:`DEFAULT_VELOCITY_RAD_S` where it gives none), acceleration
+  and jerk from the caller or :data:`DEFAULT_ACCELERATION_RAD_S2` / :data:`DEFAULT_JERK_RAD_S3`,
+  written with the comment ``# assumed``.
+- home poses ``zero`` and ``ready`` (:func:`ready_pose`).
+- collision pairs in contact at every sampled configuration. dualarm already skips the pairs that
+  touch by construction (:func:`dualarm.sim.world.disable_touching_pairs`, a Panda's hand and
+  link 7 among them) in the planners and the execution; robot.toml gets no key for them. A pair in
+  contact everywhere that this rule does not skip is refused (:class:`RobotModelError` naming it).
+"""
+
+from __future__ import annotations
+
+import shutil
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+
+from dualarm.describe.layout import ArmPlan, _Layout, _layout, _srs_verdict, lock_value
+from dualarm.describe.meshes import copy_urdf, resolve_mesh
+from dualarm.describe.ready import SAMPLES, _collision_world, always_in_contact, held_values, ready_pose
+from dualarm.describe.robot_toml import DEFAULT_ACCELERATION_RAD_S2, DEFAULT_JERK_RAD_S3, DEFAULT_VELOCITY_RAD_S, robot_toml
+from dualarm.errors import OutputError, RobotModelError, excerpt
+from dualarm.files import DIRECTORY, kind
+from dualarm.model.robot import Robot, load_robot
+from dualarm.model.urdf import UrdfModel, load_urdf
+
+
+@dataclass(frozen=True)
+class RobotInit:
+    """What ``robot init`` wrote.
+
+    Attributes:
+        directory: the robot directory.
+        robot: the robot as :func:`dualarm.model.robot.load_robot` reads the directory back.
+        arms: the arm chains.
+        waist: (base, tip) of the waist chain, or None.
+        locked: joints in no chain held by the home poses [rad], by name.
+        ready: the ``ready`` home pose [rad], by joint.
+        touching_pairs: link pairs dualarm skips as touching by construction (sorted names).
+        notes: the lines ``robot init`` prints: every choice and assumption.
+    """
+
+    directory: Path
+    robot: Robot
+    arms: tuple[ArmPlan, ...]
+    waist: tuple[str, str] | None
+    locked: Mapping[str, float]
+    ready: Mapping[str, float]
+    touching_pairs: frozenset[tuple[str, str]]
+    notes: tuple[str, ...]
+
+
+def _out_directory(out: Path) -> None:
+    k = kind(out)
+    if k is None:
+        return
+    if k != DIRECTORY:
+        raise OutputError(f"--out {excerpt(out)}: is {k}, not a directory", str(out))
+    if any(out.iterdir()):
+        raise OutputError(f"--out {excerpt(out)}: exists and is not empty; give a new or empty directory", str(out))
+
+
+def init_robot(
+    urdf_path: str | Path,
+    out: str | Path,
+    *,
+    left_tip: str | None = None,
+    right_tip: str | None = None,
+    left_base: str | None = None,
+    right_base: str | None = None,
+    torso: str | None = None,
+    acceleration: float | None = None,
+    jerk: float | None = None,
+    name: str | None = None,
+) -> RobotInit:
+    """Write a robot directory ``out`` (robot.toml, the URDF and its meshes) for ``urdf_path``; see the module docstring for every choice.
+
+    Args:
+        urdf_path: the URDF.
+        out: the robot directory to write (new, or empty).
+        left_tip, right_tip: the arms' tip links (None: proposed from the tree).
+        left_base, right_base: the arms' base links (None: the torso).
+        torso: the link the arms hang from (None: their common root).
+        acceleration: every chain joint's acceleration limit [rad/s^2] (None: :data:`DEFAULT_ACCELERATION_RAD_S2`, assumed).
+        jerk: every chain joint's jerk limit [rad/s^3] (None: :data:`DEFAULT_JERK_RAD_S3`, assumed).
+        name: the robot's name (None: the directory's name).
+
+    Raises:
+        RobotModelError: not a URDF, an unknown link, tips that are not on separate branches below a
+            common root, a mesh not found, a pair in contact everywhere that dualarm does not skip.
+        OutputError: ``out`` exists and is not an empty directory.
+    """
+    from dualarm.model.robot import LIMIT_RANGES
+
+    source, out = Path(urdf_path), Path(out)
+    for kind_, value in (("acceleration", acceleration), ("jerk", jerk)):
+        low, high = LIMIT_RANGES[kind_]
+        if value is not None and not low <= value <= high:
+            raise RobotModelError(f"--{kind_} {value:g}: outside the allowed range [{low:g}, {high:g}]")
+    _out_directory(out)
+    urdf = load_urdf(source)
+    layout = _layout(urdf, {"left": left_tip, "right": right_tip}, {"left": left_base, "right": right_base}, torso)
+    for filename in (e.get("filename", "") for e in ET.fromstring(urdf.kinematic_xml).iter("mesh")):
+        resolve_mesh(filename, source)  # refused before anything is written (collision meshes are checked by copy_urdf)
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name)
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
+def _write(source: Path, out: Path, urdf: UrdfModel, layout: _Layout, acceleration: float | None, jerk: float | None, name: str) -> RobotInit:
+    notes = list(layout.notes)
+    copy = copy_urdf(source, out)
+    notes.append(f"URDF copied to {copy} with its meshes under {out / 'meshes'} (the directory is self-contained: it works when moved or shipped)")
+    urdf = load_urdf(copy)
+    srs = {hand: _srs_verdict(urdf, f"{hand}_arm", base, tip) for hand, base, tip in layout.arms}
+    for hand, base, tip in layout.arms:
+        notes.append(f"chain {hand}_arm: {base} -> {tip}, hand '{hand}': " + ("S-R-S" if srs[hand] is None else f"not S-R-S ({srs[hand]})"))
+    if layout.waist:
+        notes.append(f"chain waist: {layout.waist[0]} -> {layout.waist[1]}")
+    for j in layout.locked:
+        notes.append(f"locked: {j.name} = {lock_value(j):g} rad (between the torso and an arm's base; name a base above it to move it)")
+    chain_joints = [j.name for hand, base, tip in layout.arms for j in urdf.chain(base, tip) if j.movable]
+    if layout.waist:
+        chain_joints = [j.name for j in urdf.chain(*layout.waist) if j.movable] + chain_joints
+    limits: dict[str, dict[str, tuple[float, bool]]] = {"velocity": {}, "acceleration": {}, "jerk": {}}
+    for joint in chain_joints:
+        if not np.isfinite(urdf.joint(joint).velocity):
+            limits["velocity"][joint] = (DEFAULT_VELOCITY_RAD_S, True)
+        limits["acceleration"][joint] = (acceleration, False) if acceleration is not None else (DEFAULT_ACCELERATION_RAD_S2, True)
+        limits["jerk"][joint] = (jerk, False) if jerk is not None else (DEFAULT_JERK_RAD_S3, True)
+    for kind_, default, unit in (("velocity", DEFAULT_VELOCITY_RAD_S, "rad/s"), ("acceleration", DEFAULT_ACCELERATION_RAD_S2, "rad/s^2"), ("jerk", DEFAULT_JERK_RAD_S3, "rad/s^3")):
+        assumed = [j for j, (_, a) in limits[kind_].items() if a]
+        if assumed:
+            notes.append(
+                f"assumed {kind_} limit {default:g} {unit} for {len(assumed)} joints ({'the URDF gives none' if kind_ == 'velocity' else f'give --{kind_}'}); marked '# assumed' in robot.toml"
+            )
+    homes: dict[str, Mapping[str, float]] = {"zero": {j.name: lock_value(j) for j in layout.locked}}
+    (out / "robot.toml").write_text(robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, frozenset()))
+    robot = load_robot(out)
+    sim, touching = _collision_world(robot)
+    with sim:
+        held = held_values(robot, sim, chain_joints)
+        for joint, value in held.items():
+            if value != lock_value(urdf.joint(joint)):
+                notes.append(f"held: {joint} = {value:g} (in no chain; at {lock_value(urdf.joint(joint)):g} its links touch another link)")
+        everywhere = always_in_contact(robot, sim, held)
+        if everywhere:
+            a, b = sorted(everywhere)[0]
+            raise RobotModelError(
+                f"{excerpt(copy)}: links '{excerpt(a, 40)}' and '{excerpt(b, 40)}' collide at every sampled configuration and do not touch by construction (dualarm checks them): fix their collision shapes"
+            )
+        ready = ready_pose(robot, sim, held)
+    homes["zero"] = {k: v for k, v in held.items() if v != 0.0 or k in homes["zero"]}
+    homes["ready"] = {k: v for k, v in ready.items() if v != 0.0 or k in homes["zero"]}
+    notes.append("home ready: " + ", ".join(f"{k} = {v:g}" for k, v in homes["ready"].items()))
+    notes.append(
+        f"collision: {len(touching)} link pairs touch by construction and are skipped by dualarm itself (execute.world.disable_touching_pairs); no other pair is in contact at all {SAMPLES} sampled configurations, so robot.toml needs no key for them"
+    )
+    (out / "robot.toml").write_text(robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, touching))
+    robot = load_robot(out)
+    arms = tuple(ArmPlan(chain=f"{hand}_arm", hand=hand, base=base, tip=tip, srs=srs[hand]) for hand, base, tip in layout.arms)
+    return RobotInit(
+        directory=out,
+        robot=robot,
+        arms=arms,
+        waist=layout.waist,
+        locked=MappingProxyType({j.name: lock_value(j) for j in layout.locked}),
+        ready=MappingProxyType(dict(robot.home("ready"))),
+        touching_pairs=touching,
+        notes=tuple(notes),
+    )

@@ -1,0 +1,71 @@
+"""Validation of a trajectory before it is executed, as MoveIt validates a trajectory before handing it to the controllers.
+
+The trajectory is checked against every joint's position, velocity, acceleration and jerk limits
+(:func:`~dualarm.violations.trajectory_violations`) and for collisions with the planners' checker
+(:class:`~dualarm.plan.collision.CollisionChecker`, no safety margin, the task's expected contacts
+allowed) at configurations no more than ``resolution_rad`` apart in every joint. The execute stage
+refuses a trajectory that fails, unless it is told to play it anyway.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dualarm.contracts.trajectory import JointTrajectory
+from dualarm.contracts.verdict import Violation
+from dualarm.tasks import Task
+from dualarm.violations import trajectory_violations
+
+if TYPE_CHECKING:
+    from dualarm.plan.collision import CollisionChecker
+
+#: Largest joint step between the configurations checked for collision [rad] (the planners' default).
+RESOLUTION_RAD = 0.02
+
+
+def checked_samples(q: np.ndarray, resolution_rad: float) -> np.ndarray:
+    """Indices of the samples of ``q`` (M, n) to check: the first, the last, and the next sample wherever some joint has moved ``resolution_rad`` [rad] since the last one kept.
+
+    A trajectory sampled densely (each step below ``resolution_rad``) is so checked at configurations
+    no more than ``2 resolution_rad`` apart, each a configuration it passes through.
+    """
+    if not len(q):
+        return np.zeros(0, dtype=int)
+    kept, last = [0], q[0]
+    for k in range(1, len(q)):
+        if np.abs(q[k] - last).max() >= resolution_rad:
+            kept.append(k)
+            last = q[k]
+    if kept[-1] != len(q) - 1:
+        kept.append(len(q) - 1)
+    return np.array(kept)
+
+
+def collision_violations(checker: "CollisionChecker", traj: JointTrajectory, resolution_rad: float = RESOLUTION_RAD) -> list[Violation]:
+    """Each pair of bodies ``checker`` finds in collision along ``traj``, with the first time and the deepest overlap found."""
+    first: dict[tuple[str, str], tuple[float, float, int]] = {}
+    for k in checked_samples(traj.q, resolution_rad):
+        for c in checker.contacts(traj.q[k]):
+            t, depth, count = first.get((c.a, c.b), (float(traj.t[k]), 0.0, 0))
+            first[(c.a, c.b)] = (t, max(depth, c.depth_m), count + 1)
+    return [
+        Violation("contact", traj.stage, f"{traj.stage}: {a} collides with {b} at t = {t:.3f} s, {depth * 1e3:.3g} mm deep at most, at {count} checked configurations", t)
+        for (a, b), (t, depth, count) in sorted(first.items(), key=lambda item: item[1][0])
+    ]
+
+
+def preflight(traj: JointTrajectory, task: Task, resolution_rad: float = RESOLUTION_RAD) -> list[Violation]:
+    """Every limit (jerk included) and collision (no margin) ``traj`` breaks, its ``approach``'s first when it has one; earliest first within each kind.
+
+    One checker serves both: the approach and the trajectory move the same joints.
+    """
+    from dualarm.plan.collision import CollisionChecker
+
+    spec, found = task.spec, []
+    with CollisionChecker(task.robot, traj.joint_names, traj.fixed, spec.environment, spec.expected_contacts, margin_m=0.0, resolution_rad=resolution_rad) as checker:
+        for played in (traj.approach, traj):
+            if played is not None:
+                found += trajectory_violations(played, task.robot, jerk=True) + collision_violations(checker, played, resolution_rad)
+    return found

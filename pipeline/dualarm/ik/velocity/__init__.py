@@ -1,0 +1,1 @@
+"""Velocity-level IK: TV-GDD (:mod:`.tvgdd`, its gesture bounds :mod:`.gesture` and hand stack :mod:`.stack`) and the pseudoinverse baseline (:mod:`.pinv`)."""

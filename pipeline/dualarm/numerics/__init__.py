@@ -1,0 +1,1 @@
+"""Numerics: CasADi Functions compiled to machine code (:mod:`.compiled`) and evaluated many inputs per call (:mod:`.batched`)."""

@@ -1,0 +1,381 @@
+"""The MCAP sink: each stage's product once into ``run.mcap``, with foxglove-sdk, and ``foxglove-layout.json``.
+
+One Context per run, so nothing is global: one topic family per stage (``/task/...`` for the path
+stage, :data:`STAGE_TOPICS`), ``/robot_description`` with the URDF as URDF 1.0 viewers read it,
+``/tf`` with the link frames of one robot, the run's :func:`~dualarm.record.sink.shown_stage`,
+under the URDF's own link names (Foxglove's URDF layer places links by those names, so it can
+animate one robot), ``/metrics``; the manifest as metadata; the task file, robot.toml and URDF as
+attachments. Log time is motion time (each stage from 0), not the wall clock: repetitions and runs
+line up.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import foxglove
+import numpy as np
+import orjson
+from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
+from foxglove.messages import (
+    Color,
+    CubePrimitive,
+    CylinderPrimitive,
+    FrameTransform,
+    FrameTransforms,
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Point3,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    SpherePrimitive,
+    Timestamp,
+    Vector3,
+)
+
+from dualarm.contracts.joint_path import JointPath
+from dualarm.contracts.reference import CartesianReference
+from dualarm.contracts.trajectory import JointTrajectory
+from dualarm.model.kinematics import joint_transforms
+from dualarm.model.poses import pose_matrix, quaternion_xyzw
+from dualarm.model.robot import Robot
+from dualarm.model.urdf import viewer_urdf
+from dualarm.record import schemas
+from dualarm.record.foxglove_layout import foxglove_layout
+from dualarm.record.run_dir import FOXGLOVE_LAYOUT
+from dualarm.record.sink import HAND_COLORS, STAGE_COLORS, NullSink, animation_rows, shown_stage
+from dualarm.tasks.task import hand_poses_at
+
+if TYPE_CHECKING:  # pybullet is imported only by runs that execute
+    from dualarm.contracts.execution import ExecutionLog
+
+#: MCAP topic family of each stage.
+STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "approach": "/approach", "execute": "/execute"}
+
+
+def _ns(t: float) -> int:
+    """Motion time [s] -> MCAP log time [ns]."""
+    return int(round(t * 1e9))
+
+
+def _encoder(*values: np.ndarray | float) -> Callable[[dict], bytes]:
+    """The JSON encoder of messages made of ``values``: orjson's (a few times faster than json's, for the per-sample topics) when all are finite, else json's, which writes NaN and Infinity as Python and Foxglove read them (orjson writes null)."""
+    if all(np.isfinite(np.asarray(v, dtype=float)).all() for v in values):
+        return orjson.dumps
+    return lambda message: json.dumps(message).encode()
+
+
+def _vec(v) -> dict[str, float]:
+    return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
+
+def _quat(q) -> dict[str, float]:
+    return {"x": float(q[0]), "y": float(q[1]), "z": float(q[2]), "w": float(q[3])}
+
+
+class McapSink(NullSink):
+    """The sink that writes one run's ``run.mcap`` (and, when closed, ``foxglove-layout.json``) into ``directory``.
+
+    Args:
+        directory: the (temporary) run directory.
+        robot: the robot, for /tf and the URDF.
+        attachments: file name -> text, stored in the MCAP (task file, robot.toml, URDF).
+        stages: the stages recorded (the others' products are dropped; for the layout the run
+            opens on and the robot on ``/tf``).
+    """
+
+    def __init__(self, directory: Path, robot: Robot, attachments: Mapping[str, str], stages: Sequence[str] = tuple(STAGE_TOPICS)) -> None:
+        super().__init__()
+        self.stages = tuple(stages)
+        self.shown = shown_stage(self.stages)
+        self.directory = directory
+        self.robot = robot
+        self._keys = {"joints": robot.joint_names, "hands": robot.hands}
+        self._hands: tuple[str, ...] = robot.hands  # the task's, once the reference is recorded
+        self._joint_names: tuple[str, ...] | None = None  # the moving joints, once a stage hands them
+        self._context = foxglove.Context()
+        self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
+        self._channels: dict[str, foxglove.Channel] = {}
+        self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
+        self._closed = False
+        for name, text in attachments.items():
+            media = "application/xml" if name.endswith(".urdf") else "application/toml"
+            self._mcap.attach(log_time=0, create_time=0, name=name, media_type=media, data=text.encode())
+        self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log({"data": viewer_urdf(robot.urdf.path.read_text())}, log_time=0)
+
+    def _json(self, topic: str, schema: dict, **keys: Sequence[str]) -> foxglove.Channel:
+        """The JSON channel ``topic``, opened on first use with ``schema``, its maps keyed by the robot's joints and hands (and ``keys``: kind -> names)."""
+        if topic not in self._channels:
+            self._channels[topic] = foxglove.Channel(topic, schema=schemas.named(schema, {**self._keys, **keys}), context=self._context)
+        return self._channels[topic]
+
+    def _tf(self, stage: str, t: np.ndarray | float, q: Mapping[str, np.ndarray | float]) -> None:
+        """The robot's link frames on ``/tf`` at times ``t`` (K,) [s] (joint name -> (K,) positions [rad]), root hung from ``world``: the shown stage's only."""
+        if stage != self.shown:
+            return
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        q = {name: np.broadcast_to(np.asarray(v, dtype=float), t.shape) for name, v in q.items()}
+        links = [("world", self.robot.urdf.root, np.broadcast_to(np.eye(4), (len(t), 4, 4)))] + joint_transforms(self.robot.urdf.joints, q)
+        frames = [(parent, child, T[:, :3, 3].tolist(), quaternion_xyzw(T[:, :3, :3]).tolist()) for parent, child, T in links]
+        for k, time in enumerate(t.tolist()):
+            stamp = Timestamp(sec=_ns(time) // 10**9, nsec=_ns(time) % 10**9)  # the log time, to the nanosecond
+            self._tf_channel.log(
+                FrameTransforms(
+                    transforms=[
+                        FrameTransform(
+                            timestamp=stamp,
+                            parent_frame_id=parent,
+                            child_frame_id=child,
+                            translation=Vector3(x=p[k][0], y=p[k][1], z=p[k][2]),
+                            rotation=Quaternion(x=r[k][0], y=r[k][1], z=r[k][2], w=r[k][3]),
+                        )
+                        for parent, child, p, r in frames
+                    ]
+                ),
+                log_time=_ns(time),
+            )
+
+    def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
+        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: ``/tf`` and ``<family>/joint_state``."""
+        if stage not in self.stages:
+            return
+        self._tf(stage, t, q)
+        family = STAGE_TOPICS.get(stage, f"/{stage}")
+        self._json(f"{family}/joint_state", schemas.JOINT_STATE).log({"t": t, "rep": rep, "position": {n: float(v) for n, v in q.items()}}, log_time=_ns(t))
+
+    def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+        """The IK (or plan) stage's product, under ``stage``'s topics.
+
+        ``/ik/limits`` once (the robot's position limits and ``velocity_limits`` [rad/s] of the
+        path's joints), ``/ik/sample`` (with each hand's position error [m], orientation error
+        [rad] when measured, and ``arm_angles`` [rad], (N,) per hand) and (TV-GDD) ``/ik/bounds``
+        per sample, the robot on ``/tf`` and, for the shown stage, the hands' paths.
+        """
+        if stage not in self.stages:
+            return
+        family = STAGE_TOPICS[stage]
+        names = self._joint_names = path.joint_names
+        self._limits(stage, names, {"velocity": velocity_limits})
+        sample = self._json(f"{family}/sample", schemas.IK_SAMPLE)
+        bounds = self._json(f"{family}/bounds", schemas.JOINT_BOUNDS) if path.extras else None
+        angle = path.hand_orientation_error_rad
+        measured = bool(np.isfinite(angle).all())  # a planner's path measures no orientation: the field is left out
+        encode = _encoder(path.q, path.qd, path.solve_time_s, path.hand_error_m, angle if measured else 0.0, *arm_angles.values(), *path.extras.values())
+        for k in range(len(path)):
+            t, rep = float(path.t[k]), int(path.rep[k])
+            sample.log(
+                encode(
+                    {
+                        "t": t,
+                        "rep": rep,
+                        "method": path.method,
+                        "status": int(path.status[k]),
+                        "solve_time_s": float(path.solve_time_s[k]),
+                        "position": dict(zip(names, path.q[k].tolist())),
+                        "velocity": dict(zip(names, path.qd[k].tolist())),
+                        "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist())),
+                        **({"hand_orientation_error_rad": dict(zip(path.hands, angle[k].tolist())), "task_space": path.task_space} if measured else {}),
+                        "arm_angle_rad": {hand: float(psi[k]) for hand, psi in arm_angles.items()},
+                    }
+                ),
+                log_time=_ns(t),
+            )
+            if bounds is not None:
+                bounds.log(encode({"t": t, "rep": rep, **{key: dict(zip(names, v[k].tolist())) for key, v in path.extras.items()}}), log_time=_ns(t))
+        self._animation(stage, path.t, names, path.q, path.fixed)
+        if stage == self.shown:
+            fixed = {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed}
+            self._hand_path(stage, {hand: T[:, :3, 3] for hand, T in hand_poses_at(self.robot, path.hands, path.joint_names, path.q, fixed).items()})
+
+    def _animation(self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> None:
+        """The robot of ``stage`` on ``/tf`` at :func:`~dualarm.record.sink.animation_rows`."""
+        rows = animation_rows(t)
+        self._tf(stage, t[rows], {**fixed, **dict(zip(names, q[rows].T))})
+
+    def _limits(self, stage: str, names: tuple[str, ...], limits: Mapping[str, np.ndarray]) -> None:
+        lower, upper = self.robot.lower_upper(names)
+        values = {"lower": lower, "upper": upper, **limits}
+        self._json(f"{STAGE_TOPICS[stage]}/limits", schemas.JOINT_LIMITS).log(
+            {"t": 0.0, "rep": 0, **{key: dict(zip(names, np.asarray(v, dtype=float).tolist())) for key, v in values.items()}}, log_time=0
+        )
+
+    def _hand_path(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
+        """Each hand's path (M, 3) [m] in ``stage`` on ``/<stage>/hand_path`` (Foxglove lines, the stage's colour): the shown stage's."""
+        if stage == self.shown:
+            color = STAGE_COLORS.get(stage, (200, 200, 200))
+            self._lines(f"{STAGE_TOPICS[stage]}/hand_path", "world", positions, Color(r=color[0] / 255, g=color[1] / 255, b=color[2] / 255, a=1.0))
+
+    def _lines(self, topic: str, frame: str, positions: Mapping[str, np.ndarray], color: Color | None = None) -> None:
+        """Paths (name -> (M, 3) [m]) as Foxglove line strips in ``frame``, once at t = 0 on ``topic`` (each hand in its colour unless ``color``)."""
+        entities = []
+        for name, p in positions.items():
+            r, g, b = HAND_COLORS.get(name, (200, 200, 200))
+            line = LinePrimitive(
+                type=LinePrimitiveLineType.LineStrip,
+                pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                thickness=3.0,
+                scale_invariant=True,
+                points=[Point3(x=float(x), y=float(y), z=float(z)) for x, y, z in np.asarray(p, dtype=float)],
+                color=color or Color(r=r / 255, g=g / 255, b=b / 255, a=1.0),
+            )
+            entities.append(SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id=frame, id=name, lines=[line]))
+        SceneUpdateChannel(topic, context=self._context).log(SceneUpdate(entities=entities), log_time=0)
+
+    def trajectory(
+        self,
+        traj: JointTrajectory,
+        limits: Mapping[str, np.ndarray],
+        hand_positions: Mapping[str, np.ndarray],
+        extras: Mapping[str, np.ndarray] = {},
+    ) -> None:
+        """A retime, smooth or approach stage's product (``traj.stage``; the approach on its own clock).
+
+        ``/<stage>/limits`` once (position limits and ``limits``: kind -> (n,) values, kinds
+        ``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3]), ``/<stage>/sample``
+        per sample (with ``extras``: name -> (M, n), e.g. ``jerk``, ``deviation_rad``, and the
+        hands' ``hand_positions``: hand -> (M, 3) [m]), the robot on ``/tf``.
+        """
+        stage, names = traj.stage, traj.joint_names
+        if stage not in self.stages:
+            return
+        self._limits(stage, names, limits)
+        channel = self._json(f"{STAGE_TOPICS[stage]}/sample", schemas.TRAJECTORY_SAMPLE)
+        series = {"velocity": traj.qd, "acceleration": traj.qdd, **extras}
+        encode = _encoder(traj.q, *series.values(), *hand_positions.values())
+        for k in range(len(traj)):
+            t = float(traj.t[k])
+            channel.log(
+                encode(
+                    {
+                        "t": t,
+                        "rep": int(traj.rep[k]),
+                        "position": dict(zip(names, traj.q[k].tolist())),
+                        **{key: dict(zip(names, v[k].tolist())) for key, v in series.items()},
+                        "hand_position": {hand: _vec(p[k]) for hand, p in hand_positions.items()},
+                    }
+                ),
+                log_time=_ns(t),
+            )
+        self._animation(stage, traj.t, names, traj.q, traj.fixed)
+        self._hand_path(stage, hand_positions)
+
+    def execution(self, log: "ExecutionLog") -> None:
+        """The execute stage's product.
+
+        ``/execute/sample`` per physics step (measured joints, the command, hand positions,
+        ``hand_error_m``: hand -> [m], contact counts), ``/execute/contacts`` per step and pair
+        that touched (both names, the depth, whether the task expects it), the robot on ``/tf``;
+        the approach played before, on its own clock, as ``/approach/executed`` and
+        ``/approach/contacts``.
+        """
+        if "execute" not in self.stages:
+            return
+        self._executed(log, f"{STAGE_TOPICS['execute']}/sample", f"{STAGE_TOPICS['execute']}/contacts")
+        if len(log.t):
+            self._animation("execute", log.t, log.joint_names, log.q, log.fixed)
+        self._hand_path("execute", {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()})
+        if log.approach is not None:
+            self._executed(log.approach, f"{STAGE_TOPICS['approach']}/executed", f"{STAGE_TOPICS['approach']}/contacts")
+
+    def _executed(self, log: "ExecutionLog", samples: str, contacts: str) -> None:
+        """One played trajectory's steps on topic ``samples``, its contacts on ``contacts``."""
+        names = log.joint_names
+        channel = self._json(samples, schemas.EXECUTED_SAMPLE)
+        positions = {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()}
+        encode = _encoder(log.q, log.qd, log.q_command, *positions.values(), *log.hand_error_m.values())
+        for k in range(len(log.t)):
+            t = float(log.t[k])
+            channel.log(
+                encode(
+                    {
+                        "t": t,
+                        "rep": int(log.rep[k]),
+                        "position": dict(zip(names, log.q[k].tolist())),
+                        "velocity": dict(zip(names, log.qd[k].tolist())),
+                        "command": dict(zip(names, log.q_command[k].tolist())),
+                        "hand_position": {hand: _vec(p[k]) for hand, p in positions.items()},
+                        "hand_error_m": {hand: float(e[k]) for hand, e in log.hand_error_m.items()},
+                        "self_contacts": int(log.self_contacts[k]),
+                        "environment_contacts": int(log.environment_contacts[k]),
+                        "expected_contacts": int(log.expected_contacts[k]),
+                    }
+                ),
+                log_time=_ns(t),
+            )
+        touching = self._json(contacts, schemas.CONTACT)
+        for e in log.contact_events:
+            touching.log({"t": e.t_s, "rep": e.rep, "first": e.first, "second": e.second, "depth_m": e.depth_m, "expected": e.expected}, log_time=_ns(e.t_s))
+
+    def environment(self, objects) -> None:
+        """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate)."""
+        if "path" not in self.stages:
+            return
+        entities = []
+        for obj in objects:
+            T = pose_matrix(obj.pose.position, obj.pose.rpy)
+            x, y, z, w = quaternion_xyzw(T[:3, :3]).tolist()
+            pose = Pose(position=Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3]), orientation=Quaternion(x=x, y=y, z=z, w=w))
+            color = Color(r=0.55, g=0.45, b=0.35, a=0.8)
+            if obj.shape == "box":
+                size = obj.size_m
+                cube = CubePrimitive(pose=pose, size=Vector3(x=size[0], y=size[1], z=size[2]), color=color)
+                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, cubes=[cube])
+            elif obj.shape == "cylinder":
+                d = 2 * obj.radius_m
+                cylinder = CylinderPrimitive(pose=pose, size=Vector3(x=d, y=d, z=obj.height_m), bottom_scale=1.0, top_scale=1.0, color=color)
+                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, cylinders=[cylinder])
+            else:
+                d = 2 * obj.radius_m
+                sphere = SpherePrimitive(pose=pose, size=Vector3(x=d, y=d, z=d), color=color)
+                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, spheres=[sphere])
+            entities.append(entity)
+        if entities:
+            SceneUpdateChannel(f"{STAGE_TOPICS['path']}/environment", context=self._context).log(SceneUpdate(entities=entities), log_time=0)
+
+    def reference(self, ref: CartesianReference) -> None:
+        """The path stage's product: one ``/task/reference/<hand>`` message per sample, the hands' whole paths once on ``/task/reference_path`` (Foxglove line strips in the reference's frame)."""
+        if "path" not in self.stages:
+            return
+        family = STAGE_TOPICS["path"]
+        frame = ref.frame_in(self.robot)
+        self._hands = tuple(ref.hands)
+        for hand, hr in ref.hands.items():
+            channel = self._json(f"{family}/reference/{hand}", schemas.HAND_REFERENCE)
+            quats = quaternion_xyzw(hr.rotation)
+            encode = _encoder(hr.position, quats, hr.linear_velocity, hr.angular_velocity)
+            for k in range(len(ref)):
+                channel.log(
+                    encode(
+                        {
+                            "t": float(ref.t[k]),
+                            "rep": int(ref.rep[k]),
+                            "segment": int(ref.segment[k]),
+                            "frame_id": frame,
+                            "position": _vec(hr.position[k]),
+                            "orientation": _quat(quats[k]),
+                            "linear_velocity": _vec(hr.linear_velocity[k]),
+                            "angular_velocity": _vec(hr.angular_velocity[k]),
+                        }
+                    ),
+                    log_time=_ns(ref.t[k]),
+                )
+        self._lines(f"{family}/reference_path", frame, {hand: hr.position for hand, hr in ref.hands.items()})
+
+    def metrics(self, values: Mapping[str, float], t: float) -> None:
+        """The run's metrics on ``/metrics`` at motion time ``t`` [s]."""
+        self._json("/metrics", schemas.METRICS, metrics=list(values)).log({"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t))
+
+    def close(self, manifest: Mapping[str, object]) -> None:
+        """Write the Foxglove layout (``foxglove-layout.json``) and the manifest as MCAP metadata, and finish the file."""
+        if self._closed:
+            return
+        self._closed = True
+        layout = foxglove_layout(self.robot, self.stages, self._hands, self._joint_names)
+        (self.directory / FOXGLOVE_LAYOUT).write_text(json.dumps(layout, indent=1) + "\n")
+        self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})
+        self._mcap.close()

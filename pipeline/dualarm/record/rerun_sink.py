@@ -1,0 +1,245 @@
+"""The Rerun sink: each stage's product once into ``run.rrd``, and the :func:`blueprint` the run opens on.
+
+The URDF per stage under ``/<stage>/<robot>``, reference paths and each stage's hand traces in 3D
+under ``/world``, time series under ``/plots``; the blueprint is sent before any data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from dualarm.contracts.joint_path import JointPath
+from dualarm.contracts.reference import CartesianReference
+from dualarm.contracts.run import ALL_STAGES
+from dualarm.contracts.trajectory import JointTrajectory
+from dualarm.interrupt import held
+from dualarm.model.poses import pose_matrix, quaternion_xyzw
+from dualarm.model.robot import Robot
+from dualarm.record.sink import HAND_COLORS, STAGE_COLORS, NullSink, animation_rows, shown_stage
+from dualarm.tasks.task import hand_poses_at
+
+if TYPE_CHECKING:  # pybullet is imported only by runs that execute
+    from dualarm.contracts.execution import ExecutionLog
+
+#: Rerun's timeline of motion time.
+TIMELINE = "time"
+#: Where the 3D views look from: the whole 1.6 m humanoid from its front right.
+EYE = rrb.EyeControls3D(position=[2.4, -1.5, 1.5], look_target=[0.2, 0.0, 0.8], eye_up=[0.0, 0.0, 1.0])
+#: The limit line of the ratio plots.
+LIMIT_LINE = rr.SeriesLines(colors=[(200, 0, 0)], widths=[2.0], names=["limit"])
+
+
+def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> rrb.Blueprint:
+    """The Rerun layout a run of ``stages`` opens on, centred on the stage ``focus`` (default :func:`shown_stage`).
+
+    Tab "run": the ``focus`` robot with the reference and its hand paths in one 3D view, beside
+    plots grouped by quantity: hand errors; velocity, acceleration and jerk over their limits
+    (the limit is the line at 1); joint positions, arm angles and contacts. Tab "stages": one 3D
+    view per stage, each with its robot and hand traces on its own clock. The URDF's collision
+    shapes are logged but hidden.
+    """
+    focus = focus or shown_stage(stages)
+    hidden = [f"- /{stage}/{robot.urdf.name}/collision_geometries/**" for stage in stages]
+    scene = ["+ /world/reference/**", "+ /world/environment/**"]
+
+    def view3d(stage: str, name: str) -> rrb.Spatial3DView:
+        return rrb.Spatial3DView(origin="/", name=name, contents=[*scene, f"+ /{stage}/**", f"+ /world/{stage}/**", *hidden], eye_controls=EYE)
+
+    def plot(name: str, *paths: str, legend: bool = True) -> rrb.TimeSeriesView:
+        return rrb.TimeSeriesView(origin="/plots", name=name, contents=[f"+ /plots/{p}/**" for p in paths], plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=legend))
+
+    driven = next((s for s in ("smooth", "retime") if s in stages), focus) if focus == "execute" else focus
+    solved = next((s for s in ("ik", "plan") if s in stages), None)
+    plots: list[rrb.Container | rrb.View] = [
+        plot("hand error [m]", *[f"{s}/hand_error_m" for s in (solved, focus) if s]),
+        rrb.Tabs(*[plot(f"{kind} / limit", f"{driven}/{kind}_ratio") for kind in ("velocity", "acceleration", "jerk")]),
+        rrb.Tabs(
+            plot(f"joint positions [rad] ({driven})", f"{driven}/position", legend=False),
+            *([plot("arm angle [rad]", f"{solved}/arm_angle_rad")] if solved == "ik" else []),
+            *([plot("contacts", "execute/contacts"), plot("tracking error [rad]", "execute/tracking_error_rad", legend=False)] if focus == "execute" else []),
+        ),
+    ]
+    return rrb.Blueprint(
+        rrb.Tabs(
+            rrb.Horizontal(view3d(focus, f"{focus}: robot and hand paths"), rrb.Vertical(*plots), column_shares=[3, 2], name="run"),
+            rrb.Grid(*[view3d(stage, stage) for stage in stages if stage != "approach"], name="stages"),
+        ),
+        collapse_panels=True,
+    )
+
+
+class RerunSink(NullSink):
+    """The sink that writes one run's ``run.rrd`` into ``directory``.
+
+    Args:
+        directory: the (temporary) run directory.
+        run_id: the run's id (the Rerun recording id).
+        robot: the robot, for the URDF.
+        stages: the stages recorded (the others' products are dropped; for the blueprint).
+    """
+
+    def __init__(self, directory: Path, run_id: str, robot: Robot, stages: Sequence[str] = ALL_STAGES) -> None:
+        super().__init__()
+        self.stages = tuple(stages)
+        self.robot = robot
+        with held():  # the layout first, so that the viewer never shows a default one while loading
+            self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
+            self._rr.save(directory / "run.rrd")
+            self._rr.send_blueprint(blueprint(robot, self.stages), make_active=True, make_default=True)
+        self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
+        self._closed = False
+        self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+
+    def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
+        """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world (logged on first use)."""
+        if stage not in self._robot_trees:
+            # one static entity per stage robot: static data logged twice to one entity replaces the first
+            tree = rr.urdf.UrdfTree.from_file_path(self.robot.urdf.path, entity_path_prefix=stage, frame_prefix=f"{stage}/", static_transform_entity_path=f"/{stage}/tf_static")
+            tree.log_urdf_to_recording(self._rr)
+            self._rr.log(
+                f"{stage}/root",
+                rr.Transform3D(parent_frame="tf#/", child_frame=f"{stage}/{self.robot.urdf.root}"),
+                static=True,
+            )
+            self._robot_trees[stage] = tree
+        return self._robot_trees[stage]
+
+    def _rerun_motion(self, stage: str, t: np.ndarray, q: Mapping[str, np.ndarray]) -> None:
+        """Animate ``stage``'s robot in Rerun: joint name -> positions (N,) at times t (N,) [s]."""
+        tree = self._rerun_robot(stage)
+        times = rr.TimeColumn(TIMELINE, duration=t)
+        for joint in tree.joints():
+            if joint.joint_type != "fixed":
+                values = q.get(joint.name, np.zeros(len(t)))
+                self._rr.send_columns(f"{stage}/transforms/{joint.name}", indexes=[times], columns=joint.compute_transform_columns(np.asarray(values, float).tolist(), clamp=False))
+
+    def _series(self, prefix: str, t: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
+        """Rerun time series ``plots/<prefix>/<name>``."""
+        times = rr.TimeColumn(TIMELINE, duration=t)
+        for name, v in values.items():
+            self._rr.send_columns(f"plots/{prefix}/{name}", indexes=[times], columns=rr.Scalars.columns(scalars=np.asarray(v, float)))
+
+    def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
+        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: the URDF under ``/<stage>``."""
+        if stage not in self.stages:
+            return
+        self._rerun_motion(stage, np.array([t]), {n: np.array([v]) for n, v in q.items()})
+
+    def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+        """The IK (or plan) stage's product: the animated robot under ``/<stage>``, every joint's position, velocity and bounds, the hand errors and the arm angles as time series, and the hand traces."""
+        if stage not in self.stages:
+            return
+        names = path.joint_names
+        angle = path.hand_orientation_error_rad
+        measured = bool(np.isfinite(angle).all())  # a planner's path measures no orientation
+        self._animation(stage, path.t, names, path.q, path.fixed)
+        self._series(f"{stage}/position", path.t, dict(zip(names, path.q.T)))
+        self._series(f"{stage}/velocity", path.t, dict(zip(names, path.qd.T)))
+        for key, v in path.extras.items():
+            self._series(f"{stage}/{key}", path.t, dict(zip(names, v.T)))
+        self._series(f"{stage}/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T)))
+        if measured:
+            self._series(f"{stage}/hand_orientation_error_rad", path.t, dict(zip(path.hands, angle.T)))
+        self._series(f"{stage}/solve_time_s", path.t, {"all": path.solve_time_s})
+        self._series(f"{stage}/arm_angle_rad", path.t, arm_angles)
+        self._hand_traces(
+            stage, {hand: T[:, :3, 3] for hand, T in hand_poses_at(self.robot, path.hands, path.joint_names, path.q, {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed}).items()}
+        )
+
+    def _animation(self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> None:
+        """The robot of ``stage`` at :func:`~dualarm.record.sink.animation_rows`."""
+        rows = animation_rows(t)
+        self._rerun_motion(stage, t[rows], {**{n: np.full(len(rows), v) for n, v in fixed.items()}, **dict(zip(names, q[rows].T))})
+
+    def _hand_traces(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
+        """Each hand's path (M, 3) [m] in ``stage`` under ``/world/<stage>/<hand>``, in the stage's colour."""
+        color = STAGE_COLORS.get(stage, (200, 200, 200))
+        for hand, p in positions.items():
+            self._rr.log(f"world/{stage}/{hand}", rr.LineStrips3D([p], colors=[color], radii=0.0015), static=True)
+
+    def trajectory(
+        self,
+        traj: JointTrajectory,
+        limits: Mapping[str, np.ndarray],
+        hand_positions: Mapping[str, np.ndarray],
+        extras: Mapping[str, np.ndarray] = {},
+    ) -> None:
+        """A retime, smooth or approach stage's product (``traj.stage``; the approach on its own clock).
+
+        The robot under ``/<stage>``, the hand traces under ``/world/<stage>``, and under
+        ``/plots/<stage>`` the positions and each quantity's ratio to its limit (|x| / limit,
+        with the limit as the line ``limit`` at 1).
+        """
+        stage, names = traj.stage, traj.joint_names
+        if stage not in self.stages:
+            return
+        series = {"velocity": traj.qd, "acceleration": traj.qdd, **extras}
+        self._animation(stage, traj.t, names, traj.q, traj.fixed)
+        self._hand_traces(stage, hand_positions)
+        self._series(f"{stage}/position", traj.t, dict(zip(names, traj.q.T)))
+        for kind, limit in limits.items():
+            ratio = np.abs(series[kind]) / np.asarray(limit, dtype=float)
+            self._series(f"{stage}/{kind}_ratio", traj.t, {**dict(zip(names, ratio.T)), "limit": np.ones(len(traj))})
+            self._rr.log(f"plots/{stage}/{kind}_ratio/limit", LIMIT_LINE, static=True)
+        if "deviation_rad" in extras:
+            self._series(f"{stage}/deviation_rad", traj.t, dict(zip(names, extras["deviation_rad"].T)))
+
+    def execution(self, log: "ExecutionLog") -> None:
+        """The execute stage's product: the robot under ``/execute``, the measured hand traces under ``/world/execute``, and under ``/plots/execute`` the hand errors, contacts and the joints' tracking error (``/plots/approach/executed_*`` for the approach)."""
+        if "execute" not in self.stages:
+            return
+        self._executed(log, "execute/")
+        if len(log.t):
+            self._animation("execute", log.t, log.joint_names, log.q, log.fixed)
+        self._hand_traces("execute", {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()})
+        if log.approach is not None:
+            self._executed(log.approach, "approach/executed_")
+
+    def _executed(self, log: "ExecutionLog", plots: str) -> None:
+        """One played trajectory's plots, named ``plots/<plots><quantity>``."""
+        names = log.joint_names
+        self._series(f"{plots}hand_error_m", log.t, dict(log.hand_error_m))
+        self._series(f"{plots}tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
+        self._series(f"{plots}contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
+
+    def environment(self, objects) -> None:
+        """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame) under ``/world/environment/<name>``."""
+        if "path" not in self.stages:
+            return
+        for obj in objects:
+            T = pose_matrix(obj.pose.position, obj.pose.rpy)
+            x, y, z, w = quaternion_xyzw(T[:3, :3]).tolist()
+            archetype: rr.Boxes3D | rr.Cylinders3D | rr.Ellipsoids3D
+            if obj.shape == "box":
+                archetype = rr.Boxes3D(half_sizes=[[s / 2 for s in obj.size_m]], centers=[T[:3, 3]], quaternions=[[x, y, z, w]], fill_mode="solid")
+            elif obj.shape == "cylinder":
+                archetype = rr.Cylinders3D(lengths=[obj.height_m], radii=[obj.radius_m], centers=[T[:3, 3]], quaternions=[[x, y, z, w]], fill_mode="solid")
+            else:
+                archetype = rr.Ellipsoids3D(half_sizes=[[obj.radius_m] * 3], centers=[T[:3, 3]], fill_mode="solid")
+            self._rr.log(f"world/environment/{obj.name}", archetype, static=True)
+
+    def reference(self, ref: CartesianReference) -> None:
+        """The path stage's product: the hands' paths as 3D line strips and the position components as time series."""
+        if "path" not in self.stages:
+            return
+        for hand, hr in ref.hands.items():
+            self._rr.log(
+                f"world/reference/{hand}",
+                rr.LineStrips3D([hr.position], colors=[HAND_COLORS.get(hand, (200, 200, 200))], radii=0.003),
+                static=True,
+            )
+            self._series(f"reference/{hand}", ref.t, {**{f"position/{a}": hr.position[:, i] for i, a in enumerate("xyz")}, "rep": ref.rep})
+
+    def close(self, manifest: Mapping[str, object]) -> None:
+        """Finish the file."""
+        if self._closed:
+            return
+        self._closed = True
+        self._rr.flush()
+        self._rr.disconnect()

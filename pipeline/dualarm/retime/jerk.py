@@ -1,0 +1,450 @@
+"""Jerk-limited, near time-optimal timing that stays on the joint path (``[retime] timing = "jerk-limited"``, the default).
+
+All active joints (both arms) follow ONE path parameter s, the cumulative joint-space chord length
+[rad] (:func:`dualarm.retime.topp.chord_parameter`), and q(t) = P(s(t)) exactly: the trajectory
+never leaves the curve P, whatever the timing.
+
+Pieces (:func:`pieces`). The path is cut where the joint-space direction turns by more than
+acos(:data:`TURN_COSINE`): between a sample's steps in and out, and between chords of at least
+:data:`TURN_CHORD_RAD` before and after it (the corners of a polygon the hand draws and the
+reversals of a gesture, where the task brings the hands to rest; a chord that long is not turned
+by the IK's rounding noise, ~1e-7 rad between samples at rest). Each piece is timed rest to rest,
+so the joints' velocities and accelerations are continuous (0) across the cuts.
+
+The curve (:func:`fit`). P(s) on a piece is a quintic least-squares B-spline through both end
+samples and within :data:`FIT_RAD` of every other (``scipy.interpolate.make_lsq_spline``, its
+knots doubled until it fits). An interpolating spline would pass the IK's noise on to P''' (up
+to 246 rad/rad^3 on the circle, against 8 for the fit) and so to the jerk. Where no spline fits
+because samples near an end wander (a hook, ~1e-6 rad, while the task is at rest), those samples
+become straight pieces of their own; where the samples wiggle further in (TV-GDD's wrist pitch on
+the ball game, by up to 8e-5 rad with a 0.19 s period), P is the interpolating quintic, and the
+timing slows down to keep its jerk. q''' = P''' s'^3 + 3 P'' s' s'' + P' s''' is bounded.
+
+The timing of a piece. A straight piece (two samples) is timed by Ruckig on s, within the limits of
+s that keep each joint within :data:`MARGIN` of its own: exact and time-optimal. Any other is one
+nonlinear program (CasADi, solved by IPOPT; Debrouwere et al. 2013 set out time-optimal path
+following as such a program): on K + 1 values of s, the nodes, the unknowns are the path velocity
+s' and acceleration s'' at each node, and on each interval its duration and a constant path jerk
+s'''; s moves between nodes by the exact triple integrator. The joint velocity, acceleration and
+jerk (the jerk with both neighbouring intervals' s''') are kept within :data:`MARGIN` of the limits
+at every node, and the total time is minimised. The program is solved in units of the piece's
+length and its first guess's duration, where its unknowns are of order one. The solution's jerks
+are then integrated exactly, after the least change that ends the piece at rest (:func:`_exact`).
+
+The check. Between the nodes the limits can be exceeded; so each timing is checked analytically
+every :data:`CHECK_STEP_S`, on both sides of every node, and where s passes each knot of P and
+three points between knots. Each interval where a limit is exceeded by more than
+:data:`REFINE_ABOVE` is halved (in s), and the program solved again from the last timing: from
+:data:`NODES` intervals (denser at both rest ends) up to :data:`MAX_NODES`. What exceeds then is
+removed by a uniform slow-down of the piece, k = max(velocity ratio, sqrt(acceleration ratio),
+cbrt(jerk ratio)) (t -> k t scales the velocity by 1/k, the acceleration by 1/k^2, the jerk by
+1/k^3).
+
+A piece equal to an earlier one (within :data:`SAME_PIECE_RAD`: a repetition) reuses its timing, so
+repeated paths give bit-identical repeated trajectories and are solved once.
+
+Units: joint positions [rad], velocities [rad/s], accelerations [rad/s^2], jerks [rad/s^3], times
+[s]; s in [rad].
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, replace
+
+import casadi as cs
+import numpy as np
+from ruckig import InputParameter, Result, Ruckig, Trajectory
+from scipy.interpolate import BSpline, make_interp_spline, make_lsq_spline
+
+from dualarm.contracts.joint_path import JointPath
+from dualarm.errors import StageError
+from dualarm.retime.timing import STAGE, Timing, still
+from dualarm.retime.topp import chord_parameter
+
+#: The path is cut where its direction turns more than acos(this) ...
+TURN_COSINE = 0.9
+#: ... between chords at least this long before and after a sample [rad].
+TURN_CHORD_RAD = 1e-4
+#: The path's spline P passes within this of every sample [rad] (half the 1e-6 rad the path may deviate).
+FIT_RAD = 5e-7
+#: Intervals of a piece's first program ...
+NODES = 40
+#: ... and of its last: intervals exceeding a limit by more than REFINE_ABOVE (a share) are halved up to this.
+MAX_NODES = 400
+REFINE_ABOVE = 1e-2
+#: Share of each limit a program may use at its nodes (the check takes up the rest), and a straight piece everywhere.
+MARGIN = 1 - 2e-3
+#: Time step of the analytic check of each piece's limits [s].
+CHECK_STEP_S = 1e-4
+#: Pieces closer than this (every joint of every sample) share one timing [rad].
+SAME_PIECE_RAD = 1e-10
+#: IPOPT's settings: a monotone barrier from 1e-3 halved the solve time against the adaptive default on the triangle.
+IPOPT = {"print_level": 0, "sb": "yes", "tol": 1e-8, "max_iter": 500, "mu_strategy": "monotone", "mu_init": 1e-3, "linear_solver": "mumps"}
+#: IPOPT's return statuses that count as solved.
+SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+@dataclass(frozen=True)
+class PieceTiming:
+    """The timing of one piece: s(t) piecewise cubic (constant path jerk per interval), run ``stretch`` times slower.
+
+    Attributes:
+        path: P(s) [rad], (n,) per s.
+        s: s at each interval's start and at the end (K + 1,) [rad], from 0 to the piece's length.
+        sd, sdd: s' [rad/s] and s'' [rad/s^2] there (K + 1,), 0 at both ends.
+        sddd: s''' on each interval (K,) [rad/s^3].
+        dt: each interval's duration (K,) [s].
+        stretch: the uniform slow-down after the check (>= 1).
+    """
+
+    path: BSpline
+    s: np.ndarray
+    sd: np.ndarray
+    sdd: np.ndarray
+    sddd: np.ndarray
+    dt: np.ndarray
+    stretch: float = 1.0
+
+    @property
+    def starts_s(self) -> np.ndarray:
+        """Each node's time before the stretch (K + 1,) [s]."""
+        return np.concatenate([[0.0], np.cumsum(self.dt)])
+
+    @property
+    def duration_s(self) -> float:
+        """The piece's duration [s]."""
+        return self.stretch * float(self.dt.sum())
+
+    def path_state(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The path state at times ``t`` (M,) [s] of the stretched piece: s [rad], s' [rad/s], s'' [rad/s^2], s''' [rad/s^3]."""
+        starts, k = self.starts_s, self.stretch
+        tau = np.clip(np.asarray(t, dtype=float) / k, 0.0, starts[-1])
+        i = np.clip(np.searchsorted(starts, tau, side="right") - 1, 0, len(self.dt) - 1)
+        h = tau - starts[i]
+        s = self.s[i] + self.sd[i] * h + self.sdd[i] * h**2 / 2 + self.sddd[i] * h**3 / 6
+        sd = self.sd[i] + self.sdd[i] * h + self.sddd[i] * h**2 / 2
+        sdd = self.sdd[i] + self.sddd[i] * h
+        return np.clip(s, self.s[0], self.s[-1]), sd / k, sdd / k**2, self.sddd[i] / k**3
+
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The joints at times ``t`` (M,) [s]: q [rad], qd [rad/s], qdd [rad/s^2] and the jerk [rad/s^3], each (M, n)."""
+        s, sd, sdd, sddd = self.path_state(t)
+        d1, d2, d3 = (self.path(s, m) for m in (1, 2, 3))
+        return (
+            self.path(s),
+            d1 * sd[:, None],
+            d2 * sd[:, None] ** 2 + d1 * sdd[:, None],
+            d3 * sd[:, None] ** 3 + 3 * d2 * (sd * sdd)[:, None] + d1 * sddd[:, None],
+        )
+
+    def excess(self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> np.ndarray:
+        """Each interval's slow-down to meet the limits, max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) (K,), checked every :data:`CHECK_STEP_S`, on both sides of every node, and where s passes each knot of P and the points a quarter, half and three quarters between them."""
+        end = self.duration_s
+        nodes = self.stretch * self.starts_s
+        knots = np.unique(self.path.t)
+        between = np.concatenate([knots, *(knots[:-1] + share * np.diff(knots) for share in (0.25, 0.5, 0.75))])
+        passes = _passing(self, between)
+        t = np.sort(np.concatenate([np.linspace(0.0, end, max(50, int(end / CHECK_STEP_S)) + 1), *(np.clip(x + side, 0, end) for x in (nodes, passes) for side in (-1e-12, 1e-12))]))
+        _, qd, qdd, qddd = self(t)
+        worst = np.max([np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=(0, 2))
+        excess = np.zeros(len(self.dt))
+        np.maximum.at(excess, np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(self.dt) - 1), worst)
+        return excess
+
+
+def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> Timing:
+    """The jerk-limited timing of ``path`` (module docstring).
+
+    Args:
+        path: the IK output, finite.
+        velocity, acceleration, jerk: validated limits per joint (n,), symmetric [rad/s, rad/s^2, rad/s^3].
+
+    Returns:
+        A ``jerk-limited`` timing; a path that does not move gives one at rest of duration 0.
+
+    Raises:
+        StageError: IPOPT does not solve a piece's program (naming the piece's samples).
+    """
+    s, kept, of_sample = chord_parameter(path.q)
+    if len(kept) == 1:
+        return still(path, method="jerk-limited")
+    q = path.q[kept]
+    cut = pieces(q, s)
+    timings: list[PieceTiming] = []
+    solved: list[tuple[np.ndarray, PieceTiming]] = []
+    for first, last, curve in cut:
+        samples = q[first : last + 1]
+        same = next((timing for earlier, timing in solved if earlier.shape == samples.shape and np.abs(earlier - samples).max() <= SAME_PIECE_RAD), None)
+        if same is None:
+            same = _time_piece(curve, velocity, acceleration, jerk, (int(kept[first]), int(kept[last])))
+            solved.append((samples, same))
+        timings.append(same)
+    starts = np.concatenate([[0.0], np.cumsum([p.duration_s for p in timings])])
+    evaluate = _Pieces(tuple(timings), starts)
+    passes = np.concatenate([start + _passing(timing, s[first:last] - s[first]) for start, timing, (first, last, _) in zip(starts, timings, cut)] + [starts[-1:]])
+    return Timing(
+        method="jerk-limited",
+        joint_names=path.joint_names,
+        duration_s=float(starts[-1]),
+        sample_times_s=passes[of_sample],
+        rep=path.rep,
+        evaluate=evaluate,
+        stretch=max(p.stretch for p in timings),
+        fixed=path.fixed,
+    )
+
+
+def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
+    """The pieces of the distinct samples ``q`` (K, n) at chord lengths ``s`` (K,) [rad], in order: each one's first and last sample and its curve P over s - s[first] (module docstring).
+
+    The path is cut at both ends and at its turns: at each sample whose step in and step out turn
+    more than acos(:data:`TURN_COSINE`), and once in each run of samples whose chords in and out turn
+    that much (at the sample that turns most), the chord in being from the last sample at least
+    :data:`TURN_CHORD_RAD` before it (or the first), the chord out to the first sample at least as
+    far after it (or the last). Then each piece gets its curve (:func:`fit`). Where none fits and
+    it misses samples within :data:`TURN_CHORD_RAD` of an end (a hook), every sample from that end
+    to the last it misses there is cut too, and the rest fitted again; where it misses only samples
+    farther in, the curve is the interpolating quintic.
+    """
+    index = np.arange(len(s))
+    before = np.clip(np.searchsorted(s, s - TURN_CHORD_RAD, side="right") - 1, 0, None)
+    after = np.minimum(np.searchsorted(s, s + TURN_CHORD_RAD, side="left"), len(s) - 1)
+    cosine = np.ones(len(s))
+    inner = (before < index) & (index < after)
+    cosine[inner] = _cosines(q[index[inner]] - q[before[inner]], q[after[inner]] - q[index[inner]])
+    runs = np.flatnonzero(np.diff(np.concatenate([[0], (cosine < TURN_COSINE).astype(int), [0]])))  # where runs of turning samples start and end
+    turns = [start + int(np.argmin(cosine[start:end])) for start, end in zip(runs[::2], runs[1::2])]
+    sharp = np.flatnonzero(_cosines(np.diff(q[:-1], axis=0), np.diff(q[1:], axis=0)) < TURN_COSINE) + 1
+    cuts = np.unique(np.concatenate([[0], turns, sharp, [len(s) - 1]])).astype(int)
+    done: list[tuple[int, int, BSpline]] = []
+    todo = list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
+    while todo:
+        first, last = todo.pop()
+        spline, miss = fit(s[first : last + 1] - s[first], q[first : last + 1])
+        hook = np.flatnonzero(miss > FIT_RAD) + first  # the samples it misses
+        start, end = hook[s[hook] - s[first] <= TURN_CHORD_RAD], hook[s[last] - s[hook] <= TURN_CHORD_RAD]
+        if spline is not None:
+            done.append((first, last, spline))
+        elif len(start) or len(end):  # hooks: cut every sample from each end to the last it misses there
+            lo = max(int(start.max()), first + 1) if len(start) else first
+            hi = max(lo, min(int(end.min()), last - 1)) if len(end) else last
+            todo += [(k, k + 1) for k in range(first, lo)] + ([(lo, hi)] if lo < hi else []) + [(k, k + 1) for k in range(hi, last)]
+        else:
+            done.append((first, last, make_interp_spline(s[first : last + 1] - s[first], q[first : last + 1], k=5)))
+    return sorted(done, key=lambda piece: piece[0])
+
+
+def fit(s: np.ndarray, q: np.ndarray) -> tuple[BSpline | None, np.ndarray]:
+    """A piece's curve P: a quintic least-squares B-spline of the samples ``q`` (m, n) over ``s`` (m,) [rad] through both end samples and within :data:`FIT_RAD` of each, and how far it misses each sample (m,) [rad].
+
+    Its interior knots are equally spaced in (s / s[-1] + i / (m - 1)) / 2, i the sample's index (so
+    denser where the samples are: where the task moves slowly, as it does where the path bends
+    tightly), and at least :data:`TURN_CHORD_RAD` apart. Their number is doubled from 1 until the
+    spline fits; with at most 6 samples the interpolating spline of degree m - 1 is P. None when no
+    spline of at most m / 2 intervals fits (the misses are then the densest one's).
+    """
+    m, k = len(s), 5
+    if m <= k + 1:
+        return make_interp_spline(s, q, k=m - 1), np.zeros(m)
+    blend = (s / s[-1] + np.linspace(0.0, 1.0, m)) / 2
+    weights = np.ones(m)
+    weights[[0, -1]] = 1e6
+    intervals, miss = 1, np.zeros(m)
+    while intervals <= max(1, m // 2):
+        inner = [s[0]]
+        for knot in np.interp(np.linspace(0.0, 1.0, intervals + 1)[1:], blend, s):
+            if knot - inner[-1] >= TURN_CHORD_RAD or knot == s[-1]:
+                inner.append(knot)
+        if inner[-2] > s[-1] - TURN_CHORD_RAD and len(inner) > 2:
+            del inner[-2]
+        spline = make_lsq_spline(s, q, np.concatenate([np.full(k, s[0]), inner, np.full(k, s[-1])]), k=k, w=weights)
+        spline.c[[0, -1]] = q[[0, -1]]  # nearly so already (their weights): through both ends exactly, so pieces meet
+        miss = np.abs(spline(s) - q).max(axis=1)
+        if miss.max() <= FIT_RAD:
+            return spline, miss
+        intervals *= 2
+    return None, miss
+
+
+def _cosines(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The cosine of the angle between each row of ``a`` and of ``b`` (M, n); 1 where one is zero (a chord back to where the path was: the turn is a sharp one between those samples, cut there)."""
+    lengths = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
+    return np.divide(np.einsum("ij,ij->i", a, b), lengths, out=np.ones(len(a)), where=lengths > 0)
+
+
+@dataclass(frozen=True)
+class _Pieces:
+    """The pieces' timings one after the other: (t) -> (q, qd, qdd), each (M, n)."""
+
+    pieces: tuple[PieceTiming, ...]
+    starts: np.ndarray
+
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.clip(np.asarray(t, dtype=float), 0.0, self.starts[-1])
+        which = np.clip(np.searchsorted(self.starts, t, side="right") - 1, 0, len(self.pieces) - 1)
+        n = self.pieces[0].path.c.shape[-1]
+        q, qd, qdd = (np.empty((len(t), n)) for _ in range(3))
+        for i, piece in enumerate(self.pieces):
+            mine = which == i
+            if mine.any():
+                q[mine], qd[mine], qdd[mine], _ = piece(t[mine] - self.starts[i])
+        return q, qd, qdd
+
+
+def _passing(piece: PieceTiming, s: np.ndarray) -> np.ndarray:
+    """When the piece passes the path parameters ``s`` (M,) [s]: s(t) does not decrease at the nodes, so bisection on each."""
+    lo, hi = np.zeros(len(s)), np.full(len(s), piece.duration_s)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        before = piece.path_state(mid)[0] < s
+        lo, hi = np.where(before, mid, lo), np.where(before, hi, mid)
+    return np.where(s <= piece.s[0], 0.0, hi)
+
+
+def _time_piece(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]) -> PieceTiming:
+    """One piece's timing along its curve ``path`` (:func:`pieces`): programs solved on nodes refined where the check finds a limit exceeded, then stretched (module docstring); the piece's ``samples`` (first, last) name it in errors."""
+    if path.k == 1:
+        return _straight(path, velocity, acceleration, jerk, samples)
+    nodes = path.t[-1] * (1 - np.cos(np.linspace(0.0, np.pi, NODES + 1))) / 2  # denser at both rest ends
+    piece = _solve(path, nodes, velocity, acceleration, jerk, samples, None)
+    excess = piece.excess(velocity, acceleration, jerk)
+    while (excess > 1 + REFINE_ABOVE).any():
+        halve = excess > 1 + REFINE_ABOVE
+        if len(nodes) - 1 + halve.sum() > MAX_NODES:
+            break
+        nodes = np.sort(np.concatenate([nodes, (nodes[:-1][halve] + nodes[1:][halve]) / 2]))
+        try:
+            piece = _solve(path, nodes, velocity, acceleration, jerk, samples, piece)
+        except StageError:  # a finer program IPOPT cannot solve: the coarser timing, stretched, stands
+            break
+        excess = piece.excess(velocity, acceleration, jerk)
+    k = float(excess.max())
+    return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0)
+
+
+def _straight(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]) -> PieceTiming:
+    """The time-optimal timing of a straight piece (two samples): Ruckig's on s, rest to rest, within the limits of s that keep every joint within :data:`MARGIN` of its own (P' is constant, P'' and P''' are 0)."""
+    direction = np.maximum(np.abs(path(0.0, 1)), 1e-300)
+    inp = InputParameter(1)
+    inp.current_position, inp.target_position = [0.0], [float(path.t[-1])]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = ([float(MARGIN * np.min(limit / direction))] for limit in (velocity, acceleration, jerk))
+    plan = Trajectory(1)
+    if Ruckig(1).calculate(inp, plan) not in (Result.Working, Result.Finished):
+        raise StageError(f"{STAGE}: jerk-limited: Ruckig did not time the straight piece from sample {samples[0]} to {samples[1]}", stage=STAGE, sample=samples[0])
+    profile = plan.profiles[0][0]
+    used = np.flatnonzero(np.asarray(profile.t) > 0)  # Ruckig's seven phases, without those of no duration
+    return _exact(path, np.asarray(profile.j)[used], np.asarray(profile.t)[used])
+
+
+def _exact(path: BSpline, sddd: np.ndarray, dt: np.ndarray) -> PieceTiming:
+    """The timing that starts at rest at s = 0 and applies the path jerks ``sddd`` (K,) [rad/s^3] for ``dt`` (K,) [s], made exact.
+
+    The solver meets its constraints to its tolerance (~1e-8); integrated as they are, the jerks
+    would end the piece with s' and s'' of that order. So they are first changed by the least
+    (in the least-squares sense) that ends the piece at rest exactly, then integrated exactly (so
+    s(t) is twice continuously differentiable), and s is scaled to end exactly at the piece's
+    length (a relative change of the solver's tolerance); the joints then meet the next piece's at
+    rest, exactly.
+    """
+    sddd, dt = np.asarray(sddd, dtype=float), np.asarray(dt, dtype=float)
+    remaining = dt.sum() - np.cumsum(dt)  # from each interval's end to the piece's end [s]
+    effect = np.stack([dt * (dt / 2 + remaining), dt])  # d(s', s'' at the end) / d(each jerk)
+    sddd = sddd - effect.T @ np.linalg.solve(effect @ effect.T, effect @ sddd)
+    s, sd, sdd = np.zeros(len(dt) + 1), np.zeros(len(dt) + 1), np.zeros(len(dt) + 1)
+    for i, (j, h) in enumerate(zip(sddd, dt)):
+        s[i + 1] = s[i] + sd[i] * h + sdd[i] * h**2 / 2 + j * h**3 / 6
+        sd[i + 1] = sd[i] + sdd[i] * h + j * h**2 / 2
+        sdd[i + 1] = sdd[i] + j * h
+    scale = path.t[-1] / s[-1]
+    return PieceTiming(path, scale * s, scale * sd, scale * sdd, scale * sddd, dt)
+
+
+def _solve(path: BSpline, nodes: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int], start: PieceTiming | None) -> PieceTiming:
+    """The program on ``nodes`` (K + 1,) [rad] along ``path`` solved (:func:`_program`), unstretched, from the timing ``start`` on coarser nodes (or from :func:`_first_guess`); StageError naming the piece's ``samples`` if IPOPT fails."""
+    K = len(nodes) - 1
+    d1, d2, d3 = (path(nodes, m) for m in (1, 2, 3))
+    solver, lbg, ubg = _program(d1.shape[1], K)
+    cap = MARGIN * np.min(velocity / np.maximum(np.abs(d1), 1e-12), axis=1)  # s' within every joint's velocity limit
+    if start is None:
+        bends = np.min(np.cbrt(jerk / np.maximum(np.abs(d3), 1e-12)), axis=1) / 2  # s' where the path's third derivative alone asks 8 times the jerk limit
+        sd0 = _first_guess(nodes, d1, d2, np.minimum(cap, bends), MARGIN * acceleration)
+        dt0 = 2 * np.diff(nodes) / np.maximum(sd0[:-1] + sd0[1:], 1e-6)
+        sdd0 = np.append(np.diff(sd0) / dt0, 0.0)
+    else:
+        passes = _passing(start, nodes)
+        _, sd0, sdd0, _ = start.path_state(passes)
+        sd0, dt0 = np.minimum(sd0, cap), np.maximum(np.diff(passes), 1e-5)
+    # The program runs in sigma = s / L and tau = t / T (the piece's length, the first guess's duration), where its
+    # unknowns are of order one whatever the limits (a Panda's jerk limits are 5000 rad/s^3): the same program, with
+    # P's derivatives times L, L^2, L^3 and the limits times T, T^2, T^3.
+    L, T = float(nodes[-1]), float(dt0.sum())
+    speed = L / T
+    lbx = np.concatenate([np.zeros(K + 1), np.full(K + 1, -np.inf), np.full(K, -np.inf), np.full(K, 1e-5 / T)])
+    ubx = np.concatenate([cap / speed, np.full(K + 1, np.inf), np.full(K, np.inf), np.full(K, np.inf)])
+    for end in (0, K):  # rest at both ends
+        ubx[end] = lbx[K + 1 + end] = ubx[K + 1 + end] = 0.0
+    parameters = np.concatenate([np.diff(nodes) / L, *((d * L**m).T.ravel() for m, d in ((1, d1), (2, d2), (3, d3))), 1 / (acceleration * T**2), 1 / (jerk * T**3)])
+    x0 = np.concatenate([sd0 / speed, sdd0 * T / speed, np.diff(sdd0) / dt0 * T**2 / speed, dt0 / T])
+    result = solver(x0=x0, p=parameters, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    status = solver.stats()["return_status"]
+    if status not in SOLVED:
+        raise StageError(f"{STAGE}: jerk-limited: IPOPT did not time the piece from sample {samples[0]} to {samples[1]} ({status})", stage=STAGE, sample=samples[0])
+    x = np.asarray(result["x"]).ravel()
+    return _exact(path, x[2 * K + 2 : 3 * K + 2] * speed / T**2, x[3 * K + 2 :] * T)
+
+
+@functools.lru_cache(maxsize=None)
+def _program(n: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
+    """A piece's program for ``n`` joints on ``K`` intervals (module docstring): the IPOPT solver and the bounds of its constraints.
+
+    Variables: s' (K + 1), s'' (K + 1), s''' (K), dt (K). Parameters: the nodes' spacing (K), P', P'',
+    P''' at the nodes ((K + 1) x n each, column-major), 1 / the acceleration and 1 / the jerk limits (n each).
+    """
+    sd, sdd, sddd, dt = cs.SX.sym("sd", K + 1), cs.SX.sym("sdd", K + 1), cs.SX.sym("sddd", K), cs.SX.sym("dt", K)
+    ds = cs.SX.sym("ds", K)
+    d1, d2, d3 = (cs.SX.sym(f"d{m}", K + 1, n) for m in (1, 2, 3))
+    inverse_a, inverse_j = cs.SX.sym("inverse_a", n), cs.SX.sym("inverse_j", n)
+
+    def columns(x: cs.SX) -> cs.SX:  # a value per node, for every joint
+        return cs.repmat(x, 1, n)
+
+    def rows(x: cs.SX, count: int) -> cs.SX:  # a value per joint, for every node
+        return cs.repmat(x.T, count, 1)
+
+    triple = [  # the exact triple integrator over each interval
+        sd[:-1] * dt + sdd[:-1] * dt**2 / 2 + sddd * dt**3 / 6 - ds,
+        sd[:-1] + sdd[:-1] * dt + sddd * dt**2 / 2 - sd[1:],
+        sdd[:-1] + sddd * dt - sdd[1:],
+    ]
+    acc = (d2 * columns(sd**2) + d1 * columns(sdd)) * rows(inverse_a, K + 1)
+    base = d3 * columns(sd**3) + 3 * d2 * columns(sd * sdd)
+    jerks = [(base[at, :] + d1[at, :] * columns(sddd)) * rows(inverse_j, K) for at in (slice(0, K), slice(1, K + 1))]  # each node with the jerk after it, and before it
+    g = cs.vertcat(*triple, cs.vec(acc), *(cs.vec(j) for j in jerks))
+    bound = np.concatenate([np.zeros(3 * K), np.full((K + 1) * n + 2 * K * n, MARGIN)])
+    lower = np.concatenate([np.zeros(3 * K), -bound[3 * K :]])
+    problem = {"x": cs.vertcat(sd, sdd, sddd, dt), "p": cs.vertcat(ds, cs.vec(d1), cs.vec(d2), cs.vec(d3), inverse_a, inverse_j), "f": cs.sum1(dt), "g": g}
+    solver = cs.nlpsol("jerk_limited", "ipopt", problem, {"print_time": False, **{f"ipopt.{k}": v for k, v in IPOPT.items()}})
+    return solver, lower, bound
+
+
+def _first_guess(s: np.ndarray, d1: np.ndarray, d2: np.ndarray, cap: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
+    """A starting s' (K + 1,) [rad/s] for the program: constant path acceleration between nodes within the velocity cap and the acceleration limits, backward then forward (numerical integration, as TOPP's), at 90 %."""
+    ds = np.diff(s)
+    moving = np.abs(d1) > 1e-12
+
+    def bounds(k: int, b: float) -> tuple[float, float]:  # s'' allowed at node k for s'^2 = b
+        m = moving[k]
+        ends = np.stack([(-acceleration[m] - d2[k, m] * b) / d1[k, m], (acceleration[m] - d2[k, m] * b) / d1[k, m]])
+        return float(ends.min(axis=0).max()), float(ends.max(axis=0).min())
+
+    cap2 = cap**2
+    back = np.zeros(len(s))
+    for k in range(len(s) - 2, -1, -1):
+        lo, hi = bounds(k + 1, back[k + 1])
+        back[k] = min(cap2[k], back[k + 1] - 2 * ds[k] * min(lo, 0.0)) if lo < hi else 0.0
+    forward = np.zeros(len(s))
+    for k in range(len(s) - 1):
+        lo, hi = bounds(k, forward[k])
+        forward[k + 1] = min(back[k + 1], forward[k] + 2 * ds[k] * max(hi, 0.0))
+    return 0.9 * np.sqrt(np.maximum(forward, 0.0))

@@ -1,0 +1,1 @@
+"""The simulation world: the robot and the task's objects loaded in PyBullet (DIRECT mode), its shapes and contacts."""
