@@ -16,4 +16,9 @@ sink = dualarm.MetricsSink()
 result = dualarm.run_task(task, "mc-inverse", sink=sink)
 for stage, seconds in sink.stage_seconds.items():
     print(f"{stage:8s} {seconds:6.2f} s")
-print("executed for", result.execution.t[-1], "s; hand tracking error", f"{result.metrics['execute.tracking_error_max_m']:.1e} m")
+print(
+    "executed for",
+    result.execution.t[-1],
+    "s; hand tracking error",
+    f"{result.metrics['execute.tracking_error_max_m']:.1e} m",
+)

@@ -22,7 +22,9 @@ TASKS = REPO / "tasks"
 
 def pytest_configure(config: pytest.Config) -> None:
     """A short base temporary directory, made for this run: a one-line message quotes a long path shortened (:func:`dualarm.errors.excerpt`), and the tests match whole paths, written for pytest's own base (``/tmp/pytest-of-USER/pytest-N``, 31 characters here); pytest-xdist adds ``popen-gwN/`` to it, which made 56 of those paths too long."""
-    if config.option.basetemp is None and not hasattr(config, "workerinput"):  # the controller's; the workers get theirs below it
+    if config.option.basetemp is None and not hasattr(
+        config, "workerinput"
+    ):  # the controller's; the workers get theirs below it
         config.option.basetemp = config._dualarm_basetemp = tempfile.mkdtemp(prefix="dt-")  # type: ignore[attr-defined]
 
 
@@ -37,8 +39,12 @@ def wrist_offset_robot(directory: Path) -> Path:
     """Write into ``directory`` the offset humanoid with its left wrist pitch axis moved 2 cm off the forearm roll axis: a 7R arm of no SEW family (the right arm untouched). Returns ``directory``."""
     text = (OFFSET / "humanoid_offset.urdf").read_text()
     origin = text.index('<origin xyz="0 0 0"', text.index('<joint name="left_wrist_pitch"'))
-    (directory / "offset_wrist.urdf").write_text(text[:origin] + '<origin xyz="0.02 0 0"' + text[origin + len('<origin xyz="0 0 0"') :])
-    (directory / "robot.toml").write_text((OFFSET / "robot.toml").read_text().replace('urdf = "humanoid_offset.urdf"', 'urdf = "offset_wrist.urdf"'))
+    (directory / "offset_wrist.urdf").write_text(
+        text[:origin] + '<origin xyz="0.02 0 0"' + text[origin + len('<origin xyz="0 0 0"') :]
+    )
+    (directory / "robot.toml").write_text(
+        (OFFSET / "robot.toml").read_text().replace('urdf = "humanoid_offset.urdf"', 'urdf = "offset_wrist.urdf"')
+    )
     return directory
 
 
@@ -63,18 +69,46 @@ def wheel_env(tmp_path_factory) -> Path:
     dependencies are reached through a .pth file pointing at this environment's site-packages (so
     nothing is downloaded); the checkout itself is not on its path."""
     root = tmp_path_factory.mktemp("wheel")
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(root / "dist"), str(REPO)], check=True, capture_output=True, timeout=600)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(root / "dist"),
+            str(REPO),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=600,
+    )
     (wheel,) = (root / "dist").glob("dualarm-*.whl")
     venv = root / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=300)
     python = venv / "bin" / "python"
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", "--no-index", str(wheel)], check=True, capture_output=True, timeout=600)
-    site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], check=True, capture_output=True, text=True).stdout.strip()
+    subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", "--no-index", str(wheel)],
+        check=True,
+        capture_output=True,
+        timeout=600,
+    )
+    site = subprocess.run(
+        [str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
     (Path(site) / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     return venv
 
 
-def still_path_fields(n: int, *, joint: str = "a", hand: str = "left", method: str = "x", period_s: float = 0.01, **fields) -> dict:
+def still_path_fields(
+    n: int, *, joint: str = "a", hand: str = "left", method: str = "x", period_s: float = 0.01, **fields
+) -> dict:
     """The fields of a one-joint, one-hand :class:`~dualarm.contracts.joint_path.JointPath` of ``n`` samples at rest at 0, every sample solved; ``fields`` replace any of them."""
     import numpy as np
 
@@ -94,7 +128,13 @@ def still_path_fields(n: int, *, joint: str = "a", hand: str = "left", method: s
 
 
 #: Each shipped task and the method it is reproduced with, for the tests that open runs in the viewers.
-SHIPPED = {"triangle": "mc-inverse", "circle": "mc-inverse", "ball_game": "tvgdd", "carry_box": "mc-inverse", "bowl_grasp": "mcikrrt"}
+SHIPPED = {
+    "triangle": "mc-inverse",
+    "circle": "mc-inverse",
+    "ball_game": "tvgdd",
+    "carry_box": "mc-inverse",
+    "bowl_grasp": "mcikrrt",
+}
 
 
 @pytest.fixture(scope="session")
@@ -158,7 +198,15 @@ def pybullet_urdf(path: Path) -> Iterator[PyBulletURDF]:
     client = pb.connect(pb.DIRECT)
     try:
         body = pb.loadURDF(str(path), useFixedBase=True, physicsClientId=client)
-        infos = [pb.getJointInfo(body, i, physicsClientId=client) for i in range(pb.getNumJoints(body, physicsClientId=client))]
-        yield PyBulletURDF(client, body, {info[1].decode(): i for i, info in enumerate(infos)}, {info[12].decode(): i for i, info in enumerate(infos)})
+        infos = [
+            pb.getJointInfo(body, i, physicsClientId=client)
+            for i in range(pb.getNumJoints(body, physicsClientId=client))
+        ]
+        yield PyBulletURDF(
+            client,
+            body,
+            {info[1].decode(): i for i, info in enumerate(infos)},
+            {info[12].decode(): i for i, info in enumerate(infos)},
+        )
     finally:
         pb.disconnect(client)

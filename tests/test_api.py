@@ -26,7 +26,12 @@ STUB = Path(dualarm.__file__).with_suffix(".pyi")
 
 
 def test_all_is_the_stub_and_every_name_is_documented():
-    stub = {alias.asname or alias.name for node in ast.parse(STUB.read_text()).body if isinstance(node, ast.ImportFrom) for alias in node.names}
+    stub = {
+        alias.asname or alias.name
+        for node in ast.parse(STUB.read_text()).body
+        if isinstance(node, ast.ImportFrom)
+        for alias in node.names
+    }
     assert set(dualarm.__all__) == stub
     for name in dualarm.__all__:
         value = getattr(dualarm, name)
@@ -122,9 +127,13 @@ def test_mc_inverse_one_pose_is_the_path_solvers_branch(robot):
     solution = dualarm.mc_inverse(robot, "left", pose, -1.0)
     q = solution.nearest(ready)
     settings = dualarm.ArmAngle(mode="constant", value_rad={"left": -1.0})
-    path = dualarm.solve_mc_inverse(robot, dualarm.CartesianReference.from_poses(0.01, {"left": pose[None]}), ready, settings)
+    path = dualarm.solve_mc_inverse(
+        robot, dualarm.CartesianReference.from_poses(0.01, {"left": pose[None]}), ready, settings
+    )
     np.testing.assert_array_equal(path.q[0], q)
-    np.testing.assert_allclose(dualarm.hand_pose(robot, "left", {**ready, **dict(zip(solution.joint_names, q))}), pose, atol=1e-9)
+    np.testing.assert_allclose(
+        dualarm.hand_pose(robot, "left", {**ready, **dict(zip(solution.joint_names, q))}), pose, atol=1e-9
+    )
 
 
 def test_reference_checks_its_arguments():
@@ -177,7 +186,12 @@ def test_task_from_a_dict_is_the_task_from_its_file():
     with pytest.raises(DualarmError, match=r"^<dict>:moves\[0\].left.to: no waypoint 'D'"):
         dualarm.task_from_dict({**data, "moves": [{"duration_s": 1.0, "left": {"to": "D"}}]}, base_dir=TASKS)
     robot = dualarm.load_robot("humanoid")
-    assert dualarm.task_from_dict({k: v for k, v in data.items() if k not in ("robot", "title", "source")}, robot=robot).robot.name == "humanoid"
+    assert (
+        dualarm.task_from_dict(
+            {k: v for k, v in data.items() if k not in ("robot", "title", "source")}, robot=robot
+        ).robot.name
+        == "humanoid"
+    )
 
 
 def test_run_in_memory_writes_nothing_and_every_sink_sees_the_same(tmp_path, monkeypatch):
@@ -190,7 +204,9 @@ def test_run_in_memory_writes_nothing_and_every_sink_sees_the_same(tmp_path, mon
     assert result.joint_path is not None and result.retimed is None and result.directory is None
     assert isinstance(sink, dualarm.Sink) and isinstance(dualarm.NullSink(), dualarm.Sink)
     recorded = dualarm.record_run(task, "pinv", stages=("path", "ik"), out_dir=tmp_path / "runs")
-    assert recorded.metrics == pytest.approx(result.metrics | {k: recorded.metrics[k] for k in result.metrics if k.startswith("ik.solve_time")})
+    assert recorded.metrics == pytest.approx(
+        result.metrics | {k: recorded.metrics[k] for k in result.metrics if k.startswith("ik.solve_time")}
+    )
     assert dualarm.read_run(recorded.directory).metrics.keys() == result.metrics.keys()
 
 

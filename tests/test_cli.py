@@ -21,7 +21,15 @@ def _commands(group=None, prefix=()) -> list[list[str]]:
 
 
 def test_the_command_walk_finds_the_commands_users_type():
-    assert {("reproduce",), ("robot", "init"), ("robot", "poses"), ("task", "check"), ("ik", "srs"), ("view",), ("bench", "plan")} <= {tuple(c) for c in _commands()}
+    assert {
+        ("reproduce",),
+        ("robot", "init"),
+        ("robot", "poses"),
+        ("task", "check"),
+        ("ik", "srs"),
+        ("view",),
+        ("bench", "plan"),
+    } <= {tuple(c) for c in _commands()}
 
 
 @pytest.mark.parametrize("command", _commands(), ids=lambda c: " ".join(c) or "dualarm")
@@ -41,7 +49,21 @@ def test_robot_check_humanoid_passes():
 
 
 def test_robot_check_bare_urdf(kuka_urdf):
-    result = runner.invoke(app, ["robot", "check", "--urdf", str(kuka_urdf), "--base", "lbr_iiwa_link_0", "--tip", "lbr_iiwa_link_7", "--samples", "200"])
+    result = runner.invoke(
+        app,
+        [
+            "robot",
+            "check",
+            "--urdf",
+            str(kuka_urdf),
+            "--base",
+            "lbr_iiwa_link_0",
+            "--tip",
+            "lbr_iiwa_link_7",
+            "--samples",
+            "200",
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert "7 DOF" in result.stdout and "S-R-S" in result.stdout
 
@@ -52,18 +74,57 @@ def test_robot_check_bare_urdf(kuka_urdf):
         (["robot", "check"], "give either ROBOT_DIR or --urdf"),
         (["robot", "check", "robots/none"], "no robot.toml"),
         (["robot", "check", "--urdf", "x.urdf", "--base", "a"], "--urdf needs --base LINK and --tip LINK"),
-        (["robot", "check", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "torso", "--tip", "foot"], "no link 'foot'"),
-        (["robot", "check", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "left_hand", "--tip", "torso"], "is not below link"),
-        (["run", str(TASKS / "triangle.toml"), "--stages", "path,ik,smooth", "--ik", "pinv"], "stage 'smooth' needs stage 'retime'"),
-        (["run", str(TASKS / "triangle.toml"), "--ik", "pinv", "--timing", "slow"], "unknown timing 'slow' (timings: jerk-limited, optimal, task)"),
+        (
+            ["robot", "check", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "torso", "--tip", "foot"],
+            "no link 'foot'",
+        ),
+        (
+            ["robot", "check", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "left_hand", "--tip", "torso"],
+            "is not below link",
+        ),
+        (
+            ["run", str(TASKS / "triangle.toml"), "--stages", "path,ik,smooth", "--ik", "pinv"],
+            "stage 'smooth' needs stage 'retime'",
+        ),
+        (
+            ["run", str(TASKS / "triangle.toml"), "--ik", "pinv", "--timing", "slow"],
+            "unknown timing 'slow' (timings: jerk-limited, optimal, task)",
+        ),
         (["run", str(TASKS / "triangle.toml"), "--stages", "path,ik"], "stage 'ik' needs --ik METHOD"),
         (["run", str(TASKS / "ball_game.toml"), "--ik", "magic"], "unknown IK method 'magic'"),
         (["run", str(TASKS / "ball_game.toml"), "--ik", "tvgdd", "--scheme", "fast"], "unknown TV-GDD scheme 'fast'"),
-        (["run", str(TASKS / "ball_game.toml"), "--ik", "tvgdd", "--qp-backend", "gurobi"], "unknown QP backend 'gurobi'"),
+        (
+            ["run", str(TASKS / "ball_game.toml"), "--ik", "tvgdd", "--qp-backend", "gurobi"],
+            "unknown QP backend 'gurobi'",
+        ),
         (["run", str(TASKS / "triangle.toml"), "--stages", "fly"], "unknown stage 'fly'"),
         (["inspect", "recordings/no-such-run"], "no such run directory"),
-        (["ik", "srs", str(HUMANOID), "--pose", "0.3", "0.2", "0.1", "0", "0", "0", "--arm-angle", "0"], "give --arm left or --arm right"),
-        (["ik", "srs", "--urdf", str(HUMANOID / "humanoid.urdf"), "--base", "pelvis", "--tip", "left_hand", "--pose", "0.3", "0.2", "0.1", "0", "0", "0", "--arm-angle", "0"], "10 movable joints"),
+        (
+            ["ik", "srs", str(HUMANOID), "--pose", "0.3", "0.2", "0.1", "0", "0", "0", "--arm-angle", "0"],
+            "give --arm left or --arm right",
+        ),
+        (
+            [
+                "ik",
+                "srs",
+                "--urdf",
+                str(HUMANOID / "humanoid.urdf"),
+                "--base",
+                "pelvis",
+                "--tip",
+                "left_hand",
+                "--pose",
+                "0.3",
+                "0.2",
+                "0.1",
+                "0",
+                "0",
+                "0",
+                "--arm-angle",
+                "0",
+            ],
+            "10 movable joints",
+        ),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(args, needle, tmp_path):
@@ -83,11 +144,25 @@ def test_infeasible_ik_step_prints_one_line_even_from_c(backend, tmp_path):
     text = (TASKS / "ball_game.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     task = tmp_path / "ball_game.toml"
     task.write_text(text.replace("velocity = 6.0", "velocity = 0.01"))
-    command = [sys.executable, "-c", "from dualarm.cli import app; app()", "run", str(task), "--ik", "tvgdd", "--qp-backend", backend, "--out", str(tmp_path / "out")]
+    command = [
+        sys.executable,
+        "-c",
+        "from dualarm.cli import app; app()",
+        "run",
+        str(task),
+        "--ik",
+        "tvgdd",
+        "--qp-backend",
+        backend,
+        "--out",
+        str(tmp_path / "out"),
+    ]
     result = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert result.returncode == 1  # the run failed on valid input
     lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 3 and lines[0] == "verdict: failed" and lines[1].startswith("error: TV-GDD step "), result.stderr
+    assert len(lines) == 3 and lines[0] == "verdict: failed" and lines[1].startswith("error: TV-GDD step "), (
+        result.stderr
+    )
     assert "meets the hand-velocity equality (24)" in lines[1] and lines[2].startswith("the run is kept as failed in ")
 
 
@@ -102,7 +177,23 @@ def test_ik_srs_json_lists_8_candidates_that_pybullet_confirms(humanoid):
     from dualarm.sim.world import load_pybullet_robot
 
     pose = [0.147, 0.404, 0.455, 0.937, 0.560, -0.377]
-    result = runner.invoke(app, ["ik", "srs", str(HUMANOID), "--arm", "left", "--pose", *map(str, pose), "--arm-angle", "2.2", "--json", "--frame", "chain"])
+    result = runner.invoke(
+        app,
+        [
+            "ik",
+            "srs",
+            str(HUMANOID),
+            "--arm",
+            "left",
+            "--pose",
+            *map(str, pose),
+            "--arm-angle",
+            "2.2",
+            "--json",
+            "--frame",
+            "chain",
+        ],
+    )
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     candidates = data["candidates"]
@@ -131,16 +222,47 @@ BOWL = str(TASKS / "bowl_grasp.toml")
     [
         *[
             (command + ["--seed", "-1"], "--seed -1: a seed is an integer >= 0")
-            for command in (["run", TRIANGLE], ["plan", BOWL], ["consistency", TRIANGLE], ["bench", "ik"], ["bench", "plan"], ["robot", "check", str(HUMANOID)])
+            for command in (
+                ["run", TRIANGLE],
+                ["plan", BOWL],
+                ["consistency", TRIANGLE],
+                ["bench", "ik"],
+                ["bench", "plan"],
+                ["robot", "check", str(HUMANOID)],
+            )
         ],
-        *[([*SRS, "--pose", v, "0.2", "0.1", "0", "0", "0", "--arm-angle", "0"], f"--pose X {float(v)}: give a finite number in [-1000, 1000]") for v in ("nan", "inf", "-inf")],
-        ([*SRS, "--pose", "0.3", "0.2", "0.1", "1e308", "0", "0", "--arm-angle", "0"], "--pose ROLL 1e+308: give a finite number in [-1000, 1000]"),
-        *[([*SRS, *POSE, "--arm-angle", v], f"--arm-angle {float(v)}: give a finite number") for v in ("nan", "inf", "1e308")],
+        *[
+            (
+                [*SRS, "--pose", v, "0.2", "0.1", "0", "0", "0", "--arm-angle", "0"],
+                f"--pose X {float(v)}: give a finite number in [-1000, 1000]",
+            )
+            for v in ("nan", "inf", "-inf")
+        ],
+        (
+            [*SRS, "--pose", "0.3", "0.2", "0.1", "1e308", "0", "0", "--arm-angle", "0"],
+            "--pose ROLL 1e+308: give a finite number in [-1000, 1000]",
+        ),
+        *[
+            ([*SRS, *POSE, "--arm-angle", v], f"--arm-angle {float(v)}: give a finite number")
+            for v in ("nan", "inf", "1e308")
+        ],
         ([*SRS, *POSE, "--arm-angle", "0", "--vertical", "0", "0", "nan"], "--vertical nan: give a finite number"),
         ([*SRS, *POSE, "--arm-angle", "0", "--vertical", "0", "0", "0"], "--vertical must not be zero"),
-        *[(["compare", "a", "b", "--tol", v], f"--tol {float(v)}: give a finite number >= 0") for v in ("inf", "nan", "-1")],
-        *[(["run", TRIANGLE, "--ik", "tvgdd", "--lvi-tolerance", v], f"--lvi-tolerance {float(v)}: give a finite number in (0, 1]") for v in ("inf", "nan", "0", "2")],
-        *[(["run", TRIANGLE, "--timeout", v], f"--timeout {float(v)}: give a finite number in (0, 86400]") for v in ("inf", "nan", "0", "-1")],
+        *[
+            (["compare", "a", "b", "--tol", v], f"--tol {float(v)}: give a finite number >= 0")
+            for v in ("inf", "nan", "-1")
+        ],
+        *[
+            (
+                ["run", TRIANGLE, "--ik", "tvgdd", "--lvi-tolerance", v],
+                f"--lvi-tolerance {float(v)}: give a finite number in (0, 1]",
+            )
+            for v in ("inf", "nan", "0", "2")
+        ],
+        *[
+            (["run", TRIANGLE, "--timeout", v], f"--timeout {float(v)}: give a finite number in (0, 86400]")
+            for v in ("inf", "nan", "0", "-1")
+        ],
         (["plan", BOWL, "--timeout", "inf"], "--timeout inf: give a finite number in (0, 86400]"),
         *[(["run", TRIANGLE, "--stages", v], f"--stages '{v}': names no stage") for v in ("", ",", " , ")],
         *[
@@ -157,7 +279,10 @@ BOWL = str(TASKS / "bowl_grasp.toml")
         ],
         (["plan", BOWL, "--trials", "1000000"], "--trials 1000000: give a finite number in [1, 100000]"),
         (["bench", "ik", "--poses", "10000000"], "--poses 10000000: give a finite number in [1, 1e+06]"),
-        (["robot", "check", str(HUMANOID), "--samples", "10000000"], "--samples 10000000: give a finite number in [1, 1e+06]"),
+        (
+            ["robot", "check", str(HUMANOID), "--samples", "10000000"],
+            "--samples 10000000: give a finite number in [1, 1e+06]",
+        ),
         (["bench", "tvgdd", "--repeats", "5000"], "--repeats 5000: give a finite number in [1, 1000]"),
     ],
 )
@@ -177,7 +302,23 @@ def test_a_seed_of_any_size_plans_and_is_recorded_exactly(tmp_path):
     from pathlib import Path
 
     seed = 2**64 + 5
-    result = runner.invoke(app, ["plan", BOWL, "--planner", "ompl-rrtconnect", "--trials", "2", "--seed", str(seed), "--out", str(tmp_path / "p"), "--recordings", str(tmp_path / "r")])
+    result = runner.invoke(
+        app,
+        [
+            "plan",
+            BOWL,
+            "--planner",
+            "ompl-rrtconnect",
+            "--trials",
+            "2",
+            "--seed",
+            str(seed),
+            "--out",
+            str(tmp_path / "p"),
+            "--recordings",
+            str(tmp_path / "r"),
+        ],
+    )
     assert result.exit_code in (0, 3), (result.output, result.exception)
     with (tmp_path / "p" / "plan_trials.csv").open() as f:
         assert [int(row["seed"]) for row in csv.DictReader(f)] == [seed, seed + 1]
@@ -238,5 +379,12 @@ def test_help_is_printed_as_written_with_the_exit_codes():
     result = runner.invoke(app, ["run", "--help"])
     assert "Planning timeout [s]" in result.output
     root = " ".join(runner.invoke(app, ["--help"]).output.split())  # as wrapped to the terminal
-    for text in ("0 complete", "3 violated", "1 failed", "2 user error", "130 interrupted (SIGINT)", "143 terminated (SIGTERM)"):
+    for text in (
+        "0 complete",
+        "3 violated",
+        "1 failed",
+        "2 user error",
+        "130 interrupted (SIGINT)",
+        "143 terminated (SIGTERM)",
+    ):
         assert text in root

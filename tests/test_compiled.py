@@ -88,7 +88,9 @@ def test_one_pose_calls_equal_the_batched_path_and_check_their_inputs(humanoid):
     for i in range(len(T)):
         one = solver.solve(T[i], psi[i])
         assert np.array_equal(one.q, q[i]) and np.array_equal(one.reason, reason[i])
-    assert np.array_equal(solver.solve(T[0].tolist(), np.float32(psi[0])).q, solver.solve(T[0], float(np.float32(psi[0]))).q)  # lists and numpy scalars too
+    assert np.array_equal(
+        solver.solve(T[0].tolist(), np.float32(psi[0])).q, solver.solve(T[0], float(np.float32(psi[0]))).q
+    )  # lists and numpy scalars too
     reflected, tilted, skewed = T[0].copy(), T[0].copy(), T[0].copy()
     reflected[:3, 0] *= -1
     tilted[3, 0] = 10 * RIGID_TOLERANCE

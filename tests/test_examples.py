@@ -42,7 +42,9 @@ def test_examples_are_numbered_and_short():
 def test_example_runs(path: Path, tmp_path: Path, wheel_env: Path):
     out = run_example(wheel_env / "bin" / "python", path, tmp_path)
     if path.stem.startswith("01"):
-        assert out.count(" valid") + out.count("singular") + out.count("outside limits") + out.count("out of reach") >= 8
+        assert (
+            out.count(" valid") + out.count("singular") + out.count("outside limits") + out.count("out of reach") >= 8
+        )
         assert number(r"position error \[m\]: (\S+)", out) < 1e-9
     elif path.stem.startswith("02"):
         assert number(r"largest hand position error: (\S+) m", out) < 1e-3
@@ -62,7 +64,12 @@ def test_example_runs(path: Path, tmp_path: Path, wheel_env: Path):
 
 
 #: The pages a reader sees: the README, the documentation site's sources and the data READMEs.
-DOCS = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md")), REPO / "tasks" / "README.md", REPO / "reports" / "README.md"]
+DOCS = [
+    REPO / "README.md",
+    *sorted((REPO / "docs").rglob("*.md")),
+    REPO / "tasks" / "README.md",
+    REPO / "reports" / "README.md",
+]
 
 
 def python_blocks(doc: Path) -> list[str]:
@@ -73,21 +80,29 @@ def test_docs_show_the_first_two_examples_as_they_are():
     """The Python page (docs/python.md) shows examples 01 and 02, the README 01; every copy is the file."""
     shown = {doc: python_blocks(doc) for doc in DOCS}
     for path in EXAMPLES[:2]:
-        assert path.read_text().rstrip() + "\n" in shown[REPO / "docs" / "python.md"], f"docs/python.md's copy of {path.name} differs from the file"
-    assert EXAMPLES[0].read_text().rstrip() + "\n" in shown[REPO / "README.md"], f"README's copy of {EXAMPLES[0].name} differs from the file"
+        assert path.read_text().rstrip() + "\n" in shown[REPO / "docs" / "python.md"], (
+            f"docs/python.md's copy of {path.name} differs from the file"
+        )
+    assert EXAMPLES[0].read_text().rstrip() + "\n" in shown[REPO / "README.md"], (
+        f"README's copy of {EXAMPLES[0].name} differs from the file"
+    )
     for path in EXAMPLES:
         first = path.read_text().splitlines()[0]
         for doc, blocks in shown.items():
             for block in blocks:
                 if block.splitlines()[:1] == [first]:
-                    assert block == path.read_text().rstrip() + "\n", f"{doc.relative_to(REPO)}'s copy of {path.name} differs from the file"
+                    assert block == path.read_text().rstrip() + "\n", (
+                        f"{doc.relative_to(REPO)}'s copy of {path.name} differs from the file"
+                    )
 
 
 def test_readme_links_only_inside_the_repository():
     for doc in DOCS:
         for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", doc.read_text()):
             if "://" not in target:
-                assert (doc.parent / target).resolve().is_relative_to(REPO), f"{doc.name} links outside the repository: {target}"
+                assert (doc.parent / target).resolve().is_relative_to(REPO), (
+                    f"{doc.name} links outside the repository: {target}"
+                )
                 assert (doc.parent / target).exists(), f"{doc.name} links to a missing file: {target}"
         assert "../shared" not in doc.read_text(), f"{doc.name} points at ../shared"
 
@@ -98,4 +113,6 @@ def test_docs_link_only_to_pages():
     for doc in sorted(docs.rglob("*.md")):
         for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", doc.read_text()):
             if "://" not in target:
-                assert (doc.parent / target).resolve().is_relative_to(docs), f"{doc.relative_to(REPO)} links outside docs/: {target}"
+                assert (doc.parent / target).resolve().is_relative_to(docs), (
+                    f"{doc.relative_to(REPO)} links outside docs/: {target}"
+                )

@@ -28,7 +28,9 @@ runner = CliRunner()
 
 def tree(directory: Path) -> dict[str, bytes | None]:
     """Every entry under ``directory``: a file's bytes, None for a directory."""
-    return {str(p.relative_to(directory)): (p.read_bytes() if p.is_file() else None) for p in sorted(directory.rglob("*"))}
+    return {
+        str(p.relative_to(directory)): (p.read_bytes() if p.is_file() else None) for p in sorted(directory.rglob("*"))
+    }
 
 
 def plant(directory: Path) -> dict[str, bytes | None]:
@@ -44,14 +46,18 @@ def one_error_line(result) -> str:
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
     assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
-    assert "Traceback" not in result.output and not isinstance(result.exception, (AssertionError, OSError, TypeError, ValueError))
+    assert "Traceback" not in result.output and not isinstance(
+        result.exception, (AssertionError, OSError, TypeError, ValueError)
+    )
     return lines[0]
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory) -> Path:
     """A recorded run of the triangle's path."""
-    return record_run(TASKS / "triangle.toml", stages=["path"], out_dir=tmp_path_factory.mktemp("runs"), command=["test"]).directory
+    return record_run(
+        TASKS / "triangle.toml", stages=["path"], out_dir=tmp_path_factory.mktemp("runs"), command=["test"]
+    ).directory
 
 
 #: Each command that writes, with its output path as ``{out}`` (``{run}``: a recorded run).
@@ -73,12 +79,18 @@ def test_a_users_directory_is_refused_and_survives(command, run, tmp_path):
     mine = tmp_path / "mine"
     before = plant(mine)
     line = one_error_line(runner.invoke(app, _args(command, mine, run, tmp_path)))
-    assert str(mine) in line and "not a" in line and any(f"'{name}'" in line for name in ("report.md", "precious.txt", "sub"))
+    assert (
+        str(mine) in line
+        and "not a" in line
+        and any(f"'{name}'" in line for name in ("report.md", "precious.txt", "sub"))
+    )
     assert tree(mine) == before
     assert not (tmp_path / "rec").exists()  # refused before any work
 
 
-@pytest.mark.parametrize(("where", "named"), [("figures/mine.txt", "figures/mine.txt"), ("runs/triangle/notes.txt", "runs")])  # table-i writes no runs/: the planted one is foreign whole
+@pytest.mark.parametrize(
+    ("where", "named"), [("figures/mine.txt", "figures/mine.txt"), ("runs/triangle/notes.txt", "runs")]
+)  # table-i writes no runs/: the planted one is foreign whole
 def test_a_file_planted_inside_an_earlier_reproduction_stops_the_next_one(where, named, tmp_path):
     out = tmp_path / "repro"
     assert runner.invoke(app, ["reproduce", "--only", "table-i", "--jobs", "1", "--out", str(out)]).exit_code == 0
@@ -103,7 +115,10 @@ def test_a_reproduction_replaces_its_own_outputs(tmp_path):
     [
         (["report", "{run}", "--out", "{out}"], "summary.md"),
         (["report", "{run}", "{run}", "--out", "{out}"], "runs.csv"),
-        (["consistency", str(TASKS / "triangle.toml"), "--methods", "mc-inverse", "--reps", "1", "--out", "{out}"], "consistency.csv"),
+        (
+            ["consistency", str(TASKS / "triangle.toml"), "--methods", "mc-inverse", "--reps", "1", "--out", "{out}"],
+            "consistency.csv",
+        ),
     ],
 )
 def test_a_command_writes_again_into_its_own_directory(args, written, run, tmp_path):
@@ -130,7 +145,19 @@ def test_a_run_adds_itself_beside_a_users_files(tmp_path):
 
 def test_plan_records_beside_a_users_files(tmp_path):
     before = plant(tmp_path / "rec")
-    result = runner.invoke(app, ["plan", str(TASKS / "bowl_grasp.toml"), "--trials", "1", "--out", str(tmp_path / "plan"), "--recordings", str(tmp_path / "rec")])
+    result = runner.invoke(
+        app,
+        [
+            "plan",
+            str(TASKS / "bowl_grasp.toml"),
+            "--trials",
+            "1",
+            "--out",
+            str(tmp_path / "plan"),
+            "--recordings",
+            str(tmp_path / "rec"),
+        ],
+    )
     assert result.exit_code in (0, 3), result.output
     after = tree(tmp_path / "rec")
     assert {k: v for k, v in after.items() if k in before} == before and (tmp_path / "rec" / "bowl_grasp").is_dir()
@@ -173,7 +200,16 @@ def test_a_path_the_system_refuses_is_one_line(command, case, run, tmp_path):
     if command == "run":
         args = ["run", str(TASKS / "triangle.toml"), "--out", path]
     elif command == "plan --recordings":
-        args = ["plan", str(TASKS / "bowl_grasp.toml"), "--trials", "1", "--out", str(tmp_path / "p"), "--recordings", path]
+        args = [
+            "plan",
+            str(TASKS / "bowl_grasp.toml"),
+            "--trials",
+            "1",
+            "--out",
+            str(tmp_path / "p"),
+            "--recordings",
+            path,
+        ]
     elif command == "compare --csv":
         args = ["compare", str(run), str(run), "--csv", path]
         cause = {"a regular file": "not a table dualarm compare wrote"}.get(case, cause)
@@ -185,7 +221,9 @@ def test_a_path_the_system_refuses_is_one_line(command, case, run, tmp_path):
     if case in ("a regular file", "through a file"):
         assert path in line
     assert len(line) < 300
-    assert tree(tmp_path) == before or command == "plan --recordings"  # plan made its own --out first, empty but for its marker
+    assert (
+        tree(tmp_path) == before or command == "plan --recordings"
+    )  # plan made its own --out first, empty but for its marker
 
 
 def test_a_second_reproduction_into_a_directory_in_use_is_refused(tmp_path):
@@ -206,7 +244,9 @@ sys.argv = ["dualarm", "reproduce", "--only", "table-i", "--jobs", "1", "--out",
 from dualarm.cli import app
 app()
 """
-    first = subprocess.Popen([sys.executable, "-c", first_code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = subprocess.Popen(
+        [sys.executable, "-c", first_code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     try:
         deadline = time.monotonic() + 300
         while not held.exists():
@@ -215,10 +255,29 @@ app()
         before = tree(out)
         assert "table_i.json" in before
         second = subprocess.run(
-            [sys.executable, "-c", "from dualarm.cli import app; app()", "reproduce", "--only", "table-i", "--jobs", "1", "--out", str(out)], capture_output=True, text=True, timeout=300
+            [
+                sys.executable,
+                "-c",
+                "from dualarm.cli import app; app()",
+                "reproduce",
+                "--only",
+                "table-i",
+                "--jobs",
+                "1",
+                "--out",
+                str(out),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=300,
         )
         lines = [line for line in second.stderr.splitlines() if line.strip()]
-        assert second.returncode == 2 and len(lines) == 1 and "in use by another dualarm process" in lines[0] and str(out) in lines[0], second.stderr
+        assert (
+            second.returncode == 2
+            and len(lines) == 1
+            and "in use by another dualarm process" in lines[0]
+            and str(out) in lines[0]
+        ), second.stderr
         assert tree(out) == before
     finally:
         release.touch()

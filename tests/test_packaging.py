@@ -19,12 +19,24 @@ def test_an_editable_install_is_a_plain_path_that_mypy_follows(tmp_path: Path):
     a wrong argument type to :func:`dualarm.solve_tvgdd`."""
     site = Path(sysconfig.get_paths()["purelib"])
     assert not list(site.glob("__editable__*dualarm*")), "an import-hook finder, not a plain path"
-    assert (REPO / "pipeline") in {Path(line.strip()) for pth in site.glob("*.pth") for line in pth.read_text().splitlines()}
+    assert (REPO / "pipeline") in {
+        Path(line.strip()) for pth in site.glob("*.pth") for line in pth.read_text().splitlines()
+    }
     script = tmp_path / "user_script.py"
-    script.write_text("import dualarm\n\nrobot = dualarm.load_robot('humanoid')\ndualarm.solve_tvgdd(robot, 'not a reference')\n")
-    done = subprocess.run([sys.executable, "-m", "mypy", "--no-incremental", "--follow-imports=silent", str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    script.write_text(
+        "import dualarm\n\nrobot = dualarm.load_robot('humanoid')\ndualarm.solve_tvgdd(robot, 'not a reference')\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "mypy", "--no-incremental", "--follow-imports=silent", str(script)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert done.returncode == 1, done.stdout + done.stderr
-    assert 'Argument 2 to "solve_tvgdd" has incompatible type "str"; expected "CartesianReference"' in done.stdout, done.stdout
+    assert 'Argument 2 to "solve_tvgdd" has incompatible type "str"; expected "CartesianReference"' in done.stdout, (
+        done.stdout
+    )
 
 
 def test_wheel_holds_the_data_and_the_stub(wheel_env: Path, tmp_path: Path):
@@ -34,14 +46,32 @@ def test_wheel_holds_the_data_and_the_stub(wheel_env: Path, tmp_path: Path):
     assert done.returncode == 0, done.stderr
     module, robots, tasks, shipped_robots, exported = json.loads(done.stdout)
     assert Path(module).is_relative_to(wheel_env) and Path(robots).is_relative_to(wheel_env)
-    assert tasks == ["ball_game", "bowl_grasp", "carry_box", "circle", "triangle"] and shipped_robots == sorted(p.name for p in (REPO / "robots").iterdir() if (p / "robot.toml").is_file())
+    assert tasks == ["ball_game", "bowl_grasp", "carry_box", "circle", "triangle"] and shipped_robots == sorted(
+        p.name for p in (REPO / "robots").iterdir() if (p / "robot.toml").is_file()
+    )
     assert list(wheel_env.rglob("dualarm/__init__.pyi")) and exported > 50
 
 
 def test_wheel_runs_the_cli_on_a_shipped_task_from_another_directory(wheel_env: Path, tmp_path: Path):
     """(tests/test_examples.py runs every example with the same wheel.)"""
     run = subprocess.run(
-        [str(wheel_env / "bin" / "dualarm"), "run", "triangle", "--ik", "mc-inverse", "--stages", "path,ik", "--reps", "2", "--out", "out"], cwd=tmp_path, capture_output=True, text=True, timeout=600
+        [
+            str(wheel_env / "bin" / "dualarm"),
+            "run",
+            "triangle",
+            "--ik",
+            "mc-inverse",
+            "--stages",
+            "path,ik",
+            "--reps",
+            "2",
+            "--out",
+            "out",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert run.returncode == 0, run.stderr
     directory = tmp_path / run.stdout.strip().splitlines()[-1]

@@ -47,10 +47,22 @@ def _error_lines(stderr: str) -> list[str]:
     return [line for line in stderr.splitlines() if line.strip()]
 
 
-@pytest.mark.parametrize(("signum", "code", "line", "error"), [(signal.SIGINT, 130, "interrupted (SIGINT)", "KeyboardInterrupt"), (signal.SIGTERM, 143, "terminated (SIGTERM)", "Terminated: SIGTERM")])
+@pytest.mark.parametrize(
+    ("signum", "code", "line", "error"),
+    [
+        (signal.SIGINT, 130, "interrupted (SIGINT)", "KeyboardInterrupt"),
+        (signal.SIGTERM, 143, "terminated (SIGTERM)", "Terminated: SIGTERM"),
+    ],
+)
 def test_a_signalled_run_is_kept_as_failed(tmp_path, signum, code, line, error):
     out = tmp_path / "out"
-    process = subprocess.Popen([*CLI, "run", "triangle", "--ik", "mc-inverse", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
+    process = subprocess.Popen(
+        [*CLI, "run", "triangle", "--ik", "mc-inverse", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_default_sigint,
+    )
     _wait_for(lambda: bool(_stagings(out)), process)
     process.send_signal(signal.SIGSTOP)
     assert _stagings(out), "the run ended before it could be interrupted"
@@ -85,7 +97,10 @@ def _alive(pid: int, started: str) -> bool:
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="finds the workers in /proc (Linux)")
-@pytest.mark.parametrize(("signum", "group", "code", "line"), [(signal.SIGINT, True, 130, "interrupted (SIGINT)"), (signal.SIGTERM, False, 143, "terminated (SIGTERM)")])
+@pytest.mark.parametrize(
+    ("signum", "group", "code", "line"),
+    [(signal.SIGINT, True, 130, "interrupted (SIGINT)"), (signal.SIGTERM, False, 143, "terminated (SIGTERM)")],
+)
 def test_an_interrupted_reproduction_stops_its_workers(tmp_path, signum, group, code, line):
     """Ctrl-C reaches the whole process group (as from a terminal); SIGTERM the main process alone."""
     out = tmp_path / "repro"

@@ -50,13 +50,24 @@ def _joints(df, field: str, names) -> np.ndarray:
 def _limits(data, stage: str):
     row = data[f"/{stage}/limits"].iloc[0]
     names = [c.split(".", 1)[1] for c in data[f"/{stage}/limits"].columns if c.startswith("velocity.")]
-    return names, {kind: np.array([row[f"{kind}.{n}"] for n in names]) for kind in ("velocity", "acceleration", "jerk") if f"{kind}.{names[0]}" in row}
+    return names, {
+        kind: np.array([row[f"{kind}.{n}"] for n in names])
+        for kind in ("velocity", "acceleration", "jerk")
+        if f"{kind}.{names[0]}" in row
+    }
 
 
 def test_every_stage_runs_by_default_and_is_recorded(triangle):
     task, run, data = triangle
     manifest = json.loads((run / "manifest.json").read_text())
-    assert manifest["status"] == "complete" and manifest["stages"] == ["path", "ik", "retime", "smooth", "approach", "execute"]
+    assert manifest["status"] == "complete" and manifest["stages"] == [
+        "path",
+        "ik",
+        "retime",
+        "smooth",
+        "approach",
+        "execute",
+    ]
     for topic in ("/retime/sample", "/retime/limits", "/smooth/sample", "/smooth/limits", "/execute/sample"):
         assert len(data[topic]) > 0, topic
     assert "left_hand" in set(data["/tf"]["child_frame_id"])  # the executed robot
@@ -85,12 +96,17 @@ def test_the_approach_moves_from_the_initial_configuration_to_the_motion_start_w
     velocity = np.diff(q, axis=0) / dt
     acceleration = np.diff(velocity, axis=0) / dt[1:]
     jerk = np.diff(_joints(approach, "acceleration", names), axis=0) / dt
-    assert (np.abs(velocity) <= limits["velocity"] * SLACK).all() and (np.abs(acceleration) <= limits["acceleration"] * SLACK + 1e-6).all()
+    assert (np.abs(velocity) <= limits["velocity"] * SLACK).all() and (
+        np.abs(acceleration) <= limits["acceleration"] * SLACK + 1e-6
+    ).all()
     assert (np.abs(jerk) <= limits["jerk"] * SLACK).all()
     assert np.abs(velocity).max(axis=0).max() > 0.1  # it moved
     executed = data["/approach/executed"]
     assert executed["t"].iloc[-1] == pytest.approx(approach["t"].iloc[-1], abs=1e-3)
-    assert np.abs(_joints(executed, "position", names)[-1] - _joints(data["/execute/sample"], "position", names)[0]).max() < 0.01
+    assert (
+        np.abs(_joints(executed, "position", names)[-1] - _joints(data["/execute/sample"], "position", names)[0]).max()
+        < 0.01
+    )
 
 
 def test_the_approach_is_the_straight_jerk_limited_move_ruckig_times_in_phase(carry_box):
@@ -111,7 +127,9 @@ def test_the_approach_is_the_straight_jerk_limited_move_ruckig_times_in_phase(ca
     for share in (0.998, 1.0):
         inp = InputParameter(len(names))
         inp.current_position, inp.target_position = q[0].tolist(), q[-1].tolist()
-        inp.max_velocity, inp.max_acceleration, inp.max_jerk = ((share * limits[kind]).tolist() for kind in ("velocity", "acceleration", "jerk"))
+        inp.max_velocity, inp.max_acceleration, inp.max_jerk = (
+            (share * limits[kind]).tolist() for kind in ("velocity", "acceleration", "jerk")
+        )
         inp.synchronization = Synchronization.Phase
         plan = Trajectory(len(names))
         assert Ruckig(len(names)).calculate(inp, plan) == Result.Working
@@ -149,13 +167,20 @@ def test_retimed_samples_stay_within_velocity_and_acceleration_limits(triangle):
     task, run, data = triangle
     names, limits = _limits(data, "retime")
     df = data["/retime/sample"]
-    t, q, qd, qdd = df["t"].to_numpy(), _joints(df, "position", names), _joints(df, "velocity", names), _joints(df, "acceleration", names)
+    t, q, qd, qdd = (
+        df["t"].to_numpy(),
+        _joints(df, "position", names),
+        _joints(df, "velocity", names),
+        _joints(df, "acceleration", names),
+    )
     assert (np.abs(qd) / limits["velocity"]).max() <= SLACK
     assert (np.abs(qdd) / limits["acceleration"]).max() <= SLACK
     # the recorded velocities are the positions' derivative: mean velocity over each step within the limit too
     assert (np.abs(np.diff(q, axis=0) / np.diff(t)[:, None]) / limits["velocity"]).max() <= SLACK
     assert np.abs(np.diff(q, axis=0) / np.diff(t)[:, None] - 0.5 * (qd[1:] + qd[:-1])).max() < 1e-3
-    assert np.allclose(qd[[0, -1]], 0) and np.allclose(q[0], data["/ik/sample"][[f"position.{n}" for n in names]].to_numpy()[0])
+    assert np.allclose(qd[[0, -1]], 0) and np.allclose(
+        q[0], data["/ik/sample"][[f"position.{n}" for n in names]].to_numpy()[0]
+    )
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["retime.velocity_ratio_max"] == pytest.approx((np.abs(qd) / limits["velocity"]).max(), rel=1e-9)
 
@@ -177,11 +202,24 @@ def test_smoothed_samples_stay_within_velocity_acceleration_and_jerk_limits(tria
     _, run, data = triangle
     names, limits = _limits(data, "smooth")
     df = data["/smooth/sample"]
-    t, q, qd, qdd = df["t"].to_numpy(), _joints(df, "position", names), _joints(df, "velocity", names), _joints(df, "acceleration", names)
+    t, q, qd, qdd = (
+        df["t"].to_numpy(),
+        _joints(df, "position", names),
+        _joints(df, "velocity", names),
+        _joints(df, "acceleration", names),
+    )
     dt = np.diff(t)[:, None]
-    assert np.allclose(dt[:-1], 0.001) and 0.0005 <= dt[-1, 0] < 0.0015  # every control period, the last step to the motion's end
+    assert (
+        np.allclose(dt[:-1], 0.001) and 0.0005 <= dt[-1, 0] < 0.0015
+    )  # every control period, the last step to the motion's end
     jerk = np.diff(qdd, axis=0) / dt
-    for values, limit in ((qd, "velocity"), (qdd, "acceleration"), (jerk, "jerk"), (np.diff(q, axis=0) / dt, "velocity"), (np.diff(qd, axis=0) / dt, "acceleration")):
+    for values, limit in (
+        (qd, "velocity"),
+        (qdd, "acceleration"),
+        (jerk, "jerk"),
+        (np.diff(q, axis=0) / dt, "velocity"),
+        (np.diff(qd, axis=0) / dt, "acceleration"),
+    ):
         assert (np.abs(values) / limits[limit]).max() <= SLACK, limit
     assert np.allclose(qd[[0, -1]], 0) and np.allclose(qdd[[0, -1]], 0)  # rest to rest
     metrics = json.loads((run / "metrics.json").read_text())
@@ -196,11 +234,15 @@ def test_the_default_timing_is_jerk_limited_and_the_smooth_stage_passes_it_throu
     """The default retime is the jerk-limited timing (within the full velocity, acceleration and jerk limits): by third
     differences of the recorded positions every 1 ms too; the smooth stage records the same samples, deviation 0."""
     _, run, data = triangle
-    assert data.setting("retime", "timing") == "jerk-limited" and "pass-through" in str(data.setting("smooth", "method"))
+    assert data.setting("retime", "timing") == "jerk-limited" and "pass-through" in str(
+        data.setting("smooth", "method")
+    )
     names, limits = _limits(data, "retime")
     retimed, smoothed = data["/retime/sample"], data["/smooth/sample"]
     assert np.array_equal(_joints(retimed, "position", names), _joints(smoothed, "position", names))
-    q = _joints(retimed, "position", names)[:-1]  # every 1 ms (the last step, to the motion's end, is shorter or longer)
+    q = _joints(retimed, "position", names)[
+        :-1
+    ]  # every 1 ms (the last step, to the motion's end, is shorter or longer)
     for order, kind in ((1, "velocity"), (2, "acceleration"), (3, "jerk")):
         ratio = (np.abs(np.diff(q, order, axis=0)) / 1e-3**order / limits[kind]).max()
         assert 0.9 < ratio <= SLACK, kind  # within the limit, and near it: near time-optimal
@@ -218,7 +260,9 @@ def test_the_motion_stays_on_the_ik_path_within_1e_6_rad_and_10_um_at_the_hands(
     task, run, data = triangle
     names, _ = _limits(data, "retime")
     retimed = data["/retime/sample"]
-    curve = CubicHermiteSpline(retimed["t"].to_numpy(), _joints(retimed, "position", names), _joints(retimed, "velocity", names))
+    curve = CubicHermiteSpline(
+        retimed["t"].to_numpy(), _joints(retimed, "position", names), _joints(retimed, "velocity", names)
+    )
     dense = curve(np.arange(0.0, retimed["t"].iloc[-1], 5e-5))
     ik = _joints(data["/ik/sample"], "position", names)
     distance, nearest = _distance_to_polyline(ik, dense, nearest=True)
@@ -233,7 +277,9 @@ def test_the_motion_stays_on_the_ik_path_within_1e_6_rad_and_10_um_at_the_hands(
                 positions.append(sim.link_pose("left_hand")[:3, 3])
             hands.append(np.array(positions))
     assert np.linalg.norm(hands[0] - hands[1], axis=1).max() <= 1e-5
-    assert json.loads((run / "metrics.json").read_text())["retime.hand_deviation_max_m"] <= 1e-5  # the stage's own measure agrees
+    assert (
+        json.loads((run / "metrics.json").read_text())["retime.hand_deviation_max_m"] <= 1e-5
+    )  # the stage's own measure agrees
 
 
 def test_execution_tracks_the_command_within_2_mm_by_pybullet_fk(triangle):
@@ -246,7 +292,9 @@ def test_execution_tracks_the_command_within_2_mm_by_pybullet_fk(triangle):
         for k in rows:
             sim.set_positions(names, df.iloc[k][[f"command.{n}" for n in names]].to_numpy(float))
             commanded = sim.link_pose("left_hand")[:3, 3]
-            measured = df.iloc[k][["hand_position.left.x", "hand_position.left.y", "hand_position.left.z"]].to_numpy(float)
+            measured = df.iloc[k][["hand_position.left.x", "hand_position.left.y", "hand_position.left.z"]].to_numpy(
+                float
+            )
             assert np.linalg.norm(measured - commanded) <= 2e-3, k
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["execute.tracking_error_max_m"] <= 2e-3
@@ -257,8 +305,20 @@ def test_execution_tracks_the_command_within_2_mm_by_pybullet_fk(triangle):
 def test_rerun_file_has_an_animated_robot_per_stage(triangle):
     _, run, _ = triangle
     rerun = Path(sys.executable).parent / "rerun"
-    printed = subprocess.run([str(rerun), "rrd", "print", str(run / "run.rrd")], capture_output=True, text=True, env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
-    for entity in ("/ik/transforms/", "/retime/transforms/", "/smooth/transforms/", "/execute/transforms/", "/world/execute/left", "/plots/smooth/jerk_ratio/"):
+    printed = subprocess.run(
+        [str(rerun), "rrd", "print", str(run / "run.rrd")],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    ).stdout
+    for entity in (
+        "/ik/transforms/",
+        "/retime/transforms/",
+        "/smooth/transforms/",
+        "/execute/transforms/",
+        "/world/execute/left",
+        "/plots/smooth/jerk_ratio/",
+    ):
         assert entity in printed, entity
 
 
@@ -267,20 +327,26 @@ def test_task_timing_too_fast_for_a_tightened_limit_is_one_line_and_a_failed_run
     text = TRIANGLE.read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     task_file = tmp_path / "triangle.toml"
     task_file.write_text(text + '\n[limits]\nvelocity = 0.05\n\n[retime]\ntiming = "task"\n')
-    result = CliRunner().invoke(app, ["run", str(task_file), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")])
+    result = CliRunner().invoke(
+        app, ["run", str(task_file), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")]
+    )
     assert result.exit_code == 1  # a run that failed on valid input (2 is for input refused before running)
     lines = result.output.strip().splitlines()
     (run,) = (tmp_path / "runs" / "triangle").iterdir()
     assert lines[0] == "verdict: failed" and lines[2] == f"the run is kept as failed in {run}", result.output
     assert len(lines) == 3 and "keep_timing" in lines[1] and "velocity limit" in lines[1], result.output
     manifest = json.loads((run / "manifest.json").read_text())
-    assert manifest["status"] == "failed" and "velocity limit" in manifest["error"] and not (run / "metrics.json").exists()
+    assert (
+        manifest["status"] == "failed" and "velocity limit" in manifest["error"] and not (run / "metrics.json").exists()
+    )
 
 
 def test_stages_subset_stops_after_retime(tmp_path):
     run = record_run(load_task(TRIANGLE, 1), "mc-inverse", stages=["path", "ik", "retime"], out_dir=tmp_path).directory
     data = read_run(run)
-    assert "/retime/sample" in data.topics and "/smooth/sample" not in data.topics and "/execute/sample" not in data.topics
+    assert (
+        "/retime/sample" in data.topics and "/smooth/sample" not in data.topics and "/execute/sample" not in data.topics
+    )
     assert not any(key.startswith(("smooth.", "execute.")) for key in data.metrics)
 
 

@@ -91,7 +91,9 @@ def _distance(task, q: dict[str, float], a: str, b: str) -> float:
     with load_pybullet_robot(task.robot.urdf.path) as sim:
         sim.set_positions(list(q), list(q.values()))
         pb.performCollisionDetection(physicsClientId=sim.client)
-        points = pb.getClosestPoints(sim.body, sim.body, 0.5, sim.link_index[a], sim.link_index[b], physicsClientId=sim.client)
+        points = pb.getClosestPoints(
+            sim.body, sim.body, 0.5, sim.link_index[a], sim.link_index[b], physicsClientId=sim.client
+        )
         return min(p[8] for p in points)
 
 
@@ -143,7 +145,9 @@ def square_runs(tmp_path_factory):
     (tmp / "square.toml").write_text(SQUARE)
     runner = CliRunner()
     refused = runner.invoke(app, ["run", str(tmp / "square.toml"), "--ik", "dls-svd", "--out", str(tmp / "refused")])
-    played = runner.invoke(app, ["run", str(tmp / "square.toml"), "--ik", "dls-svd", "--out", str(tmp / "played"), "--execute-anyway"])
+    played = runner.invoke(
+        app, ["run", str(tmp / "square.toml"), "--ik", "dls-svd", "--out", str(tmp / "played"), "--execute-anyway"]
+    )
     return load_task(tmp / "square.toml"), tmp, refused, played
 
 
@@ -181,12 +185,18 @@ def test_the_colliding_square_played_anyway_is_violated_with_the_pair_time_and_d
     # executed: the contacts are recorded per step and pair, with their depth
     contacts = data["/execute/contacts"]
     assert {"first", "second", "depth_m", "t"} <= set(contacts.columns) and len(contacts) > 0
-    assert ((contacts["first"] == "right_forearm") | (contacts["second"] == "right_forearm") | (contacts["first"] == "right_upper_arm")).any()
+    assert (
+        (contacts["first"] == "right_forearm")
+        | (contacts["second"] == "right_forearm")
+        | (contacts["first"] == "right_upper_arm")
+    ).any()
     assert data.metrics["execute.self_collisions"] > 0
 
 
 def test_crossing_hands_played_anyway_name_the_arms_that_touch():
-    result = run_task(task_from_dict(tomllib.loads(CROSSING)), "dls-svd", execution=ExecutionSettings(execute_anyway=True))
+    result = run_task(
+        task_from_dict(tomllib.loads(CROSSING)), "dls-svd", execution=ExecutionSettings(execute_anyway=True)
+    )
     assert result.verdict.status == "violated"
     pairs = [v.message for v in result.verdict.violations if v.check == "contact" and v.stage == "execute"]
     assert pairs and all("touched" in p for p in pairs)
@@ -198,7 +208,11 @@ def test_crossing_hands_played_anyway_name_the_arms_that_touch():
 
 def _path(status, error_m) -> JointPath:
     n = len(status)
-    return JointPath(**still_path_fields(n, method="m", status=np.array(status), hand_error_m=np.array(error_m, dtype=float).reshape(n, 1)))
+    return JointPath(
+        **still_path_fields(
+            n, method="m", status=np.array(status), hand_error_m=np.array(error_m, dtype=float).reshape(n, 1)
+        )
+    )
 
 
 class _Limits:
@@ -214,8 +228,12 @@ class _Limits:
 def test_failed_samples_and_a_missed_position_are_violations_naming_the_first_time():
     found = ik_violations(_path([0, 1, 1, 0, 0], [0, 0, 0, 2e-3, 0]), _Limits(), Checks(), retimed=True)
     failed, missed = found
-    assert "2 of 5 samples failed, the first at t = 0.010 s (rep 0)" in failed.message and failed.t_s == pytest.approx(0.01)
-    assert "left hand 2 mm off the asked position at t = 0.030 s" in missed.message and missed.t_s == pytest.approx(0.03)
+    assert "2 of 5 samples failed, the first at t = 0.010 s (rep 0)" in failed.message and failed.t_s == pytest.approx(
+        0.01
+    )
+    assert "left hand 2 mm off the asked position at t = 0.030 s" in missed.message and missed.t_s == pytest.approx(
+        0.03
+    )
     assert ik_violations(_path([0, 0], [0, 9e-4]), _Limits(), Checks(), retimed=True) == []
 
 
@@ -231,4 +249,8 @@ def test_a_position_limit_is_timed_at_its_own_sample_after_a_failed_one():
     """Samples 0 failed, 2 beyond the [-1, 1] rad limit by 0.5 rad: the violation is at t = 0.02 s."""
     path = JointPath(**still_path_fields(3, method="m", status=np.array([1, 0, 0]), q=np.array([[0.0], [0.0], [1.5]])))
     limit = [v for v in ik_violations(path, _Limits(), Checks(), retimed=True) if v.check == "limit"]
-    assert len(limit) == 1 and limit[0].t_s == pytest.approx(0.02) and "position of a 0.5 rad beyond its limits [-1, 1]" in limit[0].message
+    assert (
+        len(limit) == 1
+        and limit[0].t_s == pytest.approx(0.02)
+        and "position of a 0.5 rad beyond its limits [-1, 1]" in limit[0].message
+    )

@@ -33,7 +33,9 @@ def finite_array(a: Any, name: str, shape: tuple[int | None, ...] | None = None)
         array = np.asarray(a, dtype=float)
     except (TypeError, ValueError):
         raise InvalidArgumentError(name, f"expected an array of numbers, got {type(a).__name__}") from None
-    if shape is not None and (array.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, array.shape))):
+    if shape is not None and (
+        array.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, array.shape))
+    ):
         wanted = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
         raise InvalidArgumentError(name, f"expected shape {wanted}, got {array.shape}")
     bad = np.argwhere(~np.isfinite(array))
@@ -58,7 +60,10 @@ def rigid_transforms(a: Any, name: str, *, many: bool = False) -> np.ndarray:
     bad = np.flatnonzero((orthogonal > RIGID_TOLERANCE) | (row > RIGID_TOLERANCE) | (np.linalg.det(R) < 0))
     if len(bad):
         which = f" (pose {bad[0]})" if many else ""
-        raise InvalidArgumentError(name, f"is not a rigid transform{which}: the rotation block must be orthonormal with determinant 1 and the last row [0, 0, 0, 1]")
+        raise InvalidArgumentError(
+            name,
+            f"is not a rigid transform{which}: the rotation block must be orthonormal with determinant 1 and the last row [0, 0, 0, 1]",
+        )
     return T
 
 

@@ -30,7 +30,17 @@ from dualarm.interrupt import stop
 if TYPE_CHECKING:
     from distributed import Client, Future, Worker
 
-__all__ = ["ALLOWED_FAILURES", "LOCAL", "WORKER_ENVIRON", "WorkerSetup", "connect", "local_cores", "pin_to_core", "stop_tasks", "worker_name"]
+__all__ = [
+    "ALLOWED_FAILURES",
+    "LOCAL",
+    "WORKER_ENVIRON",
+    "WorkerSetup",
+    "connect",
+    "local_cores",
+    "pin_to_core",
+    "stop_tasks",
+    "worker_name",
+]
 
 #: How long a client tries to reach a scheduler named by its address [s] (Dask retries a refused connection until then).
 CONNECT_TIMEOUT_S = 30.0
@@ -160,7 +170,9 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError, TypeError) as exc:
-            raise DualarmError(f"--scheduler {excerpt(scheduler)}: no Dask scheduler answers there ({type(exc).__name__}: {excerpt(str(exc), 120)})") from None
+            raise DualarmError(
+                f"--scheduler {excerpt(scheduler)}: no Dask scheduler answers there ({type(exc).__name__}: {excerpt(str(exc), 120)})"
+            ) from None
         with client:
             client.register_plugin(WorkerSetup(local=False))
             yield client
@@ -173,7 +185,12 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
         # Dask's own logs silenced up to ERROR: a task's failure comes back as its exception (a failed row or part), and an
         # interrupted command's workers, stopped as the scheduler closes, logged "Failed to communicate with scheduler
         # during heartbeat" with a traceback (seen once in CI, under SIGTERM).
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
+        with (
+            LocalCluster(
+                n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.CRITICAL
+            ) as cluster,
+            Client(cluster) as client,
+        ):
             _without_gc_diagnosis()  # this process's, which the LocalCluster's scheduler installed
             client.register_plugin(WorkerSetup(local=True, cores=local_cores(n)))
             yield client

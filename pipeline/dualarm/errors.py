@@ -93,7 +93,16 @@ class StageError(DualarmError):
 
     run_directory: Path | None = None
 
-    def __init__(self, message: str, *, stage: str = "", sample: int | None = None, t_s: float | None = None, joint: str | None = None, violations: tuple = ()) -> None:
+    def __init__(
+        self,
+        message: str,
+        *,
+        stage: str = "",
+        sample: int | None = None,
+        t_s: float | None = None,
+        joint: str | None = None,
+        violations: tuple = (),
+    ) -> None:
         super().__init__(message)
         self.stage, self.sample, self.t_s, self.joint, self.violations = stage, sample, t_s, joint, tuple(violations)
 

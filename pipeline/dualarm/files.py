@@ -22,7 +22,13 @@ MAX_FILE_BYTES = 16 * 1024 * 1024
 
 #: What :func:`kind` says of a regular file and of a directory.
 REGULAR_FILE, DIRECTORY = "a regular file", "a directory"
-_KINDS = ((stat.S_ISDIR, DIRECTORY), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
+_KINDS = (
+    (stat.S_ISDIR, DIRECTORY),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+)
 
 
 def listing(names: Iterable[object], most: int = 12) -> str:

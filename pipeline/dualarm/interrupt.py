@@ -34,7 +34,9 @@ _stopped: set[str] = set()
 
 def _raise_in(thread_id: int, exception: type[BaseException] | None) -> None:
     """Raise ``exception`` in thread ``thread_id`` at its next Python instruction (None: take back one not yet raised)."""
-    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread_id), ctypes.py_object(exception) if exception else None)
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(
+        ctypes.c_ulong(thread_id), ctypes.py_object(exception) if exception else None
+    )
 
 
 @contextmanager
@@ -85,7 +87,9 @@ def held() -> Iterator[list[int]]:
     """
     if threading.current_thread() is threading.main_thread():
         signals: list[int] = []
-        caught = [signum for signum in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(signum) is not signal.SIG_IGN]
+        caught = [
+            signum for signum in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(signum) is not signal.SIG_IGN
+        ]
         previous = {signum: signal.signal(signum, lambda signum, frame: signals.append(signum)) for signum in caught}
         try:
             yield signals

@@ -38,11 +38,18 @@ def per_joint(values: Any, joint_names: Sequence[str], kind: str, stage: str) ->
     try:
         limits = np.broadcast_to(np.asarray(values, dtype=float), (len(joint_names),)).copy()
     except (TypeError, ValueError):
-        raise InvalidArgumentError(kind, f"{stage} expected {len(joint_names)} limits (one per joint: {', '.join(joint_names)}), got {np.shape(values)}") from None
+        raise InvalidArgumentError(
+            kind,
+            f"{stage} expected {len(joint_names)} limits (one per joint: {', '.join(joint_names)}), got {np.shape(values)}",
+        ) from None
     bad = np.flatnonzero(~(np.isfinite(limits) & (limits > 0)))
     if len(bad):
         j = int(bad[0])
-        raise InvalidArgumentError(kind, f"the limit of joint {j} ({joint_names[j]}) is {float(limits[j])!r} {unit} in {stage}; every limit must be a positive finite number", joint=joint_names[j])
+        raise InvalidArgumentError(
+            kind,
+            f"the limit of joint {j} ({joint_names[j]}) is {float(limits[j])!r} {unit} in {stage}; every limit must be a positive finite number",
+            joint=joint_names[j],
+        )
     return limits
 
 
@@ -68,7 +75,9 @@ class LimitRatio:
         return self.ratio > 1 + LIMIT_TOLERANCE
 
 
-def limit_ratios(t: np.ndarray, joint_names: Sequence[str], samples: Mapping[str, np.ndarray], limits: Mapping[str, Any], stage: str) -> dict[str, LimitRatio]:
+def limit_ratios(
+    t: np.ndarray, joint_names: Sequence[str], samples: Mapping[str, np.ndarray], limits: Mapping[str, Any], stage: str
+) -> dict[str, LimitRatio]:
     """The largest limit ratio of each kind.
 
     Args:
@@ -85,7 +94,9 @@ def limit_ratios(t: np.ndarray, joint_names: Sequence[str], samples: Mapping[str
     for kind, limit in limits.items():
         values = np.asarray(samples[kind], dtype=float)
         if values.shape != (len(t), len(joint_names)):
-            raise StageError(f"{stage}: {kind} samples: expected shape {(len(t), len(joint_names))}, got {values.shape}", stage=stage)
+            raise StageError(
+                f"{stage}: {kind} samples: expected shape {(len(t), len(joint_names))}, got {values.shape}", stage=stage
+            )
         if not values.size:
             out[kind] = LimitRatio(kind, 0.0, "", 0.0)
             continue

@@ -77,7 +77,7 @@ class Method:
         """The settings class (imports the method's module)."""
         return self._get(self.settings_class)
 
-    def settings_for(self, task: "Task | None" = None, **overrides: Any) -> Any:
+    def settings_for(self, task: Task | None = None, **overrides: Any) -> Any:
         """The method's settings: from ``task``'s tables when given, else the class defaults, with ``overrides`` (fields of the settings class) on top.
 
         Raises:
@@ -108,7 +108,17 @@ METHODS: Mapping[str, Method] = MappingProxyType(
                 "TvgddSettings",
                 "settings_for",
             ),
-            Method("pinv", "ik", "pseudoinverse baseline of TV-GDD eqs (2)-(3), no bounds", False, False, "dualarm.ik.velocity.pinv", "solve_pinv", "PinvSettings", "settings_for"),
+            Method(
+                "pinv",
+                "ik",
+                "pseudoinverse baseline of TV-GDD eqs (2)-(3), no bounds",
+                False,
+                False,
+                "dualarm.ik.velocity.pinv",
+                "solve_pinv",
+                "PinvSettings",
+                "settings_for",
+            ),
             Method(
                 "mc-inverse",
                 "ik",
@@ -132,12 +142,66 @@ METHODS: Mapping[str, Method] = MappingProxyType(
                 "settings_for",
                 needs_sew=True,
             ),
-            Method("trac-ik", "ik", "TRAC-IK (pytracik) pose by pose, seeded with the previous answer", False, True, _POINTWISE, "solve_trac_ik", "TracIkSettings"),
-            Method("pybullet", "ik", "pybullet.calculateInverseKinematics pose by pose", False, True, _POINTWISE, "solve_pybullet", "PyBulletIkSettings"),
-            Method("dls-svd", "ik", "damped least squares through the SVD, pose by pose (Li, Liang, eqs 12-20)", False, True, _POINTWISE, "solve_dls_svd", "DlsSettings"),
-            Method("ikfast-style", "ik", "theta_3 discretised, the other six joints in closed form, nearest candidate", True, True, _POINTWISE, "solve_ikfast_style", "IkfastStyleSettings"),
-            Method("mcikrrt", "planner", "MCIKRRT: bidirectional RRT to Workspace Target Areas (Li, Liang)", False, True, "dualarm.plan.problem", "plan_task", "PlanningSettings"),
-            Method("ompl-rrtconnect", "planner", "OMPL's RRTConnect, same checker and goals", False, True, "dualarm.plan.problem", "plan_task", "PlanningSettings"),
+            Method(
+                "trac-ik",
+                "ik",
+                "TRAC-IK (pytracik) pose by pose, seeded with the previous answer",
+                False,
+                True,
+                _POINTWISE,
+                "solve_trac_ik",
+                "TracIkSettings",
+            ),
+            Method(
+                "pybullet",
+                "ik",
+                "pybullet.calculateInverseKinematics pose by pose",
+                False,
+                True,
+                _POINTWISE,
+                "solve_pybullet",
+                "PyBulletIkSettings",
+            ),
+            Method(
+                "dls-svd",
+                "ik",
+                "damped least squares through the SVD, pose by pose (Li, Liang, eqs 12-20)",
+                False,
+                True,
+                _POINTWISE,
+                "solve_dls_svd",
+                "DlsSettings",
+            ),
+            Method(
+                "ikfast-style",
+                "ik",
+                "theta_3 discretised, the other six joints in closed form, nearest candidate",
+                True,
+                True,
+                _POINTWISE,
+                "solve_ikfast_style",
+                "IkfastStyleSettings",
+            ),
+            Method(
+                "mcikrrt",
+                "planner",
+                "MCIKRRT: bidirectional RRT to Workspace Target Areas (Li, Liang)",
+                False,
+                True,
+                "dualarm.plan.problem",
+                "plan_task",
+                "PlanningSettings",
+            ),
+            Method(
+                "ompl-rrtconnect",
+                "planner",
+                "OMPL's RRTConnect, same checker and goals",
+                False,
+                True,
+                "dualarm.plan.problem",
+                "plan_task",
+                "PlanningSettings",
+            ),
         )
     }
 )
@@ -162,7 +226,7 @@ def method(name: str, kind: Literal["ik", "planner"] | None = None, argument: st
     return METHODS[name]
 
 
-def _failing(robot: "Robot", hands: Sequence[str], check: Callable[[Any], object]) -> dict[str, NotSRSError]:
+def _failing(robot: Robot, hands: Sequence[str], check: Callable[[Any], object]) -> dict[str, NotSRSError]:
     """The arms of ``hands`` whose chain ``check`` refuses: hand -> its one-line reason."""
     reasons = {}
     for hand in hands:
@@ -173,21 +237,21 @@ def _failing(robot: "Robot", hands: Sequence[str], check: Callable[[Any], object
     return reasons
 
 
-def not_srs(robot: "Robot", hands: Sequence[str]) -> dict[str, NotSRSError]:
+def not_srs(robot: Robot, hands: Sequence[str]) -> dict[str, NotSRSError]:
     """The arms of ``hands`` (``left``/``right``) that are not S-R-S: hand -> why not (the chain and the joints whose axes miss, as :func:`dualarm.model.srs.srs_geometry` says)."""
     from dualarm.model.srs import srs_geometry
 
     return _failing(robot, hands, srs_geometry)
 
 
-def not_sew(robot: "Robot", hands: Sequence[str]) -> dict[str, NotSRSError]:
+def not_sew(robot: Robot, hands: Sequence[str]) -> dict[str, NotSRSError]:
     """The arms of ``hands`` that are not of the family :mod:`dualarm.ik.analytic.sew` solves: hand -> why not."""
     from dualarm.model.sew import sew_chain
 
     return _failing(robot, hands, sew_chain)
 
 
-def suited_methods(robot: "Robot", hands: Sequence[str], kind: Literal["ik", "planner"] = "ik") -> tuple[str, ...]:
+def suited_methods(robot: Robot, hands: Sequence[str], kind: Literal["ik", "planner"] = "ik") -> tuple[str, ...]:
     """The methods of ``kind`` that run on ``robot``'s arms of ``hands``: those whose needs (S-R-S arms, the SEW solver's family) every arm meets."""
     names = IK_METHODS if kind == "ik" else PLANNERS
     srs = not not_srs(robot, hands)
@@ -195,7 +259,7 @@ def suited_methods(robot: "Robot", hands: Sequence[str], kind: Literal["ik", "pl
     return tuple(n for n in names if (srs or not METHODS[n].needs_srs) and (sew or not METHODS[n].needs_sew))
 
 
-def refuse_unsuited(m: Method, robot: "Robot", hands: Sequence[str]) -> None:
+def refuse_unsuited(m: Method, robot: Robot, hands: Sequence[str]) -> None:
     """Refuse method ``m`` when it needs S-R-S arms (``needs_srs``) and an arm of ``hands`` is not one, or the SEW solver's family (``needs_sew``) and an arm is not of it.
 
     Raises:
@@ -207,7 +271,10 @@ def refuse_unsuited(m: Method, robot: "Robot", hands: Sequence[str]) -> None:
         if sew_reasons:
             hand, reason = next(iter(sew_reasons.items()))
             usable = ", ".join(suited_methods(robot, hands, m.kind))
-            raise NotSRSError(f"{m.name} does not run on the {hand} arm of robot '{excerpt(robot.name, 40)}': {reason}; methods that run on it: {usable}", chain=robot.hand_chain(hand).name)
+            raise NotSRSError(
+                f"{m.name} does not run on the {hand} arm of robot '{excerpt(robot.name, 40)}': {reason}; methods that run on it: {usable}",
+                chain=robot.hand_chain(hand).name,
+            )
     if not m.needs_srs:
         return
     reasons = not_srs(robot, hands)
@@ -215,4 +282,7 @@ def refuse_unsuited(m: Method, robot: "Robot", hands: Sequence[str]) -> None:
         hand, reason = next(iter(reasons.items()))
         chain = robot.hand_chain(hand).name
         usable = ", ".join(suited_methods(robot, hands, m.kind))
-        raise NotSRSError(f"{m.name} needs S-R-S arms, and the {hand} arm of robot '{excerpt(robot.name, 40)}' is not: {reason}; methods that run on it: {usable}", chain=chain)
+        raise NotSRSError(
+            f"{m.name} needs S-R-S arms, and the {hand} arm of robot '{excerpt(robot.name, 40)}' is not: {reason}; methods that run on it: {usable}",
+            chain=chain,
+        )

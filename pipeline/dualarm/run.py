@@ -39,13 +39,28 @@ if TYPE_CHECKING:
 #: The stages one of which each stage needs (execute plays the smoothed trajectory when smooth
 #: runs, else the retimed one, after the approach from the task's initial configuration when
 #: ``approach`` runs).
-NEEDS = {"ik": ("path",), "plan": ("path",), "retime": ("ik", "plan"), "smooth": ("retime",), "approach": ("retime",), "execute": ("retime",)}
+NEEDS = {
+    "ik": ("path",),
+    "plan": ("path",),
+    "retime": ("ik", "plan"),
+    "smooth": ("retime",),
+    "approach": ("retime",),
+    "execute": ("retime",),
+}
 #: Timings of the retime stage (a task's ``retime.timing``).
 TIMINGS = ("jerk-limited", "optimal", "task")
 
 
 #: Which RunResult field each stage's product fills.
-_PRODUCT = {"path": "reference", "ik": "joint_path", "plan": "joint_path", "retime": "retimed", "smooth": "smoothed", "approach": "approached", "execute": "execution"}
+_PRODUCT = {
+    "path": "reference",
+    "ik": "joint_path",
+    "plan": "joint_path",
+    "retime": "retimed",
+    "smooth": "smoothed",
+    "approach": "approached",
+    "execute": "execution",
+}
 
 
 def resolve_stages(stages: Sequence[str] | None, ik: str | None = None, planner: str | None = None) -> tuple[str, ...]:
@@ -64,12 +79,20 @@ def resolve_stages(stages: Sequence[str] | None, ik: str | None = None, planner:
     if ik is not None and planner is not None:
         raise DualarmError("give either --ik METHOD or --planner PLANNER: both make the joint path")
     if not stages:
-        return tuple(s for s in ALL_STAGES if s != "plan") if ik else tuple(s for s in ALL_STAGES if s != "ik") if planner else ("path",)
+        return (
+            tuple(s for s in ALL_STAGES if s != "plan")
+            if ik
+            else tuple(s for s in ALL_STAGES if s != "ik")
+            if planner
+            else ("path",)
+        )
     for stage in stages:
         if stage not in ALL_STAGES:
             raise DualarmError(f"unknown stage '{stage}' (stages: {', '.join(ALL_STAGES)})")
         if stage in NEEDS and not any(need in stages for need in NEEDS[stage]):
-            raise DualarmError(f"stage '{stage}' needs stage '{' or '.join(NEEDS[stage])}' (stages: {', '.join(ALL_STAGES)})")
+            raise DualarmError(
+                f"stage '{stage}' needs stage '{' or '.join(NEEDS[stage])}' (stages: {', '.join(ALL_STAGES)})"
+            )
     if "ik" in stages and "plan" in stages:
         raise DualarmError("stages 'ik' and 'plan' both make the joint path: choose one")
     if "ik" in stages and ik is None:
@@ -100,7 +123,7 @@ def build_stages(
     settings: Any = None,
     stages: Sequence[str] | None = None,
     retime: Retime | None = None,
-    execution: "ExecutionSettings | None" = None,
+    execution: ExecutionSettings | None = None,
     checks: Checks | None = None,
     seed: int = 0,
 ) -> tuple[Stage, ...]:
@@ -122,7 +145,9 @@ def build_stages(
     """
     method = default_method(task, method, stages)
     m = registered(method) if method is not None else None
-    chosen = resolve_stages(stages, m.name if m and m.kind == "ik" else None, m.name if m and m.kind == "planner" else None)
+    chosen = resolve_stages(
+        stages, m.name if m and m.kind == "ik" else None, m.name if m and m.kind == "planner" else None
+    )
     if m is not None:
         if m.kind == "ik":
             refuse_unsuited(m, task.robot, task.spec.hands)  # the robot first: its settings may not apply to it either
@@ -150,7 +175,9 @@ def build_stages(
     return tuple(built)
 
 
-def run_stages(task: Task, stages: Sequence[Stage[Any, Any]], sink: Sink | None = None, violations: list[Violation] | None = None) -> RunResult:
+def run_stages(
+    task: Task, stages: Sequence[Stage[Any, Any]], sink: Sink | None = None, violations: list[Violation] | None = None
+) -> RunResult:
     """Run ``stages`` in order on ``task``, handing every product to ``sink`` (default :class:`~dualarm.record.sink.NullSink`), then the metrics; judge each product (the verdict).
 
     Stages holding resources (the plan stage's PyBullet client) are closed afterwards, whatever
@@ -185,7 +212,7 @@ def run_task(
     settings: Any = None,
     stages: Sequence[str] | None = None,
     retime: Retime | None = None,
-    execution: "ExecutionSettings | None" = None,
+    execution: ExecutionSettings | None = None,
     seed: int = 0,
     sink: Sink | None = None,
 ) -> RunResult:
@@ -194,7 +221,11 @@ def run_task(
     The arguments are those of :func:`build_stages`; the result holds every product and the metrics.
     """
     task = _as_task(task)
-    return run_stages(task, build_stages(task, method, settings=settings, stages=stages, retime=retime, execution=execution, seed=seed), sink)
+    return run_stages(
+        task,
+        build_stages(task, method, settings=settings, stages=stages, retime=retime, execution=execution, seed=seed),
+        sink,
+    )
 
 
 def record_run(
@@ -225,7 +256,15 @@ def record_run(
     """
     record_level(record)
     task = _as_task(task)
-    return record_stages(task, build_stages(task, method, **options), out_dir=out_dir, seed=options.get("seed", 0), command=command, progress=progress, record=record)
+    return record_stages(
+        task,
+        build_stages(task, method, **options),
+        out_dir=out_dir,
+        seed=options.get("seed", 0),
+        command=command,
+        progress=progress,
+        record=record,
+    )
 
 
 def record_stages(
@@ -247,7 +286,9 @@ def record_stages(
         raise
     try:
         recorder = _recorder(task, run, stages, record, progress)
-    except BaseException as exc:  # stopped (Ctrl-C, SIGTERM) before any stage ran: kept as failed, without the recorder's unfinished files
+    except (
+        BaseException
+    ) as exc:  # stopped (Ctrl-C, SIGTERM) before any stage ran: kept as failed, without the recorder's unfinished files
         _close(stages)
         for unfinished in run.staging.iterdir():
             unfinished.unlink()
@@ -260,7 +301,11 @@ def record_stages(
         recorder.begin("record")
     except BaseException as exc:
         refused = exc.violations if isinstance(exc, StageError) else ()
-        run.conclude(Verdict.failure(str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}", [*found, *refused]))
+        run.conclude(
+            Verdict.failure(
+                str(exc) if isinstance(exc, DualarmError) else f"{type(exc).__name__}: {exc}", [*found, *refused]
+            )
+        )
         recorder.close(run.manifest)
         directory = run.finish(None)
         exc.add_note(f"the run is kept as failed in {directory}")
@@ -273,7 +318,13 @@ def record_stages(
     return replace(result, directory=run.finish(result.metrics), stage_seconds=recorder.stage_seconds)
 
 
-def _recorder(task: Task, run: RunDirectory, stages: Sequence[Stage[Any, Any]], record: str, progress: Callable[[str], None] | None) -> NullSink:
+def _recorder(
+    task: Task,
+    run: RunDirectory,
+    stages: Sequence[Stage[Any, Any]],
+    record: str,
+    progress: Callable[[str], None] | None,
+) -> NullSink:
     """The sink that writes the run's files at level ``record``: a Recorder of the recorded stages (it drops the others' products), or (``metrics``) a sink that writes nothing."""
     kept = recorded_stages(record, [s.name for s in stages])
     if record == "metrics":
@@ -303,7 +354,9 @@ def _settings(stages: Sequence[Stage[Any, Any]]) -> dict[str, object]:
     return {s.name: s.settings_record() for s in sorted(stages, key=lambda s: ALL_STAGES.index(s.name))}
 
 
-def _manifest(task: Task, stages: Sequence[Stage[Any, Any]], seed: int, command: Sequence[str], record: str = "full") -> dict[str, object]:
+def _manifest(
+    task: Task, stages: Sequence[Stage[Any, Any]], seed: int, command: Sequence[str], record: str = "full"
+) -> dict[str, object]:
     robot = task.robot
     robot_files = {robot.urdf.path.name: sha256_file(robot.urdf.path)}
     if robot.directory is not None:

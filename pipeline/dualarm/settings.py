@@ -35,7 +35,9 @@ def with_overrides(settings: S, overrides: Mapping[str, Any]) -> S:
 def _check_keys(settings: object, known: set[str], overrides: Mapping[str, Any]) -> None:
     for key in overrides:
         if key not in known:
-            raise InvalidArgumentError(key, f"not a setting of {type(settings).__name__} (settings: {', '.join(sorted(known))})")
+            raise InvalidArgumentError(
+                key, f"not a setting of {type(settings).__name__} (settings: {', '.join(sorted(known))})"
+            )
 
 
 def as_record(settings: Any) -> dict[str, Any]:

@@ -151,7 +151,12 @@ class IkStage:
         sink.joint_path(path, robot.limit_array("velocity", path.joint_names), angles)
         profiles = arm_angle_profiles(path, robot, self.settings) if self.method.name == "mc-inverse" else ()
         self.arm_angle_profile.update({p.hand: p.record() for p in profiles})
-        return path, {**ik_metrics(path, robot), **condition_metrics(path, robot), **consistency_metrics(path, reference, angles), **{k: v for p in profiles for k, v in p.metrics().items()}}
+        return path, {
+            **ik_metrics(path, robot),
+            **condition_metrics(path, robot),
+            **consistency_metrics(path, reference, angles),
+            **{k: v for p in profiles for k, v in p.metrics().items()},
+        }
 
     def violations(self, path: JointPath) -> list[Violation]:
         """Failed samples, hands off the asked pose (the orientation when the method solved it), position limits; velocity limits when no retime stage follows (``retimed`` False)."""
@@ -166,10 +171,10 @@ class PlanStage:
     successful trial so). The problem (and its PyBullet checker) is released by :meth:`close`.
     """
 
-    problem: "PlanningProblem"
+    problem: PlanningProblem
     planner: str
     seed: int = 0
-    planned: "PlanResult | None" = None
+    planned: PlanResult | None = None
     name: ClassVar[str] = "plan"
 
     def settings_record(self) -> dict[str, Any]:
@@ -213,7 +218,11 @@ class RetimeStage:
 
     def settings_record(self) -> dict[str, Any]:
         """The timing, the share of the limits it may use, the sample period and toppra's parametrizer."""
-        return {**self.settings.model_dump(), "sample_period_s": CONTROL_PERIOD_S, "parametrizer": "ParametrizeConstAccel"}
+        return {
+            **self.settings.model_dump(),
+            "sample_period_s": CONTROL_PERIOD_S,
+            "parametrizer": "ParametrizeConstAccel",
+        }
 
     def __call__(self, path: JointPath, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
         """Time the joint path: JointPath -> JointTrajectory (stage ``retime``)."""
@@ -225,20 +234,31 @@ class RetimeStage:
         v, a = robot.limit_array("velocity", names), robot.limit_array("acceleration", names)
         j = robot.limit_array("jerk", names) if settings.timing != "optimal" else None
         if settings.timing == "optimal":
-            result = retime_path(path, settings.velocity_fraction * v, settings.acceleration_fraction * a, sample_period_s=CONTROL_PERIOD_S)
+            result = retime_path(
+                path,
+                settings.velocity_fraction * v,
+                settings.acceleration_fraction * a,
+                sample_period_s=CONTROL_PERIOD_S,
+            )
         else:
-            result = retime_path(path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=settings.timing == "task", jerk=j)
+            result = retime_path(
+                path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=settings.timing == "task", jerk=j
+            )
         traj = result.trajectory
         samples, limits = {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}
         if j is not None:
             samples["jerk"], limits["jerk"] = traj.mean_jerk(), j
         ratios = limit_ratios(traj.t, names, samples, limits, self.name)
-        sink.trajectory(traj, limits, hand_positions(self.task, traj), {"jerk": samples["jerk"]} if j is not None else {})
+        sink.trajectory(
+            traj, limits, hand_positions(self.task, traj), {"jerk": samples["jerk"]} if j is not None else {}
+        )
         return traj, {
             "retime.duration_s": traj.duration_s,
             **{f"retime.{kind}_ratio_max": r.ratio for kind, r in ratios.items()},
             "retime.path_deviation_max_rad": result.path_deviation_max_rad,
-            "retime.hand_deviation_max_m": _distance_max(hand_positions(self.task, traj, result.at_samples), hand_positions(self.task, traj, path.q)),
+            "retime.hand_deviation_max_m": _distance_max(
+                hand_positions(self.task, traj, result.at_samples), hand_positions(self.task, traj, path.q)
+            ),
             "retime.stretch": result.stretch,
         }
 
@@ -269,7 +289,12 @@ class SmoothStage:
 
     def settings_record(self) -> dict[str, Any]:
         """The tracking method (or ``pass-through``) and its control period [s]."""
-        return {"method": "ruckig online tracking" if self.tracks else f"pass-through (the {self.timing} timing is within the jerk limits)", "control_period_s": CONTROL_PERIOD_S}
+        return {
+            "method": "ruckig online tracking"
+            if self.tracks
+            else f"pass-through (the {self.timing} timing is within the jerk limits)",
+            "control_period_s": CONTROL_PERIOD_S,
+        }
 
     def __call__(self, retimed: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
         """Track the retimed trajectory, or pass it through: JointTrajectory -> JointTrajectory (stage ``smooth``)."""
@@ -283,10 +308,21 @@ class SmoothStage:
         else:
             result = Smoothed.unchanged(retimed)
         traj = result.trajectory
-        ratios = limit_ratios(traj.t, names, {"velocity": traj.qd, "acceleration": traj.qdd, "jerk": result.jerk}, {"velocity": v, "acceleration": a, "jerk": j}, self.name)
+        ratios = limit_ratios(
+            traj.t,
+            names,
+            {"velocity": traj.qd, "acceleration": traj.qdd, "jerk": result.jerk},
+            {"velocity": v, "acceleration": a, "jerk": j},
+            self.name,
+        )
         hands = hand_positions(self.task, traj)
         hand_deviation = _distance_max(hands, hand_positions(self.task, traj, retimed.interpolate(traj.t)[0]))
-        sink.trajectory(traj, {"velocity": v, "acceleration": a, "jerk": j}, hands, {"jerk": result.jerk, "deviation_rad": result.deviation_rad})
+        sink.trajectory(
+            traj,
+            {"velocity": v, "acceleration": a, "jerk": j},
+            hands,
+            {"jerk": result.jerk, "deviation_rad": result.deviation_rad},
+        )
         return traj, {
             "smooth.duration_s": traj.duration_s,
             **{f"smooth.{kind}_ratio_max": r.ratio for kind, r in ratios.items()},
@@ -328,7 +364,16 @@ class ApproachStage:
         names, robot = traj.joint_names, self.task.robot
         initial = np.array([self.task.initial_q[n] for n in names])
         limits = {kind: robot.limit_array(kind, names) for kind in ("velocity", "acceleration", "jerk")}
-        approach = approach_trajectory(names, initial, traj.q[0], limits["velocity"], limits["acceleration"], limits["jerk"], CONTROL_PERIOD_S, dict(traj.fixed))
+        approach = approach_trajectory(
+            names,
+            initial,
+            traj.q[0],
+            limits["velocity"],
+            limits["acceleration"],
+            limits["jerk"],
+            CONTROL_PERIOD_S,
+            dict(traj.fixed),
+        )
         sink.trajectory(approach, limits, hand_positions(self.task, approach), {"jerk": approach.mean_jerk()})
         return replace(traj, approach=approach), {
             "approach.duration_s": approach.duration_s,
@@ -353,7 +398,7 @@ class ExecuteStage:
     """
 
     task: Task
-    settings: "ExecutionSettings"
+    settings: ExecutionSettings
     checks: Checks = field(default_factory=Checks)
     name: ClassVar[str] = "execute"
 
@@ -361,7 +406,7 @@ class ExecuteStage:
         """The simulation's settings and the bounds it is judged against."""
         return {**as_record(self.settings), "simulator": "pybullet", "tracking_bound_m": self.checks.tracking_bound_m}
 
-    def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple["ExecutionLog", dict[str, float]]:
+    def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple[ExecutionLog, dict[str, float]]:
         """Validate and play the trajectory in PyBullet: JointTrajectory -> ExecutionLog."""
         from dualarm.execute.preflight import preflight
         from dualarm.execute.simulate import execute_trajectory
@@ -371,9 +416,18 @@ class ExecuteStage:
         found = preflight(traj, task)
         if found and not self.settings.execute_anyway:
             more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
-            raise StageError(f"execute: refused to play the trajectory: {found[0].message}{more}; --execute-anyway plays it for diagnosis", stage=self.name, t_s=found[0].t_s, violations=tuple(found))
-        log = execute_trajectory(traj, task.robot, task.spec.hands, task.spec.environment, task.spec.expected_contacts, self.settings)
-        approach = replace(log.approach, hand_error_m=hand_errors(task, log.approach)) if log.approach is not None else None
+            raise StageError(
+                f"execute: refused to play the trajectory: {found[0].message}{more}; --execute-anyway plays it for diagnosis",
+                stage=self.name,
+                t_s=found[0].t_s,
+                violations=tuple(found),
+            )
+        log = execute_trajectory(
+            traj, task.robot, task.spec.hands, task.spec.environment, task.spec.expected_contacts, self.settings
+        )
+        approach = (
+            replace(log.approach, hand_error_m=hand_errors(task, log.approach)) if log.approach is not None else None
+        )
         log = replace(log, preflight=tuple(found), approach=approach, hand_error_m=hand_errors(task, log))
         sink.execution(log)
         all_errors = np.concatenate([np.zeros(0), *log.hand_error_m.values()])
@@ -390,13 +444,13 @@ class ExecuteStage:
             "execute.preflight_violations": float(len(found)),
         }
 
-    def violations(self, log: "ExecutionLog") -> list[Violation]:
+    def violations(self, log: ExecutionLog) -> list[Violation]:
         """What the preflight found (a trajectory played anyway), unexpected contacts and hands beyond the tracking bound."""
         approach = execution_violations(log.approach, self.checks, "approach") if log.approach is not None else []
         return [*log.preflight, *approach, *execution_violations(log, self.checks)]
 
 
-def hand_errors(task: Task, log: "ExecutionLog") -> dict[str, np.ndarray]:
+def hand_errors(task: Task, log: ExecutionLog) -> dict[str, np.ndarray]:
     """Each hand's distance between its measured position and the forward kinematics of the commanded joints (K,) [m]."""
     if not len(log.t):  # nothing was played (a trajectory, or an approach, of no duration)
         return {hand: np.zeros(0) for hand in log.hand_poses}
@@ -407,7 +461,13 @@ def hand_errors(task: Task, log: "ExecutionLog") -> dict[str, np.ndarray]:
 if TYPE_CHECKING:
 
     def _products(
-        path: PathStage, ik: IkStage, plan: PlanStage, retime: RetimeStage, smooth: SmoothStage, approach: ApproachStage, execute: ExecuteStage
+        path: PathStage,
+        ik: IkStage,
+        plan: PlanStage,
+        retime: RetimeStage,
+        smooth: SmoothStage,
+        approach: ApproachStage,
+        execute: ExecuteStage,
     ) -> tuple[
         Stage[Task, CartesianReference],
         Stage[CartesianReference, JointPath],

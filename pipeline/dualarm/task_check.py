@@ -119,8 +119,9 @@ def check_task(path: str | Path, robot: str | Path | None = None, step_rad: floa
             sweep = sweep_arm_angle(solver, to_arm_frame(task.robot, hand, T, task.initial_q), step_rad)
             branches = {b: iv for b in range(8) if (iv := sweep.intervals(b))}
         numeric = None if branches else bool(numeric_reach(task, hand).within(T[None])[0])
-        rpy = tuple(float(v) for v in Rotation.from_matrix(T[:3, :3]).as_euler("xyz"))
-        results.append(WaypointReach(f"waypoints.{name}", hand, tuple(float(v) for v in wp.position), rpy, branches, srs, numeric))  # type: ignore[arg-type]
+        x, y, z = (float(v) for v in wp.position)
+        roll, pitch, yaw = (float(v) for v in Rotation.from_matrix(T[:3, :3]).as_euler("xyz"))
+        results.append(WaypointReach(f"waypoints.{name}", hand, (x, y, z), (roll, pitch, yaw), branches, srs, numeric))
     return TaskCheck(name=task.name, source=excerpt(file), waypoints=tuple(results))
 
 
@@ -131,11 +132,18 @@ def report_lines(check: TaskCheck) -> list[str]:
         pose = f"position [{', '.join(f'{v:.3f}' for v in w.position_m)}] m, rpy [{', '.join(f'{v:.3f}' for v in w.rpy_rad)}] rad"
         if w.branches:
             spans = "; ".join(
-                f"branch {b + 1}: " + ", ".join(f"[{lo:.3f}, {hi:.3f}]" if hi <= np.pi else f"[{lo:.3f}, {hi - 2 * np.pi:.3f}] across ±pi" for lo, hi in iv) for b, iv in w.branches.items()
+                f"branch {b + 1}: "
+                + ", ".join(
+                    f"[{lo:.3f}, {hi:.3f}]" if hi <= np.pi else f"[{lo:.3f}, {hi - 2 * np.pi:.3f}] across ±pi"
+                    for lo, hi in iv
+                )
+                for b, iv in w.branches.items()
             )
             how = f"reachable by MC-Inverse, psi [rad] per branch: {spans}"
         elif w.numeric:
-            how = "reachable by numeric IK within the limits" + (" (no MC-Inverse branch on the psi grid)" if w.srs else " (arm not S-R-S: MC-Inverse cannot be used)")
+            how = "reachable by numeric IK within the limits" + (
+                " (no MC-Inverse branch on the psi grid)" if w.srs else " (arm not S-R-S: MC-Inverse cannot be used)"
+            )
         else:
             how = "NOT reachable within the joint limits"
         lines.append(f"{w.key} ({w.hand} hand): {pose}: {how}")

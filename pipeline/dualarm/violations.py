@@ -39,7 +39,9 @@ def _at(t: float, rep: int | None = None) -> str:
     return f"t = {t:.3f} s" + (f" (rep {rep})" if rep is not None else "")
 
 
-def position_limit_violations(stage: str, t: np.ndarray, names: Sequence[str], q: np.ndarray, robot: Robot) -> list[Violation]:
+def position_limit_violations(
+    stage: str, t: np.ndarray, names: Sequence[str], q: np.ndarray, robot: Robot
+) -> list[Violation]:
     """The first sample of ``q`` (M, n) [rad] outside a joint's position limits (by more than :data:`LIMIT_TOLERANCE` of its range), if any."""
     lower, upper = robot.lower_upper(tuple(names))
     slack = LIMIT_TOLERANCE * (upper - lower)
@@ -48,21 +50,40 @@ def position_limit_violations(stage: str, t: np.ndarray, names: Sequence[str], q
         return []
     k, j = np.argwhere(outside)[0]
     beyond = max(lower[j] - q[k, j], q[k, j] - upper[j])
-    return [Violation("limit", stage, f"{stage}: position of {names[j]} {beyond:.3g} rad beyond its limits [{lower[j]:.4g}, {upper[j]:.4g}] at {_at(t[k])}", float(t[k]))]
+    return [
+        Violation(
+            "limit",
+            stage,
+            f"{stage}: position of {names[j]} {beyond:.3g} rad beyond its limits [{lower[j]:.4g}, {upper[j]:.4g}] at {_at(t[k])}",
+            float(t[k]),
+        )
+    ]
 
 
-def ratio_violations(stage: str, t: np.ndarray, names: Sequence[str], samples: Mapping[str, np.ndarray], limits: Mapping[str, np.ndarray]) -> list[Violation]:
+def ratio_violations(
+    stage: str, t: np.ndarray, names: Sequence[str], samples: Mapping[str, np.ndarray], limits: Mapping[str, np.ndarray]
+) -> list[Violation]:
     """A violation for each kind (velocity, acceleration, jerk) whose largest limit ratio exceeds 1 + :data:`LIMIT_TOLERANCE`."""
     ratios = limit_ratios(t, names, samples, limits, stage)
-    return [Violation("limit", stage, f"{stage}: {r.kind} of {r.joint} at {r.ratio:.4g}x its limit at {_at(r.t_s)}", r.t_s) for r in ratios.values() if r.exceeded]
+    return [
+        Violation("limit", stage, f"{stage}: {r.kind} of {r.joint} at {r.ratio:.4g}x its limit at {_at(r.t_s)}", r.t_s)
+        for r in ratios.values()
+        if r.exceeded
+    ]
 
 
 def trajectory_violations(traj: JointTrajectory, robot: Robot, *, jerk: bool) -> list[Violation]:
     """Position, velocity, acceleration and (with ``jerk``: the mean jerk over each sample period) jerk limits of a trajectory."""
     names = traj.joint_names
-    samples = {"velocity": traj.qd, "acceleration": traj.qdd, **({"jerk": traj.mean_jerk()} if jerk else {})}  # the jerk as the smooth stage reports it
+    samples = {
+        "velocity": traj.qd,
+        "acceleration": traj.qdd,
+        **({"jerk": traj.mean_jerk()} if jerk else {}),
+    }  # the jerk as the smooth stage reports it
     limits = {kind: robot.limit_array(kind, names) for kind in samples}
-    return position_limit_violations(traj.stage, traj.t, names, traj.q, robot) + ratio_violations(traj.stage, traj.t, names, samples, limits)
+    return position_limit_violations(traj.stage, traj.t, names, traj.q, robot) + ratio_violations(
+        traj.stage, traj.t, names, samples, limits
+    )
 
 
 def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: bool) -> list[Violation]:
@@ -72,7 +93,14 @@ def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: boo
     failed = np.flatnonzero(path.status != 0)
     if len(failed):
         k = int(failed[0])
-        out.append(Violation("ik", stage, f"ik ({path.method}): {len(failed)} of {len(path)} samples failed, the first at {_at(path.t[k], int(path.rep[k]))}", float(path.t[k])))
+        out.append(
+            Violation(
+                "ik",
+                stage,
+                f"ik ({path.method}): {len(failed)} of {len(path)} samples failed, the first at {_at(path.t[k], int(path.rep[k]))}",
+                float(path.t[k]),
+            )
+        )
     errors = [("position", path.hand_error_m, checks.ik_position_tolerance_m, 1e3, "mm")]
     if path.task_space == "pose":  # NaN where it was not measured: never beyond the tolerance
         errors.append(("orientation", path.hand_orientation_error_rad, checks.ik_orientation_tolerance_rad, 1.0, "rad"))
@@ -91,13 +119,21 @@ def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: boo
                     float(path.t[k]),
                 )
             )
-    out += position_limit_violations(stage, path.t[ok], path.joint_names, path.q[ok], robot)  # a failed sample holds its last solution
+    out += position_limit_violations(
+        stage, path.t[ok], path.joint_names, path.q[ok], robot
+    )  # a failed sample holds its last solution
     if not retimed and len(path) > 1:
-        out += ratio_violations(stage, path.t, path.joint_names, {"velocity": path.qd}, {"velocity": robot.limit_array("velocity", path.joint_names)})
+        out += ratio_violations(
+            stage,
+            path.t,
+            path.joint_names,
+            {"velocity": path.qd},
+            {"velocity": robot.limit_array("velocity", path.joint_names)},
+        )
     return out
 
 
-def execution_violations(log: "ExecutionLog", checks: Checks, part: str = "execute") -> list[Violation]:
+def execution_violations(log: ExecutionLog, checks: Checks, part: str = "execute") -> list[Violation]:
     """Unexpected contacts (each pair: its first time, its deepest penetration, its steps) and hands beyond the tracking bound; ``part`` names what was played (``execute``, or ``approach`` for the approach's log)."""
     out = []
     for c in log.contacts:

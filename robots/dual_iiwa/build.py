@@ -57,7 +57,9 @@ def _body(robot: ET.Element) -> None:
     base = ET.SubElement(robot, "link", {"name": "base_link"})
     torso_bottom = SHOULDER_HEIGHT_M - 0.5
     for tag in ("visual", "collision"):
-        _box(base, tag, f"0.16 0.16 {torso_bottom:g}", f"0 0 {torso_bottom / 2:g}", "Torso" if tag == "visual" else None)
+        _box(
+            base, tag, f"0.16 0.16 {torso_bottom:g}", f"0 0 {torso_bottom / 2:g}", "Torso" if tag == "visual" else None
+        )
     _inertial(base, 10.0)
     joint = ET.SubElement(robot, "joint", {"name": "base_to_torso", "type": "fixed"})
     ET.SubElement(joint, "parent", {"link": "base_link"})
@@ -81,7 +83,9 @@ def _arm(robot: ET.Element, iiwa: ET.Element, side: str) -> None:
     mount = ET.SubElement(robot, "joint", {"name": f"{side}_mount", "type": "fixed"})
     ET.SubElement(mount, "parent", {"link": "torso"})
     ET.SubElement(mount, "child", {"link": f"{side}_lbr_iiwa_link_0"})
-    ET.SubElement(mount, "origin", {"xyz": f"0 {MOUNT_Y_M if side == 'left' else -MOUNT_Y_M:g} 0", "rpy": MOUNT_RPY[side]})
+    ET.SubElement(
+        mount, "origin", {"xyz": f"0 {MOUNT_Y_M if side == 'left' else -MOUNT_Y_M:g} 0", "rpy": MOUNT_RPY[side]}
+    )
     for element in iiwa:
         if element.tag not in ("link", "joint"):
             continue

@@ -58,7 +58,9 @@ def build_urdf() -> str:
 def build_toml() -> str:
     """The humanoid's robot.toml with this robot's name, URDF and description."""
     text = (HUMANOID / "robot.toml").read_text()
-    text = text.replace('name = "humanoid"', 'name = "humanoid_offset"').replace('urdf = "humanoid.urdf"', 'urdf = "humanoid_offset.urdf"')
+    text = text.replace('name = "humanoid"', 'name = "humanoid_offset"').replace(
+        'urdf = "humanoid.urdf"', 'urdf = "humanoid_offset.urdf"'
+    )
     description = (
         f"The dualarm humanoid with a {SHOULDER_OFFSET_M * 100:g} cm shoulder offset (the shoulder pitch and upper-arm roll axes meet\n"
         f"in front of the shoulder yaw axis) and a {ELBOW_OFFSET_M * 100:g} cm elbow offset on each arm: 7R arms that are not S-R-S\n"

@@ -23,7 +23,9 @@ def triangle():
     path = solve_mc_inverse(task.robot, build_reference(task), task.initial_q, settings_for(task))
     spline = CubicSpline(path.t, path.q, bc_type="clamped")
     t = np.arange(0, 2.0 + 1e-9, 0.001)
-    return task, JointTrajectory("smooth", path.joint_names, t, spline(t), spline(t, 1), spline(t, 2), np.zeros(len(t), int), path.fixed)
+    return task, JointTrajectory(
+        "smooth", path.joint_names, t, spline(t), spline(t, 1), spline(t, 2), np.zeros(len(t), int), path.fixed
+    )
 
 
 def test_the_hand_tracks_within_2_mm_by_independent_fk(triangle):
@@ -33,7 +35,12 @@ def test_the_hand_tracks_within_2_mm_by_independent_fk(triangle):
     log = execute_trajectory(trajectory, task.robot, ("left",))
     chain = task.hand_chain_from_root("left")
     columns = {n: i for i, n in enumerate(trajectory.joint_names)}
-    Q = np.array([[log.q_command[k, columns[n]] if n in columns else trajectory.fixed[n] for n in chain.joint_names] for k in range(len(log.t))])
+    Q = np.array(
+        [
+            [log.q_command[k, columns[n]] if n in columns else trajectory.fixed[n] for n in chain.joint_names]
+            for k in range(len(log.t))
+        ]
+    )
     commanded = ChainKinematics.of(chain).poses(Q)
     error = np.linalg.norm(log.hand_poses["left"][:, :3, 3] - commanded[:, :3, 3], axis=1)
     assert error.max() <= 2e-3
@@ -47,7 +54,12 @@ def test_a_box_in_the_way_is_a_named_environment_contact(triangle):
     k = 1000
     q = {**trajectory.fixed, **dict(zip(trajectory.joint_names, trajectory.q[k]))}
     hand = ChainKinematics.of(chain).pose(np.array([q[n] for n in chain.joint_names]))
-    box = EnvironmentObject(name="obstacle", shape="box", pose={"position": tuple(hand[:3, 3]), "rpy": (0.0, 0.0, 0.0)}, size_m=(0.05, 0.05, 0.05))
+    box = EnvironmentObject(
+        name="obstacle",
+        shape="box",
+        pose={"position": tuple(hand[:3, 3]), "rpy": (0.0, 0.0, 0.0)},
+        size_m=(0.05, 0.05, 0.05),
+    )
     log = execute_trajectory(trajectory, task.robot, ("left",), environment=(box,))
     assert log.environment_contacts.sum() > 0 and log.expected_contacts.sum() == 0
     touched = [(c.first, c.second) for c in log.contacts if "obstacle" in (c.first, c.second)]
@@ -69,9 +81,14 @@ def test_a_box_in_the_way_is_a_named_environment_contact(triangle):
             points = pb.getClosestPoints(sim.body, body, 0.01, sim.link_index[link], -1, physicsClientId=sim.client)
             distances.append(min((p[8] for p in points), default=np.inf))
     assert distances[1] < 1e-4 and distances[0] < 1e-3
-    assert first.depth_max_m >= 0 and len([e for e in log.contact_events if e.second == "obstacle" or e.first == "obstacle"]) >= first.steps
+    assert (
+        first.depth_max_m >= 0
+        and len([e for e in log.contact_events if e.second == "obstacle" or e.first == "obstacle"]) >= first.steps
+    )
     # named as expected (in the other order), the same contacts are counted apart
-    expected = execute_trajectory(trajectory, task.robot, ("left",), environment=(box,), expected_contacts=[pair[::-1] for pair in touched])
+    expected = execute_trajectory(
+        trajectory, task.robot, ("left",), environment=(box,), expected_contacts=[pair[::-1] for pair in touched]
+    )
     assert expected.environment_contacts.sum() == 0
     assert expected.expected_contacts.sum() == log.environment_contacts.sum()
 

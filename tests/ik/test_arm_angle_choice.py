@@ -25,7 +25,10 @@ def _pybullet_check(sim, names, q, target) -> tuple[bool, bool]:
     """(the hand reaches ``target`` to 1e-6 in PyBullet, q within PyBullet's joint limits)."""
     sim.set_positions(names, q)
     reached = np.abs(sim.link_pose("left_hand") - target).max() < 1e-6
-    index = {pb.getJointInfo(sim.body, i, physicsClientId=sim.client)[1].decode(): i for i in range(pb.getNumJoints(sim.body, physicsClientId=sim.client))}
+    index = {
+        pb.getJointInfo(sim.body, i, physicsClientId=sim.client)[1].decode(): i
+        for i in range(pb.getNumJoints(sim.body, physicsClientId=sim.client))
+    }
     info = [pb.getJointInfo(sim.body, index[n], physicsClientId=sim.client) for n in names]
     inside = all(i[8] - 1e-12 <= v <= i[9] + 1e-12 for i, v in zip(info, q))
     return reached, inside
@@ -53,7 +56,10 @@ def test_sweep_intervals_agree_with_single_solves_checked_in_pybullet(humanoid):
             for g in rng.choice(outside, min(10, outside.size), replace=False) if outside.size else []:
                 q = mc_inverse(humanoid, "left", POSE_A, float(sweep.psi_rad[g])).q[b]
                 reached, within = _pybullet_check(sim, chain.joint_names, q, POSE_A)
-                assert not (reached and within) or np.isclose(np.sin(q[[1, 3, 5]]), 0, atol=1e-6).any(), (b, sweep.psi_rad[g])
+                assert not (reached and within) or np.isclose(np.sin(q[[1, 3, 5]]), 0, atol=1e-6).any(), (
+                    b,
+                    sweep.psi_rad[g],
+                )
                 outside_checked += 1
     assert inside_checked >= 24 and outside_checked >= 10
 
@@ -70,13 +76,32 @@ def test_sweep_from_the_command_line_in_both_frames_agrees(humanoid):
     outputs = {}
     for frame, T in (("robot", POSE_A), ("chain", chain_pose)):
         p, rpy = T[:3, 3], Rotation.from_matrix(T[:3, :3]).as_euler("xyz")
-        result = runner.invoke(app, ["ik", "srs", str(HUMANOID), "--arm", "left", "--pose", *(repr(float(v)) for v in [*p, *rpy]), "--sweep", "--step", "2", "--json", "--frame", frame])
+        result = runner.invoke(
+            app,
+            [
+                "ik",
+                "srs",
+                str(HUMANOID),
+                "--arm",
+                "left",
+                "--pose",
+                *(repr(float(v)) for v in [*p, *rpy]),
+                "--sweep",
+                "--step",
+                "2",
+                "--json",
+                "--frame",
+                frame,
+            ],
+        )
         assert result.exit_code == 0, result.output
         outputs[frame] = json.loads(result.stdout)
         assert outputs[frame]["frame"]["kind"] == frame
     assert outputs["robot"]["frame"]["link"] == humanoid.urdf.root and outputs["chain"]["frame"]["link"] == "torso"
     for a, b in zip(outputs["robot"]["branches"], outputs["chain"]["branches"]):
-        assert a["valid_samples"] == b["valid_samples"] and np.allclose(a["intervals_rad"] or 0, b["intervals_rad"] or 0)
+        assert a["valid_samples"] == b["valid_samples"] and np.allclose(
+            a["intervals_rad"] or 0, b["intervals_rad"] or 0
+        )
 
 
 def _triangle(tmp_path, edit=lambda t: t):
@@ -103,7 +128,9 @@ def test_a_run_records_the_profile_in_its_manifest_and_metrics(tmp_path):
     from dualarm.run import record_run
     from tests.reproduce.test_reproduce import pybullet_arm_angle
 
-    run_dir = record_run(load_task(TASKS / "triangle.toml", 1), "mc-inverse", stages=("path", "ik"), out_dir=tmp_path).directory
+    run_dir = record_run(
+        load_task(TASKS / "triangle.toml", 1), "mc-inverse", stages=("path", "ik"), out_dir=tmp_path
+    ).directory
     manifest = json.loads((run_dir / "manifest.json").read_text())
     metrics = json.loads((run_dir / "metrics.json").read_text())
     profile = manifest["settings"]["ik"]["arm_angle_profile"]["left"]
@@ -134,7 +161,10 @@ def test_a_branch_leaving_the_limits_names_the_joint_the_sample_and_the_way_out(
     with pytest.raises(StageError) as failure:
         solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
     message = str(failure.value)
-    match = re.search(r"sample (\d+) \(t = ([\d.]+) s.*: (left_\w+) at (-?[\d.]+) rad is ([\d.]+) rad \(.* deg\) (above its upper|below its lower) limit", message)
+    match = re.search(
+        r"sample (\d+) \(t = ([\d.]+) s.*: (left_\w+) at (-?[\d.]+) rad is ([\d.]+) rad \(.* deg\) (above its upper|below its lower) limit",
+        message,
+    )
     assert match, message
     assert 'mode = "auto"' in message and "range_rad" in message
     joint, value, excess = match.group(3), float(match.group(4)), float(match.group(5))

@@ -36,7 +36,9 @@ def plain_search(solver: McInverse, targets, reference, preferred, q0, spec):
     for branch in range(8):
         q = candidates[:, :, branch]
         node = np.where(margins[:, :, branch] >= 0, np.maximum(0.0, spec.margin_rad - margins[:, :, branch]), np.inf)
-        start = node[0] + mc_path.START_WEIGHT * (np.abs(np.angle(np.exp(1j * (grid - preferred)))) + np.abs(q[0] - q0).max(axis=1))
+        start = node[0] + mc_path.START_WEIGHT * (
+            np.abs(np.angle(np.exp(1j * (grid - preferred)))) + np.abs(q[0] - q0).max(axis=1)
+        )
         with np.errstate(invalid="ignore"):
             change = np.stack([np.abs(q[1:] - np.roll(q[:-1], d, axis=1)).max(axis=2) for d in shifts], axis=2)
         step_cost = np.where(change <= spec.max_joint_step_rad, change, np.inf) + np.abs(shifts) * (2 * np.pi / G)
@@ -45,7 +47,9 @@ def plain_search(solver: McInverse, targets, reference, preferred, q0, spec):
             for k in range(1, n):
                 options = np.stack([np.roll(cost, d, axis=-1) + step_cost[k - 1, :, j] for j, d in enumerate(shifts)])
                 if back is not None:
-                    back[k] = np.argmin(options, axis=0)  # the first shift among equals, as the search's strict comparison
+                    back[k] = np.argmin(
+                        options, axis=0
+                    )  # the first shift among equals, as the search's strict comparison
                 cost = options.min(axis=0) + node[k]
                 if not np.isfinite(cost).any():
                     return k
@@ -81,7 +85,11 @@ def plain_search(solver: McInverse, targets, reference, preferred, q0, spec):
 
 def _search_inputs(task, reference):
     spec = mc_path.settings_for(task)
-    ((arm, solver, preferred),) = [a for a in mc_path.arm_solvers(task.robot, reference, task.robot.configuration(task.initial_q, "q0"), spec) if a[0].hand == "left"]
+    ((arm, solver, preferred),) = [
+        a
+        for a in mc_path.arm_solvers(task.robot, reference, task.robot.configuration(task.initial_q, "q0"), spec)
+        if a[0].hand == "left"
+    ]
     return solver, arm.targets, reference, preferred, arm.q0, spec
 
 

@@ -129,7 +129,9 @@ def test_an_exact_seed_comes_back(tip, humanoid, pybullet_ik):
     kin = ChainKinematics.of(chain)
     lower, upper = humanoid.lower_upper(chain.joint_names)
     Q = np.random.default_rng(7).uniform(lower, upper, size=(10, chain.dof))
-    tracik = TracIkSolver.of(humanoid, BASE, tip, timeout_s=TRACIK_TIMEOUT_S)  # wall-clock: 5 ms ran out before the seed was checked, with the machine loaded
+    tracik = TracIkSolver.of(
+        humanoid, BASE, tip, timeout_s=TRACIK_TIMEOUT_S
+    )  # wall-clock: 5 ms ran out before the seed was checked, with the machine loaded
     with PyBulletIkSolver.of(humanoid, BASE, tip) as pybullet_solver:
         for q in Q:
             exact = tracik.solve(kin.pose(q), q)
@@ -173,7 +175,10 @@ def test_a_shared_pybullet_solver_answers_as_a_new_one_does(humanoid, samples):
     Q, targets, seeds = samples
     waist = {"waist_yaw": 0.3, "waist_pitch": -0.2, "waist_roll": 0.1}
     shared = PyBulletIkSolver.shared(humanoid, BASE, TIP)
-    assert PyBulletIkSolver.shared(humanoid, BASE, TIP) is shared and PyBulletIkSolver.shared(humanoid, BASE, TIP, locked=waist) is not shared
+    assert (
+        PyBulletIkSolver.shared(humanoid, BASE, TIP) is shared
+        and PyBulletIkSolver.shared(humanoid, BASE, TIP, locked=waist) is not shared
+    )
     for T, seed in zip(targets[10:20], seeds[::-1][:10]):
         shared.solve(T, seed)
         PyBulletIkSolver.shared(humanoid, BASE, TIP, locked=waist).solve(T, seed)

@@ -59,7 +59,9 @@ def pose_error(target, actual):
 
 def error_vector(target, actual):
     """[p* - p; log(R* R^T)] of the module docstring, with scipy's rotation vector."""
-    return np.concatenate([target[:3, 3] - actual[:3, 3], Rotation.from_matrix(target[:3, :3] @ actual[:3, :3].T).as_rotvec()])
+    return np.concatenate(
+        [target[:3, 3] - actual[:3, 3], Rotation.from_matrix(target[:3, :3] @ actual[:3, :3].T).as_rotvec()]
+    )
 
 
 def smallest_singular_value(J):

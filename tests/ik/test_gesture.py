@@ -38,11 +38,15 @@ def test_velocity_bounds_take_the_tighter_of_eq_21_and_the_limits():
 
 def test_casadi_and_numpy_agree():
     t, theta = cs.SX.sym("t"), cs.SX.sym("theta", 2)
-    lo, hi = position_bounds(t, np.array([-1.0, -2.0]), np.array([1.0, 2.0]), np.array([0.5, -2.0]), np.array([0.5, 2.0]), 0.75, 1.0)
+    lo, hi = position_bounds(
+        t, np.array([-1.0, -2.0]), np.array([1.0, 2.0]), np.array([0.5, -2.0]), np.array([0.5, 2.0]), 0.75, 1.0
+    )
     zlo, zhi = velocity_bounds(theta, lo, hi, -6.0, 6.0, 2.0)
     f = cs.Function("f", [t, theta], [lo, hi, zlo, zhi])
     for tv, th in ((0.0, [0.0, 0.0]), (3.0, [0.7, -1.0])):
-        nlo, nhi = position_bounds(tv, np.array([-1.0, -2.0]), np.array([1.0, 2.0]), np.array([0.5, -2.0]), np.array([0.5, 2.0]), 0.75, 1.0)
+        nlo, nhi = position_bounds(
+            tv, np.array([-1.0, -2.0]), np.array([1.0, 2.0]), np.array([0.5, -2.0]), np.array([0.5, 2.0]), 0.75, 1.0
+        )
         nzlo, nzhi = velocity_bounds(np.array(th), nlo, nhi, -6.0, 6.0, 2.0)
         for a, b in zip(f(tv, th), (nlo, nhi, nzlo, nzhi)):
             np.testing.assert_allclose(np.asarray(a).ravel(), b, atol=1e-14)

@@ -52,7 +52,9 @@ def test_a_joint_jump_fails_naming_the_sample(tmp_path):
     path = tmp_path / "carry_box.toml"
     path.write_text(text.replace("[arm_angle]\n", "[arm_angle]\nmax_joint_step_rad = 1e-6\n"))
     task = load_task(path)
-    with pytest.raises(StageError, match=r"MC-Inverse, left arm: left_\w+ jumps [\d.]+ rad between samples 0 and 1 \(t = 0\.010 s\)"):
+    with pytest.raises(
+        StageError, match=r"MC-Inverse, left arm: left_\w+ jumps [\d.]+ rad between samples 0 and 1 \(t = 0\.010 s\)"
+    ):
         solve_mc_inverse(task.robot, build_reference(task), task.initial_q, settings_for(task))
 
 
@@ -61,7 +63,10 @@ def test_a_scheduled_arm_angle_repeats_with_the_repetitions(tmp_path):
     repetitions) gives every repetition the first one's joints, sample for sample."""
     text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     path = tmp_path / "carry_box.toml"
-    path.write_text(text.replace('mode = "initial"\n', "") + 'mode = "schedule"\nschedule = { left = [[0.0, 0.0], [2.0, 0.1], [4.0, 0.0]], right = [[0.0, 0.0], [2.0, -0.1], [4.0, 0.0]] }\n')
+    path.write_text(
+        text.replace('mode = "initial"\n', "")
+        + 'mode = "schedule"\nschedule = { left = [[0.0, 0.0], [2.0, 0.1], [4.0, 0.0]], right = [[0.0, 0.0], [2.0, -0.1], [4.0, 0.0]] }\n'
+    )
     task = load_task(path)
     ref = build_reference(task)
     joints = solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
@@ -103,7 +108,10 @@ def test_auto_fails_naming_the_sample_when_the_range_is_too_narrow(tmp_path):
     path.write_text(text.replace("range_rad = [-3.141592653589793, 0.0]", "range_rad = [-0.3, 0.3]"))
     task = load_task(path)
     ref = build_reference(task)
-    with pytest.raises(StageError, match=r"^MC-Inverse, left arm: no arm angle in arm_angle.range_rad .* beyond sample \d+ \(t = [\d.]+ s\)$") as failure:
+    with pytest.raises(
+        StageError,
+        match=r"^MC-Inverse, left arm: no arm angle in arm_angle.range_rad .* beyond sample \d+ \(t = [\d.]+ s\)$",
+    ) as failure:
         solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
     k, t = re.search(r"sample (\d+) \(t = ([\d.]+) s\)", str(failure.value)).groups()
     assert 0 < int(k) < len(ref) and float(t) == pytest.approx(ref.t[int(k)], abs=1e-3)

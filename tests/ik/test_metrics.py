@@ -21,7 +21,10 @@ def carry():
 
 
 def _with(path: JointPath, q: np.ndarray, status: np.ndarray | None = None) -> JointPath:
-    fields = {f: getattr(path, f) for f in ("method", "joint_names", "t", "rep", "qd", "solve_time_s", "hand_error_m", "hands", "fixed")}
+    fields = {
+        f: getattr(path, f)
+        for f in ("method", "joint_names", "t", "rep", "qd", "solve_time_s", "hand_error_m", "hands", "fixed")
+    }
     return JointPath(**fields, q=q, status=path.status if status is None else status)
 
 
@@ -105,10 +108,16 @@ def test_condition_metrics_against_finite_differences_and_the_limits():
     result = run_task("triangle", "mc-inverse", stages=("path", "ik"))
     path, robot = result.joint_path, result.task.robot
     metrics = condition_metrics(path, robot)
-    margins = [min(q - robot.lower_upper([name])[0][0], robot.lower_upper([name])[1][0] - q) for name, column in zip(path.joint_names, path.q.T) for q in column]
+    margins = [
+        min(q - robot.lower_upper([name])[0][0], robot.lower_upper([name])[1][0] - q)
+        for name, column in zip(path.joint_names, path.q.T)
+        for q in column
+    ]
     assert metrics["ik.joint_limit_margin_min_rad"] == min(margins)
     chain = robot.hand_chain("left")
-    J = finite_difference_jacobians(ChainKinematics.of(chain), path.q[:, [path.joint_names.index(n) for n in chain.joint_names]])
+    J = finite_difference_jacobians(
+        ChainKinematics.of(chain), path.q[:, [path.joint_names.index(n) for n in chain.joint_names]]
+    )
     singular = np.linalg.svd(J, compute_uv=False)
     np.testing.assert_allclose(metrics["ik.manipulability_min"], singular.prod(axis=1).min(), rtol=1e-6)
     assert metrics == {k: result.metrics[k] for k in metrics}

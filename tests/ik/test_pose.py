@@ -22,7 +22,14 @@ from dualarm.ik.pose_level.pointwise import solve_pybullet
 from dualarm.ik.velocity.pinv import PinvSettings, solve_pinv
 from dualarm.ik.velocity.pinv import settings_for as pinv_settings_for
 from dualarm.ik.velocity.stack import hand_stack, reference_stack, stacked_reference, start_configuration
-from dualarm.ik.velocity.tvgdd import FEASIBILITY_TOLERANCE, TvgddSettings, build_problem, joint_bounds, settings_for, solve_tvgdd
+from dualarm.ik.velocity.tvgdd import (
+    FEASIBILITY_TOLERANCE,
+    TvgddSettings,
+    build_problem,
+    joint_bounds,
+    settings_for,
+    solve_tvgdd,
+)
 from dualarm.paths import build_reference
 from dualarm.sim.world import load_pybullet_robot
 from tests.conftest import still_path_fields
@@ -35,7 +42,9 @@ STRIDE = 25
 POSE_NU = 10.0
 
 
-def pybullet_orientation_errors(task, path: JointPath, reference, stride: int = STRIDE) -> tuple[np.ndarray, np.ndarray]:
+def pybullet_orientation_errors(
+    task, path: JointPath, reference, stride: int = STRIDE
+) -> tuple[np.ndarray, np.ndarray]:
     """Rows k = 0, stride, ...: the angle of R_asked^T R_reached per hand [rad], R_reached by PyBullet, R_asked^T R_reached by scipy."""
     rows = np.arange(0, len(path), stride)
     angles = np.empty((len(rows), len(path.hands)))
@@ -45,7 +54,9 @@ def pybullet_orientation_errors(task, path: JointPath, reference, stride: int = 
             sim.set_positions(list(q), list(q.values()))
             for j, hand in enumerate(path.hands):
                 reached = sim.link_pose(f"{hand}_hand")[:3, :3]
-                angles[i, j] = (Rotation.from_matrix(reference.hands[hand].rotation[k]).inv() * Rotation.from_matrix(reached)).magnitude()
+                angles[i, j] = (
+                    Rotation.from_matrix(reference.hands[hand].rotation[k]).inv() * Rotation.from_matrix(reached)
+                ).magnitude()
     return rows, angles
 
 
@@ -54,7 +65,9 @@ def triangle():
     """The shipped triangle (five repetitions), its reference, and MC-Inverse's first configuration (on the path start in position and orientation)."""
     task = dualarm.load_task("triangle")
     ref = build_reference(task)
-    mc = solve_mc_inverse(task.robot, build_reference(dualarm.load_task("triangle", 1)), task.initial_q, mc_settings_for(task))
+    mc = solve_mc_inverse(
+        task.robot, build_reference(dualarm.load_task("triangle", 1)), task.initial_q, mc_settings_for(task)
+    )
     return task, ref, mc.configuration(0)
 
 
@@ -74,7 +87,10 @@ def tvgdd_paths(triangle):
 def pinv_paths(triangle):
     task, ref, _ = triangle
     assert pinv_settings_for(task).task_space == "pose"
-    return {space: solve_pinv(task.robot, ref, task.initial_q, pinv_settings_for(task, task_space=space)) for space in ("position", "pose")}
+    return {
+        space: solve_pinv(task.robot, ref, task.initial_q, pinv_settings_for(task, task_space=space))
+        for space in ("position", "pose")
+    }
 
 
 def test_rotation_vector_is_scipys():
@@ -84,13 +100,17 @@ def test_rotation_vector_is_scipys():
     rng = np.random.default_rng(7)
     axes = rng.normal(size=(600, 3))
     axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-    angles = np.concatenate([rng.uniform(0, np.pi, 200), 10.0 ** -rng.uniform(3, 15, 200), np.pi - 10.0 ** -rng.uniform(1, 6, 200)])
+    angles = np.concatenate(
+        [rng.uniform(0, np.pi, 200), 10.0 ** -rng.uniform(3, 15, 200), np.pi - 10.0 ** -rng.uniform(1, 6, 200)]
+    )
     for rotvec in axes * angles[:, None]:
         E = Rotation.from_rotvec(rotvec).as_matrix()
         np.testing.assert_allclose(np.asarray(log(E)).ravel(), rotvec, atol=1e-9)
     assert np.asarray(log(np.eye(3))).ravel().tolist() == [0.0, 0.0, 0.0]
     half_turn = Rotation.from_rotvec([0.0, 0.0, np.pi]).as_matrix()  # the axis's sign is arbitrary at pi
-    np.testing.assert_allclose(Rotation.from_rotvec(np.asarray(log(half_turn)).ravel()).as_matrix(), half_turn, atol=1e-12)
+    np.testing.assert_allclose(
+        Rotation.from_rotvec(np.asarray(log(half_turn)).ravel()).as_matrix(), half_turn, atol=1e-12
+    )
 
 
 def test_orientation_errors_are_the_angle_between():
@@ -149,7 +169,9 @@ def test_pose_mode_tracks_the_orientation_and_position_mode_does_not(triangle, t
         np.testing.assert_allclose(path.hand_orientation_error_rad[rows], angles, atol=1e-6)
         metrics = ik_metrics(path, task.robot)
         assert metrics["ik.orientation_error_max_rad"] == pytest.approx(path.hand_orientation_error_rad.max(), abs=0)
-        assert metrics["ik.orientation_error_mean_rad"] == pytest.approx(path.hand_orientation_error_rad.mean(), rel=1e-12)
+        assert metrics["ik.orientation_error_mean_rad"] == pytest.approx(
+            path.hand_orientation_error_rad.mean(), rel=1e-12
+        )
         assert metrics["ik.orientation_solved"] == (1.0 if space == "pose" else 0.0)
         assert metrics["ik.position_error_max_m"] < 5e-4
         worst[space] = angles.max()
@@ -171,7 +193,8 @@ def test_pose_mode_with_the_papers_nu_fails_at_the_elbow(triangle):
     settings = settings_for(task, nu=2.0)
     assert (settings.task_space, settings.scheme, settings.nu) == ("pose", "mvn", 2.0)
     with pytest.raises(
-        StageError, match=r"infeasible: no joint velocity within the bounds \(25\) meets the hand-velocity equality \(24\) \(6 task rows \(pose\) on 7 joints\).*left_elbow at zeta-"
+        StageError,
+        match=r"infeasible: no joint velocity within the bounds \(25\) meets the hand-velocity equality \(24\) \(6 task rows \(pose\) on 7 joints\).*left_elbow at zeta-",
     ) as caught:
         solve_tvgdd(task.robot, ref, task.initial_q, settings)
     k = caught.value.sample
@@ -185,9 +208,13 @@ def test_pose_mode_with_the_papers_nu_fails_at_the_elbow(triangle):
         assert float(violation) <= FEASIBILITY_TOLERANCE
         theta = theta + ref.period_s * np.asarray(velocity).ravel()
     _, _, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(theta, ref.t[k], R[k], V[k], theta0))
-    assert linprog(np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(lo.ravel(), hi.ravel()))).status == 2  # infeasible
+    assert (
+        linprog(np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(lo.ravel(), hi.ravel()))).status == 2
+    )  # infeasible
     elbow = stack.joint_names.index("left_elbow")
-    assert lo.ravel()[elbow] == pytest.approx(settings.nu * (bounds.lower[elbow] - theta[elbow]), abs=1e-12)  # eq (21), not the velocity limit
+    assert lo.ravel()[elbow] == pytest.approx(
+        settings.nu * (bounds.lower[elbow] - theta[elbow]), abs=1e-12
+    )  # eq (21), not the velocity limit
     # with that one bound loosened to the velocity limit, the step is feasible: the elbow is what holds it back
     loose = lo.ravel().copy()
     loose[elbow] = -bounds.velocity[elbow]
@@ -217,7 +244,10 @@ def test_pose_level_methods_measure_their_orientation_error(triangle):
     rows, angles = pybullet_orientation_errors(one, path, ref)
     np.testing.assert_allclose(path.hand_orientation_error_rad[rows], angles, atol=1e-6)
     metrics = ik_metrics(path, one.robot)
-    assert metrics["ik.orientation_solved"] == 1.0 and metrics["ik.orientation_error_max_rad"] == path.hand_orientation_error_rad.max()
+    assert (
+        metrics["ik.orientation_solved"] == 1.0
+        and metrics["ik.orientation_error_max_rad"] == path.hand_orientation_error_rad.max()
+    )
 
 
 def test_task_space_is_checked():
@@ -285,7 +315,9 @@ def test_the_hand_pose_fixes_the_elbow_beyond_the_papers_nu(pose_task):
         sim.set_positions(list(task.initial_q), list(task.initial_q.values()))
         shoulder = sim.link_pose("left_shoulder_yaw_link")[:3, 3]
         sim.set_positions(mc.joint_names, np.random.default_rng(5).uniform(-1, 1, len(mc.joint_names)))
-        at_elbow, wrist, hand = (sim.link_pose(link) for link in ("left_forearm", "left_forearm_roll_link", "left_hand"))
+        at_elbow, wrist, hand = (
+            sim.link_pose(link) for link in ("left_forearm", "left_forearm_roll_link", "left_hand")
+        )
         lower, upper = pybullet_limits(sim, ["left_elbow"])
     upper_arm, forearm = np.linalg.norm(at_elbow[:3, 3] - shoulder), np.linalg.norm(wrist[:3, 3] - at_elbow[:3, 3])
     wrist_in_hand = hand[:3, :3].T @ (wrist[:3, 3] - hand[:3, 3])
@@ -315,8 +347,12 @@ def test_pose_tvgdd_completes_the_shipped_task_with_its_own_settings(pose_task, 
     assert angles.max() < 2e-3 and path.hand_error_m.max() < 5e-4
     goals = {**task.spec.gesture.goal_lower, **task.spec.gesture.goal_upper}
     free = [i for i, n in enumerate(path.joint_names) if n not in goals]
-    np.testing.assert_allclose(path.extras["theta_lower"][:, free], np.broadcast_to(lower[free], (len(path), len(free))), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(path.extras["theta_upper"][:, free], np.broadcast_to(upper[free], (len(path), len(free))), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        path.extras["theta_lower"][:, free], np.broadcast_to(lower[free], (len(path), len(free))), rtol=0, atol=1e-12
+    )
+    np.testing.assert_allclose(
+        path.extras["theta_upper"][:, free], np.broadcast_to(upper[free], (len(path), len(free))), rtol=0, atol=1e-12
+    )
     if task.name == "triangle":
         per_repetition = round(sum(m.duration_s for m in task.spec.moves) / ref.period_s)
         assert repetition_deviation(path, per_repetition) < 0.03
@@ -326,7 +362,9 @@ def test_triangle_mvn_without_the_shoulder_yaw_goal_drifts_out_of_room(triangle)
     """The triangle's [gesture] without its one goal: MVN drifts along the self-motion (the shoulder yaw rises by more than 0.4 rad in each of the first two triangles) and a step of the third triangle is infeasible; HiGHS confirms it at that step (rebuilt by the same Euler steps)."""
     task, ref, _ = triangle
     settings = settings_for(task, goal_upper={})
-    assert settings.scheme == "mvn" and task.spec.gesture.goal_upper == {"left_shoulder_yaw": task.initial_q["left_shoulder_yaw"]}
+    assert settings.scheme == "mvn" and task.spec.gesture.goal_upper == {
+        "left_shoulder_yaw": task.initial_q["left_shoulder_yaw"]
+    }
     with pytest.raises(StageError, match=r"infeasible") as caught:
         solve_tvgdd(task.robot, ref, task.initial_q, settings)
     k = caught.value.sample
@@ -346,7 +384,9 @@ def test_triangle_mvn_without_the_shoulder_yaw_goal_drifts_out_of_room(triangle)
         theta = theta + ref.period_s * np.asarray(velocity).ravel()
     assert starts[1] - starts[0] > 0.4 and starts[2] - starts[1] > 0.4
     _, _, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(theta, ref.t[k], R[k], V[k], theta0))
-    assert linprog(np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(lo.ravel(), hi.ravel()))).status == 2  # infeasible
+    assert (
+        linprog(np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(lo.ravel(), hi.ravel()))).status == 2
+    )  # infeasible
 
 
 def test_pose_tvgdd_from_ready_starts_on_another_branch_and_fails(pose_task):

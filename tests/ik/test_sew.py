@@ -66,7 +66,9 @@ def test_the_product_of_exponentials_is_the_urdf_chain(arm7):
         assert np.linalg.norm(C - S) == pytest.approx(0.04, abs=1e-9)  # axes 2-3 meet 4 cm from axis 1
         h3, h4 = arm.axes[2], arm.axes[3]
         n = np.cross(h3, h4) / np.linalg.norm(np.cross(h3, h4))
-        assert abs(n @ (arm.axis_points[3] - C)) == pytest.approx(0.03, abs=1e-9)  # axis 4 misses axis 3 by the elbow offset
+        assert abs(n @ (arm.axis_points[3] - C)) == pytest.approx(
+            0.03, abs=1e-9
+        )  # axis 4 misses axis 3 by the elbow offset
 
 
 def test_the_stereographic_angle_is_the_papers_formula():
@@ -104,7 +106,10 @@ def test_every_candidate_reproduces_the_pose_and_angle_and_one_is_the_configurat
 #: between two samples (the elbow near its reach: 129, 671, 1208, 4474, 8993, 9035; subproblem 2 at its limit: 1773, 5379,
 #: 5514, 8218); on the Panda a root between a branch's end and the first sample, with a turn (2678, 4764, 8408), and a root
 #: at a gap in a branch narrower than a sample (7129). The numpy search of the previous version missed all 14.
-HARD = {"humanoid_offset": [129, 671, 1208, 1773, 4474, 5379, 5514, 8218, 8993, 9035], "panda": [2678, 4764, 7129, 8408]}
+HARD = {
+    "humanoid_offset": [129, 671, 1208, 1773, 4474, 5379, 5514, 8218, 8993, 9035],
+    "panda": [2678, 4764, 7129, 8408],
+}
 
 
 def test_roots_near_and_between_a_branchs_ends_are_found(arm7):
@@ -176,7 +181,10 @@ def test_on_s_r_s_arms_it_gives_mc_inverses_candidates(robot_dir):
 def test_refusals_name_the_chain_and_why(tmp_path):
     """A 7R arm of neither family names both families' axes and how far they miss; a chain without 7 joints is no 7R arm: one line each, a NotSRSError (the CLI's exit 2)."""
     odd = load_robot(wrist_offset_robot(tmp_path))
-    with pytest.raises(NotSewError, match=r"left_arm' is of no family .*left_forearm_roll, left_wrist_pitch, left_wrist_roll \(miss 0\.0[12]\d* m\)") as caught:
+    with pytest.raises(
+        NotSewError,
+        match=r"left_arm' is of no family .*left_forearm_roll, left_wrist_pitch, left_wrist_roll \(miss 0\.0[12]\d* m\)",
+    ) as caught:
         sew_chain(odd.hand_chain("left"))
     assert "\n" not in str(caught.value)
     sew_chain(odd.hand_chain("right"))  # the other arm is untouched
@@ -198,17 +206,36 @@ def test_ik_sew_command_prints_every_solution_as_json(arm7):
     q = Q[0]
     hand = ARMS[robot.name][2]
     to_base = robot.chain_between(robot.urdf.root, chain.base)
-    T = ChainKinematics.of(to_base).pose(np.zeros(len(to_base.joint_names))) @ ChainKinematics.of(chain).pose(q)  # robot base frame, the waist at 0
+    T = ChainKinematics.of(to_base).pose(np.zeros(len(to_base.joint_names))) @ ChainKinematics.of(chain).pose(
+        q
+    )  # robot base frame, the waist at 0
     pose = [*T[:3, 3], *Rotation.from_matrix(T[:3, :3]).as_euler("xyz")]
     psi = _psi(arm, STEREO, q)
-    result = CliRunner().invoke(app, ["ik", "sew", str(urdf.parent), "--arm", hand, "--pose", *(repr(float(v)) for v in pose), "--sew-angle", repr(psi), "--json"])
+    result = CliRunner().invoke(
+        app,
+        [
+            "ik",
+            "sew",
+            str(urdf.parent),
+            "--arm",
+            hand,
+            "--pose",
+            *(repr(float(v)) for v in pose),
+            "--sew-angle",
+            repr(psi),
+            "--json",
+        ],
+    )
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert data["singular"] == [0.0, 0.0, -1.0] and data["reference"] == [0.0, 0.0, 1.0]
     candidates = data["candidates"]
     mine = [c for c in candidates if _wrapped(np.array(c["q"]) - q).max() < 1e-6]
     assert len(mine) == 1 and mine[0]["valid"] and mine[0]["reason"] == "valid"
-    assert max(c["position_error_m"] for c in candidates) < 1e-9 and max(c["orientation_error_rad"] for c in candidates) < 1e-9
+    assert (
+        max(c["position_error_m"] for c in candidates) < 1e-9
+        and max(c["orientation_error_rad"] for c in candidates) < 1e-9
+    )
     lower, upper = robot.lower_upper(chain.joint_names)
     for c in candidates:
         inside = bool(np.all((lower <= c["q"]) & (np.array(c["q"]) <= upper)))
@@ -223,8 +250,44 @@ def test_ik_sew_command_refuses_in_one_line(tmp_path):
 
     runner = CliRunner()
     for args, needle in (
-        (["ik", "sew", str(wrist_offset_robot(tmp_path)), "--arm", "left", "--pose", "0.3", "0.27", "1.0", "0", "0", "0", "--sew-angle", "0.5"], "is of no family"),
-        (["ik", "sew", "panda", "--arm", "right", "--pose", "2", "0", "0.5", "3.1416", "0", "0", "--sew-angle", "0.5"], "no solution at psi = 0.5 rad"),
+        (
+            [
+                "ik",
+                "sew",
+                str(wrist_offset_robot(tmp_path)),
+                "--arm",
+                "left",
+                "--pose",
+                "0.3",
+                "0.27",
+                "1.0",
+                "0",
+                "0",
+                "0",
+                "--sew-angle",
+                "0.5",
+            ],
+            "is of no family",
+        ),
+        (
+            [
+                "ik",
+                "sew",
+                "panda",
+                "--arm",
+                "right",
+                "--pose",
+                "2",
+                "0",
+                "0.5",
+                "3.1416",
+                "0",
+                "0",
+                "--sew-angle",
+                "0.5",
+            ],
+            "no solution at psi = 0.5 rad",
+        ),
     ):
         result = runner.invoke(app, args)
         assert result.exit_code == 2, result.output

@@ -12,7 +12,13 @@ from tests.conftest import OFFSET, TASKS, pybullet_urdf
 
 @pytest.fixture(scope="module")
 def circle(tmp_path_factory):
-    return run_consistency(TASKS / "circle.toml", ["sew", "dls-svd"], tmp_path_factory.mktemp("sew") / "consistency", repetitions=2, robot=OFFSET)
+    return run_consistency(
+        TASKS / "circle.toml",
+        ["sew", "dls-svd"],
+        tmp_path_factory.mktemp("sew") / "consistency",
+        repetitions=2,
+        robot=OFFSET,
+    )
 
 
 def test_auto_sew_repeats_the_circle_on_the_offset_humanoid(circle):
@@ -39,10 +45,15 @@ def test_the_sew_angle_repeats_as_pybullet_measures_it(circle):
 
         def frames(row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             sim.set(chain.joint_names, row)
-            return np.linalg.inv(base) @ sim.frame("left_upper_arm"), np.linalg.inv(base) @ sim.frame("left_wrist_pitch_link")
+            return np.linalg.inv(base) @ sim.frame("left_upper_arm"), np.linalg.inv(base) @ sim.frame(
+                "left_wrist_pitch_link"
+            )
 
         zero3, zero6 = frames(np.zeros(7))
-        e_local, w_local = np.linalg.inv(zero3) @ np.append(arm.elbow, 1.0), np.linalg.inv(zero6) @ np.append(arm.wrist, 1.0)
+        e_local, w_local = (
+            np.linalg.inv(zero3) @ np.append(arm.elbow, 1.0),
+            np.linalg.inv(zero6) @ np.append(arm.wrist, 1.0),
+        )
         angles = []
         for row in q:
             T3, T6 = frames(row)

@@ -69,7 +69,9 @@ def test_gesture_joints_stay_inside_the_closing_bounds_only_with_the_feedforward
         return np.maximum(path.extras["theta_lower"] - path.q, path.q - path.extras["theta_upper"]).max()
 
     assert task.spec.gesture.bound_feedforward
-    published = solve_tvgdd(task.robot, ref, task.initial_q, dataclasses.replace(settings_for(task), bound_feedforward=False))
+    published = solve_tvgdd(
+        task.robot, ref, task.initial_q, dataclasses.replace(settings_for(task), bound_feedforward=False)
+    )
     assert outside(tvgdd_path) <= 1e-9 < 1e-3 < outside(published)
     assert ik_metrics(published, task.robot)["ik.position_error_max_m"] <= PAPER_MAE_M
 
@@ -109,13 +111,19 @@ def test_pinv_leaves_the_gesture_bounds_far_more_than_tvgdd(ball_game, tvgdd_pat
 def test_rmp_returns_to_the_start_on_a_closed_path_and_mvn_does_not(tmp_path):
     """The ball game without gesture bounds, strokes doubled (MVN's drift grows with the loop)."""
     text = re.sub(r"\[gesture\].*?(?=\[\[moves\]\])", "", (TASKS / "ball_game.toml").read_text(), flags=re.S)
-    text = re.sub(r"by = \[([^]]*)\]", lambda m: "by = [" + ", ".join(f"{2 * float(v)}" for v in m.group(1).split(",")) + "]", text)
+    text = re.sub(
+        r"by = \[([^]]*)\]",
+        lambda m: "by = [" + ", ".join(f"{2 * float(v)}" for v in m.group(1).split(",")) + "]",
+        text,
+    )
     task = load_task(_variant(tmp_path, text))
     ref = build_reference(task)
     assert np.allclose(ref.hands["left"].position[-1], ref.hands["left"].position[0], atol=1e-12)
     closure = {}
     for scheme in ("mvn", "rmp"):
-        path = solve_tvgdd(task.robot, ref, task.initial_q, dataclasses.replace(settings_for(task, scheme=scheme), feedback_gain=50.0))
+        path = solve_tvgdd(
+            task.robot, ref, task.initial_q, dataclasses.replace(settings_for(task, scheme=scheme), feedback_gain=50.0)
+        )
         closure[scheme] = np.abs(path.q[-1] - path.q[0]).max()
     assert closure["rmp"] <= 1e-5 < 1e-4 < closure["mvn"]
 
@@ -123,7 +131,11 @@ def test_rmp_returns_to_the_start_on_a_closed_path_and_mvn_does_not(tmp_path):
 def test_infeasible_step_fails_the_run_naming_step_time_and_joint(tmp_path):
     """A wrist goal 3.3 rad away (from -1.0323 rad) reached within 0.1 s: nu (theta_new- - theta) exceeds the 6 rad/s limit."""
     text = (TASKS / "ball_game.toml").read_text()
-    text = text.replace("t_sp_s = 0.75", "t_sp_s = 0.05").replace("c_tuning = 1.0", "c_tuning = 0.01").replace("bound_feedforward = true", "bound_feedforward = false")
+    text = (
+        text.replace("t_sp_s = 0.75", "t_sp_s = 0.05")
+        .replace("c_tuning = 1.0", "c_tuning = 0.01")
+        .replace("bound_feedforward = true", "bound_feedforward = false")
+    )
     head, goals = text.split("[gesture.goal_lower]")
     text = head + "[gesture.goal_lower]" + goals.replace("left_wrist_roll = -1.0323", "left_wrist_roll = 2.2677")
     task_file = _variant(tmp_path, text)
@@ -184,7 +196,9 @@ def test_one_hand_off_the_path_start_begins_on_it(tmp_path):
 
 def test_tvgdd_with_the_waist_free_solves_17_joints(tmp_path):
     """The ball game with the waist free: 17 active joints, a shared waist in both hands' Jacobians."""
-    task = load_task(_variant(tmp_path, (TASKS / "ball_game.toml").read_text().replace('waist = "locked"', 'waist = "free"')))
+    task = load_task(
+        _variant(tmp_path, (TASKS / "ball_game.toml").read_text().replace('waist = "locked"', 'waist = "free"'))
+    )
     path = solve_tvgdd(task.robot, build_reference(task), task.initial_q, settings_for(task))
     assert len(path.joint_names) == 17 and sum(n.startswith("waist") for n in path.joint_names) == 3
     assert np.abs(path.qd[:, [n.startswith("waist") for n in path.joint_names]]).max() > 1e-3  # the waist does move

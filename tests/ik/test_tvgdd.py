@@ -43,7 +43,9 @@ def test_casadi_step_solves_the_qp_along_the_ball_game(ball_game, scheme):
     """On QP instances taken along the ball game (all 1801 for MVN), the conic solution equals quadprog's."""
     task, stack, bounds, ref = ball_game
     settings = TvgddSettings(scheme=scheme, feedback_gain=task.spec.gesture.feedback_gain)
-    problem = build_problem(stack, bounds, settings, ref.period_s, task.robot.urdf.kinematic_xml, task.robot.joint_names)
+    problem = build_problem(
+        stack, bounds, settings, ref.period_s, task.robot.urdf.kinematic_xml, task.robot.joint_names
+    )
     R, V = stacked_reference(stack, ref)
     theta = theta0 = stack.initial
     worst, stride = 0.0, 1 if scheme == "mvn" else 3
@@ -79,7 +81,11 @@ def along(problem, ref, theta0):
 def instances(ball_game):
     """Every QP instance along the ball game (MVN, position task space as the paper's, the casadi path)."""
     task, stack, bounds, ref = ball_game
-    return along(build_problem(stack, bounds, TvgddSettings(feedback_gain=task.spec.gesture.feedback_gain), ref.period_s), ref, stack.initial)
+    return along(
+        build_problem(stack, bounds, TvgddSettings(feedback_gain=task.spec.gesture.feedback_gain), ref.period_s),
+        ref,
+        stack.initial,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +101,9 @@ def pose_instances():
     start = solve_mc_inverse(task.robot, ref, task.initial_q, mc_settings_for(task)).configuration(0)
     settings = settings_for(task, scheme="rmp", nu=10.0)
     stack = hand_stack(task.robot, task.spec.hands, start, task_space=settings.task_space)
-    return along(build_problem(stack, joint_bounds(task.robot, stack, settings), settings, ref.period_s), ref, stack.initial)
+    return along(
+        build_problem(stack, joint_bounds(task.robot, stack, settings), settings, ref.period_s), ref, stack.initial
+    )
 
 
 def kkt_violation(M, b, J, rhs, lo, hi, x, lam):
@@ -165,7 +173,14 @@ def test_lvi_backend_follows_the_casadi_one_in_pose_mode():
     task = load_task(TASKS / "triangle.toml", 1)
     full = build_reference(task)
     hand = full.hands["left"]
-    ref = CartesianReference(full.period_s, {"left": HandReference(hand.position[:320], hand.rotation[:320], hand.linear_velocity[:320], hand.angular_velocity[:320])})
+    ref = CartesianReference(
+        full.period_s,
+        {
+            "left": HandReference(
+                hand.position[:320], hand.rotation[:320], hand.linear_velocity[:320], hand.angular_velocity[:320]
+            )
+        },
+    )
     start = solve_mc_inverse(task.robot, full, task.initial_q, mc_settings_for(task)).configuration(0)
     settings = settings_for(task, scheme="rmp", nu=10.0)
     casadi = solve_tvgdd(task.robot, ref, start, settings)

@@ -51,7 +51,11 @@ def made(tmp_path_factory):
     for_pybullet.write_text(dual.read_text().replace("package://kuka_iiwa/", f"{DATA}/kuka_iiwa/"))
     out = {}
     with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(DATA)}):
-        for name, source, reference in (("iiwa", IIWA, IIWA), ("panda", PANDA, PANDA), ("dual_iiwa", dual, for_pybullet)):
+        for name, source, reference in (
+            ("iiwa", IIWA, IIWA),
+            ("panda", PANDA, PANDA),
+            ("dual_iiwa", dual, for_pybullet),
+        ):
             out[name] = (reference, init_robot(source, root / name))
     return out
 
@@ -84,7 +88,10 @@ def test_chain_choice(made):
     assert [(a.hand, a.base, a.tip) for a in made["iiwa"][1].arms] == [("left", "lbr_iiwa_link_0", "lbr_iiwa_link_7")]
     assert [(a.hand, a.tip) for a in made["panda"][1].arms] == [("left", "panda_hand")]  # above the prismatic fingers
     arms = made["dual_iiwa"][1].arms
-    assert [(a.hand, a.base, a.tip) for a in arms] == [("left", "torso", "left_lbr_iiwa_link_7"), ("right", "torso", "right_lbr_iiwa_link_7")]
+    assert [(a.hand, a.base, a.tip) for a in arms] == [
+        ("left", "torso", "left_lbr_iiwa_link_7"),
+        ("right", "torso", "right_lbr_iiwa_link_7"),
+    ]
     # left is the arm on +y, as PyBullet places it
     poses = _pybullet_link_poses(made["dual_iiwa"][0], {}, ["left_lbr_iiwa_link_1", "right_lbr_iiwa_link_1"])
     assert poses["left_lbr_iiwa_link_1"][1, 3] > 0 > poses["right_lbr_iiwa_link_1"][1, 3]
@@ -102,13 +109,19 @@ def _axis_line(sim, joint: str) -> tuple[np.ndarray, np.ndarray]:
 def _line_distance(a, b) -> float:
     (p, u), (q, v) = a, b
     n = np.cross(u, v)
-    return float(abs(np.dot(q - p, n)) / np.linalg.norm(n)) if np.linalg.norm(n) > 1e-9 else float(np.linalg.norm(np.cross(q - p, u)))
+    return (
+        float(abs(np.dot(q - p, n)) / np.linalg.norm(n))
+        if np.linalg.norm(n) > 1e-9
+        else float(np.linalg.norm(np.cross(q - p, u)))
+    )
 
 
 def test_srs_verdicts(made):
     assert all(a.srs is None for name in ("iiwa", "dual_iiwa") for a in made[name][1].arms)
     (panda,) = made["panda"][1].arms
-    assert re.search(r"axes of panda_joint5, panda_joint6, panda_joint7 do not meet in one point \(miss 0\.05\d+ m\)", panda.srs)
+    assert re.search(
+        r"axes of panda_joint5, panda_joint6, panda_joint7 do not meet in one point \(miss 0\.05\d+ m\)", panda.srs
+    )
     text = (made["panda"][1].directory / "robot.toml").read_text()
     assert "not S-R-S" in text and "miss 0.05" in text
     # PyBullet's own joint axes: joints 6 and 7 pass d apart, so every point is at least d/2 from one of them;
@@ -128,18 +141,32 @@ def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
     with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(DATA)}), c_output_silenced():
         client = pb.connect(pb.DIRECT)
         try:
-            body = pb.loadURDF(str(source), useFixedBase=True, flags=pb.URDF_USE_SELF_COLLISION | pb.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS, physicsClientId=client)
-            index = {pb.getJointInfo(body, i, physicsClientId=client)[1].decode(): i for i in range(pb.getNumJoints(body, physicsClientId=client))}
+            body = pb.loadURDF(
+                str(source),
+                useFixedBase=True,
+                flags=pb.URDF_USE_SELF_COLLISION | pb.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS,
+                physicsClientId=client,
+            )
+            index = {
+                pb.getJointInfo(body, i, physicsClientId=client)[1].decode(): i
+                for i in range(pb.getNumJoints(body, physicsClientId=client))
+            }
 
             def position(joint: str) -> np.ndarray:
                 """Where PyBullet puts ``joint``'s child link frame now."""
-                return np.array(pb.getLinkState(body, index[joint], computeForwardKinematics=True, physicsClientId=client)[4])
+                return np.array(
+                    pb.getLinkState(body, index[joint], computeForwardKinematics=True, physicsClientId=client)[4]
+                )
 
             def tip_joint(arm) -> str:
-                return next(j for j in index if pb.getJointInfo(body, index[j], physicsClientId=client)[12].decode() == arm.tip)
+                return next(
+                    j for j in index if pb.getJointInfo(body, index[j], physicsClientId=client)[12].decode() == arm.tip
+                )
 
             first = {arm.hand: robot.chains[arm.chain].joint_names[0] for arm in result.arms}
-            stretched = {arm.hand: np.linalg.norm(position(tip_joint(arm)) - position(first[arm.hand])) for arm in result.arms}  # at the zero pose, as robot init measures an arm
+            stretched = {
+                arm.hand: np.linalg.norm(position(tip_joint(arm)) - position(first[arm.hand])) for arm in result.arms
+            }  # at the zero pose, as robot init measures an arm
             for joint, value in ready.items():
                 info = pb.getJointInfo(body, index[joint], physicsClientId=client)
                 assert info[8] <= value <= info[9], joint
@@ -153,8 +180,12 @@ def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
             for arm in result.arms:
                 hand, shoulder = position(tip_joint(arm)), position(first[arm.hand])
                 assert hand[0] > 0.1, arm.hand
-                assert 0.4 - 1e-6 <= np.linalg.norm(hand - shoulder) / stretched[arm.hand] <= 0.8 + 1e-6, arm.hand  # elbow bent (init.READY_REACH)
-                assert abs(hand[1]) - abs(shoulder[1]) <= 0.25 * stretched[arm.hand] + 1e-6, arm.hand  # not out to the side (init.READY_OUTWARD)
+                assert 0.4 - 1e-6 <= np.linalg.norm(hand - shoulder) / stretched[arm.hand] <= 0.8 + 1e-6, (
+                    arm.hand
+                )  # elbow bent (init.READY_REACH)
+                assert abs(hand[1]) - abs(shoulder[1]) <= 0.25 * stretched[arm.hand] + 1e-6, (
+                    arm.hand
+                )  # not out to the side (init.READY_OUTWARD)
         finally:
             pb.disconnect(physicsClientId=client)
 
@@ -173,9 +204,15 @@ def test_robot_poses_equal_pybullet_link_poses(made, name):
         assert np.allclose(row["position_m"], T[:3, 3], atol=1e-6)
         assert np.allclose(Rotation.from_euler("xyz", row["rpy_rad"]).as_matrix(), T[:3, :3], atol=1e-6)
         srs = all(a.srs is None for a in result.arms)
-        assert (row["arm_angle_rad"] is not None) == (srs and row["home"] == "ready")  # at zero the iiwa's shoulder-wrist line is vertical or the arm straight
+        assert (row["arm_angle_rad"] is not None) == (
+            srs and row["home"] == "ready"
+        )  # at zero the iiwa's shoulder-wrist line is vertical or the arm straight
     table = runner.invoke(app, ["robot", "poses", str(result.directory), "--pose", "ready"])
-    assert table.exit_code == 0 and "ready" in table.stdout and "zero" not in table.stdout.split("\n", 3)[-1].split("ψ:")[0]
+    assert (
+        table.exit_code == 0
+        and "ready" in table.stdout
+        and "zero" not in table.stdout.split("\n", 3)[-1].split("ψ:")[0]
+    )
 
 
 def test_init_prints_every_choice_and_assumption(tmp_path):
@@ -202,8 +239,12 @@ def test_dual_iiwa_loads_and_passes_robot_check():
     assert done.stdout.count("pass") == 2 and done.stdout.count("S-R-S: shoulder") == 2
     # its velocity limits are robot.toml's, not the URDF's 10 rad/s
     with load_pybullet_robot(robot.urdf.path) as sim:
-        urdf_velocity = pb.getJointInfo(sim.body, sim.joint_index["left_lbr_iiwa_joint_1"], physicsClientId=sim.client)[11]
-    assert urdf_velocity == 10 and robot.limits["left_lbr_iiwa_joint_1"].velocity == pytest.approx(np.radians(85), abs=1e-4)
+        urdf_velocity = pb.getJointInfo(sim.body, sim.joint_index["left_lbr_iiwa_joint_1"], physicsClientId=sim.client)[
+            11
+        ]
+    assert urdf_velocity == 10 and robot.limits["left_lbr_iiwa_joint_1"].velocity == pytest.approx(
+        np.radians(85), abs=1e-4
+    )
 
 
 def _one_line(args, needle):
@@ -218,13 +259,32 @@ def test_refusals(tmp_path):
     (tmp_path / "full" / "x").write_text("x")
     (tmp_path / "notes.urdf").write_text("hello")
     _one_line(["robot", "init", str(tmp_path / "notes.urdf"), "--out", str(tmp_path / "a")], "not valid XML")
-    _one_line(["robot", "init", str(IIWA), "--out", str(tmp_path / "b"), "--left-tip", "paw"], "--left-tip 'paw': no such link")
-    _one_line(["robot", "init", str(IIWA), "--out", str(tmp_path / "c"), "--left-tip", "lbr_iiwa_link_7", "--right-tip", "lbr_iiwa_link_3"], "not on separate branches below a common root")
+    _one_line(
+        ["robot", "init", str(IIWA), "--out", str(tmp_path / "b"), "--left-tip", "paw"],
+        "--left-tip 'paw': no such link",
+    )
+    _one_line(
+        [
+            "robot",
+            "init",
+            str(IIWA),
+            "--out",
+            str(tmp_path / "c"),
+            "--left-tip",
+            "lbr_iiwa_link_7",
+            "--right-tip",
+            "lbr_iiwa_link_3",
+        ],
+        "not on separate branches below a common root",
+    )
     _one_line(["robot", "init", str(IIWA), "--out", str(tmp_path / "full")], "exists and is not empty")
     _one_line(["robot", "init", str(IIWA), "--out", str(tmp_path / "d"), "--jerk", "-1"], "--jerk")
     shutil.copy(PANDA, tmp_path / "panda.urdf")  # without its meshes
     with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": ""}):
-        _one_line(["robot", "init", str(tmp_path / "panda.urdf"), "--out", str(tmp_path / "e")], "mesh 'package://meshes/collision/link0.obj' not found")
+        _one_line(
+            ["robot", "init", str(tmp_path / "panda.urdf"), "--out", str(tmp_path / "e")],
+            "mesh 'package://meshes/collision/link0.obj' not found",
+        )
     assert not any((tmp_path / n).exists() for n in "abcde")
 
 
@@ -234,7 +294,10 @@ def test_mesh_paths_resolve_through_ros_package_path(tmp_path):
     with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(DATA)}):
         result = init_robot(urdf, tmp_path / "out")
     filenames = re.findall(r'filename="([^"]+)"', (tmp_path / "out" / "one.urdf").read_text())
-    assert filenames and all(f.startswith("meshes/") and (tmp_path / "out" / f).read_bytes() == (DATA / "kuka_iiwa" / f).read_bytes() for f in filenames)
+    assert filenames and all(
+        f.startswith("meshes/") and (tmp_path / "out" / f).read_bytes() == (DATA / "kuka_iiwa" / f).read_bytes()
+        for f in filenames
+    )
     assert result.robot.hands == ("left",)
 
 
@@ -247,7 +310,10 @@ def _humanoid_copy(tmp_path: Path, edit) -> Path:
 
 def test_robot_check_refuses_a_chain_joint_without_jerk(tmp_path):
     robot_dir = _humanoid_copy(tmp_path, lambda t: t.replace("left_elbow = 120.0\n", ""))
-    _one_line(["robot", "check", str(robot_dir)], "joint 'left_elbow' of chain 'left_arm' has no jerk limit: add it to [limits.jerk]")
+    _one_line(
+        ["robot", "check", str(robot_dir)],
+        "joint 'left_elbow' of chain 'left_arm' has no jerk limit: add it to [limits.jerk]",
+    )
 
 
 def test_robot_toml_overrides_velocity(tmp_path):
@@ -255,7 +321,9 @@ def test_robot_toml_overrides_velocity(tmp_path):
     robot = load_robot(robot_dir)
     with load_pybullet_robot(robot.urdf.path) as sim:
         urdf_velocity = pb.getJointInfo(sim.body, sim.joint_index["right_elbow"], physicsClientId=sim.client)[11]
-    assert robot.limits["left_elbow"].velocity == 0.5 and robot.limits["right_elbow"].velocity == pytest.approx(urdf_velocity)
+    assert robot.limits["left_elbow"].velocity == 0.5 and robot.limits["right_elbow"].velocity == pytest.approx(
+        urdf_velocity
+    )
     bad = _humanoid_copy(tmp_path, lambda t: t + "\n[limits.velocity]\nleft_elbow = 0.0\n")
     with pytest.raises(Exception, match=re.escape("limits.velocity.left_elbow: 0 is outside the allowed range")):
         load_robot(bad)
@@ -264,6 +332,10 @@ def test_robot_toml_overrides_velocity(tmp_path):
 def test_committed_dual_iiwa_is_what_build_py_makes(made):
     """robots/dual_iiwa holds build.py's outputs: init on the URDF it assembles writes the same robot.toml (plus build.py's velocity table) and the same meshes."""
     built = made["dual_iiwa"][1].directory
-    assert (DUAL_IIWA / "robot.toml").read_text() == (built / "robot.toml").read_text() + _build_module()._velocity_table()
+    assert (DUAL_IIWA / "robot.toml").read_text() == (
+        built / "robot.toml"
+    ).read_text() + _build_module()._velocity_table()
     assert (DUAL_IIWA / "dual_iiwa.urdf").read_text() == (built / "dual_iiwa.urdf").read_text()
-    assert sorted(p.name for p in (DUAL_IIWA / "meshes").iterdir()) == sorted(p.name for p in (built / "meshes").iterdir())
+    assert sorted(p.name for p in (DUAL_IIWA / "meshes").iterdir()) == sorted(
+        p.name for p in (built / "meshes").iterdir()
+    )

@@ -3,7 +3,15 @@
 import numpy as np
 import pytest
 
-from dualarm.describe.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, adam_poses, check_chain, finite_difference_jacobians, pybullet_poses
+from dualarm.describe.check import (
+    FK_TOLERANCE,
+    JACOBIAN_TOLERANCE,
+    PYBULLET_TOLERANCE,
+    adam_poses,
+    check_chain,
+    finite_difference_jacobians,
+    pybullet_poses,
+)
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.poses import pose_errors
 from dualarm.model.robot import random_configurations, robot_from_urdf

@@ -45,8 +45,14 @@ def test_home_poses_are_within_limits(humanoid):
         (lambda t: t.replace('tip = "left_hand"', 'tip = "left_foot"'), "no link 'left_foot'"),
         (lambda t: t.replace("[chains.waist]", "[chains.waist]\ncolour = 1"), "chains.waist.colour: unknown key"),
         (lambda t: t.replace("left_elbow = -1.5708", "left_elbow = -9.0"), "home.ready.left_elbow"),
-        (lambda t: t.replace("waist_yaw = 4.0", "waist_yaw = -4.0"), "limits.acceleration.waist_yaw: -4 is outside the allowed range [0.01, 10000]"),
-        (lambda t: t.replace('urdf = "humanoid.urdf"', 'urdf = "missing.urdf"'), "missing.urdf: cannot read the URDF: No such file or directory"),
+        (
+            lambda t: t.replace("waist_yaw = 4.0", "waist_yaw = -4.0"),
+            "limits.acceleration.waist_yaw: -4 is outside the allowed range [0.01, 10000]",
+        ),
+        (
+            lambda t: t.replace('urdf = "humanoid.urdf"', 'urdf = "missing.urdf"'),
+            "missing.urdf: cannot read the URDF: No such file or directory",
+        ),
         (lambda t: t + "\n[home.bad]\nnot_a_joint = 1.0\n", "home.bad.not_a_joint: no such joint"),
     ],
 )
@@ -76,17 +82,43 @@ def copy_humanoid(tmp_path):
 @pytest.mark.parametrize(
     ("old", "new", "message"),
     [
-        ("waist_yaw = 4.0", "waist_yaw = 1e300", "robot.toml:limits.acceleration.waist_yaw: 1e+300 is outside the allowed range [0.01, 10000]"),
-        ("waist_yaw = 40.0", "waist_yaw = 1e-300", "robot.toml:limits.jerk.waist_yaw: 1e-300 is outside the allowed range [0.1, 1e+06]"),
+        (
+            "waist_yaw = 4.0",
+            "waist_yaw = 1e300",
+            "robot.toml:limits.acceleration.waist_yaw: 1e+300 is outside the allowed range [0.01, 10000]",
+        ),
+        (
+            "waist_yaw = 40.0",
+            "waist_yaw = 1e-300",
+            "robot.toml:limits.jerk.waist_yaw: 1e-300 is outside the allowed range [0.1, 1e+06]",
+        ),
         ("waist_yaw = 40.0", "waist_yaw = inf", "robot.toml:limits.jerk.waist_yaw: expected a finite number, got inf"),
         ("waist_yaw = 40.0", "waist_yaw = nan", "robot.toml:limits.jerk.waist_yaw: expected a finite number, got nan"),
-        ("left_elbow = -1.5708", "left_elbow = 1" + "0" * 400, "robot.toml:home.ready.left_elbow: expected a finite number, got 100000"),
+        (
+            "left_elbow = -1.5708",
+            "left_elbow = 1" + "0" * 400,
+            "robot.toml:home.ready.left_elbow: expected a finite number, got 100000",
+        ),
         ('name = "humanoid"', "name = 5", "robot.toml:name: expected a non-empty string, got 5"),
-        ('urdf = "humanoid.urdf"', 'urdf = ["humanoid.urdf"]', "robot.toml:urdf: expected a non-empty string, got ['humanoid.urdf']"),
+        (
+            'urdf = "humanoid.urdf"',
+            'urdf = ["humanoid.urdf"]',
+            "robot.toml:urdf: expected a non-empty string, got ['humanoid.urdf']",
+        ),
         ('base = "pelvis"', "base = 1", "robot.toml:chains.waist.base: expected a non-empty string, got 1"),
         ("[chains.waist]", '[chains.waist]\n"' + "k" * 5000 + '" = 1', "robot.toml:chains.waist.kkkkkkkkkk"),
     ],
-    ids=["acceleration_1e300", "jerk_1e-300", "jerk_inf", "jerk_nan", "home_1e400", "name_int", "urdf_list", "base_int", "long_key"],
+    ids=[
+        "acceleration_1e300",
+        "jerk_1e-300",
+        "jerk_inf",
+        "jerk_nan",
+        "home_1e400",
+        "name_int",
+        "urdf_list",
+        "base_int",
+        "long_key",
+    ],
 )
 def test_absurd_robot_toml(tmp_path, old, new, message):
     directory = copy_humanoid(tmp_path)
@@ -95,14 +127,20 @@ def test_absurd_robot_toml(tmp_path, old, new, message):
     (directory / "robot.toml").write_text(text.replace(old, new))
     with pytest.raises(RobotModelError) as info:
         load_robot(directory)
-    assert message in str(info.value) and "\n" not in str(info.value) and len(str(info.value)) < 400, str(info.value)[:1000]
+    assert message in str(info.value) and "\n" not in str(info.value) and len(str(info.value)) < 400, str(info.value)[
+        :1000
+    ]
     assert "k" * 100 not in str(info.value)  # a long key is quoted short
 
 
 @pytest.mark.parametrize(
     ("old", "new", "message"),
     [
-        ('<joint name="waist_yaw" type="revolute">', '<joint name="waist_yaw" type="revolute">\n<axis xyz="0 0 nan"/>', "joint 'waist_yaw' axis: expected finite numbers"),
+        (
+            '<joint name="waist_yaw" type="revolute">',
+            '<joint name="waist_yaw" type="revolute">\n<axis xyz="0 0 nan"/>',
+            "joint 'waist_yaw' axis: expected finite numbers",
+        ),
         ('lower="-0.785398"', 'lower="nan"', "joint 'waist_yaw' has a NaN limit"),
     ],
     ids=["nan_axis", "nan_limit"],
@@ -123,7 +161,9 @@ def test_urdf_origin_overflowing_to_inf(tmp_path):
     first = text.index('<origin xyz="', text.index('<joint name="waist_yaw"'))
     end = text.index('"', first + len('<origin xyz="'))
     (directory / "humanoid.urdf").write_text(text[: first + len('<origin xyz="')] + "1e400 0 0" + text[end:])
-    with pytest.raises(RobotModelError, match=r"joint 'waist_yaw' origin xyz: expected finite numbers, got \[inf, 0, 0\]"):
+    with pytest.raises(
+        RobotModelError, match=r"joint 'waist_yaw' origin xyz: expected finite numbers, got \[inf, 0, 0\]"
+    ):
         load_robot(directory)
 
 
@@ -133,7 +173,9 @@ def test_urdf_entity_bomb_and_deep_nesting(tmp_path):
     bomb += [f' <!ENTITY e{i} "{f"&e{i - 1};" * 10}">' for i in range(1, 10)]
     bomb += ["]>", '<robot name="&e9;"><link name="a"/></robot>']
     (tmp_path / "bomb.urdf").write_text("\n".join(bomb))
-    (tmp_path / "deep.urdf").write_text('<robot name="x">' + '<link name="a">' * 200_000 + "</link>" * 200_000 + "</robot>")
+    (tmp_path / "deep.urdf").write_text(
+        '<robot name="x">' + '<link name="a">' * 200_000 + "</link>" * 200_000 + "</robot>"
+    )
     for name, needle in (("bomb.urdf", "not valid XML"), ("deep.urdf", "nested too deeply")):
         with pytest.raises(RobotModelError) as info:
             robot_from_urdf(tmp_path / name, "a", "a")

@@ -22,7 +22,10 @@ def test_shoulder_elbow_wrist_match_pybullet_joint_frames(humanoid, side):
         for q in Q:
             sim.set_positions(chain.joint_names, q)
             base = np.linalg.inv(sim.link_pose(chain.base))
-            expected = [(base @ sim.link_pose(link))[:3, 3] for link in (f"{side}_shoulder_yaw_link", f"{side}_forearm", f"{side}_forearm_roll_link")]
+            expected = [
+                (base @ sim.link_pose(link))[:3, 3]
+                for link in (f"{side}_shoulder_yaw_link", f"{side}_forearm", f"{side}_forearm_roll_link")
+            ]
             for ours, theirs in zip(srs.points(q), expected):
                 assert np.linalg.norm(np.asarray(ours).ravel() - theirs) <= PYBULLET_TOLERANCE
 
@@ -71,7 +74,9 @@ def test_non_seven_dof_chain_is_refused(humanoid):
 def test_arm_angle_closed_form_cases(elbow, expected):
     S, W = np.zeros(3), np.array([1.0, 0.0, 0.0])
     psi = arm_angle(S, np.array(elbow), W)
-    assert np.isclose(np.cos(psi), np.cos(expected), atol=1e-12) and np.isclose(np.sin(psi), np.sin(expected), atol=1e-12)
+    assert np.isclose(np.cos(psi), np.cos(expected), atol=1e-12) and np.isclose(
+        np.sin(psi), np.sin(expected), atol=1e-12
+    )
 
 
 def test_arm_angle_measures_rotation_of_the_elbow_about_sw():
@@ -96,5 +101,8 @@ def test_arm_angle_of_q_matches_pybullet_points(humanoid):
         for q, psi in zip(Q, psis):
             sim.set_positions(chain.joint_names, q)
             base = np.linalg.inv(sim.link_pose(chain.base))
-            S, E, W = ((base @ sim.link_pose(link))[:3, 3] for link in ("left_shoulder_yaw_link", "left_forearm", "left_forearm_roll_link"))
+            S, E, W = (
+                (base @ sim.link_pose(link))[:3, 3]
+                for link in ("left_shoulder_yaw_link", "left_forearm", "left_forearm_roll_link")
+            )
             assert abs(np.angle(np.exp(1j * (psi - arm_angle(S, E, W))))) < 1e-5  # float32 points

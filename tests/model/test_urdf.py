@@ -15,7 +15,10 @@ URDF = HUMANOID / "humanoid.urdf"
 def _collision_boxes(path) -> dict[str, np.ndarray]:
     """Link name -> PyBullet's axis-aligned bounding box of its collision shapes at the zero pose (2, 3) [m]."""
     with load_pybullet_robot(path) as sim:
-        return {name: np.array(pb.getAABB(sim.body, index, physicsClientId=sim.client)) for name, index in sim.link_index.items()}
+        return {
+            name: np.array(pb.getAABB(sim.body, index, physicsClientId=sim.client))
+            for name, index in sim.link_index.items()
+        }
 
 
 def test_capsules_become_urdf_1_0_shapes_that_pybullet_bounds_alike(tmp_path):
@@ -23,9 +26,13 @@ def test_capsules_become_urdf_1_0_shapes_that_pybullet_bounds_alike(tmp_path):
     text = URDF.read_text()
     published = tmp_path / "humanoid.urdf"
     published.write_text(viewer_urdf(text))
-    shapes = {e.tag for e in ET.parse(published).getroot().iter() if e.tag in ("box", "cylinder", "sphere", "mesh", "capsule")}
+    shapes = {
+        e.tag for e in ET.parse(published).getroot().iter() if e.tag in ("box", "cylinder", "sphere", "mesh", "capsule")
+    }
     assert "capsule" in text and shapes <= {"box", "cylinder", "sphere", "mesh"}
     original, viewed = _collision_boxes(URDF), _collision_boxes(published)
     assert original.keys() == viewed.keys()
     for link, box in original.items():
-        np.testing.assert_allclose(viewed[link], box, atol=4e-3, err_msg=link)  # Bullet pads a cylinder's box by its collision margin (3 mm here), a capsule's not
+        np.testing.assert_allclose(
+            viewed[link], box, atol=4e-3, err_msg=link
+        )  # Bullet pads a cylinder's box by its collision margin (3 mm here), a capsule's not

@@ -26,9 +26,15 @@ def _axes_6_7_distance_m() -> float:
     """The distance between the axes of panda_joint6 and panda_joint7 at a random configuration, by PyBullet on pybullet_data's panda.urdf (in an S-R-S wrist they meet)."""
     client = pb.connect(pb.DIRECT)
     try:
-        body = pb.loadURDF(str(Path(pybullet_data.getDataPath()) / "franka_panda" / "panda.urdf"), useFixedBase=True, physicsClientId=client)
+        body = pb.loadURDF(
+            str(Path(pybullet_data.getDataPath()) / "franka_panda" / "panda.urdf"),
+            useFixedBase=True,
+            physicsClientId=client,
+        )
         for i, value in enumerate(np.random.default_rng(1).uniform(-0.5, 0.5, 7)):
-            pb.resetJointState(body, i, value - (1.5 if i == 3 else 0.0), physicsClientId=client)  # joint 4 inside its limits
+            pb.resetJointState(
+                body, i, value - (1.5 if i == 3 else 0.0), physicsClientId=client
+            )  # joint 4 inside its limits
         axes = []
         for i in (5, 6):  # the joint's child link frame is its joint frame; every Panda axis is that frame's z
             state = pb.getLinkState(body, i, computeForwardKinematics=True, physicsClientId=client)
@@ -37,7 +43,11 @@ def _axes_6_7_distance_m() -> float:
         pb.disconnect(client)
     (p1, d1), (p2, d2) = axes
     n = np.cross(d1, d2)
-    return float(abs(np.dot(p2 - p1, n)) / np.linalg.norm(n)) if np.linalg.norm(n) > 1e-9 else float(np.linalg.norm(np.cross(p2 - p1, d1)))
+    return (
+        float(abs(np.dot(p2 - p1, n)) / np.linalg.norm(n))
+        if np.linalg.norm(n) > 1e-9
+        else float(np.linalg.norm(np.cross(p2 - p1, d1)))
+    )
 
 
 def test_the_panda_wrist_is_not_spherical():
@@ -49,7 +59,9 @@ def test_suited_methods_are_those_that_do_not_need_srs():
     assert suited_methods(panda, ["right"]) == tuple(n for n in IK_METHODS if not METHODS[n].needs_srs)
     assert {"mc-inverse", "ikfast-style"}.isdisjoint(suited_methods(panda, ["right"]))
     assert "sew" in suited_methods(panda, ["right"])  # the Panda is of the SEW solver's family
-    assert suited_methods(humanoid, ["left", "right"]) == IK_METHODS  # an S-R-S arm is of the SEW solver's R-2R-R-3R family too
+    assert (
+        suited_methods(humanoid, ["left", "right"]) == IK_METHODS
+    )  # an S-R-S arm is of the SEW solver's R-2R-R-3R family too
 
 
 @pytest.mark.parametrize("method", ["mc-inverse", "ikfast-style"])

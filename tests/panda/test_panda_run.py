@@ -24,7 +24,10 @@ class OriginalPanda:
     def __init__(self) -> None:
         self.client = pb.connect(pb.DIRECT)
         self.body = pb.loadURDF(str(ORIGINAL), useFixedBase=True, physicsClientId=self.client)
-        infos = [pb.getJointInfo(self.body, i, physicsClientId=self.client) for i in range(pb.getNumJoints(self.body, physicsClientId=self.client))]
+        infos = [
+            pb.getJointInfo(self.body, i, physicsClientId=self.client)
+            for i in range(pb.getNumJoints(self.body, physicsClientId=self.client))
+        ]
         self.joint = {info[1].decode(): i for i, info in enumerate(infos)}
         self.link = {info[12].decode(): i for i, info in enumerate(infos)}
 
@@ -34,7 +37,14 @@ class OriginalPanda:
         for row in np.atleast_2d(q):
             for name, value in zip(ARM, row):
                 pb.resetJointState(self.body, self.joint[name], float(value), physicsClientId=self.client)
-            out.append(pb.getLinkState(self.body, self.link["panda_grasptarget"], computeForwardKinematics=True, physicsClientId=self.client)[4])
+            out.append(
+                pb.getLinkState(
+                    self.body,
+                    self.link["panda_grasptarget"],
+                    computeForwardKinematics=True,
+                    physicsClientId=self.client,
+                )[4]
+            )
         return np.array(out)
 
     def close(self) -> None:
@@ -78,7 +88,9 @@ def test_every_stage_runs_and_the_hand_follows_the_path(method, original, tmp_pa
     for stage in ("path", "ik", "retime", "smooth", "execute"):
         assert any(k.startswith(f"{stage}.") for k in run.metrics), stage
     sample = run["/ik/sample"]
-    assert "ik.rep_arm_angle_deviation_max_rad" in run.metrics and "arm_angle_rad.right" in sample  # the Panda's arm angle is its SEW angle
+    assert (
+        "ik.rep_arm_angle_deviation_max_rad" in run.metrics and "arm_angle_rad.right" in sample
+    )  # the Panda's arm angle is its SEW angle
     q = sample[[f"position.{n}" for n in ARM]].to_numpy()
     asked = result.reference.hands["right"].position
     reached = original.hand(q)  # PyBullet's FK of pybullet_data's URDF, not ours

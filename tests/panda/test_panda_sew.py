@@ -18,10 +18,14 @@ PANDA = REPO / "robots" / "panda"
 runner = CliRunner()
 
 
-@pytest.fixture(scope="module", params=[("panda_triangle.toml", 3), ("panda_circle.toml", 2)], ids=["triangle", "circle"])
+@pytest.fixture(
+    scope="module", params=[("panda_triangle.toml", 3), ("panda_circle.toml", 2)], ids=["triangle", "circle"]
+)
 def compared(request, tmp_path_factory):
     name, repetitions = request.param
-    return run_consistency(HERE / name, ["sew", "dls-svd"], tmp_path_factory.mktemp("sew") / "consistency", repetitions=repetitions)
+    return run_consistency(
+        HERE / name, ["sew", "dls-svd"], tmp_path_factory.mktemp("sew") / "consistency", repetitions=repetitions
+    )
 
 
 def test_sew_repeats_every_repetition_and_dls_svd_does_not(compared):
@@ -62,7 +66,21 @@ def test_sew_on_an_arm_of_no_family_is_refused_in_one_line(tmp_path):
     """The offset humanoid with its left wrist offset too (no SEW family): `dualarm run triangle --robot` with sew exits 2 with one line naming the chain, and leaves no run behind."""
     (tmp_path / "robot").mkdir()
     robot = wrist_offset_robot(tmp_path / "robot")
-    result = runner.invoke(app, ["run", "triangle", "--robot", str(robot), "--ik", "sew", "--stages", "path,ik", "--out", str(tmp_path / "runs")])
+    result = runner.invoke(
+        app,
+        [
+            "run",
+            "triangle",
+            "--robot",
+            str(robot),
+            "--ik",
+            "sew",
+            "--stages",
+            "path,ik",
+            "--out",
+            str(tmp_path / "runs"),
+        ],
+    )
     assert result.exit_code == 2, result.output
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "chain 'left_arm' is of no family the SEW solver handles" in lines[0]

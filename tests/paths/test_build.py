@@ -211,7 +211,10 @@ def test_triangle_peak_speed_is_the_quintic_peak(triangle):
     """Quintic time scaling: peak speed = 15/8 * edge length / duration."""
     data, _, names = _triangle_boundaries()
     T = data["moves"][0]["duration_s"]
-    lengths = [np.linalg.norm(np.subtract(data["waypoints"][a]["position"], data["waypoints"][b]["position"])) for a, b in zip(names[:3], names[1:4])]
+    lengths = [
+        np.linalg.norm(np.subtract(data["waypoints"][a]["position"], data["waypoints"][b]["position"]))
+        for a, b in zip(names[:3], names[1:4])
+    ]
     vmax = np.linalg.norm(triangle.hands["left"].linear_velocity, axis=1).max()
     assert vmax == pytest.approx(15 / 8 * max(lengths) / T, rel=1e-3)
 
@@ -276,7 +279,9 @@ def test_circle_velocity_matches_finite_difference(circle):
     np.testing.assert_allclose(hand.linear_velocity[1:-1], fd, rtol=0, atol=1e-3 * vmax)
     # tangent to the circle
     centre = np.asarray(toml("circle")["moves"][0]["left"]["arc_center"])
-    np.testing.assert_allclose(np.einsum("ij,ij->i", hand.linear_velocity, hand.position - centre), 0.0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        np.einsum("ij,ij->i", hand.linear_velocity, hand.position - centre), 0.0, rtol=0, atol=1e-12
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -293,10 +298,17 @@ def test_ball_game_hands_move_together(ball_game):
     assert ball_game.duration_s == pytest.approx(total, abs=1e-9)
     # orientation kept by `by` moves
     for hand in (left, right):
-        np.testing.assert_allclose(hand.rotation, np.broadcast_to(hand.rotation[0], hand.rotation.shape), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            hand.rotation, np.broadcast_to(hand.rotation[0], hand.rotation.shape), rtol=0, atol=1e-12
+        )
         np.testing.assert_allclose(hand.angular_velocity, 0.0, rtol=0, atol=1e-12)
     # the hands keep their separation
-    np.testing.assert_allclose(left.position - right.position, np.broadcast_to(left.position[0] - right.position[0], left.position.shape), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        left.position - right.position,
+        np.broadcast_to(left.position[0] - right.position[0], left.position.shape),
+        rtol=0,
+        atol=1e-12,
+    )
 
 
 def test_ball_game_displacements(ball_game):
@@ -348,8 +360,12 @@ def test_carry_box_grasp_geometry(carry_box):
     left, right = carry_box.hands["left"], carry_box.hands["right"]
     np.testing.assert_allclose(left.position[0], data["waypoints"]["grasp"]["position"], rtol=0, atol=1e-12)
     gap = left.position - right.position
-    np.testing.assert_allclose(gap, np.broadcast_to([0.0, data["object"]["size_m"][1], 0.0], gap.shape), rtol=0, atol=1e-9)
-    np.testing.assert_allclose(np.einsum("ij,ij->i", left.rotation[:, :, 2], right.rotation[:, :, 2]), -1.0, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        gap, np.broadcast_to([0.0, data["object"]["size_m"][1], 0.0], gap.shape), rtol=0, atol=1e-9
+    )
+    np.testing.assert_allclose(
+        np.einsum("ij,ij->i", left.rotation[:, :, 2], right.rotation[:, :, 2]), -1.0, rtol=0, atol=1e-9
+    )
 
 
 def test_carry_box_master_motion(carry_box):
@@ -374,8 +390,12 @@ def test_carry_box_slave_velocity_matches_finite_difference(carry_box):
     dt = carry_box.period_s
     vmax = np.linalg.norm(right.linear_velocity, axis=1).max()
     assert vmax > 0.05
-    np.testing.assert_allclose(right.linear_velocity[1:-1], central_velocity(right.position, dt), rtol=0, atol=1e-3 * vmax)
-    np.testing.assert_allclose(right.angular_velocity[1:-1], central_angular_velocity(right.rotation, dt), rtol=0, atol=1e-3 * vmax)
+    np.testing.assert_allclose(
+        right.linear_velocity[1:-1], central_velocity(right.position, dt), rtol=0, atol=1e-3 * vmax
+    )
+    np.testing.assert_allclose(
+        right.angular_velocity[1:-1], central_angular_velocity(right.rotation, dt), rtol=0, atol=1e-3 * vmax
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -383,7 +403,9 @@ def test_carry_box_slave_velocity_matches_finite_difference(carry_box):
 
 
 def test_repeated_path_that_does_not_close(tmp_path: Path):
-    path = variant(tmp_path, "triangle", ('duration_s = 2.0\nleft = { to = "A" }', 'duration_s = 2.0\nleft = { to = "C" }'))
+    path = variant(
+        tmp_path, "triangle", ('duration_s = 2.0\nleft = { to = "A" }', 'duration_s = 2.0\nleft = { to = "C" }')
+    )
     task = load_task(path)
     assert task.spec.repetitions == 5
     with pytest.raises(TaskFileError) as info:
@@ -469,7 +491,11 @@ def test_big_arc_closed_form_matches_reference(tmp_path: Path):
     """The same arc, shrunk to stay reachable (radius 0.15 m from a +y start: the paper's circle),
     matches its closed form: checks _big_arc_position's conventions used above against a reachable case."""
     data = toml("circle")
-    edits = (("position = [0.31, 0.24, 1.05]", "position = [0.293, 0.15, 1.05]"), ("arc_center = [0.31, 0.09, 1.05]", "arc_center = [0.293, 0.0, 1.05]"), ("repetitions = 5", "repetitions = 1"))
+    edits = (
+        ("position = [0.31, 0.24, 1.05]", "position = [0.293, 0.15, 1.05]"),
+        ("arc_center = [0.31, 0.09, 1.05]", "arc_center = [0.293, 0.0, 1.05]"),
+        ("repetitions = 5", "repetitions = 1"),
+    )
     ref = build_reference(load_task(variant(tmp_path, "circle", *edits)))
     tau = ref.t / data["moves"][0]["duration_s"]
     theta = (10 * tau**3 - 15 * tau**4 + 6 * tau**5) * data["moves"][0]["left"]["arc_angle_rad"]
@@ -500,9 +526,15 @@ def test_carry_box_rotating_master_slave_velocity(tmp_path: Path):
     vmax = np.linalg.norm(right.linear_velocity, axis=1).max()
     # the rotation matters: the slave moves differently from the master
     assert np.abs(right.linear_velocity - left.linear_velocity).max() > 0.05 * vmax
-    np.testing.assert_allclose(right.linear_velocity[1:-1], central_velocity(right.position, dt), rtol=0, atol=1e-3 * vmax)
-    np.testing.assert_allclose(right.angular_velocity[1:-1], central_angular_velocity(right.rotation, dt), rtol=0, atol=1e-3 * wmax)
-    np.testing.assert_allclose(left.angular_velocity[1:-1], central_angular_velocity(left.rotation, dt), rtol=0, atol=1e-3 * wmax)
+    np.testing.assert_allclose(
+        right.linear_velocity[1:-1], central_velocity(right.position, dt), rtol=0, atol=1e-3 * vmax
+    )
+    np.testing.assert_allclose(
+        right.angular_velocity[1:-1], central_angular_velocity(right.rotation, dt), rtol=0, atol=1e-3 * wmax
+    )
+    np.testing.assert_allclose(
+        left.angular_velocity[1:-1], central_angular_velocity(left.rotation, dt), rtol=0, atol=1e-3 * wmax
+    )
 
 
 @pytest.mark.parametrize("name", ["circle", "carry_box"])
@@ -518,7 +550,9 @@ def test_every_repetition_is_the_one_repetition_path_bit_for_bit(name):
             assert np.array_equal(ours[0], first[0])
             for r in range(R):
                 assert np.array_equal(ours[1 + r * n : 1 + (r + 1) * n], first[1:]), (hand, field, r)
-    assert np.array_equal(many.rep, np.r_[0, np.repeat(np.arange(R), n)]) and np.array_equal(many.segment[1:], np.tile(once.segment[1:], R))
+    assert np.array_equal(many.rep, np.r_[0, np.repeat(np.arange(R), n)]) and np.array_equal(
+        many.segment[1:], np.tile(once.segment[1:], R)
+    )
 
 
 def test_a_task_without_moves_is_its_start_alone():

@@ -37,7 +37,15 @@ def problem(task):
 @pytest.fixture(scope="module")
 def bare_checker(task, problem):
     """The same pairs without any safety margin, at a finer resolution."""
-    with CollisionChecker(task.robot, problem.joint_names, problem.fixed, task.spec.environment, task.spec.expected_contacts, margin_m=0.0, resolution_rad=0.005) as checker:
+    with CollisionChecker(
+        task.robot,
+        problem.joint_names,
+        problem.fixed,
+        task.spec.environment,
+        task.spec.expected_contacts,
+        margin_m=0.0,
+        resolution_rad=0.005,
+    ) as checker:
         yield checker
 
 
@@ -70,7 +78,10 @@ def test_planners_find_free_paths(problem, bare_checker, planner):
 
 
 def test_plan_command_writes_trials_summary_and_a_collision_free_run(tmp_path, bare_checker):
-    result = runner.invoke(app, ["plan", str(BOWL), "--trials", "3", "--out", str(tmp_path / "plan"), "--recordings", str(tmp_path / "rec")])
+    result = runner.invoke(
+        app,
+        ["plan", str(BOWL), "--trials", "3", "--out", str(tmp_path / "plan"), "--recordings", str(tmp_path / "rec")],
+    )
     assert result.exit_code == 0, result.output
     table = pd.read_csv(tmp_path / "plan" / "plan_trials.csv")
     summary = json.loads((tmp_path / "plan" / "plan_summary.json").read_text())
@@ -97,9 +108,12 @@ def test_plan_command_writes_trials_summary_and_a_collision_free_run(tmp_path, b
 
 def test_unreachable_wta_is_named_at_the_timeout(tmp_path):
     text = BOWL.read_text().replace(
-        'name = "bowl_right"\nhand = "right"\nreference = { position = [0.40, 0.0, 0.93] }', 'name = "bowl_right"\nhand = "right"\nreference = { position = [1.60, 0.0, 0.93] }'
+        'name = "bowl_right"\nhand = "right"\nreference = { position = [0.40, 0.0, 0.93] }',
+        'name = "bowl_right"\nhand = "right"\nreference = { position = [1.60, 0.0, 0.93] }',
     )
-    (tmp_path / "far.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
+    (tmp_path / "far.toml").write_text(
+        text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"')
+    )
     result = runner.invoke(app, ["run", str(tmp_path / "far.toml"), "--timeout", "0.5", "--out", str(tmp_path / "rec")])
     assert result.exit_code == 1  # the planner failed: the run is kept as failed
     lines = result.output.strip().splitlines()
@@ -110,9 +124,17 @@ def test_unreachable_wta_is_named_at_the_timeout(tmp_path):
 
 
 def test_start_in_collision_names_the_pair(tmp_path):
-    text = BOWL.read_text().replace("[[wta]]", '[[environment]]\nname = "post"\nshape = "box"\nsize_m = [0.05, 0.05, 0.3]\npose = { position = [0.0, 0.2, 0.8] }\n\n[[wta]]', 1)
-    (tmp_path / "hit.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
-    with pytest.raises(StageError, match=r"start configuration is in collision: left_(forearm|upper_arm|palm) with post"):
+    text = BOWL.read_text().replace(
+        "[[wta]]",
+        '[[environment]]\nname = "post"\nshape = "box"\nsize_m = [0.05, 0.05, 0.3]\npose = { position = [0.0, 0.2, 0.8] }\n\n[[wta]]',
+        1,
+    )
+    (tmp_path / "hit.toml").write_text(
+        text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"')
+    )
+    with pytest.raises(
+        StageError, match=r"start configuration is in collision: left_(forearm|upper_arm|palm) with post"
+    ):
         PlanningProblem(load_task(tmp_path / "hit.toml"))
     result = runner.invoke(app, ["run", str(tmp_path / "hit.toml"), "--out", str(tmp_path / "rec")])
     assert result.exit_code == 2 and "with post" in result.output
@@ -122,7 +144,9 @@ def test_start_in_collision_names_the_pair(tmp_path):
 def test_obstacle_overlapping_the_base_is_refused_at_load(tmp_path):
     text = BOWL.read_text().replace("pose = { position = [0.30, 0.0, 0.97] }", "pose = { position = [0.0, 0.05, 0.6] }")
     assert text != BOWL.read_text()
-    (tmp_path / "base.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
+    (tmp_path / "base.toml").write_text(
+        text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"')
+    )
     result = runner.invoke(app, ["run", str(tmp_path / "base.toml"), "--out", str(tmp_path / "rec")])
     assert result.exit_code == 2
     assert re.search(r"environment\[2\]: 'panel' overlaps the robot's base link 'pelvis'", result.output), result.output
@@ -136,12 +160,17 @@ def test_unknown_planner_is_one_line():
 
 def test_ompl_without_goals_names_the_wta(tmp_path):
     text = BOWL.read_text().replace(
-        'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 0.0, 0.93] }', 'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 1.50, 0.93] }'
+        'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 0.0, 0.93] }',
+        'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 1.50, 0.93] }',
     )
-    (tmp_path / "far.toml").write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"'))
+    (tmp_path / "far.toml").write_text(
+        text.replace('robot = "../robots/humanoid"', f'robot = "{TASKS.parent / "robots" / "humanoid"}"')
+    )
     settings = PlanningSettings(planner=TreeSearchSettings(timeout_s=0.3))
     with PlanningProblem(load_task(tmp_path / "far.toml"), settings) as problem:
         result = problem.solve("ompl-rrtconnect", 0)
     assert not result.success and result.goals == 0
     # the far area is named first (the right hand, dragged over the shared waist, may miss too)
-    assert re.search(r"no IK sample reached WTA 'bowl_left' \(\d+ samples, nearest 0\.[0-9]+ m\)", result.reason), result.reason
+    assert re.search(r"no IK sample reached WTA 'bowl_left' \(\d+ samples, nearest 0\.[0-9]+ m\)", result.reason), (
+        result.reason
+    )

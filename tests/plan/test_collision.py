@@ -50,7 +50,9 @@ def reference(task):
 
 
 def make_checker(task, names, margin_m, **kwargs) -> CollisionChecker:
-    return CollisionChecker(task.robot, names, {}, task.spec.environment, task.spec.expected_contacts, margin_m=margin_m, **kwargs)
+    return CollisionChecker(
+        task.robot, names, {}, task.spec.environment, task.spec.expected_contacts, margin_m=margin_m, **kwargs
+    )
 
 
 def urdf_collisions(task) -> dict[str, tuple[np.ndarray, str, dict[str, float]]]:
@@ -198,9 +200,20 @@ def test_unchecked_pairs_are_parents_and_touching_neighbours(task, names, refere
 
 #: Besides the bowl grasp's objects: a tilted box, a sphere and a tilted cylinder in the arms' reach.
 EXTRA = [
-    EnvironmentObject(name="crate", shape="box", size_m=(0.12, 0.3, 0.08), pose={"position": (0.3, 0.25, 1.15), "rpy": (0.3, -0.5, 0.9)}),
+    EnvironmentObject(
+        name="crate",
+        shape="box",
+        size_m=(0.12, 0.3, 0.08),
+        pose={"position": (0.3, 0.25, 1.15), "rpy": (0.3, -0.5, 0.9)},
+    ),
     EnvironmentObject(name="ball", shape="sphere", radius_m=0.06, pose={"position": (0.25, -0.3, 1.2)}),
-    EnvironmentObject(name="post", shape="cylinder", radius_m=0.03, height_m=0.3, pose={"position": (0.35, -0.15, 1.1), "rpy": (0.4, 0.2, 0.0)}),
+    EnvironmentObject(
+        name="post",
+        shape="cylinder",
+        radius_m=0.03,
+        height_m=0.3,
+        pose={"position": (0.35, -0.15, 1.1), "rpy": (0.4, 0.2, 0.0)},
+    ),
 ]
 
 
@@ -234,11 +247,15 @@ def test_distances_agree_with_closest_points(task, names, margin_m):
     sim = load_pybullet_robot(task.robot.urdf.path)
     bodies = {name: body for body, name in add_environment(sim, environment).items()}
     try:
-        with CollisionChecker(task.robot, names, {}, environment, task.spec.expected_contacts, margin_m=margin_m) as checker:
+        with CollisionChecker(
+            task.robot, names, {}, environment, task.spec.expected_contacts, margin_m=margin_m
+        ) as checker:
             Q = random_configurations(task, names, 2000, 31)
             Q = np.vstack([Q, near_contact(checker, Q, 60)])
             D = checker.distances(Q)
-            assert D.shape == (len(Q), len(checker.pairs)) and checker.checks == 2000 + 60 * 50  # distances are not checks
+            assert (
+                D.shape == (len(Q), len(checker.pairs)) and checker.checks == 2000 + 60 * 50
+            )  # distances are not checks
             threshold = np.array([2 * margin_m if b in sim.link_index else margin_m for _, b in checker.pairs])
             compared, penetrating, at_contact = 0, 0, 0
             for q, d in zip(Q, D):
@@ -255,7 +272,16 @@ def test_distances_agree_with_closest_points(task, names, margin_m):
                         penetrating += theirs < 0
                         at_contact += abs(theirs - limit) < 1e-6
             assert compared > 5000 and penetrating > 500 and at_contact >= 50
-            assert {n for pair in checker.pairs for n in pair} >= {"table", "panel", "bowl", "crate", "ball", "post", "head", "pelvis"}
+            assert {n for pair in checker.pairs for n in pair} >= {
+                "table",
+                "panel",
+                "bowl",
+                "crate",
+                "ball",
+                "post",
+                "head",
+                "pelvis",
+            }
     finally:
         sim.close()
 
@@ -269,7 +295,9 @@ def test_verdicts_equal_free_and_the_pybullet_checker(task, names):
         free = checker.free_many(Q)
         assert free.dtype == bool and free.shape == (len(Q),)
         boundary = near_contact(checker, Q, 100)
-        assert np.concatenate([free, checker.free_many(boundary)]).tolist() == [checker.free(q) for q in np.vstack([Q, boundary])]
+        assert np.concatenate([free, checker.free_many(boundary)]).tolist() == [
+            checker.free(q) for q in np.vstack([Q, boundary])
+        ]
         objects = {o.name for o in environment}
         limits = np.array([0.01 if b in objects else 0.02 for _, b in checker.pairs])
         clear = np.abs(checker.distances(Q) - limits).min(axis=1) > DISTANCE_M
@@ -314,7 +342,9 @@ def test_a_link_without_capsules_is_checked_by_pybullet(task, names, reference, 
     text = (HUMANOID / "humanoid.urdf").read_text()
     head = text.index("<collision>", text.index('<link name="head">'))
     end = text.index("</collision>", head)
-    (tmp_path / "humanoid.urdf").write_text(text[:head] + '<collision><geometry><box size="0.18 0.2 0.16"/></geometry>' + text[end:])
+    (tmp_path / "humanoid.urdf").write_text(
+        text[:head] + '<collision><geometry><box size="0.18 0.2 0.16"/></geometry>' + text[end:]
+    )
     (tmp_path / "robot.toml").write_text((HUMANOID / "robot.toml").read_text())
     robot = load_robot(tmp_path)
     args = (robot, names, {}, task.spec.environment, task.spec.expected_contacts)
@@ -335,14 +365,18 @@ def test_an_object_on_a_link_no_joint_moves_collides_everywhere(task, names, ref
     """A block inside the pelvis (which no planned joint moves): every configuration collides, with the block's depth, computed once."""
     sim, _ = reference
     block = EnvironmentObject(name="block", shape="box", size_m=(0.1, 0.1, 0.1), pose={"position": (0.05, 0.0, 0.5)})
-    with CollisionChecker(task.robot, names, {}, [*task.spec.environment, block], task.spec.expected_contacts, margin_m=0.01) as checker:
+    with CollisionChecker(
+        task.robot, names, {}, [*task.spec.environment, block], task.spec.expected_contacts, margin_m=0.01
+    ) as checker:
         assert ("pelvis", "block") not in checker.pairs
         Q = random_configurations(task, names, 50, 43)
         assert not checker.free_many(Q).any()
         depth = {(c.a, c.b): c.depth_m for c in checker.contacts(Q[0])}[("pelvis", "block")]
     bodies = add_environment(sim, [block])
     try:
-        assert depth == pytest.approx(0.01 - nearest(sim, next(iter(bodies)), sim.link_index["pelvis"], -1, 1.0), abs=DISTANCE_M)
+        assert depth == pytest.approx(
+            0.01 - nearest(sim, next(iter(bodies)), sim.link_index["pelvis"], -1, 1.0), abs=DISTANCE_M
+        )
     finally:
         pb.removeBody(next(iter(bodies)), physicsClientId=sim.client)
 
@@ -353,21 +387,37 @@ def test_pybullet_rounds_box_edges_by_its_margin():
     client = pb.connect(pb.DIRECT)
     try:
         h = np.array([0.25, 0.5, 0.02])
-        box = pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_BOX, halfExtents=h.tolist(), physicsClientId=client), physicsClientId=client)
-        capsule = pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_CAPSULE, radius=0.04, height=0.19, physicsClientId=client), physicsClientId=client)
-        sphere = pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_SPHERE, radius=0.05, physicsClientId=client), physicsClientId=client)
+        box = pb.createMultiBody(
+            0,
+            pb.createCollisionShape(pb.GEOM_BOX, halfExtents=h.tolist(), physicsClientId=client),
+            physicsClientId=client,
+        )
+        capsule = pb.createMultiBody(
+            0,
+            pb.createCollisionShape(pb.GEOM_CAPSULE, radius=0.04, height=0.19, physicsClientId=client),
+            physicsClientId=client,
+        )
+        sphere = pb.createMultiBody(
+            0, pb.createCollisionShape(pb.GEOM_SPHERE, radius=0.05, physicsClientId=client), physicsClientId=client
+        )
         rng = np.random.default_rng(17)
         inner = (np.eye(3), np.zeros(3), h - BOX_ROUNDING_M)
         signs = set()
         for k in range(300):
             position, rotation = rng.uniform(-h - 0.1, h + 0.1), Rotation.random(random_state=k)
-            pb.resetBasePositionAndOrientation(capsule, position.tolist(), rotation.as_quat().tolist(), physicsClientId=client)
+            pb.resetBasePositionAndOrientation(
+                capsule, position.tolist(), rotation.as_quat().tolist(), physicsClientId=client
+            )
             pb.resetBasePositionAndOrientation(sphere, position.tolist(), [0, 0, 0, 1], physicsClientId=client)
             axis = rotation.as_matrix()[:, 2] * 0.095
             mine = float(f["segment_box"](position - axis, position + axis, *inner)) - 0.04 - BOX_ROUNDING_M
-            assert mine == pytest.approx(min(p[8] for p in pb.getClosestPoints(capsule, box, 10.0, physicsClientId=client)), abs=DISTANCE_M)
+            assert mine == pytest.approx(
+                min(p[8] for p in pb.getClosestPoints(capsule, box, 10.0, physicsClientId=client)), abs=DISTANCE_M
+            )
             mine = float(f["point_box"](position, *inner)) - 0.05 - BOX_ROUNDING_M
-            assert mine == pytest.approx(min(p[8] for p in pb.getClosestPoints(sphere, box, 10.0, physicsClientId=client)), abs=DISTANCE_M)
+            assert mine == pytest.approx(
+                min(p[8] for p in pb.getClosestPoints(sphere, box, 10.0, physicsClientId=client)), abs=DISTANCE_M
+            )
             signs.add(np.sign(mine))
         assert signs == {-1.0, 1.0}
     finally:
@@ -415,8 +465,12 @@ def test_segment_distance_against_brute_force():
         assert exact <= brute + 1e-12 and brute - exact <= 0.01
     # parallel and crossing cases by hand
     z = np.zeros(3)
-    assert segment_distance(z, np.array([1.0, 0, 0]), np.array([0.5, 1, 0]), np.array([2.0, 1, 0])) == pytest.approx(1.0)
-    assert segment_distance(z, np.array([1.0, 0, 0]), np.array([0.5, -1, 0.2]), np.array([0.5, 1, 0.2])) == pytest.approx(0.2)
+    assert segment_distance(z, np.array([1.0, 0, 0]), np.array([0.5, 1, 0]), np.array([2.0, 1, 0])) == pytest.approx(
+        1.0
+    )
+    assert segment_distance(
+        z, np.array([1.0, 0, 0]), np.array([0.5, -1, 0.2]), np.array([0.5, 1, 0.2])
+    ) == pytest.approx(0.2)
 
 
 def capsule_axis(sim, shapes, link):
@@ -432,7 +486,14 @@ def test_closest_points_equal_analytic_capsule_distances(task, names, reference)
     sim, _ = reference
     shapes = urdf_collisions(task)
     assert {tag for _, tag, _ in shapes.values()} == {"capsule", "sphere"}
-    pairs = [("left_forearm", "right_forearm"), ("left_upper_arm", "right_palm"), ("torso", "left_forearm"), ("pelvis", "right_forearm"), ("head", "left_palm"), ("left_palm", "right_palm")]
+    pairs = [
+        ("left_forearm", "right_forearm"),
+        ("left_upper_arm", "right_palm"),
+        ("torso", "left_forearm"),
+        ("pelvis", "right_forearm"),
+        ("head", "left_palm"),
+        ("left_palm", "right_palm"),
+    ]
     lower, upper = task.robot.lower_upper(names)
     rng = np.random.default_rng(7)
     distances = []
@@ -496,7 +557,10 @@ def test_expected_contacts_are_not_checked(task, names, reference):
     bowl = {name: body for body, name in objects.items()}["bowl"]
     lower, upper = task.robot.lower_upper(names)
     rng = np.random.default_rng(13)
-    with make_checker(task, names, 0.01) as checker, CollisionChecker(task.robot, names, {}, task.spec.environment, (), margin_m=0.01) as strict:
+    with (
+        make_checker(task, names, 0.01) as checker,
+        CollisionChecker(task.robot, names, {}, task.spec.environment, (), margin_m=0.01) as strict,
+    ):
         found = 0
         for _ in range(3000):
             q = lower + rng.random(len(names)) * (upper - lower)
@@ -579,7 +643,9 @@ def test_segment_configurations_are_spaced_by_the_resolution(task, names):
     lower, upper = task.robot.lower_upper(names)
     rng = np.random.default_rng(17)
     with make_checker(task, names, 0.01, resolution_rad=resolution) as checker:
-        cases = [(lower + rng.random(17) * (upper - lower), lower + rng.random(17) * (upper - lower)) for _ in range(10)]
+        cases = [
+            (lower + rng.random(17) * (upper - lower), lower + rng.random(17) * (upper - lower)) for _ in range(10)
+        ]
         a = np.zeros(17)
         cases += [(a, a + 0.3), (a, a + 0.049), (a, a.copy()), (a, np.r_[0.2, np.zeros(16)])]
         for a, b in cases:
@@ -611,7 +677,9 @@ def test_checks_count_every_configuration(task, names, reference):
     q1[names.index("right_elbow")] = -0.3
     with make_checker(task, names, 0.01, resolution_rad=0.02) as checker:
         for q in checker.segment_configurations(q0, q1):  # the segment is free, independently
-            assert reference_contacts(sim, objects, names, q, 0.01, checker.unchecked_pairs, allowed_pairs(task))[0] == {}
+            assert (
+                reference_contacts(sim, objects, names, q, 0.01, checker.unchecked_pairs, allowed_pairs(task))[0] == {}
+            )
         assert checker.checks == 0
         checker.free(q0)
         checker.free(q1)

@@ -136,6 +136,10 @@ def test_segment_box_overlapping_against_every_direction():
         assert -exact == pytest.approx(penetration_by_directions(p, q, h, np.vstack([normals, -normals])), abs=1e-12)
     # a point in the box: the distance to the nearest face; a segment through it along x: the smaller of y, z
     h = np.array([0.3, 0.2, 0.1])
-    assert call("segment_box", np.array([0.1, 0.05, 0.0]), np.array([0.1, 0.05, 0.0]), np.eye(3), np.zeros(3), h) == pytest.approx(-0.1)
-    assert call("segment_box", np.array([-1.0, 0.15, 0.05]), np.array([1.0, 0.15, 0.05]), np.eye(3), np.zeros(3), h) == pytest.approx(-0.05)
+    assert call(
+        "segment_box", np.array([0.1, 0.05, 0.0]), np.array([0.1, 0.05, 0.0]), np.eye(3), np.zeros(3), h
+    ) == pytest.approx(-0.1)
+    assert call(
+        "segment_box", np.array([-1.0, 0.15, 0.05]), np.array([1.0, 0.15, 0.05]), np.eye(3), np.zeros(3), h
+    ) == pytest.approx(-0.05)
     assert overlapping == 120

@@ -54,7 +54,15 @@ def goal_sampler(rng, goals):
 def plan(seed, checker=None, settings=TreeSearchSettings(step_rad=0.1, timeout_s=10.0)):
     goals = []
     checker = checker or WallChecker()
-    result = mcikrrt(START, LOWER, UPPER, checker, goal_sampler(np.random.default_rng([seed, 0]), goals), np.random.default_rng([seed, 1]), settings)
+    result = mcikrrt(
+        START,
+        LOWER,
+        UPPER,
+        checker,
+        goal_sampler(np.random.default_rng([seed, 0]), goals),
+        np.random.default_rng([seed, 1]),
+        settings,
+    )
     return result, goals, checker
 
 

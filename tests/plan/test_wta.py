@@ -119,7 +119,12 @@ def test_distance_hand_computed(area, position, rpy, expected):
 
 
 def test_distance_batched(area):
-    hands = np.stack([area.reference @ transform(p, r) @ area.offset for p, r in [([0, 0, 0], [0, 0, 0]), ([0.05, 0, 0], [0, 0, 0]), ([0, 0, 0], [0, 0, 0.5])]])
+    hands = np.stack(
+        [
+            area.reference @ transform(p, r) @ area.offset
+            for p, r in [([0, 0, 0], [0, 0, 0]), ([0.05, 0, 0], [0, 0, 0]), ([0, 0, 0], [0, 0, 0.5])]
+        ]
+    )
     assert np.allclose(area.distance(hands), [0.0, 0.03, 0.1], atol=1e-12)
 
 

@@ -69,7 +69,11 @@ def circle(recordings) -> Path:
 @pytest.fixture(scope="module")
 def failed(recordings) -> Path:
     """A circle whose far side is out of reach: the path stage fails, the run is kept as failed (no metrics.json)."""
-    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
+    text = (
+        (TASKS / "circle.toml")
+        .read_text()
+        .replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")
+    )  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
     task = recordings / "unreachable.toml"
     task.write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"'))
     with pytest.raises(UnreachablePoseError):
@@ -186,7 +190,12 @@ def test_a_flipped_bit_through_the_cli_is_one_line_and_exit_2(triangle, tmp_path
     run = _copy(triangle, tmp_path)
     mcap = run / "run.mcap"
     data_end, summary_start, size = _sections(mcap)
-    byte = {"data": data_end // 2, "summary": (summary_start + size) // 2, "data_end": data_end + 3, "footer": size - 12}[section]
+    byte = {
+        "data": data_end // 2,
+        "summary": (summary_start + size) // 2,
+        "data_end": data_end + 3,
+        "footer": size - 12,
+    }[section]
     _flip(mcap, mcap.read_bytes(), byte, 0)
     line = _cli_error(command, run, triangle, tmp_path)
     assert "run.mcap: " in line
@@ -326,7 +335,11 @@ def test_a_damaged_file_through_the_cli_is_one_line_and_exit_2(triangle, tmp_pat
 
 def _cli_error(command: str, run: Path, good: Path, tmp_path: Path) -> str:
     """The one stderr line of ``command`` on the damaged ``run`` (with ``good`` as the other run of compare)."""
-    args = {"inspect": [str(run)], "report": [str(run), "--out", str(tmp_path / "report")], "compare": [str(good), str(run)]}[command]
+    args = {
+        "inspect": [str(run)],
+        "report": [str(run), "--out", str(tmp_path / "report")],
+        "compare": [str(good), str(run)],
+    }[command]
     result = runner.invoke(app, [command, *args])
     assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
     assert isinstance(result.exception, SystemExit), repr(result.exception)
@@ -411,7 +424,9 @@ def test_a_mixed_run_through_the_cli_is_one_line_and_exit_2(triangle, triangle_t
         name = {"metrics": "metrics.json", "mcap": "run.mcap", "manifest": "manifest.json"}[case]
         shutil.copy(source / name, run / name)
     line = _cli_error(command, run, triangle, tmp_path)
-    assert {"metrics": "metrics.json: ", "mcap": "run.mcap: ", "manifest": "run.mcap: ", "rrd": "run.rrd: "}[case] in line
+    assert {"metrics": "metrics.json: ", "mcap": "run.mcap: ", "manifest": "run.mcap: ", "rrd": "run.rrd: "}[
+        case
+    ] in line
 
 
 def test_a_run_directory_that_is_a_file_or_missing_is_one_line(tmp_path):

@@ -63,7 +63,9 @@ RUNS = {
         ("path", "ik", "retime", "smooth", "approach", "execute"),
         repetitions=1,
     ),
-    "bowl_grasp": RunSpec(TASKS / "bowl_grasp.toml", "mcikrrt", {}, ("path", "plan", "retime", "smooth", "approach", "execute")),
+    "bowl_grasp": RunSpec(
+        TASKS / "bowl_grasp.toml", "mcikrrt", {}, ("path", "plan", "retime", "smooth", "approach", "execute")
+    ),
 }
 
 
@@ -75,7 +77,9 @@ def out_dir(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module", params=sorted(RUNS))
 def run(request, out_dir) -> tuple[RunSpec, Path]:
     spec = RUNS[request.param]
-    return spec, record_run(load_task(spec.task, spec.repetitions), spec.method, out_dir=out_dir, **spec.options).directory
+    return spec, record_run(
+        load_task(spec.task, spec.repetitions), spec.method, out_dir=out_dir, **spec.options
+    ).directory
 
 
 # -- the URDF, read here with xml.etree -----------------------------------------------------------
@@ -245,7 +249,11 @@ def test_mcap_has_summary_footer_and_consistent_statistics(mcap_file):
     assert footer[0] == records.Opcode.FOOTER and int.from_bytes(footer[1:9], "little") == 8 + 8 + 4
     summary_start, offset_start = int.from_bytes(footer[9:17], "little"), int.from_bytes(footer[17:25], "little")
     crc = int.from_bytes(footer[25:29], "little")
-    assert (summary_start, offset_start, crc) == (mcap_file.footer.summary_start, mcap_file.footer.summary_offset_start, mcap_file.footer.summary_crc)
+    assert (summary_start, offset_start, crc) == (
+        mcap_file.footer.summary_start,
+        mcap_file.footer.summary_offset_start,
+        mcap_file.footer.summary_crc,
+    )
     assert 0 < summary_start <= offset_start < len(data), "no summary section"
     assert crc in (0, zlib.crc32(data[summary_start : len(data) - len(MCAP_MAGIC) - 4]))
 
@@ -292,7 +300,11 @@ def test_schema_checks_catch_bad_messages(mcap_file):
     good = json.loads(mcap_file.messages["/execute/sample"][0].data)
     assert json_errors(schema, [json.dumps(good).encode()]) == []
     joint = next(iter(good["position"]))
-    for broken in ({**good, "rep": "first"}, {k: v for k, v in good.items() if k != "t"}, {**good, "position": {**good["position"], joint: "high"}}):
+    for broken in (
+        {**good, "rep": "first"},
+        {k: v for k, v in good.items() if k != "t"},
+        {**good, "position": {**good["position"], joint: "high"}},
+    ):
         assert json_errors(schema, [json.dumps(broken).encode()]), broken
     assert json_errors(schema, [json.dumps({**good, "t": float("nan")}).encode()])  # NaN is not JSON
     assert json_errors(schema, [b'{"t": 0.0, "rep": 0'])
@@ -357,12 +369,21 @@ def test_tf_puts_the_hands_where_pybullet_measured_them(run, mcap_file):
     assert hands and hands <= set(tips)
     positions: dict[str, list] = {hand: [] for hand in hands}
     for log_time, message in _transforms(mcap_file):
-        frames = {t.child_frame_id: (t.parent_frame_id, [t.translation.x, t.translation.y, t.translation.z], [t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]) for t in message.transforms}
+        frames = {
+            t.child_frame_id: (
+                t.parent_frame_id,
+                [t.translation.x, t.translation.y, t.translation.z],
+                [t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w],
+            )
+            for t in message.transforms
+        }
         assert log_time in samples, f"/tf at {log_time} ns has no /execute/sample"
         for hand in hands:
             p = _world_position(frames, tips[hand])
             recorded = samples[log_time][hand]
-            np.testing.assert_allclose(p, [recorded["x"], recorded["y"], recorded["z"]], atol=1e-6, err_msg=f"{hand} at {log_time} ns")
+            np.testing.assert_allclose(
+                p, [recorded["x"], recorded["y"], recorded["z"]], atol=1e-6, err_msg=f"{hand} at {log_time} ns"
+            )
             positions[hand].append(p)
     for hand, p in positions.items():
         travel = np.ptp(np.array(p), axis=0).max()
@@ -384,7 +405,9 @@ def test_metadata_holds_the_manifest_and_attachments_the_inputs(run, mcap_file):
     manifest = json.loads((run_dir / "manifest.json").read_text())
     assert manifest["status"] == "complete" and tuple(manifest["stages"]) == spec.stages
     joint_path_stage = "plan" if "plan" in spec.stages else "ik"
-    assert manifest["settings"][joint_path_stage]["method"] == spec.method  # a planner's name is not hidden by its settings
+    assert (
+        manifest["settings"][joint_path_stage]["method"] == spec.method
+    )  # a planner's name is not hidden by its settings
     assert run_label(read_run(run_dir)) == f"{run_dir.parent.name} {spec.method}"
     (metadata,) = mcap_file.metadata
     assert metadata.name == "manifest"
@@ -422,7 +445,9 @@ def test_environment_scene_update_holds_the_task_objects(run, mcap_file):
 
 
 def rerun_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([str(RERUN), *args], capture_output=True, text=True, timeout=120, env={**os.environ, "RERUN_ANALYTICS": "0"})
+    return subprocess.run(
+        [str(RERUN), *args], capture_output=True, text=True, timeout=120, env={**os.environ, "RERUN_ANALYTICS": "0"}
+    )
 
 
 @dataclass
@@ -490,7 +515,12 @@ def blueprint_views(path: Path, listing: RrdListing) -> list[str]:
     """The rows (class, name, origin) of the blueprint's views."""
     assert any(kind == "Blueprint" for kind, _, _ in listing.stores), f"no blueprint store, only {listing.stores}"
     views = sorted({e for e in listing.entities("Blueprint") if re.fullmatch(r"/view/[0-9a-f-]+", e)})
-    return [line for view in views for line in rrd_rows(path, view).splitlines() if "┆" in line and line.strip("│ ").startswith("row_")]
+    return [
+        line
+        for view in views
+        for line in rrd_rows(path, view).splitlines()
+        if "┆" in line and line.strip("│ ").startswith("row_")
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -524,14 +554,19 @@ def test_rrd_holds_the_recording_and_an_active_blueprint(run, rrd):
     assert app == "dualarm"
     assert ("Blueprint", "dualarm", blueprint_id, True, True) in listing.activations
     # the layout comes before the data, so that a viewer opening the file never shows its default layout
-    blueprint_chunks, order = listing.store_chunks("Blueprint"), [cid for cid, entity, _, _ in listing.chunks if entity != "/__properties"]
+    blueprint_chunks, order = (
+        listing.store_chunks("Blueprint"),
+        [cid for cid, entity, _, _ in listing.chunks if entity != "/__properties"],
+    )
     assert set(order[: len(blueprint_chunks)]) == blueprint_chunks
     # one footer manifest per store, and together they hold exactly the chunks listed
     assert len(listing.footers) == len(listing.stores) == 2
     assert sorted(c for f in listing.footers for c in f) == sorted(c[0] for c in listing.chunks)
     blueprint = listing.entities("Blueprint")
     assert "/viewport" in blueprint
-    assert all(re.fullmatch(r"/(viewport|(blueprint|selection|time)_panel|container/.+|view/.+)", e) for e in blueprint), sorted(blueprint)
+    assert all(
+        re.fullmatch(r"/(viewport|(blueprint|selection|time)_panel|container/.+|view/.+)", e) for e in blueprint
+    ), sorted(blueprint)
     rows = blueprint_views(path, listing)
     assert any("[3D]" in row and "[/]" in row for row in rows), rows
     assert any("[TimeSeries]" in row and "[/plots]" in row for row in rows), rows
@@ -569,22 +604,30 @@ def test_rrd_has_every_stage_robot(run, rrd, mcap_file, urdf):
             for kind in ("visual", "collision"):
                 for i in range(len(link.findall(kind))):
                     pattern = rf"{re.escape(robot)}/{kind}_geometries/(\w+/)?{link.get('name')}/{kind}_{i}"
-                    assert any(re.fullmatch(pattern, e) for e in entities), f"{stage}: no {kind} {i} of {link.get('name')}"
+                    assert any(re.fullmatch(pattern, e) for e in entities), (
+                        f"{stage}: no {kind} {i} of {link.get('name')}"
+                    )
         for joint, (kind, child) in urdf.joints.items():
             assert f"[{stage}/{child}]" in static, f"/{stage}/tf_static has no {stage}/{child}"
             if kind == "fixed":
                 continue
             rows, columns = entities.get(f"/{stage}/transforms/{joint}", (0, set()))
-            assert {"Transform3D:child_frame", "Transform3D:parent_frame", "Transform3D:quaternion"} <= columns, f"{stage}/{joint}: {columns}"
+            assert {"Transform3D:child_frame", "Transform3D:parent_frame", "Transform3D:quaternion"} <= columns, (
+                f"{stage}/{joint}: {columns}"
+            )
             if stage == "execute":  # the robot on /tf
                 assert rows == tf_messages, f"/{stage}/transforms/{joint}: {rows} rows, /tf has {tf_messages} messages"
             else:
-                assert rows >= 1 if stage in ("path", "approach") else rows > 1, f"/{stage}/transforms/{joint}: {rows} rows"
+                assert rows >= 1 if stage in ("path", "approach") else rows > 1, (
+                    f"/{stage}/transforms/{joint}: {rows} rows"
+                )
         root = rrd_rows(path, f"/{stage}/root")
         assert "[tf#/]" in root and f"[{stage}/{urdf.root}]" in root, root
         if stage != "path":
             assert any(e.startswith(f"/plots/{stage}/") for e in entities), f"no /plots/{stage}"
         if stage in ("ik", "plan", "retime", "smooth", "execute"):
-            assert any(e.startswith(f"/world/{stage}/") and "LineStrips3D:strips" in c for e, (_, c) in entities.items()), f"no hand traces of {stage}"
+            assert any(
+                e.startswith(f"/world/{stage}/") and "LineStrips3D:strips" in c for e, (_, c) in entities.items()
+            ), f"no hand traces of {stage}"
     for obj in tomllib.loads(spec.task.read_text()).get("environment", []):
         assert f"/world/environment/{obj['name']}" in entities

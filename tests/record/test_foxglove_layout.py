@@ -90,7 +90,9 @@ def test_a_path_and_ik_run_gets_panels_for_its_topics_only(tmp_path):
     assert _missing(layout, run.directory / "run.mcap", False) == []
     assert "/execute" not in json.dumps(layout)
     full = foxglove_layout(task.robot, ("path", "ik", "retime", "smooth", "execute"), task.spec.hands)
-    assert "Plot!hand-error: /execute/sample.hand_error_m.left" in _missing(full, run.directory / "run.mcap", False)  # the check can fail
+    assert "Plot!hand-error: /execute/sample.hand_error_m.left" in _missing(
+        full, run.directory / "run.mcap", False
+    )  # the check can fail
     paths = [p["value"] for c in layout["configById"].values() for p in c.get("paths", [])]
     assert "/ik/sample.arm_angle_rad.left" in paths and "/ik/sample.hand_error_m.left" in paths
     assert "/ik/hand_path" in layout["configById"]["3D!dualarm"]["topics"]
@@ -99,9 +101,21 @@ def test_a_path_and_ik_run_gets_panels_for_its_topics_only(tmp_path):
 def test_joints_outside_the_arms_get_a_plot_of_their_own(humanoid):
     """A free waist: its joints, given as the run's joints, are plotted together; the arms' as before."""
     waist = humanoid.chain("waist").joint_names
-    layout = foxglove_layout(humanoid, ("path", "plan", "retime", "smooth", "execute"), ("left",), (*humanoid.hand_chain("left").joint_names, *waist))
-    plotted = {panel: [p["value"].rsplit(".", 1)[1] for p in config["paths"]] for panel, config in layout["configById"].items() if panel.startswith("Plot!joints")}
-    assert plotted == {"Plot!joints-left_arm": list(humanoid.hand_chain("left").joint_names), "Plot!joints-waist": list(waist)}
+    layout = foxglove_layout(
+        humanoid,
+        ("path", "plan", "retime", "smooth", "execute"),
+        ("left",),
+        (*humanoid.hand_chain("left").joint_names, *waist),
+    )
+    plotted = {
+        panel: [p["value"].rsplit(".", 1)[1] for p in config["paths"]]
+        for panel, config in layout["configById"].items()
+        if panel.startswith("Plot!joints")
+    }
+    assert plotted == {
+        "Plot!joints-left_arm": list(humanoid.hand_chain("left").joint_names),
+        "Plot!joints-waist": list(waist),
+    }
 
 
 def test_the_stages_are_the_runs():
@@ -109,7 +123,12 @@ def test_the_stages_are_the_runs():
 
 
 @pytest.mark.parametrize(
-    ("stages", "hands", "joints", "argument"), [(("path", "fly"), ("left",), None, "stages"), (("path",), ("tail",), None, "hands"), (("path",), ("left",), ("nope",), "joint_names")]
+    ("stages", "hands", "joints", "argument"),
+    [
+        (("path", "fly"), ("left",), None, "stages"),
+        (("path",), ("tail",), None, "hands"),
+        (("path",), ("left",), ("nope",), "joint_names"),
+    ],
 )
 def test_a_name_the_robot_or_run_cannot_have_is_refused(humanoid, stages, hands, joints, argument):
     with pytest.raises(InvalidArgumentError, match=f"^{argument}: unknown name") as raised:

@@ -34,7 +34,12 @@ LATER = ("/retime", "/smooth", "/approach", "/execute")
 def runs(tmp_path_factory) -> dict[str, Path]:
     """Level -> the run directory of the triangle (MC-Inverse, every stage, one repetition, seed 0) recorded at that level."""
     out = tmp_path_factory.mktemp("levels")
-    return {level: record_run(load_task(TASKS / "triangle.toml", 1), "mc-inverse", out_dir=out / level, seed=0, record=level).directory for level in RECORD_LEVELS}
+    return {
+        level: record_run(
+            load_task(TASKS / "triangle.toml", 1), "mc-inverse", out_dir=out / level, seed=0, record=level
+        ).directory
+        for level in RECORD_LEVELS
+    }
 
 
 def _topics(mcap: Path) -> set[str]:
@@ -56,7 +61,14 @@ def test_each_level_writes_exactly_its_files_and_records_its_level(runs):
     for level, run in runs.items():
         manifest = json.loads((run / "manifest.json").read_text())
         assert manifest["record"] == level and manifest["status"] == "complete"
-        assert manifest["stages"] == ["path", "ik", "retime", "smooth", "approach", "execute"]  # every stage ran, whatever was recorded
+        assert manifest["stages"] == [
+            "path",
+            "ik",
+            "retime",
+            "smooth",
+            "approach",
+            "execute",
+        ]  # every stage ran, whatever was recorded
 
 
 def test_an_ik_run_records_the_path_and_ik_stages_only(runs):
@@ -74,7 +86,9 @@ def test_every_level_has_the_same_metrics_and_verdict(runs):
     assert set(metrics["ik"]) == set(metrics["metrics"]) == set(metrics["full"])
     assert judged["ik"] == judged["metrics"] == judged["full"]
     manifests = {level: json.loads((run / "manifest.json").read_text()) for level, run in runs.items()}
-    assert {level: (m["status"], m["violations"]) for level, m in manifests.items()} == dict.fromkeys(RECORD_LEVELS, (manifests["full"]["status"], manifests["full"]["violations"]))
+    assert {level: (m["status"], m["violations"]) for level, m in manifests.items()} == dict.fromkeys(
+        RECORD_LEVELS, (manifests["full"]["status"], manifests["full"]["violations"])
+    )
 
 
 def test_a_metrics_run_reads_back_with_no_topics_and_names_its_level(runs):
@@ -90,7 +104,9 @@ def test_an_ik_run_reads_back_its_topics_and_names_its_level_for_the_others(runs
     data = read_run(runs["ik"])
     assert data.record == "ik" and data.recorded_stages == ["path", "ik"]
     assert len(data["/ik/sample"]) == len(read_run(runs["full"])["/ik/sample"])
-    with pytest.raises(RecordingError, match=r"no topic '/retime/sample': the run was recorded with --record ik \(.*path, ik only") as exc:
+    with pytest.raises(
+        RecordingError, match=r"no topic '/retime/sample': the run was recorded with --record ik \(.*path, ik only"
+    ) as exc:
         data["/retime/sample"]
     assert "\n" not in str(exc.value)
     with pytest.raises(RecordingError, match=r"no topic '/nonsense' \(topics: "):
@@ -109,7 +125,10 @@ def test_inspect_and_compare_take_runs_of_every_level(runs):
         assert result.exit_code == 0, result.output
         assert ("record   " in result.output) == (level != "full")
     result = runner.invoke(app, ["inspect", str(runs["metrics"])])
-    assert "record   metrics (no run.mcap, no run.rrd, no topics" in result.output and "execute.duration_s" in result.output
+    assert (
+        "record   metrics (no run.mcap, no run.rrd, no topics" in result.output
+        and "execute.duration_s" in result.output
+    )
     same = runner.invoke(app, ["compare", str(runs["metrics"]), str(runs["metrics"])])
     assert same.exit_code == 0 and "identical" in same.output
     differ = runner.invoke(app, ["compare", str(runs["full"]), str(runs["ik"])])
@@ -131,11 +150,20 @@ def test_a_recording_beside_a_metrics_run_is_refused(runs, tmp_path):
     for name in ("run.mcap", "run.rrd"):
         copy = _copy(runs["metrics"], tmp_path / name)
         shutil.copy(runs["full"] / name, copy / name)
-        with pytest.raises(RecordingError, match=f"{name}: present, but manifest.json says the run was recorded with --record metrics"):
+        with pytest.raises(
+            RecordingError, match=f"{name}: present, but manifest.json says the run was recorded with --record metrics"
+        ):
             read_run(copy)
 
 
-@pytest.mark.parametrize(("level", "claimed", "needle"), [("ik", "full", "records record 'ik', but manifest.json says 'full'"), ("full", "metrics", "run.mcap: present"), ("ik", "bogus", "'record'")])
+@pytest.mark.parametrize(
+    ("level", "claimed", "needle"),
+    [
+        ("ik", "full", "records record 'ik', but manifest.json says 'full'"),
+        ("full", "metrics", "run.mcap: present"),
+        ("ik", "bogus", "'record'"),
+    ],
+)
 def test_a_manifest_claiming_another_level_is_refused(runs, tmp_path, level, claimed, needle):
     copy = _copy(runs[level], tmp_path)
     _edit_manifest(copy, record=claimed)
@@ -153,7 +181,9 @@ def test_a_metrics_run_without_its_metrics_is_refused(runs, tmp_path):
 
 
 def test_an_unknown_level_is_refused_before_anything_is_written(tmp_path):
-    with pytest.raises(InvalidArgumentError, match=r"record: unknown recording level 'everything' \(levels: full, ik, metrics\)"):
+    with pytest.raises(
+        InvalidArgumentError, match=r"record: unknown recording level 'everything' \(levels: full, ik, metrics\)"
+    ):
         record_run(TASKS / "triangle.toml", stages=("path",), out_dir=tmp_path / "api", record="everything")
     result = runner.invoke(app, ["run", "triangle", "--record", "everything", "--out", str(tmp_path / "cli")])
     assert result.exit_code == 2
@@ -170,7 +200,11 @@ def test_cli_run_records_at_the_level_asked(tmp_path):
 
 def test_a_failed_metrics_run_is_kept_with_its_manifest_only(tmp_path):
     """A circle whose far side is out of reach: the path stage fails; the run is kept as failed, its manifest alone, and reads back."""
-    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
+    text = (
+        (TASKS / "circle.toml")
+        .read_text()
+        .replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")
+    )  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
     task = tmp_path / "unreachable.toml"
     task.write_text(text.replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"'))
     with pytest.raises(UnreachablePoseError):

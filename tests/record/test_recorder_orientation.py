@@ -38,7 +38,13 @@ def read_topics(path, prefix: str) -> tuple[dict[str, dict], dict[str, list[dict
 def recorded(tmp_path_factory):
     """pinv on one box carry in position task space: the hands' orientation is measured, not solved (errors of ~2 rad)."""
     task = load_task(TASKS / "carry_box.toml", 1)
-    run = record_run(task, "pinv", stages=("path", "ik"), out_dir=tmp_path_factory.mktemp("runs"), settings=settings_for(task, task_space="position"))
+    run = record_run(
+        task,
+        "pinv",
+        stages=("path", "ik"),
+        out_dir=tmp_path_factory.mktemp("runs"),
+        settings=settings_for(task, task_space="position"),
+    )
     return task, run.directory / "run.mcap"
 
 
@@ -48,7 +54,9 @@ def test_ik_samples_carry_the_orientation_error_pybullet_measures(recorded):
     _, reference = read_topics(mcap, "/task/reference/")
     samples = ik["/ik/sample"]
     assert {s["task_space"] for s in samples} == {"position"}
-    asked = {topic.rsplit("/", 1)[1]: {m["t"]: m["orientation"] for m in messages} for topic, messages in reference.items()}
+    asked = {
+        topic.rsplit("/", 1)[1]: {m["t"]: m["orientation"] for m in messages} for topic, messages in reference.items()
+    }
     assert set(asked) == {"left", "right"}
     worst = 0.0
     with load_pybullet_robot(task.robot.urdf.path) as sim:

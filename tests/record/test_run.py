@@ -31,7 +31,9 @@ def out_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def triangle_run(out_dir) -> Path:
-    return record_run(TRIANGLE, stages=["path"], out_dir=out_dir, seed=0, command=["dualarm", "run", str(TRIANGLE)]).directory
+    return record_run(
+        TRIANGLE, stages=["path"], out_dir=out_dir, seed=0, command=["dualarm", "run", str(TRIANGLE)]
+    ).directory
 
 
 def _messages(run: Path) -> dict[str, list[bytes]]:
@@ -44,7 +46,13 @@ def _messages(run: Path) -> dict[str, list[bytes]]:
 
 def test_run_directory_contract(triangle_run, out_dir):
     assert triangle_run.parent == out_dir / "triangle"
-    assert sorted(p.name for p in triangle_run.iterdir()) == ["foxglove-layout.json", "manifest.json", "metrics.json", "run.mcap", "run.rrd"]
+    assert sorted(p.name for p in triangle_run.iterdir()) == [
+        "foxglove-layout.json",
+        "manifest.json",
+        "metrics.json",
+        "run.mcap",
+        "run.rrd",
+    ]
     assert not [p for p in triangle_run.parent.iterdir() if p.name.startswith(".")]
 
 
@@ -54,7 +62,10 @@ def test_manifest(triangle_run):
     assert manifest["run_id"] == triangle_run.name
     assert manifest["task_sha256"] == hashlib.sha256(TRIANGLE.read_bytes()).hexdigest()
     assert manifest["robot_sha256"]["robot.toml"] == hashlib.sha256((HUMANOID / "robot.toml").read_bytes()).hexdigest()
-    assert manifest["robot_sha256"]["humanoid.urdf"] == hashlib.sha256((HUMANOID / "humanoid.urdf").read_bytes()).hexdigest()
+    assert (
+        manifest["robot_sha256"]["humanoid.urdf"]
+        == hashlib.sha256((HUMANOID / "humanoid.urdf").read_bytes()).hexdigest()
+    )
     assert manifest["seed"] == 0 and manifest["stages"] == ["path"]
     assert manifest["command"] == ["dualarm", "run", str(TRIANGLE)]
     for package in ("casadi", "pybullet", "rerun-sdk", "foxglove-sdk", "mcap"):
@@ -67,7 +78,9 @@ def test_metrics_match_the_task_file(triangle_run):
     steps = sum(round(m["duration_s"] / spec["control_period_s"]) for m in spec["moves"])
     metrics = json.loads((triangle_run / "metrics.json").read_text())
     assert metrics["path.samples"] == 1 + spec["repetitions"] * steps
-    assert metrics["path.duration_s"] == pytest.approx(spec["repetitions"] * sum(m["duration_s"] for m in spec["moves"]))
+    assert metrics["path.duration_s"] == pytest.approx(
+        spec["repetitions"] * sum(m["duration_s"] for m in spec["moves"])
+    )
     assert metrics["path.repetitions"] == spec["repetitions"]
     wp = spec["waypoints"]
     perimeter = sum(np.linalg.norm(np.subtract(wp[a]["position"], wp[b]["position"])) for a, b in ("AB", "BC", "CA"))
@@ -90,7 +103,11 @@ def test_mcap_schemas_metadata_and_attachments(triangle_run):
                 assert (channel.message_encoding, schema.encoding) == ("protobuf", "protobuf")
         assert schemas[topics["/tf"].schema_id].name == "foxglove.FrameTransforms"
         assert schemas[topics["/task/reference_path"].schema_id].name == "foxglove.SceneUpdate"
-        validators = {t: jsonschema.Draft202012Validator(json.loads(schemas[c.schema_id].data)) for t, c in topics.items() if c.message_encoding == "json"}
+        validators = {
+            t: jsonschema.Draft202012Validator(json.loads(schemas[c.schema_id].data))
+            for t, c in topics.items()
+            if c.message_encoding == "json"
+        }
         for _, channel, message in reader.iter_messages():
             if channel.topic in validators:
                 validators[channel.topic].validate(json.loads(message.data))
@@ -118,7 +135,11 @@ def test_readback_reference_equals_the_task_waypoints(triangle_run):
     for k, name in ((0, "A"), (200, "B"), (400, "C"), (600, "A"), (3000, "A")):
         wp = spec["waypoints"][name]
         row = ref.iloc[k]
-        np.testing.assert_allclose(row[["position.x", "position.y", "position.z"]].to_numpy(float), np.add(wp["position"], (0.0, 0.2, 1.4)), atol=1e-12)  # frame = "left.shoulder" (scale 1 here)
+        np.testing.assert_allclose(
+            row[["position.x", "position.y", "position.z"]].to_numpy(float),
+            np.add(wp["position"], (0.0, 0.2, 1.4)),
+            atol=1e-12,
+        )  # frame = "left.shoulder" (scale 1 here)
         quat = row[["orientation.x", "orientation.y", "orientation.z", "orientation.w"]].to_numpy(float)
         angle = (Rotation.from_quat(quat).inv() * Rotation.from_euler("xyz", wp["rpy"])).magnitude()
         assert angle < 1e-9
@@ -137,7 +158,9 @@ def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
     while link != "world":
         r = rows.loc[link]
         step = np.eye(4)
-        step[:3, :3] = Rotation.from_quat([r["rotation.x"], r["rotation.y"], r["rotation.z"], r["rotation.w"]]).as_matrix()
+        step[:3, :3] = Rotation.from_quat(
+            [r["rotation.x"], r["rotation.y"], r["rotation.z"], r["rotation.w"]]
+        ).as_matrix()
         step[:3, 3] = [r["translation.x"], r["translation.y"], r["translation.z"]]
         T = step @ T
         link = parent[link]
@@ -147,12 +170,19 @@ def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
         sim.set_positions(list(initial), list(initial.values()))
         expected = sim.link_pose("left_hand")
     np.testing.assert_allclose(T, expected, atol=1e-6)
-    assert np.linalg.norm(T[:3, 3] - np.add(data["waypoints"]["A"]["position"], (0.0, 0.2, 1.4))) < 1e-6  # frame = "left.shoulder" (scale 1 here)
+    assert (
+        np.linalg.norm(T[:3, 3] - np.add(data["waypoints"]["A"]["position"], (0.0, 0.2, 1.4))) < 1e-6
+    )  # frame = "left.shoulder" (scale 1 here)
 
 
 def test_rerun_file_verifies_with_the_rerun_cli(triangle_run):
     rerun = Path(sys.executable).parent / "rerun"
-    result = subprocess.run([str(rerun), "rrd", "verify", str(triangle_run / "run.rrd")], capture_output=True, text=True, env={"RERUN_ANALYTICS": "0", "PATH": ""})
+    result = subprocess.run(
+        [str(rerun), "rrd", "verify", str(triangle_run / "run.rrd")],
+        capture_output=True,
+        text=True,
+        env={"RERUN_ANALYTICS": "0", "PATH": ""},
+    )
     assert result.returncode == 0, result.stderr
 
 
@@ -179,7 +209,11 @@ def _task_copy(tmp_path: Path, text: str) -> Path:
 
 def test_failed_stage_leaves_a_failed_run(tmp_path):
     """A circle whose far side is out of reach: the path stage fails mid-way, the run is kept as failed."""
-    text = (TASKS / "circle.toml").read_text().replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
+    text = (
+        (TASKS / "circle.toml")
+        .read_text()
+        .replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.60, -0.35]")
+    )  # [0.31, -0.40, 1.05]: relative to the left shoulder [0, 0.2, 1.4]
     task = _task_copy(tmp_path, text)
     with pytest.raises(UnreachablePoseError, match=r"moves\[0\]"):
         record_run(task, out_dir=tmp_path / "out")
@@ -232,7 +266,9 @@ def test_ik_run_records_joints_bounds_and_robot(tmp_path, humanoid):
     arm_joints = [n for n in humanoid.joint_names if not n.startswith("waist")]
     for joint in arm_joints:
         qd = sample[f"velocity.{joint}"].to_numpy()
-        assert np.all(qd >= bounds[f"zeta_lower.{joint}"].to_numpy() - 1e-9) and np.all(qd <= bounds[f"zeta_upper.{joint}"].to_numpy() + 1e-9)
+        assert np.all(qd >= bounds[f"zeta_lower.{joint}"].to_numpy() - 1e-9) and np.all(
+            qd <= bounds[f"zeta_upper.{joint}"].to_numpy() + 1e-9
+        )
     errors = sample[["hand_error_m.left", "hand_error_m.right"]].to_numpy()
     assert data.metrics["ik.position_error_max_m"] == pytest.approx(errors.max(), rel=1e-12)
     tf = data["/tf"]  # a run that stops after IK shows the IK robot

@@ -14,7 +14,9 @@ from dualarm.record.run_dir import MARKER, RunDirectory, claim_output_dir, write
 
 def tree(directory: Path) -> dict[str, bytes | None]:
     """Every entry under ``directory``: a file's bytes, None for a directory."""
-    return {str(p.relative_to(directory)): (p.read_bytes() if p.is_file() else None) for p in sorted(directory.rglob("*"))}
+    return {
+        str(p.relative_to(directory)): (p.read_bytes() if p.is_file() else None) for p in sorted(directory.rglob("*"))
+    }
 
 
 def plant(directory: Path) -> dict[str, bytes | None]:
@@ -61,7 +63,9 @@ def test_a_foreign_entry_in_a_marked_directory_is_named_and_nothing_changes(tmp_
     claim_output_dir(target / "inner", "report").release()
     (target / "inner" / "notes.txt").write_text("mine\n")
     before = tree(target)
-    with pytest.raises(OutputError, match=r"holds 'inner/notes.txt', which dualarm does not write into a report directory"):
+    with pytest.raises(
+        OutputError, match=r"holds 'inner/notes.txt', which dualarm does not write into a report directory"
+    ):
         claim_output_dir(target, "report")
     assert tree(target) == before
 
@@ -89,10 +93,16 @@ def test_recordings_take_any_directory_and_touch_nothing_else(tmp_path):
     (tmp_path / "triangle" / "notes.txt").write_bytes(b"mine")
     before = tree(tmp_path)
     run = RunDirectory.create(tmp_path, "triangle", {})
-    assert run.staging.parent == tmp_path / "triangle" and run.staging.is_dir() and run.final.parent == tmp_path / "triangle"
+    assert (
+        run.staging.parent == tmp_path / "triangle"
+        and run.staging.is_dir()
+        and run.final.parent == tmp_path / "triangle"
+    )
     after = tree(tmp_path)
     assert {k: v for k, v in after.items() if k in before} == before
-    assert set(after) - set(before) == {str(run.staging.relative_to(tmp_path))}  # no marker: the directory is not dualarm's
+    assert set(after) - set(before) == {
+        str(run.staging.relative_to(tmp_path))
+    }  # no marker: the directory is not dualarm's
     del run
 
 
@@ -201,14 +211,19 @@ def test_clear_empties_a_reproduction_that_holds_only_dualarms_files(tmp_path):
     assert [p.name for p in (tmp_path / "out").iterdir()] == [MARKER]
 
 
-@pytest.mark.parametrize("where", ["runs/triangle/notes.txt", "figures/ball-game-pinv/mine.md", "plan/my.csv", "consistency/triangle/runs"])
+@pytest.mark.parametrize(
+    "where", ["runs/triangle/notes.txt", "figures/ball-game-pinv/mine.md", "plan/my.csv", "consistency/triangle/runs"]
+)
 def test_clear_deletes_nothing_when_a_foreign_entry_is_deep_inside(tmp_path, where):
     out = tmp_path / "out"
     _reproduction(out)
     (out / where).parent.mkdir(parents=True, exist_ok=True)
     (out / where).write_text("mine\n")
     before = tree(out)
-    with pytest.raises(OutputError, match=f"holds '{where}'"), claim_output_dir(out, "reproduction") as claimed:  # refused by the claim (in the recordings: by clear)
+    with (
+        pytest.raises(OutputError, match=f"holds '{where}'"),
+        claim_output_dir(out, "reproduction") as claimed,
+    ):  # refused by the claim (in the recordings: by clear)
         claimed.clear()
     assert tree(out) == before
 
@@ -218,7 +233,10 @@ def test_clear_refuses_while_a_run_adds_to_its_recordings(tmp_path):
     _reproduction(out)
     running = RunDirectory.create(out / "runs", "circle", {})
     before = tree(out)
-    with claim_output_dir(out, "reproduction") as claimed, pytest.raises(OutputError, match="runs: in use by another dualarm process"):
+    with (
+        claim_output_dir(out, "reproduction") as claimed,
+        pytest.raises(OutputError, match="runs: in use by another dualarm process"),
+    ):
         claimed.clear()
     assert tree(out) == before
     del running
@@ -239,6 +257,8 @@ def test_write_whole_is_whole_or_nothing(tmp_path, monkeypatch):
 
     with pytest.raises(OutputError, match=f"{target}: exists and is not a directory"):
         write_whole(target / "x.csv", "x")
-    with pytest.raises(OutputError, match=f"{target}/x: cannot create the directory \\({os.strerror(errno.ENOTDIR)}\\)"):
+    with pytest.raises(
+        OutputError, match=f"{target}/x: cannot create the directory \\({os.strerror(errno.ENOTDIR)}\\)"
+    ):
         write_whole(target / "x" / "y.csv", "x")
     assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]

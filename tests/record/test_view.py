@@ -31,13 +31,21 @@ BIN = Path(sys.executable).parent
 @pytest.fixture(scope="module")
 def ik_run(tmp_path_factory) -> Path:
     """The triangle through path, ik and retime, recorded with ``--record ik`` (its recordings hold path and ik)."""
-    return record_run(load_task(TASKS / "triangle.toml", 1), "mc-inverse", stages=("path", "ik", "retime"), out_dir=tmp_path_factory.mktemp("view"), record="ik").directory
+    return record_run(
+        load_task(TASKS / "triangle.toml", 1),
+        "mc-inverse",
+        stages=("path", "ik", "retime"),
+        out_dir=tmp_path_factory.mktemp("view"),
+        record="ik",
+    ).directory
 
 
 @pytest.fixture(scope="module")
 def metrics_run(tmp_path_factory) -> Path:
     """The triangle's path stage, recorded with ``--record metrics``."""
-    return record_run(TASKS / "triangle.toml", stages=("path",), out_dir=tmp_path_factory.mktemp("view_metrics"), record="metrics").directory
+    return record_run(
+        TASKS / "triangle.toml", stages=("path",), out_dir=tmp_path_factory.mktemp("view_metrics"), record="metrics"
+    ).directory
 
 
 def _sigint_default() -> None:
@@ -47,12 +55,21 @@ def _sigint_default() -> None:
 
 def test_web_serves_rerun_s_viewer_until_ctrl_c(ik_run):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}  # headless, as this machine
-    process = subprocess.Popen([str(BIN / "dualarm"), "view", str(ik_run), "--web"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, preexec_fn=_sigint_default)
+    process = subprocess.Popen(
+        [str(BIN / "dualarm"), "view", str(ik_run), "--web"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=_sigint_default,
+    )
     try:
         lines = []
         while not lines or not lines[-1].startswith("Rerun web viewer:"):
             line = process.stdout.readline()
-            assert line, f"ended before printing a URL: {lines} {process.stderr.read() if process.poll() is not None else ''}"
+            assert line, (
+                f"ended before printing a URL: {lines} {process.stderr.read() if process.poll() is not None else ''}"
+            )
             lines.append(line.rstrip("\n"))
         url = re.search(r"http://127\.0\.0\.1:\d+/\S*", lines[-1]).group(0)
         with urllib.request.urlopen(url, timeout=60) as response:
@@ -66,7 +83,9 @@ def test_web_serves_rerun_s_viewer_until_ctrl_c(ik_run):
             process.kill()
     assert process.returncode == 130
     assert err.splitlines() == ["interrupted (SIGINT)"]
-    assert lines[:2] == [f"Foxglove (or Lichtblick): open {ik_run / 'run.mcap'}", lines[1]] and lines[1].startswith("Foxglove layout: ")
+    assert lines[:2] == [f"Foxglove (or Lichtblick): open {ik_run / 'run.mcap'}", lines[1]] and lines[1].startswith(
+        "Foxglove layout: "
+    )
     with pytest.raises(urllib.error.URLError):  # the viewer was stopped with the command
         urllib.request.urlopen(url, timeout=10)
 
@@ -88,15 +107,23 @@ def test_a_metrics_run_has_nothing_to_view(metrics_run):
 
 
 def test_an_unknown_stage_names_the_run_s_stages(ik_run):
-    _one_line_error([str(ik_run), "--web", "--stage", "bogus"], "--stage 'bogus': the run has no such stage (stages: path, ik)")
-    _one_line_error([str(ik_run), "--web", "--stage", "retime"], "--stage 'retime': not in this run's recording (recorded with --record ik; stages: path, ik)")
+    _one_line_error(
+        [str(ik_run), "--web", "--stage", "bogus"], "--stage 'bogus': the run has no such stage (stages: path, ik)"
+    )
+    _one_line_error(
+        [str(ik_run), "--web", "--stage", "retime"],
+        "--stage 'retime': not in this run's recording (recorded with --record ik; stages: path, ik)",
+    )
 
 
 def test_no_display_points_to_web(ik_run, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     monkeypatch.setattr(sys, "platform", "linux")
-    _one_line_error([str(ik_run)], "no display for Rerun's native viewer (DISPLAY and WAYLAND_DISPLAY are unset): use dualarm view --web")
+    _one_line_error(
+        [str(ik_run)],
+        "no display for Rerun's native viewer (DISPLAY and WAYLAND_DISPLAY are unset): use dualarm view --web",
+    )
 
 
 def test_no_viewer_executable_is_one_line(ik_run, tmp_path, monkeypatch):
@@ -112,7 +139,9 @@ def _stand_in(tmp_path: Path, monkeypatch, exit_code: int = 0) -> Path:
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     script = bin_dir / "rerun"
-    script.write_text(f'#!/bin/sh\nprintf "%s\\n" "$@" > {kept}/args\nfor f in "$@"; do cp "$f" {kept}/; done\necho "something went wrong" >&2\nexit {exit_code}\n')
+    script.write_text(
+        f'#!/bin/sh\nprintf "%s\\n" "$@" > {kept}/args\nfor f in "$@"; do cp "$f" {kept}/; done\necho "something went wrong" >&2\nexit {exit_code}\n'
+    )
     script.chmod(0o755)
     monkeypatch.setattr(sys, "executable", str(bin_dir / "python"))
     monkeypatch.setenv("DISPLAY", ":99")
@@ -121,7 +150,9 @@ def _stand_in(tmp_path: Path, monkeypatch, exit_code: int = 0) -> Path:
 
 def _as_rerun_reads_it(rbl: Path) -> str:
     """``rerun rrd print -vvv`` of a blueprint file, without what differs between two writes of one blueprint (row, chunk and store ids, times, sizes, table widths)."""
-    printed = subprocess.run([str(BIN / "rerun"), "rrd", "print", "-vvv", str(rbl)], capture_output=True, text=True, check=True).stdout
+    printed = subprocess.run(
+        [str(BIN / "rerun"), "rrd", "print", "-vvv", str(rbl)], capture_output=True, text=True, check=True
+    ).stdout
     printed = re.sub(r"\b(chunk|row|rec)_[0-9A-Za-z]+", r"\1_", printed)
     printed = re.sub(r"\d{4}-\d\d-\d\dT[\d:.]+", "T", printed)
     printed = re.sub(r"\(\d+(\.\d+)? [KMG]?i?B\)", "(size)", printed)
@@ -143,7 +174,9 @@ def test_stage_hands_the_native_viewer_the_recording_and_a_blueprint_rerun_reads
     monkeypatch.chdir(ik_run.parent)
     result = runner.invoke(app, ["view", ik_run.name, "--stage", "ik"])
     assert result.exit_code == 0, result.output
-    assert result.output.splitlines()[0] == f"Foxglove (or Lichtblick): open {ik_run / 'run.mcap'}"  # absolute, though given relative
+    assert (
+        result.output.splitlines()[0] == f"Foxglove (or Lichtblick): open {ik_run / 'run.mcap'}"
+    )  # absolute, though given relative
     args = (kept / "args").read_text().splitlines()
     assert [Path(a).name for a in args] == ["run.rrd", "ik.rbl"] and Path(args[0]) == ik_run / "run.rrd"
     handed = _as_rerun_reads_it(kept / "ik.rbl")

@@ -42,12 +42,16 @@ pytestmark = pytest.mark.skipif(
     NODE is None or not (FOXGLOVE / "node_modules" / "@foxglove" / "studio-base" / "package.json").is_file(),
     reason="the Foxglove tests need Node.js >= 20 and its packages: npm ci --prefix viewers/foxglove",
 )
-needs_chromium = pytest.mark.skipif(not CHROMIUM.is_file(), reason=f"the Foxglove browser tests need Chromium at {CHROMIUM}: apt-get install chromium")
+needs_chromium = pytest.mark.skipif(
+    not CHROMIUM.is_file(), reason=f"the Foxglove browser tests need Chromium at {CHROMIUM}: apt-get install chromium"
+)
 
 
 def _node(script: str, *args: str, timeout_s: float) -> list[dict]:
     """Run a harness script; its JSON lines. Exit code 1 means findings (asserted by the tests), 2 the harness failed."""
-    done = subprocess.run([str(NODE), str(FOXGLOVE / script), *args], capture_output=True, text=True, timeout=timeout_s, check=False)
+    done = subprocess.run(
+        [str(NODE), str(FOXGLOVE / script), *args], capture_output=True, text=True, timeout=timeout_s, check=False
+    )
     assert done.returncode in (0, 1), f"{script} failed:\n{done.stderr[-3000:]}"
     return [json.loads(line) for line in done.stdout.splitlines()]
 
@@ -63,7 +67,15 @@ def bad_run(tmp_path_factory, shipped_runs) -> Path:
     (run / "run.mcap").symlink_to(shipped_runs["triangle"] / "run.mcap")
     layout = {
         "configById": {
-            "Plot!bad": {"paths": [{"value": "/execute/sample.position.no_such_joint", "enabled": True, "timestampMethod": "receiveTime"}]},
+            "Plot!bad": {
+                "paths": [
+                    {
+                        "value": "/execute/sample.position.no_such_joint",
+                        "enabled": True,
+                        "timestampMethod": "receiveTime",
+                    }
+                ]
+            },
             "3D!bad": {"followTf": "no_such_frame", "topics": {}},
         },
         "layout": "Plot!bad",
@@ -76,14 +88,25 @@ def bad_run(tmp_path_factory, shipped_runs) -> Path:
 def parsed(shipped_runs, bad_run) -> dict[str, list[dict]]:
     """Task name (and "bad layout": :func:`bad_run`) -> the Node check's lines for its run: its channels, then its layout's panels."""
     runs = {**shipped_runs, "bad layout": bad_run}
-    lines = _node("check-mcap.cjs", *[arg for run in runs.values() for arg in (*_layout_args(run), str(run / "run.mcap"))], timeout_s=600)
+    lines = _node(
+        "check-mcap.cjs",
+        *[arg for run in runs.values() for arg in (*_layout_args(run), str(run / "run.mcap"))],
+        timeout_s=600,
+    )
     return {name: [line for line in lines if line["mcap"] == str(run / "run.mcap")] for name, run in runs.items()}
 
 
 @pytest.mark.parametrize("task", list(SHIPPED))
 def test_every_channel_parses_and_decodes_in_studio(parsed, task):
     channels = [line for line in parsed[task] if "panel" not in line]
-    failing = {line["topic"]: line.get("parse_error") or line["problems"] or line.get("urdf") or f"{line['decoded']} of {line['messages']} decoded" for line in channels if not line["ok"]}
+    failing = {
+        line["topic"]: line.get("parse_error")
+        or line["problems"]
+        or line.get("urdf")
+        or f"{line['decoded']} of {line['messages']} decoded"
+        for line in channels
+        if not line["ok"]
+    }
     assert failing == {}
     assert channels and all(line["decoded"] == line["messages"] > 0 for line in channels)
 
@@ -101,7 +124,9 @@ def test_studio_can_plot_every_path_of_the_runs_layout(parsed, shipped_runs, tas
     """Each plot path is a plottable field by Studio's message path code and holds values; the 3D panel's frame is on /tf and joins its scene topics' frames."""
     assert (shipped_runs[task] / LAYOUT_FILE).is_file(), f"the run has no {LAYOUT_FILE}"
     panels = [line for line in parsed[task] if "panel" in line]
-    assert {line["panel"] for line in panels} == set(json.loads((shipped_runs[task] / LAYOUT_FILE).read_text())["configById"])
+    assert {line["panel"] for line in panels} == set(
+        json.loads((shipped_runs[task] / LAYOUT_FILE).read_text())["configById"]
+    )
     assert [line for line in panels if not line["ok"]] == []
 
 
@@ -120,9 +145,13 @@ def test_quoted_field_names_parse_in_studio():
         f"const {{ parseRosPath }} = loadMessagePathSupport();"
         f"for (const p of {json.dumps([_path('/execute/sample', 'position', n) for n in names])}) console.log(JSON.stringify(parseRosPath(p)));"
     )
-    done = subprocess.run([str(NODE), "-e", script], capture_output=True, text=True, timeout=120, check=True, cwd=FOXGLOVE)
+    done = subprocess.run(
+        [str(NODE), "-e", script], capture_output=True, text=True, timeout=120, check=True, cwd=FOXGLOVE
+    )
     parsed_paths = [json.loads(line) for line in done.stdout.splitlines()]
-    assert [(p["topicName"], [part["name"] for part in p["messagePath"]]) for p in parsed_paths] == [("/execute/sample", ["position", n]) for n in names]
+    assert [(p["topicName"], [part["name"] for part in p["messagePath"]]) for p in parsed_paths] == [
+        ("/execute/sample", ["position", n]) for n in names
+    ]
 
 
 # -- the whole Studio app, in headless Chromium ------------------------------------------------------
@@ -134,7 +163,11 @@ def opened(shipped_runs, tmp_path_factory) -> dict[str, dict]:
     missing = [task for task in SHIPPED if not (shipped_runs[task] / LAYOUT_FILE).is_file()]
     assert not missing, f"runs without {LAYOUT_FILE}: {missing}"
     out = tmp_path_factory.mktemp("studio")
-    args = [arg for task in SHIPPED for arg in ("--layout", str(shipped_runs[task] / LAYOUT_FILE), str(shipped_runs[task] / "run.mcap"))]
+    args = [
+        arg
+        for task in SHIPPED
+        for arg in ("--layout", str(shipped_runs[task] / LAYOUT_FILE), str(shipped_runs[task] / "run.mcap"))
+    ]
     results = _node("open-in-studio.cjs", "--out", str(out), *args, timeout_s=300 * len(SHIPPED))
     return {task: result for task, result in zip(SHIPPED, results, strict=True)}
 
@@ -180,5 +213,10 @@ def test_studio_draws_the_whole_robot(opened, task):
     rows, cols = np.nonzero(mask)
     assert mask.mean() > 0.01, f"{mask.sum()} robot pixels of {mask.size}"
     height, width = mask.shape
-    assert rows.min() >= MARGIN_PX and cols.min() >= MARGIN_PX and rows.max() < height - MARGIN_PX and cols.max() < width - MARGIN_PX
+    assert (
+        rows.min() >= MARGIN_PX
+        and cols.min() >= MARGIN_PX
+        and rows.max() < height - MARGIN_PX
+        and cols.max() < width - MARGIN_PX
+    )
     assert rows.max() - rows.min() > 0.3 * height  # a 1.6 m robot, not a speck

@@ -28,7 +28,8 @@ TARGET = "tf#/"
 MARGIN_PX = 4
 
 pytestmark = pytest.mark.skipif(
-    not any(Path(d).is_dir() and any(Path(d).glob("*.json")) for d in ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d")) or shutil.which(RERUN) is None,
+    not any(Path(d).is_dir() and any(Path(d).glob("*.json")) for d in ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"))
+    or shutil.which(RERUN) is None,
     reason="the Rerun viewer tests need a Vulkan driver: apt-get install mesa-vulkan-drivers",
 )
 
@@ -108,7 +109,11 @@ def test_every_view_reports_nothing_at_start_middle_and_end(opened):
     client, _, end = opened
     for t in (0.0, end / 2, end):
         _show(client, t)
-        errors = {f"{v.name} [{v.view_class}]": sorted({r.summary for r in v.reports})[:3] for v in client.get_state().views if v.reports}
+        errors = {
+            f"{v.name} [{v.view_class}]": sorted({r.summary for r in v.reports})[:3]
+            for v in client.get_state().views
+            if v.reports
+        }
         assert not errors, f"t = {t:g} s: {errors}"
 
 
@@ -121,7 +126,9 @@ def test_every_stage_robot_is_joined_to_the_3d_views_frame(opened):
         joined = _joined(client.get_transform_graph())
         for stage in stages:
             missing = sorted(f"{stage}/{link}" for link in links if f"{stage}/{link}" not in joined)
-            assert not missing, f"t = {t:g} s: {len(missing)} frames of the {stage} robot are not joined to {TARGET}, e.g. {missing[:3]}"
+            assert not missing, (
+                f"t = {t:g} s: {len(missing)} frames of the {stage} robot are not joined to {TARGET}, e.g. {missing[:3]}"
+            )
 
 
 def test_the_3d_view_draws_the_whole_robot(opened):
@@ -149,12 +156,21 @@ def test_the_3d_view_draws_the_whole_robot(opened):
     h, w = robot.shape
     assert robot.sum() >= 0.01 * h * w, f"only {robot.sum()} of {h * w} pixels are the robot's"
     ys, xs = np.nonzero(robot)
-    assert MARGIN_PX <= xs.min() and MARGIN_PX <= ys.min() and xs.max() < w - MARGIN_PX and ys.max() < h - MARGIN_PX, "the robot reaches the view's edge: cut off"
+    assert MARGIN_PX <= xs.min() and MARGIN_PX <= ys.min() and xs.max() < w - MARGIN_PX and ys.max() < h - MARGIN_PX, (
+        "the robot reaches the view's edge: cut off"
+    )
 
 
 def test_the_run_opens_on_its_own_layout(opened):
     """The views the viewer shows are the run's blueprint (sent before the data), not a layout the viewer made up."""
     client, stages, _ = opened
     names = {v.name for v in client.get_state().views}
-    assert {"execute: robot and hand paths", "hand error [m]", "velocity / limit", "acceleration / limit", "jerk / limit", "contacts"} <= names, names
+    assert {
+        "execute: robot and hand paths",
+        "hand error [m]",
+        "velocity / limit",
+        "acceleration / limit",
+        "jerk / limit",
+        "contacts",
+    } <= names, names
     assert {stage for stage in stages if stage != "approach"} <= names, names  # the "stages" tab: a 3D view per stage

@@ -44,19 +44,27 @@ def runs_dir(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def triangle_reruns(runs_dir) -> tuple[Path, Path]:
     """The same command twice: MC-Inverse on the triangle, path and IK, 2 repetitions."""
-    return tuple(record_run(load_task(TRIANGLE, 2), "mc-inverse", stages=("path", "ik"), out_dir=runs_dir / "rerun").directory for _ in range(2))
+    return tuple(
+        record_run(load_task(TRIANGLE, 2), "mc-inverse", stages=("path", "ik"), out_dir=runs_dir / "rerun").directory
+        for _ in range(2)
+    )
 
 
 @pytest.fixture(scope="module")
 def full_reruns(runs_dir) -> tuple[Path, Path]:
     """The same command twice through every stage (MC-Inverse, 1 repetition: a cheap full run whose trajectory passes validation)."""
-    return tuple(record_run(load_task(TRIANGLE, 1), "mc-inverse", out_dir=runs_dir / "full").directory for _ in range(2))
+    return tuple(
+        record_run(load_task(TRIANGLE, 1), "mc-inverse", out_dir=runs_dir / "full").directory for _ in range(2)
+    )
 
 
 @pytest.fixture(scope="module")
 def ball_game_methods(runs_dir) -> tuple[Path, Path]:
     """TV-GDD and pinv on the ball game, path and IK."""
-    return tuple(record_run(BALL_GAME, ik, stages=("path", "ik"), out_dir=runs_dir / "methods").directory for ik in ("tvgdd", "pinv"))
+    return tuple(
+        record_run(BALL_GAME, ik, stages=("path", "ik"), out_dir=runs_dir / "methods").directory
+        for ik in ("tvgdd", "pinv")
+    )
 
 
 @pytest.fixture(scope="module")
@@ -72,13 +80,18 @@ def gain_task(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def gain_pair(ball_game_methods, gain_task, runs_dir) -> tuple[Path, Path]:
     """pinv on the ball game at K = 50 and at K = 45: the same topics, fields, rows and text; only numbers differ."""
-    return ball_game_methods[1], record_run(gain_task, "pinv", stages=("path", "ik"), out_dir=runs_dir / "gain").directory
+    return ball_game_methods[1], record_run(
+        gain_task, "pinv", stages=("path", "ik"), out_dir=runs_dir / "gain"
+    ).directory
 
 
 @pytest.fixture(scope="module")
 def repetitions_pair(runs_dir) -> tuple[Path, Path]:
     """pinv on the triangle with 2 repetitions (A) and with 1 (B)."""
-    return tuple(record_run(load_task(TRIANGLE, n), "pinv", stages=("path", "ik"), out_dir=runs_dir / "reps").directory for n in (2, 1))
+    return tuple(
+        record_run(load_task(TRIANGLE, n), "pinv", stages=("path", "ik"), out_dir=runs_dir / "reps").directory
+        for n in (2, 1)
+    )
 
 
 # --- independent computations --------------------------------------------------------------------
@@ -182,7 +195,9 @@ def test_a_rerun_is_identical_in_every_judged_field(pair, request):
     table = comparison.table
     assert list(table.columns) == list(COLUMNS)
     rows = table_of(comparison)
-    assert set(rows) == set(expected)  # a row per topic and field, the status and each metric; no (rows) or (topic) rows
+    assert set(rows) == set(
+        expected
+    )  # a row per topic and field, the status and each metric; no (rows) or (topic) rows
     assert {key for key, row in rows.items() if row["wall_clock"]} == wall_clock
     for key, row in rows.items():
         assert row["rows_a"] == row["rows_b"] == row["aligned"], key
@@ -211,7 +226,11 @@ def ball_game_solutions():
     settings = settings_for(task)
     pinv_settings = pinv_settings_for(task)
     assert pinv_settings.feedback_gain == settings.feedback_gain
-    return reference, solve_tvgdd(task.robot, reference, task.initial_q, settings), solve_pinv(task.robot, reference, task.initial_q, pinv_settings)
+    return (
+        reference,
+        solve_tvgdd(task.robot, reference, task.initial_q, settings),
+        solve_pinv(task.robot, reference, task.initial_q, pinv_settings),
+    )
 
 
 def test_different_methods_differ_by_what_the_solvers_computed(ball_game_methods, ball_game_solutions):
@@ -233,7 +252,11 @@ def test_different_methods_differ_by_what_the_solvers_computed(ball_game_methods
                 assert np.isnan(row["first_beyond_t"]) and row["max_difference"] == 0.0, joint
     method = rows[("/ik/sample", "method")]
     assert method["max_difference"] == np.inf
-    assert f"text differs in {len(reference)} rows" in method["note"] and "'tvgdd'" in method["note"] and "'pinv'" in method["note"]
+    assert (
+        f"text differs in {len(reference)} rows" in method["note"]
+        and "'tvgdd'" in method["note"]
+        and "'pinv'" in method["note"]
+    )
 
 
 def test_different_methods_exit_1_naming_the_earliest_difference(ball_game_methods):
@@ -291,7 +314,9 @@ def test_beyond_lists_the_fields_over_the_tolerance_with_where_they_first_exceed
     tol = max([*largest(differences).values(), *files.values()]) * fraction
     comparison = compare_runs(run_data(a), run_data(b), tol)
     beyond = comparison.beyond
-    expected = {key for key, (_, gap) in differences.items() if (gap > tol).any()} | {key for key, value in files.items() if value > tol}
+    expected = {key for key, (_, gap) in differences.items() if (gap > tol).any()} | {
+        key for key, value in files.items() if value > tol
+    }
     assert set(zip(beyond["topic"], beyond["field"])) == expected
     assert comparison.within == (not expected)
     for _, row in beyond.iterrows():
@@ -347,9 +372,13 @@ def test_rows_in_one_run_only_are_counted_and_beyond_any_tolerance(repetitions_p
             assert row["max_difference"] == np.inf
             ca, cb = _row_counts(da[topic]), _row_counts(db[topic])
             first_rep, first_t = min(((ca - cb) + (cb - ca)).keys())
-            assert (row["first_beyond_rep"], row["first_beyond_t"]) == (first_rep, pytest.approx(first_t, abs=1e-9)), topic
+            assert (row["first_beyond_rep"], row["first_beyond_t"]) == (first_rep, pytest.approx(first_t, abs=1e-9)), (
+                topic
+            )
             assert re.search(rf"\b{only_a} rows only in A, {only_b} only in B\b", row["note"]), (topic, row["note"])
-            assert (row["rows_a"], row["rows_b"]) == ((len(db[topic]), len(da[topic])) if swapped else (len(da[topic]), len(db[topic])))
+            assert (row["rows_a"], row["rows_b"]) == (
+                (len(db[topic]), len(da[topic])) if swapped else (len(da[topic]), len(db[topic]))
+            )
 
     # rows in one run only are beyond any tolerance: with a huge one, only they (and fields of one run only) remain
     comparison = compare_runs(run_data(a), run_data(b), 1e300)
@@ -398,7 +427,11 @@ def _empty(run: Path) -> Path:
     return run / "manifest.json"
 
 
-@pytest.mark.parametrize("damage", [_remove, _empty, _truncate_mcap, _corrupt_chunk, _corrupt_manifest], ids=["missing", "not-a-run", "truncated-mcap", "corrupt-chunk", "corrupt-manifest"])
+@pytest.mark.parametrize(
+    "damage",
+    [_remove, _empty, _truncate_mcap, _corrupt_chunk, _corrupt_manifest],
+    ids=["missing", "not-a-run", "truncated-mcap", "corrupt-chunk", "corrupt-manifest"],
+)
 @pytest.mark.parametrize("side", ["A", "B"])
 def test_a_missing_or_corrupt_run_is_one_line_and_exit_2(triangle_reruns, tmp_path, damage, side):
     good = triangle_reruns[0]
@@ -424,7 +457,9 @@ def test_csv_holds_the_comparison_table(repetitions_pair, tmp_path):
     table = compare_runs(run_data(a), run_data(b)).table
     assert list(written.columns) == list(COLUMNS)
     assert len(written) == len(table)
-    assert np.isinf(table["max_difference"]).any() and table["first_beyond_t"].isna().any()  # the CSV has infs and NaNs to carry
+    assert (
+        np.isinf(table["max_difference"]).any() and table["first_beyond_t"].isna().any()
+    )  # the CSV has infs and NaNs to carry
     for column in COLUMNS:
         mine, theirs = written[column], table[column]
         if column in ("topic", "field", "note"):
@@ -459,7 +494,9 @@ def test_runs_of_different_status_are_never_identical(triangle_reruns):
         assert row["max_difference"] == np.inf and not row["wall_clock"]
         assert "'complete'" in row["note"] and "'failed'" in row["note"]
         assert not comparison.within
-        assert [(r.topic, r.field) for r in comparison.beyond.itertuples()] == [("manifest.json", "status")]  # the topics are the same run's
+        assert [(r.topic, r.field) for r in comparison.beyond.itertuples()] == [
+            ("manifest.json", "status")
+        ]  # the topics are the same run's
     assert table_of(compare_runs(a, a))[("manifest.json", "status")]["max_difference"] == 0.0
 
 
@@ -472,7 +509,10 @@ def test_metrics_are_judged_with_the_tolerance_and_wall_clock_metrics_listed(tri
     b = replace(a, metrics=changed)
 
     rows = table_of(compare_runs(a, b))
-    assert rows[("metrics.json", judged_key)]["max_difference"] == gap and not rows[("metrics.json", judged_key)]["wall_clock"]
+    assert (
+        rows[("metrics.json", judged_key)]["max_difference"] == gap
+        and not rows[("metrics.json", judged_key)]["wall_clock"]
+    )
     assert rows[("metrics.json", clock_key)]["wall_clock"]
     assert rows[("metrics.json", clock_key)]["max_difference"] == pytest.approx(1.0, abs=1e-9)
     unchanged = [key for key in metrics if key not in (judged_key, clock_key)]
@@ -490,13 +530,24 @@ def test_a_metric_in_one_run_only_or_null_in_one_only_is_beyond_any_tolerance(tr
     b = replace(a, metrics={**{k: v for k, v in metrics.items() if k != removed}, nulled: None})
     comparison = compare_runs(a, b, 1e300)
     rows = table_of(comparison)
-    assert rows[("metrics.json", removed)]["max_difference"] == np.inf and rows[("metrics.json", removed)]["note"] == "only in A"
-    assert rows[("metrics.json", nulled)]["max_difference"] == np.inf and rows[("metrics.json", nulled)]["note"] == "null in B only"
-    assert {(r.topic, r.field) for r in comparison.beyond.itertuples()} == {("metrics.json", removed), ("metrics.json", nulled)}
+    assert (
+        rows[("metrics.json", removed)]["max_difference"] == np.inf
+        and rows[("metrics.json", removed)]["note"] == "only in A"
+    )
+    assert (
+        rows[("metrics.json", nulled)]["max_difference"] == np.inf
+        and rows[("metrics.json", nulled)]["note"] == "null in B only"
+    )
+    assert {(r.topic, r.field) for r in comparison.beyond.itertuples()} == {
+        ("metrics.json", removed),
+        ("metrics.json", nulled),
+    }
 
 
 @pytest.mark.parametrize("edit", ["swapped metrics.json", "failed status"])
-def test_a_swapped_metrics_json_or_an_edited_status_is_not_identical_but_refused(triangle_reruns, repetitions_pair, tmp_path, edit):
+def test_a_swapped_metrics_json_or_an_edited_status_is_not_identical_but_refused(
+    triangle_reruns, repetitions_pair, tmp_path, edit
+):
     """The issue's cases: ``compare`` said "identical" for a run whose metrics.json came from another
     run, or whose manifest was set to failed. The run is not one run's files: one line, exit 2."""
     good = triangle_reruns[0]

@@ -26,17 +26,24 @@ def short_circle(tmp_path_factory):
 
 
 def test_consistency_writes_the_runs_metrics_and_figures(short_circle, tmp_path):
-    result = runner.invoke(app, ["consistency", str(short_circle), "--methods", "mc-inverse,dls-svd", "--reps", "3", "--out", str(tmp_path)])
+    result = runner.invoke(
+        app,
+        ["consistency", str(short_circle), "--methods", "mc-inverse,dls-svd", "--reps", "3", "--out", str(tmp_path)],
+    )
     # a circle in 1 s asks the shoulder for more than its velocity limit (no retime follows the IK
     # runs of a consistency comparison): both runs are violated, which the table and the exit say
     assert result.exit_code == 3, result.output
     table = pd.read_csv(tmp_path / "consistency.csv")
-    assert list(table["status"]) == ["violated", "violated"] and all(v.startswith("ik: velocity of ") for v in table["violation"])
+    assert list(table["status"]) == ["violated", "violated"] and all(
+        v.startswith("ik: velocity of ") for v in table["violation"]
+    )
     robot = load_robot(HUMANOID)
     arm = tuple(robot.hand_chain("left").joint_names)
     for _, row in table.iterrows():
         joints = read_run(Path(row["run"]))["/ik/sample"][[f"position.{n}" for n in arm]].to_numpy()
-        assert (np.abs(np.diff(joints, axis=0)).max(axis=0) / 0.01 > robot.limit_array("velocity", arm)).any()  # finite differences of the recorded joints
+        assert (
+            np.abs(np.diff(joints, axis=0)).max(axis=0) / 0.01 > robot.limit_array("velocity", arm)
+        ).any()  # finite differences of the recorded joints
     assert list(table.columns[: len(COLUMNS) + 1]) == ["method", *COLUMNS]
     assert list(table["method"]) == ["mc-inverse", "dls-svd"]
     for _, row in table.iterrows():
@@ -54,7 +61,9 @@ def test_consistency_writes_the_runs_metrics_and_figures(short_circle, tmp_path)
 
 
 def test_an_unknown_method_writes_nothing(short_circle, tmp_path):
-    result = runner.invoke(app, ["consistency", str(short_circle), "--methods", "mc-inverse,magic", "--out", str(tmp_path / "out")])
+    result = runner.invoke(
+        app, ["consistency", str(short_circle), "--methods", "mc-inverse,magic", "--out", str(tmp_path / "out")]
+    )
     assert result.exit_code == 2
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "unknown IK method 'magic'" in lines[0]
@@ -65,12 +74,20 @@ def test_a_failing_method_is_a_row_not_the_end(short_circle, tmp_path):
     """MC-Inverse held to psi in (-0.1, 0.1) cannot draw the circle: its row says so, and the
     other method still runs."""
     narrow = tmp_path / "circle.toml"
-    narrow.write_text(short_circle.read_text().replace("range_rad = [-3.141592653589793, 0.0]", "range_rad = [-0.1, 0.1]"))
-    result = runner.invoke(app, ["consistency", str(narrow), "--methods", "mc-inverse,pybullet", "--reps", "2", "--out", str(tmp_path / "out")])
+    narrow.write_text(
+        short_circle.read_text().replace("range_rad = [-3.141592653589793, 0.0]", "range_rad = [-0.1, 0.1]")
+    )
+    result = runner.invoke(
+        app,
+        ["consistency", str(narrow), "--methods", "mc-inverse,pybullet", "--reps", "2", "--out", str(tmp_path / "out")],
+    )
     assert result.exit_code == 1, result.output  # the worst verdict: a failed run
     table = pd.read_csv(tmp_path / "out" / "consistency.csv").set_index("method")
     assert table.loc["mc-inverse", "status"] == "failed" and "arm_angle.range_rad" in table.loc["mc-inverse", "error"]
     assert np.isnan(table.loc["mc-inverse", "rep_joint_deviation_max_rad"])
-    assert table.loc["pybullet", "status"] in ("complete", "violated")  # it ran (its verdict may name its failed samples)
+    assert table.loc["pybullet", "status"] in (
+        "complete",
+        "violated",
+    )  # it ran (its verdict may name its failed samples)
     manifest = json.loads((Path(table.loc["mc-inverse", "run"]) / "manifest.json").read_text())
     assert manifest["status"] == "failed"

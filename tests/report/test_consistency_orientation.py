@@ -55,7 +55,11 @@ def test_orientation_error_stands_beside_the_joint_deviations_and_position_only_
     """The table's orientation errors are PyBullet's. Position-only TV-GDD starts on the asked pose
     (circle.toml's ``initial`` is MC-Inverse's configuration at P0) and leaves it along the circle,
     by more than ten times the tolerance a pose-solving method is judged against (measured 0.72 rad)."""
-    result = runner.invoke(app, ["consistency", str(position_circle), "--methods", "mc-inverse,tvgdd", "--reps", "2", "--out", str(tmp_path)], env={"COLUMNS": "250"})
+    result = runner.invoke(
+        app,
+        ["consistency", str(position_circle), "--methods", "mc-inverse,tvgdd", "--reps", "2", "--out", str(tmp_path)],
+        env={"COLUMNS": "250"},
+    )
     assert result.exit_code == 0, result.output
     assert COLUMNS.index("orientation_error_max_rad") == COLUMNS.index("rep_arm_angle_deviation_max_rad") + 1
     table = pd.read_csv(tmp_path / "consistency.csv").set_index("method")
@@ -73,7 +77,9 @@ def test_orientation_error_stands_beside_the_joint_deviations_and_position_only_
     assert f"| tvgdd ({POSITION_ONLY}) |" in markdown and "| mc-inverse |" in markdown
     (header,) = [line for line in markdown.splitlines() if line.startswith("| method |")]
     assert "| rep_arm_angle_deviation_max_rad | orientation_error_max_rad |" in header
-    rows = [line.split("│") for line in result.stdout.splitlines() if line.startswith("│")]  # rich wraps long cells over lines
+    rows = [
+        line.split("│") for line in result.stdout.splitlines() if line.startswith("│")
+    ]  # rich wraps long cells over lines
     method_column = " ".join(cells[1].strip() for cells in rows)
     assert method_column == f"mc-inverse tvgdd ({POSITION_ONLY})"
     header = " ".join(line for line in result.stdout.splitlines() if line.startswith("┃"))

@@ -31,9 +31,17 @@ def test_the_documented_consistency_table_equals_the_runs_metrics(tmp_path, caps
         metrics = json.loads((run / "metrics.json").read_text())
         method = json.loads((run / "manifest.json").read_text())["settings"]["ik"]["method"]
         for column in ("rep_joint_deviation_max_rad", "rep_arm_angle_deviation_max_rad"):
-            assert table.loc[method, column] == pytest.approx(metrics[f"ik.{column}"], rel=1e-12, abs=1e-15), (method, column)
+            assert table.loc[method, column] == pytest.approx(metrics[f"ik.{column}"], rel=1e-12, abs=1e-15), (
+                method,
+                column,
+            )
         if method == "pybullet":
             assert metrics["ik.failures"] > 0  # failed samples are there to be left out
             violations = json.loads((run / "manifest.json").read_text())["violations"]
-            assert any(v["check"] == "ik" and f"{int(metrics['ik.failures'])} of " in v["message"] and "samples failed" in v["message"] for v in violations), violations
+            assert any(
+                v["check"] == "ik"
+                and f"{int(metrics['ik.failures'])} of " in v["message"]
+                and "samples failed" in v["message"]
+                for v in violations
+            ), violations
     assert table.loc["tvgdd", "rep_joint_deviation_max_rad"] > 1e-3  # the drift is there to be found

@@ -21,7 +21,12 @@ def test_report_of_a_pinv_run(tmp_path):
     result = CliRunner().invoke(app, ["report", str(run), "--out", str(tmp_path / "report")])
     assert result.exit_code == 0, result.output
     out = Path(result.stdout.strip().splitlines()[-1])
-    assert {p.name for p in out.glob("*.png")} == {"hand_errors.png", "joints_vs_bounds.png", "velocities_vs_bounds.png", "bound_profiles.png"}
+    assert {p.name for p in out.glob("*.png")} == {
+        "hand_errors.png",
+        "joints_vs_bounds.png",
+        "velocities_vs_bounds.png",
+        "bound_profiles.png",
+    }
     summary = (out / "summary.md").read_text()
     assert "## IK: pinv" in summary and "ik.position_error_max_m" in summary
 

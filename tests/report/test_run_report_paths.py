@@ -24,7 +24,12 @@ runner = CliRunner()
 @pytest.fixture(scope="module")
 def run(tmp_path_factory) -> Path:
     """MC-Inverse on the triangle, path and IK, one repetition."""
-    return record_run(load_task(TASKS / "triangle.toml", 1), "mc-inverse", stages=("path", "ik"), out_dir=tmp_path_factory.mktemp("runs")).directory
+    return record_run(
+        load_task(TASKS / "triangle.toml", 1),
+        "mc-inverse",
+        stages=("path", "ik"),
+        out_dir=tmp_path_factory.mktemp("runs"),
+    ).directory
 
 
 def _tree(root: Path) -> dict[str, bytes | None]:
@@ -33,7 +38,14 @@ def _tree(root: Path) -> dict[str, bytes | None]:
 
 
 def _hostile_fields(victim: Path) -> list[dict[str, str]]:
-    return [{"run_id": str(victim)}, {"task": "../../x"}, {"run_id": str(victim), "task": "../../x"}, {"task": ".."}, {"run_id": ".."}, {"task": str(victim)}]  # absolute paths inside the watched tree
+    return [
+        {"run_id": str(victim)},
+        {"task": "../../x"},
+        {"run_id": str(victim), "task": "../../x"},
+        {"task": ".."},
+        {"run_id": ".."},
+        {"task": str(victim)},
+    ]  # absolute paths inside the watched tree
 
 
 @pytest.fixture

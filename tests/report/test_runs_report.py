@@ -103,7 +103,9 @@ def test_runs_csv_has_a_row_per_run_with_its_metrics_json(report):
         assert row["run"] == manifest["run_id"] == run.name
         assert row["task"] == manifest["task"]
         assert row["method"] == manifest["settings"]["ik"]["method"]
-        assert row["status"] == manifest["status"] in ("complete", "violated")  # pinv in pose mode leaves the joint limits on the triangle
+        assert (
+            row["status"] == manifest["status"] in ("complete", "violated")
+        )  # pinv in pose mode leaves the joint limits on the triangle
         assert row["stages"] == ",".join(manifest["stages"])
         assert row["repetitions"] == manifest["settings"]["path"]["repetitions"] == metric["path.repetitions"]
         assert Path(row["directory"]) == run
@@ -208,7 +210,11 @@ def test_a_run_and_its_copy_side_by_side_stay_apart(ik_runs, tmp_path):
     out = _report([run, copy], tmp_path / "report")
     table = pd.read_csv(out / "runs.csv")
     assert table["label"].is_unique, list(table["label"])
-    summaries = [target for bang, target in LINK.findall((out / "report.md").read_text()) if not bang and target.endswith("summary.md")]
+    summaries = [
+        target
+        for bang, target in LINK.findall((out / "report.md").read_text())
+        if not bang and target.endswith("summary.md")
+    ]
     assert len(set(summaries)) == 2, summaries
 
 
@@ -244,9 +250,13 @@ def _truncated(run: Path, tmp_path: Path) -> Path:
 @pytest.mark.parametrize("bad", [_missing, _truncated], ids=["missing", "truncated-mcap"])
 def test_a_bad_directory_among_several_is_one_line_and_exit_2(ik_runs, tmp_path, bad):
     broken = bad(ik_runs[0], tmp_path)
-    result = runner.invoke(app, ["report", str(ik_runs[1]), str(broken), str(ik_runs[2]), "--out", str(tmp_path / "report")])
+    result = runner.invoke(
+        app, ["report", str(ik_runs[1]), str(broken), str(ik_runs[2]), "--out", str(tmp_path / "report")]
+    )
     assert result.exit_code == 2, result.output
     assert isinstance(result.exception, SystemExit), result.exception
     assert "Traceback" not in result.output
     lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error: ") and broken.name in lines[0], result.stderr  # paths are quoted to ~80 characters
+    assert len(lines) == 1 and lines[0].startswith("error: ") and broken.name in lines[0], (
+        result.stderr
+    )  # paths are quoted to ~80 characters

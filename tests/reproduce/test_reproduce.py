@@ -96,7 +96,16 @@ def claim_rows(report: str) -> dict[str, list[dict[str, str]]]:
         if paper not in PAPERS:
             continue
         table = [_cells(line) for line in lines if line.startswith("|")]
-        assert not table or table[0] == ["where", "claim", "paper", "ours", "ours against the paper", "verdict", "runs' verdicts", "reproduce alone"], table[:1]
+        assert not table or table[0] == [
+            "where",
+            "claim",
+            "paper",
+            "ours",
+            "ours against the paper",
+            "verdict",
+            "runs' verdicts",
+            "reproduce alone",
+        ], table[:1]
         rows[paper] = [dict(zip(keys, cells, strict=True)) for cells in table[2:]]
     return rows
 
@@ -169,7 +178,9 @@ def repro(tmp_path_factory):
     result = reproduce(out, ",".join(CHOSEN), 2)
     assert result.exit_code == 0, (result.output, result.exception)
     parts = {p["name"]: p for p in json.loads((out / "parts.json").read_text())["parts"]}
-    return dataclasses.make_dataclass("Repro", ["out", "result", "parts", "report"])(out, result, parts, (out / "report.md").read_text())
+    return dataclasses.make_dataclass("Repro", ["out", "result", "parts", "report"])(
+        out, result, parts, (out / "report.md").read_text()
+    )
 
 
 def _run_of(repro, part: str):
@@ -191,7 +202,10 @@ def test_exit_0_report_path_last_parts_json_and_time_table(repro):
         for path in paths:
             assert not Path(path).is_absolute() and (out / path).exists(), path
     assert set(repro.parts["table-i"]["outputs"]) == {"table"}
-    for part, stages in (("ball-game-tvgdd", ["path", "ik", "retime", "smooth", "approach", "execute"]), ("ball-game-pinv", ["path", "ik"])):
+    for part, stages in (
+        ("ball-game-tvgdd", ["path", "ik", "retime", "smooth", "approach", "execute"]),
+        ("ball-game-pinv", ["path", "ik"]),
+    ):
         (run,) = repro.parts[part]["outputs"]["runs"]
         manifest = json.loads((out / run / "manifest.json").read_text())
         assert manifest["status"] == "complete" and manifest["stages"] == stages
@@ -220,7 +234,9 @@ def test_report_sections_not_available_commands_and_links(repro):
         else:
             assert len(marked) == 1 and marked[0].endswith(f"(`{name}`): not run (see --only)"), marked
     assert rows["Li & Liang"] == []
-    assert not any(r["where"].startswith(("V.B", "V.C", "V.D", "section 5", "eq (11)", "section IV")) for r in rows["MC-Inverse"])
+    assert not any(
+        r["where"].startswith(("V.B", "V.C", "V.D", "section 5", "eq (11)", "section IV")) for r in rows["MC-Inverse"]
+    )
 
     # each row: a verdict and the command that reproduces its part alone, in backticks
     table_i = json.loads((out / "table_i.json").read_text())
@@ -237,7 +253,9 @@ def test_report_sections_not_available_commands_and_links(repro):
         command = shlex.split(r["command"].strip("`"))
         assert r["command"].strip("`").startswith(ik_srs), r
         pose = [float(v) for v in command[command.index("--pose") + 1 : command.index("--pose") + 7]]
-        assert np.allclose(pose, table_i["pose"], atol=1e-5) and float(command[command.index("--arm-angle") + 1]) == pytest.approx(table_i["arm_angle"], abs=1e-6)
+        assert np.allclose(pose, table_i["pose"], atol=1e-5) and float(
+            command[command.index("--arm-angle") + 1]
+        ) == pytest.approx(table_i["arm_angle"], abs=1e-6)
     assert len(rows["MC-Inverse"]) == 5
 
     # the headline counts the verdicts of the tables
@@ -344,7 +362,10 @@ def test_tvgdd_bound_execution_claims_from_the_recording(repro):
 
     position = np.maximum(lo - q, q - hi).max()
     row = one(rows, "TV-GDD's joints stay within")
-    assert (row["ours"] == "none") == (position <= ZERO) and row["verdict"] == verdict(position <= ZERO), (row, position)
+    assert (row["ours"] == "none") == (position <= ZERO) and row["verdict"] == verdict(position <= ZERO), (
+        row,
+        position,
+    )
     if position > ZERO:
         assert row["ours"].startswith(f"{position:.3g} rad (")
 
@@ -373,7 +394,10 @@ def test_tvgdd_bound_execution_claims_from_the_recording(repro):
     tracking = executed[["hand_error_m.left", "hand_error_m.right"]].to_numpy().max()
     contacts = int(((executed["self_contacts"] > 0) | (executed["environment_contacts"] > 0)).sum())
     row = one(rows, "the motion runs on the robot")
-    assert row["ours"] == f"executed in PyBullet: tracking error {tracking * 1e6:.2f} µm, {contacts} steps with unexpected contacts", row
+    assert (
+        row["ours"]
+        == f"executed in PyBullet: tracking error {tracking * 1e6:.2f} µm, {contacts} steps with unexpected contacts"
+    ), row
     assert row["verdict"] == verdict(contacts == 0 and tracking < 1e-3)
 
 
@@ -456,7 +480,10 @@ def test_table_i_rows_of_the_report_count_what_the_table_holds(repro):
 
     bent_like_hr2 = valid & (q[:, 3] < 0)
     row = one(rows, "of them are valid")
-    assert row["paper"] == "4" and row["ours"] == f"{valid.sum()} ({bent_like_hr2.sum()} with the paper's elbow sign θ4 < 0)", row
+    assert (
+        row["paper"] == "4"
+        and row["ours"] == f"{valid.sum()} ({bent_like_hr2.sum()} with the paper's elbow sign θ4 < 0)"
+    ), row
     assert row["verdict"] == verdict(valid.sum() == 4)
 
     row = one(rows, "have the arm angle asked for")
@@ -465,7 +492,10 @@ def test_table_i_rows_of_the_report_count_what_the_table_holds(repro):
 
     row = one(rows, "share θ4")
     elbows = q[bent_like_hr2, 3]
-    assert row["ours"].startswith(f"θ4 = {elbows[0]:.5f} in all {len(elbows)} (spread ") and f"{elbows[0]:.5f}" == "-1.94261"
+    assert (
+        row["ours"].startswith(f"θ4 = {elbows[0]:.5f} in all {len(elbows)} (spread ")
+        and f"{elbows[0]:.5f}" == "-1.94261"
+    )
 
     # each of the paper's solutions against the candidate that matches most of its 7 values
     equal, sign_only, others = 0, [], 0
@@ -481,7 +511,10 @@ def test_table_i_rows_of_the_report_count_what_the_table_holds(repro):
     assert (equal, len(sign_only), others) == (25, 3, 0)  # the structure the seeds README describes
     row = one(rows, "the joint values of the 4 solutions")
     assert row["paper"] == "28 values"
-    assert row["ours"] == f"{equal} of 28 equal to 5 decimals; {len(sign_only)} equal but for the sign ({', '.join(sign_only)}); {others} others", row
+    assert (
+        row["ours"]
+        == f"{equal} of 28 equal to 5 decimals; {len(sign_only)} equal but for the sign ({', '.join(sign_only)}); {others} others"
+    ), row
     assert row["verdict"] == verdict(others == 0)
 
     # the report's own Table I lists ours and the paper's
@@ -505,7 +538,10 @@ def test_table_i_command_of_the_report_reproduces_the_table(repro, monkeypatch):
     again = json.loads(result.stdout)
     data = json.loads((repro.out / "table_i.json").read_text())
     assert [c["valid"] for c in again["candidates"]] == [c["valid"] for c in data["candidates"]]
-    assert np.abs(np.array([c["q"] for c in again["candidates"]]) - np.array([c["q"] for c in data["candidates"]])).max() < FIVE_DECIMALS / 2
+    assert (
+        np.abs(np.array([c["q"] for c in again["candidates"]]) - np.array([c["q"] for c in data["candidates"]])).max()
+        < FIVE_DECIMALS / 2
+    )
 
 
 def test_table_i_command_of_the_report_runs_the_parts_exact_pose(repro):
@@ -536,7 +572,12 @@ def test_out_that_is_not_a_reproduction_is_refused_and_left_alone(tmp_path):
     result = reproduce(mine, "table-i", 1)
     assert result.exit_code == 2
     lines = error_lines(result)
-    assert len(lines) == 1 and lines[0].startswith("error: ") and str(mine) in lines[0] and "not a reproduction" in lines[0], result.stderr
+    assert (
+        len(lines) == 1
+        and lines[0].startswith("error: ")
+        and str(mine) in lines[0]
+        and "not a reproduction" in lines[0]
+    ), result.stderr
     assert tree(mine) == before and "Traceback" not in result.output
 
     a_file = tmp_path / "a_file"
@@ -573,7 +614,11 @@ def failed_repro(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("failed") / "reproduction"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setitem(experiments.BY_NAME, "ball-game-tvgdd", dataclasses.replace(experiments.BY_NAME["ball-game-tvgdd"], run=_boom))
+        mp.setitem(
+            experiments.BY_NAME,
+            "ball-game-tvgdd",
+            dataclasses.replace(experiments.BY_NAME["ball-game-tvgdd"], run=_boom),
+        )
         result = reproduce(out, "table-i,ball-game-tvgdd,ball-game-pinv", 1)
     return out, result
 
@@ -583,15 +628,23 @@ def test_a_failing_part_exits_1_and_is_reported_failed(failed_repro):
     assert result.exit_code == 1, (result.output, result.exception)
     lines = [line for line in result.stdout.splitlines() if line.strip()]
     assert lines[-1] == str(out / "report.md")
-    assert any("ball-game-tvgdd" in line and "failed: ball_game.toml: the simulator caught fire" in line for line in lines)
+    assert any(
+        "ball-game-tvgdd" in line and "failed: ball_game.toml: the simulator caught fire" in line for line in lines
+    )
     parts = {p["name"]: p for p in json.loads((out / "parts.json").read_text())["parts"]}
-    assert parts["ball-game-tvgdd"]["status"] == "failed" and parts["ball-game-tvgdd"]["error"] == "ball_game.toml: the simulator caught fire"
+    assert (
+        parts["ball-game-tvgdd"]["status"] == "failed"
+        and parts["ball-game-tvgdd"]["error"] == "ball_game.toml: the simulator caught fire"
+    )
     assert parts["ball-game-tvgdd"]["outputs"] == {}
     assert parts["table-i"]["status"] == parts["ball-game-pinv"]["status"] == "complete"
 
     report = (out / "report.md").read_text()
     body, rows = sections(report), claim_rows(report)
-    assert any(line.endswith("(`ball-game-tvgdd`): failed: ball_game.toml: the simulator caught fire") for line in body["TV-GDD"])
+    assert any(
+        line.endswith("(`ball-game-tvgdd`): failed: ball_game.toml: the simulator caught fire")
+        for line in body["TV-GDD"]
+    )
     assert not any(r["command"] == f"`{TVGDD_COMMAND}`" for r in rows["TV-GDD"])  # nothing of TV-GDD's is made up
     assert "figures/ball-game-tvgdd" not in report
     assert [r["claim"] for r in rows["MC-Inverse"]] == [
@@ -644,7 +697,10 @@ def carry_box_runs(tmp_path_factory):
     from dualarm.tasks import load_task
 
     out = tmp_path_factory.mktemp("carry_box")
-    return [read_run(record_run(load_task(TASKS / "carry_box.toml", 2), m, stages=("path", "ik"), out_dir=out).directory) for m in ("mc-inverse", "trac-ik", "ikfast-style")]
+    return [
+        read_run(record_run(load_task(TASKS / "carry_box.toml", 2), m, stages=("path", "ik"), out_dir=out).directory)
+        for m in ("mc-inverse", "trac-ik", "ikfast-style")
+    ]
 
 
 def _deviations(run, task_file: Path) -> tuple[float, float]:
@@ -675,7 +731,10 @@ def test_consistency_claims_show_the_deviations_of_the_recordings(carry_box_runs
     for run in carry_box_runs:
         method = run.manifest["settings"]["ik"]["method"]
         # TRAC-IK may fail a sample now and then (its timeout is wall-clock): a violated run, still judged
-        assert run.status == ("complete" if method != "trac-ik" else run.status) and run.status in ("complete", "violated")
+        assert run.status == ("complete" if method != "trac-ik" else run.status) and run.status in (
+            "complete",
+            "violated",
+        )
         assert sorted(run["/ik/sample"]["rep"].unique()) == [0, 1]
         dq, dpsi = _deviations(run, TASKS / "carry_box.toml")
         assert run.metrics["ik.rep_joint_deviation_max_rad"] == pytest.approx(dq, rel=1e-12, abs=1e-15), method
@@ -708,7 +767,9 @@ def test_recorded_arm_angles_are_eq1_of_pybullets_frames(carry_box_runs):
         for k in range(0, len(sample), 40):
             sim.set_positions(joints, sample.iloc[k][[f"position.{j}" for j in joints]].to_numpy(float))
             for hand in ("left", "right"):
-                worst = max(worst, float(wrapped(pybullet_arm_angle(sim, hand) - sample.iloc[k][f"arm_angle_rad.{hand}"])))
+                worst = max(
+                    worst, float(wrapped(pybullet_arm_angle(sim, hand) - sample.iloc[k][f"arm_angle_rad.{hand}"]))
+                )
     assert worst < 1e-6
 
 
@@ -734,7 +795,9 @@ def test_consistency_claims_survive_a_failed_method_run(carry_box_runs, tmp_path
 def test_plan_claims_count_successes_and_average_their_times():
     from dualarm.reproduce.claims import plan_claims
 
-    trials = pd.DataFrame({"success": [True, False, True, True, False], "planning_time_s": [0.120, 5.0, 0.030, 0.060, 5.0]})
+    trials = pd.DataFrame(
+        {"success": [True, False, True, True, False], "planning_time_s": [0.120, 5.0, 0.030, 0.060, 5.0]}
+    )
     found, mean = plan_claims(trials, None)
     assert found.ours == "3 of 5 trials" and found.agrees is True and found.part == "bowl-grasp"
     assert mean.theirs == f"{PAPER_PLANNING_MS:.2f} ms (i7-3770)"
@@ -758,7 +821,9 @@ def test_an_interrupted_reproduction_is_recognised_and_emptied(tmp_path):
 
     out = tmp_path / "repro"
     prepare(out)
-    staging = RunDirectory.create(out / "runs", "triangle", {}).staging  # a run stopped before it was renamed into place
+    staging = RunDirectory.create(
+        out / "runs", "triangle", {}
+    ).staging  # a run stopped before it was renamed into place
     (staging / "run.mcap").write_bytes(b"half")
     prepare(out)
     assert [p.name for p in out.iterdir()] == [MARKER]
@@ -776,7 +841,9 @@ def test_a_claim_resting_on_a_violated_mc_inverse_run_is_contradicted(carry_box_
     task = tmp_path / "carry_box.toml"
     text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     task.write_text(text.replace("duration_s = 2.0", "duration_s = 0.2"))
-    fast = read_run(record_run(load_task(task, 2), "mc-inverse", stages=("path", "ik"), out_dir=tmp_path / "runs").directory)
+    fast = read_run(
+        record_run(load_task(task, 2), "mc-inverse", stages=("path", "ik"), out_dir=tmp_path / "runs").directory
+    )
     sample = fast["/ik/sample"]
     joints = [c.split(".", 1)[1] for c in sample.columns if c.startswith("position.")]
     speed = np.abs(np.diff(sample[[f"position.{j}" for j in joints]].to_numpy(), axis=0)).max(axis=0) / 0.01
@@ -796,14 +863,19 @@ def test_on_a_separately_started_cluster_the_parts_are_those_of_a_local_one(repr
 
     out = tmp_path / "cluster"
     with loopback_cluster(2, tmp_path) as address:
-        result = runner.invoke(app, ["reproduce", "--out", str(out), "--only", "table-i,ball-game-pinv", "--scheduler", address])
+        result = runner.invoke(
+            app, ["reproduce", "--out", str(out), "--only", "table-i,ball-game-pinv", "--scheduler", address]
+        )
     assert result.exit_code == 0, (result.output, result.exception)
     index = json.loads((out / "parts.json").read_text())
     assert index["scheduler"] == address and index["jobs"] == 2
     assert [p["status"] for p in index["parts"]] == ["complete", "complete"]
     assert json.loads((out / "table_i.json").read_text()) == json.loads((repro.out / "table_i.json").read_text())
     (run,) = index["parts"][0]["outputs"]["runs"]
-    ours, local = (json.loads((d / "metrics.json").read_text()) for d in (out / run, repro.out / repro.parts["ball-game-pinv"]["outputs"]["runs"][0]))
+    ours, local = (
+        json.loads((d / "metrics.json").read_text())
+        for d in (out / run, repro.out / repro.parts["ball-game-pinv"]["outputs"]["runs"][0])
+    )
     assert {k: v for k, v in ours.items() if k not in VARYING} == {k: v for k, v in local.items() if k not in VARYING}
 
 
@@ -822,14 +894,22 @@ def test_a_worker_that_does_not_see_out_is_refused_in_one_line(tmp_path):
         pytest.skip("needs unshare --mount (root, Linux)")
     with loopback_cluster(0, tmp_path) as address:
         worker = f"mount -t tmpfs none {shlex.quote(str(hidden))} && exec {shlex.quote(sys.executable)} -m distributed.cli.dask_worker {address} --nthreads 1 --name elsewhere --no-dashboard"
-        process = subprocess.Popen(["unshare", "--mount", "--propagation", "private", "sh", "-c", worker], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        process = subprocess.Popen(
+            ["unshare", "--mount", "--propagation", "private", "sh", "-c", worker],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         try:
             with Client(address, timeout="60s") as client:
                 client.wait_for_workers(1, timeout=60)
-            result = runner.invoke(app, ["reproduce", "--out", str(hidden / "repro"), "--only", "table-i", "--scheduler", address])
+            result = runner.invoke(
+                app, ["reproduce", "--out", str(hidden / "repro"), "--only", "table-i", "--scheduler", address]
+            )
         finally:
             process.terminate()
             process.wait(timeout=30)
     assert result.exit_code == 2, result.output
-    assert error_lines(result) == [f"error: worker elsewhere does not see {hidden / 'repro'}: with --scheduler, --out must be on a file system the workers share"]
+    assert error_lines(result) == [
+        f"error: worker elsewhere does not see {hidden / 'repro'}: with --scheduler, --out must be on a file system the workers share"
+    ]
     assert not (hidden / "repro" / "parts.json").exists()

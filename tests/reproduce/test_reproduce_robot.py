@@ -16,7 +16,20 @@ DUAL_IIWA = REPO / "robots" / "dual_iiwa"
 def test_the_paper_experiments_run_on_the_dual_iiwa_and_the_bowl_grasp_is_not_available(tmp_path):
     """Table I's analogue, the pinv ball game and the bowl grasp on the dual iiwa: the first two run (every valid Table I candidate puts the iiwa's hand on the asked pose by PyBullet's FK), the bowl grasp is reported as not available because the robot has no waist; exit 0; the report names the robot and the reason; each command to reproduce a part alone carries --robot."""
     out = tmp_path / "repro"
-    result = runner.invoke(app, ["reproduce", "--robot", "dual_iiwa", "--only", "table-i,ball-game-pinv,bowl-grasp", "--jobs", "1", "--out", str(out)])
+    result = runner.invoke(
+        app,
+        [
+            "reproduce",
+            "--robot",
+            "dual_iiwa",
+            "--only",
+            "table-i,ball-game-pinv,bowl-grasp",
+            "--jobs",
+            "1",
+            "--out",
+            str(out),
+        ],
+    )
     assert result.exit_code == 0, result.output
     index = json.loads((out / "parts.json").read_text())
     assert index["robot"]["name"] == "dual_iiwa"
@@ -49,7 +62,9 @@ def test_the_paper_experiments_run_on_the_dual_iiwa_and_the_bowl_grasp_is_not_av
 def test_a_robot_that_runs_no_part_exits_2_and_the_report_says_why(tmp_path):
     """The Panda (one arm, not S-R-S): Table I needs an S-R-S left arm, the carried box S-R-S arms, the triangle a left hand; each is named in one line, nothing runs, exit 2."""
     out = tmp_path / "repro"
-    result = runner.invoke(app, ["reproduce", "--robot", "panda", "--only", "table-i,carry-box,triangle", "--jobs", "1", "--out", str(out)])
+    result = runner.invoke(
+        app, ["reproduce", "--robot", "panda", "--only", "table-i,carry-box,triangle", "--jobs", "1", "--out", str(out)]
+    )
     assert result.exit_code == 2, result.output
     assert "Traceback" not in result.output
     assert "no part of the reproduction runs on panda" in result.stderr

@@ -28,7 +28,9 @@ def test_a_users_directory_is_refused_and_nothing_is_deleted(tmp_path):
 def test_an_earlier_reproduction_is_emptied_and_locked_while_claimed(tmp_path):
     out = tmp_path / "repro"
     prepare(out).release()
-    RunDirectory.create(out / "runs", "triangle", {}).staging.joinpath("run.mcap").write_bytes(b"half")  # stopped half-way
+    RunDirectory.create(out / "runs", "triangle", {}).staging.joinpath("run.mcap").write_bytes(
+        b"half"
+    )  # stopped half-way
     (out / PARTS_FILE).write_text("{}")
     claimed = prepare(out)
     assert [p.name for p in out.iterdir()] == [MARKER]
@@ -69,8 +71,12 @@ def test_a_part_that_takes_its_workers_down_is_failed_and_the_others_go_on(tmp_p
         def on_progress(name: str, fraction: float, text: str) -> None:
             if name != "ball-game-pinv" or fraction >= 1.0:
                 return
-            running = [w for w, keys in client.processing().items() if any("reproduce-ball-game-pinv" in str(k) for k in keys)]
-            for pid in client.run(os.getpid, workers=running, on_error="ignore").values():  # a worker already killed may still be listed
+            running = [
+                w for w, keys in client.processing().items() if any("reproduce-ball-game-pinv" in str(k) for k in keys)
+            ]
+            for pid in client.run(
+                os.getpid, workers=running, on_error="ignore"
+            ).values():  # a worker already killed may still be listed
                 if pid not in killed:
                     os.kill(pid, signal.SIGKILL)
                     killed.append(pid)
@@ -78,7 +84,9 @@ def test_a_part_that_takes_its_workers_down_is_failed_and_the_others_go_on(tmp_p
         results = {r.name: r for r in run_parts(out, ["ball-game-pinv", "table-i"], 2, on_progress, scheduler=address)}
     claimed.release()
     assert len(killed) >= 2  # retried on another worker at least once
-    assert results["ball-game-pinv"].status == "failed" and results["ball-game-pinv"].error.startswith("KilledWorker: "), results["ball-game-pinv"]
+    assert results["ball-game-pinv"].status == "failed" and results["ball-game-pinv"].error.startswith(
+        "KilledWorker: "
+    ), results["ball-game-pinv"]
     assert results["table-i"].status == "complete"
     index = json.loads((out / PARTS_FILE).read_text())
     assert {p["name"]: p["status"] for p in index["parts"]} == {"ball-game-pinv": "failed", "table-i": "complete"}

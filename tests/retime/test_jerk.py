@@ -114,7 +114,9 @@ def test_a_bad_jerk_limit_is_refused_in_one_line(loop):
 
 def test_the_retime_stage_reports_and_checks_the_jerk():
     """The shipped triangle with `[retime] timing = "jerk-limited"`: the retime stage's velocity, acceleration and (mean, per sample period) jerk ratios are within 1 + 1e-6 and it has no violation."""
-    result = run_task(TASKS / "triangle.toml", "mc-inverse", stages=("path", "ik", "retime"), retime=Retime(timing="jerk-limited"))
+    result = run_task(
+        TASKS / "triangle.toml", "mc-inverse", stages=("path", "ik", "retime"), retime=Retime(timing="jerk-limited")
+    )
     for kind in ("velocity", "acceleration", "jerk"):
         assert result.metrics[f"retime.{kind}_ratio_max"] <= 1 + 1e-6
     assert result.verdict.status == "complete", result.verdict.violations
@@ -123,7 +125,10 @@ def test_the_retime_stage_reports_and_checks_the_jerk():
 def _fd_ratios(timing, limits=(V, A, J)) -> list[float]:
     """Velocity, acceleration and jerk ratios of the timing's positions every :data:`STEP_S` by first, second and third differences."""
     q = timing.evaluate(np.arange(0.0, timing.duration_s, STEP_S))[0]
-    return [float((np.abs(np.diff(q, order, axis=0)) / STEP_S**order / limit).max()) for order, limit in zip((1, 2, 3), limits)]
+    return [
+        float((np.abs(np.diff(q, order, axis=0)) / STEP_S**order / limit).max())
+        for order, limit in zip((1, 2, 3), limits)
+    ]
 
 
 def test_rounding_noise_in_the_samples_neither_breaks_a_limit_nor_slows_it_down(loop):
@@ -161,7 +166,9 @@ def test_the_shipped_triangles_repetitions_repeat_to_1e_9_rad():
     path = run_task(task, "mc-inverse", stages=("path", "ik")).joint_path
     v, a, j = (task.robot.limit_array(kind, path.joint_names) for kind in ("velocity", "acceleration", "jerk"))
     timing = plan(path, v, a, jerk=j)
-    starts = timing.sample_times_s[np.append(0, np.searchsorted(path.rep, [1, 2]) - 1)]  # at corner A: the first sample, and the last of each repetition before
+    starts = timing.sample_times_s[
+        np.append(0, np.searchsorted(path.rep, [1, 2]) - 1)
+    ]  # at corner A: the first sample, and the last of each repetition before
     t = np.linspace(0.0, starts[1] - starts[0], 5001)
     first = timing.evaluate(starts[0] + t)[0]
     for start in starts[1:]:
@@ -174,13 +181,25 @@ def test_the_task_timing_is_checked_against_the_jerk_limit_in_one_line(tmp_path)
     robot = tmp_path / "humanoid"
     shutil.copytree(HUMANOID, robot)
     text = (robot / "robot.toml").read_text()
-    (robot / "robot.toml").write_text(re.sub(r"(\[limits\.jerk\][^\[]*?left_elbow = )[0-9.]+", r"\g<1>0.5", text, count=1))
+    (robot / "robot.toml").write_text(
+        re.sub(r"(\[limits\.jerk\][^\[]*?left_elbow = )[0-9.]+", r"\g<1>0.5", text, count=1)
+    )
     task = tmp_path / "triangle.toml"
-    task.write_text((TASKS / "triangle.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{robot}"') + '\n[retime]\ntiming = "task"\n')
-    result = CliRunner().invoke(app, ["run", str(task), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")])
+    task.write_text(
+        (TASKS / "triangle.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{robot}"')
+        + '\n[retime]\ntiming = "task"\n'
+    )
+    result = CliRunner().invoke(
+        app, ["run", str(task), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")]
+    )
     assert result.exit_code == 1, result.output
     lines = result.output.strip().splitlines()
-    assert lines[0] == "verdict: failed" and "left_elbow" in lines[1] and "jerk limit" in lines[1] and "keep_timing" in lines[1], result.output
+    assert (
+        lines[0] == "verdict: failed"
+        and "left_elbow" in lines[1]
+        and "jerk limit" in lines[1]
+        and "keep_timing" in lines[1]
+    ), result.output
 
 
 @pytest.mark.parametrize("value", ["0.0", "-40.0", "inf"])
@@ -190,10 +209,14 @@ def test_an_infeasible_jerk_limit_is_refused_in_one_line_before_running(tmp_path
     robot = tmp_path / "humanoid"
     shutil.copytree(HUMANOID, robot)
     text = (robot / "robot.toml").read_text()
-    (robot / "robot.toml").write_text(re.sub(r"(\[limits\.jerk\][^\[]*?left_elbow = )[0-9.]+", rf"\g<1>{value}", text, count=1))
+    (robot / "robot.toml").write_text(
+        re.sub(r"(\[limits\.jerk\][^\[]*?left_elbow = )[0-9.]+", rf"\g<1>{value}", text, count=1)
+    )
     task = tmp_path / "triangle.toml"
     task.write_text((TASKS / "triangle.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{robot}"'))
-    result = CliRunner().invoke(app, ["run", str(task), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")])
+    result = CliRunner().invoke(
+        app, ["run", str(task), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")]
+    )
     assert result.exit_code == 2, result.output
     assert len(result.output.strip().splitlines()) == 1 and "limits.jerk.left_elbow" in result.output, result.output
     assert not (tmp_path / "runs").exists()

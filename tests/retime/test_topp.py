@@ -61,7 +61,13 @@ def arm():
 
 def sample_ratios(traj: JointTrajectory, v: np.ndarray, a: np.ndarray) -> dict[str, LimitRatio]:
     """The largest |qd| / v and |qdd| / a over the samples (the shared limit ratios)."""
-    return limit_ratios(traj.t, traj.joint_names, {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}, "retime")
+    return limit_ratios(
+        traj.t,
+        traj.joint_names,
+        {"velocity": traj.qd, "acceleration": traj.qdd},
+        {"velocity": v, "acceleration": a},
+        "retime",
+    )
 
 
 def central_difference(x: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -126,10 +132,15 @@ def test_matches_toppra_own_trajectory(arm):
     path, timing, traj = arm
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path.q, axis=0), axis=1))])
     spline = toppra.SplineInterpolator(s, path.q)
-    constraints = [toppra.constraint.JointVelocityConstraint(np.vstack([-V7, V7]).T), toppra.constraint.JointAccelerationConstraint(np.vstack([-A7, A7]).T)]
+    constraints = [
+        toppra.constraint.JointVelocityConstraint(np.vstack([-V7, V7]).T),
+        toppra.constraint.JointAccelerationConstraint(np.vstack([-A7, A7]).T),
+    ]
     grid = timing.evaluate.s_grid  # the stage's gridpoints (the initial ones: this path needs no refinement)
     assert np.array_equal(grid, gridpoints(s)[0])
-    reference = toppra.algorithm.TOPPRA(constraints, spline, gridpoints=grid, parametrizer="ParametrizeConstAccel").compute_trajectory(0, 0)
+    reference = toppra.algorithm.TOPPRA(
+        constraints, spline, gridpoints=grid, parametrizer="ParametrizeConstAccel"
+    ).compute_trajectory(0, 0)
     k = timing.stretch
     assert traj.duration_s == pytest.approx(k * reference.duration, rel=1e-12)
     some = np.arange(0, len(traj), 37)
@@ -233,7 +244,10 @@ def test_a_bad_limit_is_named(arm, kind, bad):
     path = arm[0]
     limits = {"velocity": V7.copy(), "acceleration": A7.copy()}
     limits[kind][3] = bad
-    with pytest.raises(InvalidArgumentError, match=rf"^{kind}: the limit of joint 3 \(left_j4\) is [-\w.]+ rad/s(\^2)? in retime; every limit must be a positive finite number$"):
+    with pytest.raises(
+        InvalidArgumentError,
+        match=rf"^{kind}: the limit of joint 3 \(left_j4\) is [-\w.]+ rad/s(\^2)? in retime; every limit must be a positive finite number$",
+    ):
         retime_path(path, limits["velocity"], limits["acceleration"])
 
 
@@ -252,7 +266,9 @@ def test_a_non_finite_joint_is_named(arm):
 
 def test_no_feasible_parameterisation_raises_not_none(arm, monkeypatch):
     monkeypatch.setattr(toppra.algorithm.TOPPRA, "compute_trajectory", lambda self, *args: None)
-    with pytest.raises(StageError, match=r"^retime: TOPP-RA found no feasible time parameterisation .*joint limits: velocity \[1, 0\.9"):
+    with pytest.raises(
+        StageError, match=r"^retime: TOPP-RA found no feasible time parameterisation .*joint limits: velocity \[1, 0\.9"
+    ):
         retime_path(arm[0], V7, A7)
 
 
@@ -275,18 +291,27 @@ def test_keep_timing_a_slow_path_keeps_its_timing():
 def test_keep_timing_a_too_fast_path_names_joint_time_and_ratio():
     t = np.linspace(0.0, 2.0, 101)
     q = rest_to_rest(t, 7, 0.1)
-    q[:, 4] = 1.6 * (1 - np.cos(np.pi * t / 2))  # left_j5: 2.51 rad/s at t = 1 s (limit 1.5), 3.95 rad/s^2 at t = 0 (limit 2)
+    q[:, 4] = 1.6 * (
+        1 - np.cos(np.pi * t / 2)
+    )  # left_j5: 2.51 rad/s at t = 1 s (limit 1.5), 3.95 rad/s^2 at t = 0 (limit 2)
     path = joint_path(q, t, ARM)
-    with pytest.raises(StageError, match=r"^retime: keep_timing: left_j5 reaches 1\.\d+x its velocity limit at t = 1\.0\d\d s") as error:
+    with pytest.raises(
+        StageError, match=r"^retime: keep_timing: left_j5 reaches 1\.\d+x its velocity limit at t = 1\.0\d\d s"
+    ) as error:
         retime_path(path, V7, 100 * A7, keep_timing=True)
     assert "\n" not in str(error.value)
     assert error.value.stage == "retime" and error.value.joint == "left_j5"
-    with pytest.raises(StageError, match=r"keep_timing: left_j5 reaches 1\.9\dx its acceleration limit at t = [02]\.000 s"):
+    with pytest.raises(
+        StageError, match=r"keep_timing: left_j5 reaches 1\.9\dx its acceleration limit at t = [02]\.000 s"
+    ):
         retime_path(path, 100 * V7, A7, keep_timing=True)
 
 
 def test_keep_timing_needs_increasing_times():
     t = np.linspace(0.0, 2.0, 21)
     t[7] = t[6]
-    with pytest.raises(StageError, match=r"keep_timing needs increasing sample times, but sample 7 \(t = 0\.6 s\) does not come after sample 6"):
+    with pytest.raises(
+        StageError,
+        match=r"keep_timing needs increasing sample times, but sample 7 \(t = 0\.6 s\) does not come after sample 6",
+    ):
         retime_path(joint_path(rest_to_rest(t, 7, 0.1), t, ARM), V7, A7, keep_timing=True)

@@ -27,7 +27,11 @@ FIXED = {"head_pan": 0.25}
 def quintic(d: float, T: float, t: np.ndarray):
     """Rest-to-rest quintic over d [rad] in T [s]: q, qd, qdd at t."""
     s = np.clip(t / T, 0.0, 1.0)
-    return (d * (10 * s**3 - 15 * s**4 + 6 * s**5), d * (30 * s**2 - 60 * s**3 + 30 * s**4) / T, d * (60 * s - 180 * s**2 + 120 * s**3) / T**2)
+    return (
+        d * (10 * s**3 - 15 * s**4 + 6 * s**5),
+        d * (30 * s**2 - 60 * s**3 + 30 * s**4) / T,
+        d * (60 * s - 180 * s**2 + 120 * s**3) / T**2,
+    )
 
 
 def trapezoid(d: float, v: float, a: float, t: np.ndarray):
@@ -90,7 +94,12 @@ def ratios(out: Smoothed, v, a, j) -> dict[str, float]:
     """The largest |velocity|, |acceleration| and |jerk| over their limits, by the shared limit ratios."""
     traj = out.trajectory
     samples = {"velocity": traj.qd, "acceleration": traj.qdd, "jerk": out.jerk}
-    return {kind: r.ratio for kind, r in limit_ratios(traj.t, traj.joint_names, samples, {"velocity": v, "acceleration": a, "jerk": j}, "smooth").items()}
+    return {
+        kind: r.ratio
+        for kind, r in limit_ratios(
+            traj.t, traj.joint_names, samples, {"velocity": v, "acceleration": a, "jerk": j}, "smooth"
+        ).items()
+    }
 
 
 def test_the_references_are_as_intended():
@@ -225,7 +234,10 @@ def test_bad_limits_name_the_joint(kind, bad):
     message = str(err.value)
     assert "\n" not in message and "(arm_j4)" in message and kind in message and err.value.joint == "arm_j4"
     scalar = {"velocity": V, "acceleration": A, "jerk": J, kind: bad}
-    with pytest.raises(InvalidArgumentError, match=rf"^{kind}: the limit of joint 0 \(arm_j1\) is \S+ rad/s(\^[23])? in smooth; every limit must be a positive finite number$"):
+    with pytest.raises(
+        InvalidArgumentError,
+        match=rf"^{kind}: the limit of joint 0 \(arm_j1\) is \S+ rad/s(\^[23])? in smooth; every limit must be a positive finite number$",
+    ):
         smooth_trajectory(ref, scalar["velocity"], scalar["acceleration"], scalar["jerk"])
 
 
@@ -236,5 +248,8 @@ def test_bad_period(period):
 
 
 def test_wrong_number_of_limits():
-    with pytest.raises(InvalidArgumentError, match=r"^velocity: smooth expected 7 limits \(one per joint: arm_j1, .*, arm_j7\), got \(2,\)$"):
+    with pytest.raises(
+        InvalidArgumentError,
+        match=r"^velocity: smooth expected 7 limits \(one per joint: arm_j1, .*, arm_j7\), got \(2,\)$",
+    ):
         smooth_trajectory(reference(slow_profile, dt=0.1, duration=1.0), [V, V], A, J)

@@ -29,10 +29,24 @@ def hand_made() -> pd.DataFrame:
     method `b`: 200 trials, the first 30 inconsistent (of them 10 failed), plus 5 rows that are errors; kinds cycle."""
     rng = np.random.default_rng(7)
     size = rng.normal(0.1, 0.03, 2000)
-    a = pd.DataFrame({"method": "a", "trial": np.arange(2000), "size_m": size, "kind": np.array(["circle", "polygon"])[np.arange(2000) % 2]})
+    a = pd.DataFrame(
+        {
+            "method": "a",
+            "trial": np.arange(2000),
+            "size_m": size,
+            "kind": np.array(["circle", "polygon"])[np.arange(2000) % 2],
+        }
+    )
     a["inconsistent"] = rng.random(2000) < 1 / (1 + np.exp(-(-1 + (size - 0.1) / 0.03)))
     a["failed"] = False
-    b = pd.DataFrame({"method": "b", "trial": np.arange(205), "size_m": rng.uniform(0.05, 0.15, 205), "kind": np.array(["circle", "polygon"])[np.arange(205) % 2]})
+    b = pd.DataFrame(
+        {
+            "method": "b",
+            "trial": np.arange(205),
+            "size_m": rng.uniform(0.05, 0.15, 205),
+            "kind": np.array(["circle", "polygon"])[np.arange(205) % 2],
+        }
+    )
     b["inconsistent"] = np.arange(205) < 30
     b["failed"] = np.arange(205) < 10
     rows = pd.concat([a, b], ignore_index=True)
@@ -47,11 +61,15 @@ def test_per_method_rates_and_wilson_intervals():
     b = rates.loc["b"]
     assert (b["trials"], b["errors"], b["inconsistent"], b["failed"]) == (200, 5, 30, 10)
     assert b["p_inconsistent"] == 30 / 200
-    np.testing.assert_allclose((b["p_inconsistent_low"], b["p_inconsistent_high"]), wilson_closed_form(30, 200), rtol=1e-12)
+    np.testing.assert_allclose(
+        (b["p_inconsistent_low"], b["p_inconsistent_high"]), wilson_closed_form(30, 200), rtol=1e-12
+    )
     np.testing.assert_allclose((b["p_failed_low"], b["p_failed_high"]), wilson_closed_form(10, 200), rtol=1e-12)
     a = rates.loc["a"]
     assert a["p_failed"] == 0
-    np.testing.assert_allclose((a["p_failed_low"], a["p_failed_high"]), wilson_closed_form(0, 2000), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        (a["p_failed_low"], a["p_failed_high"]), wilson_closed_form(0, 2000), rtol=1e-12, atol=1e-15
+    )
 
 
 def test_binned_rates_are_the_counts_per_bin():
@@ -61,10 +79,19 @@ def test_binned_rates_are_the_counts_per_bin():
     judged = rows[(rows["method"] == "b") & (rows["status"] != "error")]
     for kind in ("circle", "polygon"):
         mine = judged[judged["kind"] == kind]
-        assert (kinds.loc[kind, "trials"], kinds.loc[kind, "inconsistent"]) == (len(mine), int(mine["inconsistent"].sum()))
-        np.testing.assert_allclose((kinds.loc[kind, "low"], kinds.loc[kind, "high"]), wilson_closed_form(int(mine["inconsistent"].sum()), len(mine)), rtol=1e-12)
+        assert (kinds.loc[kind, "trials"], kinds.loc[kind, "inconsistent"]) == (
+            len(mine),
+            int(mine["inconsistent"].sum()),
+        )
+        np.testing.assert_allclose(
+            (kinds.loc[kind, "low"], kinds.loc[kind, "high"]),
+            wilson_closed_form(int(mine["inconsistent"].sum()), len(mine)),
+            rtol=1e-12,
+        )
     sizes = table[(table["feature"] == "size_m") & (table["method"] == "a")].sort_values("bin_order")
-    assert len(sizes) == 4 and sizes["trials"].sum() == 2000 and abs(sizes["trials"] - 500).max() <= 25  # quartiles of both methods' sizes
+    assert (
+        len(sizes) == 4 and sizes["trials"].sum() == 2000 and abs(sizes["trials"] - 500).max() <= 25
+    )  # quartiles of both methods' sizes
     assert sizes["p_inconsistent"].is_monotonic_increasing  # the model's rate rises with size
 
 
@@ -101,5 +128,10 @@ def test_the_report_is_written_from_trials_parquet_alone(tmp_path):
 def test_a_report_without_a_table_is_one_line(tmp_path):
     with pytest.raises(RecordingError, match="no such file"):
         write_study_report(tmp_path)
-    done = subprocess.run([sys.executable, "-c", "from dualarm.cli import app; app()", "study", "report", str(tmp_path / "none")], capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-c", "from dualarm.cli import app; app()", "study", "report", str(tmp_path / "none")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and "trials.parquet: no such file" in done.stderr

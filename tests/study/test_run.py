@@ -99,7 +99,20 @@ def test_another_study_into_the_same_directory_is_refused(local):
 def test_the_cli_refuses_a_bad_spec_in_one_line(tmp_path):
     spec = tmp_path / "bad.toml"
     spec.write_text('name = "s"\ntrials = 10\nrepetitions = [9, 3]\n')
-    done = subprocess.run([sys.executable, "-c", "from dualarm.cli import app; app()", "study", str(spec), "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from dualarm.cli import app; app()",
+            "study",
+            str(spec),
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 2, done.stderr
     assert done.stderr.strip().count("\n") == 0 and "repetitions: the low end 9 is above the high end 3" in done.stderr
     assert not (tmp_path / "out").exists()
@@ -115,7 +128,9 @@ def test_a_separately_started_scheduler_and_workers_give_the_same_rows(local, tm
 
 
 def test_an_unreachable_scheduler_is_one_line_and_leaves_no_table(tmp_path, monkeypatch):
-    monkeypatch.setattr("dualarm.cluster.CONNECT_TIMEOUT_S", 2.0)  # Dask retries a refused connection until the timeout (30 s for users)
+    monkeypatch.setattr(
+        "dualarm.cluster.CONNECT_TIMEOUT_S", 2.0
+    )  # Dask retries a refused connection until the timeout (30 s for users)
     with pytest.raises(Exception, match="no Dask scheduler answers there"):
         with connect("tcp://127.0.0.1:9"):
             pass
@@ -130,12 +145,21 @@ def test_a_killed_worker_has_its_trial_retried_on_another(local, tmp_path):
     from distributed import Client, LocalCluster
 
     killed: list[str] = []
-    with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None, silence_logs=40) as cluster, Client(cluster) as client:
+    with (
+        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None, silence_logs=40) as cluster,
+        Client(cluster) as client,
+    ):
 
         def kill_one_busy_worker() -> None:
             for _ in range(600):
                 busy = {w: keys for w, keys in client.processing().items() if keys}
-                started = [w for w, state in client.run(lambda dask_worker: [t.key for t in dask_worker.state.tasks.values() if t.state == "executing"]).items() if state]
+                started = [
+                    w
+                    for w, state in client.run(
+                        lambda dask_worker: [t.key for t in dask_worker.state.tasks.values() if t.state == "executing"]
+                    ).items()
+                    if state
+                ]
                 if busy and started:
                     pids = client.run(os.getpid)
                     killed.append(started[0])
@@ -163,18 +187,30 @@ def test_a_method_that_raises_is_its_rows_error_not_a_lost_trial(monkeypatch):
     by_method = {r["method"]: r for r in result.rows}
     assert by_method["pinv"]["status"] == "error" and by_method["pinv"]["error"] == "ZeroDivisionError: a bug"
     assert by_method["pinv"]["failed"] and by_method["pinv"]["inconsistent"]
-    assert by_method["dls-svd"]["status"] in ("complete", "violated") and by_method["pybullet"]["status"] in ("complete", "violated")
+    assert by_method["dls-svd"]["status"] in ("complete", "violated") and by_method["pybullet"]["status"] in (
+        "complete",
+        "violated",
+    )
 
 
 def test_a_shape_out_of_reach_fails_mc_inverse_in_its_row_and_is_drawn_again_when_checked():
     """With [centre] reachable = false a shape far out is kept and fails MC-Inverse (a `failed` row, its message); with the
     check, every draw before the one kept is out of reach (the analytic check) and the one kept is within."""
-    far = SPEC.replace('["pinv", "dls-svd", "pybullet"]', '["mc-inverse"]') + "[centre]\nx = [0.8, 0.9]\ny = [0.0, 0.1]\nz = [-0.2, -0.1]\n"
+    far = (
+        SPEC.replace('["pinv", "dls-svd", "pybullet"]', '["mc-inverse"]')
+        + "[centre]\nx = [0.8, 0.9]\ny = [0.0, 0.1]\nz = [-0.2, -0.1]\n"
+    )
     unchecked = study_from_toml(far + "reachable = false\n")
     with pytest.raises(UnreachablePoseError, match="cannot reach"):
         reachable_trial(unchecked, 0, REPO)
     row = run_trial(unchecked, str(REPO), 0).rows[0]
-    assert row["status"] == "failed" and row["failed"] and row["inconsistent"] and "cannot reach" in row["error"] and not row["reachable"]
+    assert (
+        row["status"] == "failed"
+        and row["failed"]
+        and row["inconsistent"]
+        and "cannot reach" in row["error"]
+        and not row["reachable"]
+    )
     near = study_from_toml(far.replace("x = [0.8, 0.9]", "x = [0.1, 0.2]") + "reachable = false\n")
     drawn, task = reachable_trial(near, 0, REPO)
     assert not within_reach(task), "the trial is within reach: move it"
@@ -202,13 +238,17 @@ def test_duckdb_reads_the_table_as_pandas_does(local):
     out, rows = local
     query = f"""select method, avg(inconsistent::int) as p, median("ik.rep_joint_deviation_max_rad") as deviation from '{out / RESULTS}' group by method order by method"""
     got = duckdb.sql(query).df().set_index("method")
-    expected = rows.groupby("method").agg(p=("inconsistent", "mean"), deviation=("ik.rep_joint_deviation_max_rad", "median"))
+    expected = rows.groupby("method").agg(
+        p=("inconsistent", "mean"), deviation=("ik.rep_joint_deviation_max_rad", "median")
+    )
     pd.testing.assert_frame_equal(got, expected, check_names=False, check_index_type=False)
 
 
 def test_a_robot_the_reach_check_cannot_use_is_refused_before_anything_is_written(tmp_path):
     spec = study_from_toml(SPEC.replace('name = "small"', 'name = "small"\nrobot = "humanoid_offset"'))
-    with pytest.raises(TaskFileError, match=r"centre.reachable: the reach check needs S-R-S arms .*set \[centre\] reachable = false"):
+    with pytest.raises(
+        TaskFileError, match=r"centre.reachable: the reach check needs S-R-S arms .*set \[centre\] reachable = false"
+    ):
         run_study(spec, REPO, tmp_path / "out")
     assert not (tmp_path / "out").exists()
 
@@ -258,14 +298,22 @@ def _affinity() -> list[list[int]]:
     return [sorted(os.sched_getaffinity(int(t))) for t in os.listdir("/proc/self/task")]
 
 
-@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2 or not Path("/proc/self/task").exists(), reason="needs 2 cores and Linux's per-thread affinity")
+@pytest.mark.skipif(
+    not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2 or not Path("/proc/self/task").exists(),
+    reason="needs 2 cores and Linux's per-thread affinity",
+)
 def test_local_workers_are_each_pinned_to_a_core_of_their_own():
     """A LocalCluster of 2 workers: every thread of worker i, and a task's thread, runs on core i only (read back from the OS); the client's process is left alone."""
     cores = sorted(os.sched_getaffinity(0))[:2]
     with connect(workers=2) as client:
         threads = client.run(_affinity)
-        tasks = [client.submit(lambda: sorted(os.sched_getaffinity(0)), pure=False, workers=[w]).result() for w in threads]
+        tasks = [
+            client.submit(lambda: sorted(os.sched_getaffinity(0)), pure=False, workers=[w]).result() for w in threads
+        ]
         names = {w: info["name"] for w, info in client.scheduler_info(n_workers=-1)["workers"].items()}
-    assert {names[w]: {tuple(a) for a in affinity} for w, affinity in threads.items()} == {0: {(cores[0],)}, 1: {(cores[1],)}}
+    assert {names[w]: {tuple(a) for a in affinity} for w, affinity in threads.items()} == {
+        0: {(cores[0],)},
+        1: {(cores[1],)},
+    }
     assert sorted(tasks) == [[cores[0]], [cores[1]]]
     assert len(os.sched_getaffinity(0)) >= 2

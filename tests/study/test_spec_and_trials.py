@@ -31,14 +31,20 @@ def test_the_example_spec_loads():
         ('name = "s"\ntrials = 10\nmethods = ["mc-inverse", "rrt"]\n', "'rrt' is not an IK method"),
         ('name = "s"\ntrials = 10\nmethods = ["mcikrrt"]\n', "'mcikrrt' is not an IK method"),
         ('name = "s"\ntrials = 10\nrepetitions = [9, 3]\n', "repetitions: the low end 9 is above the high end 3"),
-        ('name = "s"\ntrials = 10\n[shape]\nkinds = ["spiral"]\n', "shape.kinds[0]: Input should be 'polygon', 'circle' or 'figure-eight'"),
+        (
+            'name = "s"\ntrials = 10\n[shape]\nkinds = ["spiral"]\n',
+            "shape.kinds[0]: Input should be 'polygon', 'circle' or 'figure-eight'",
+        ),
         ('name = "s"\ntrials = 10\n[shape]\nsize_m = [0.1, 2.0]\n', "2 m is outside the allowed range [0.005, 0.5] m"),
         ('name = "s"\ntrials = 10\n[centre]\nx = [0.4, nan]\n', "centre.x[1]: Input should be a finite number"),
         ('name = "s"\ntrials = 10\ncolour = "red"\n', "colour"),
         ('name = "s"\ntrials = 10\n[inconsistent]\njoint_deviation_rad = 0\n', "inconsistent.joint_deviation_rad"),
         ('name = "s"\ntrials = 10\nhands = ["left", "all"]\n', "hands[1]: Input should be 'left', 'right' or 'both'"),
         ('name = "s"\ntrials = 10\n[carry]\nsize_m = [0.1, 0.2]\n', "carry.size_m"),
-        ('name = "s"\ntrials = 10\n[carry]\nmaster_to_object = { rpy = [0, 0, 0] }\n', "carry.master_to_object.position: missing"),
+        (
+            'name = "s"\ntrials = 10\n[carry]\nmaster_to_object = { rpy = [0, 0, 0] }\n',
+            "carry.master_to_object.position: missing",
+        ),
         ('name = "s"\ntrials = 10.5\n', "trials"),
         ('name = "s"\ntrials = \n', "not valid TOML"),
     ],
@@ -64,10 +70,18 @@ def test_trials_are_the_same_whatever_order_they_are_drawn_in():
     other = spec.model_copy(update={"seed": 1})
     assert sum(trial(other, i).task == forwards[i].task for i in range(40)) == 0
     kinds = {t.features["kind"] for t in forwards}
-    assert kinds == {"polygon", "circle", "figure-eight"} and {t.features["hand"] for t in forwards} == {"left", "right", "both"}
+    assert kinds == {"polygon", "circle", "figure-eight"} and {t.features["hand"] for t in forwards} == {
+        "left",
+        "right",
+        "both",
+    }
     for t in forwards:
         f = t.features
-        assert spec.repetitions[0] <= f["repetitions"] <= spec.repetitions[1] and (f["vertices"] == 0) == (f["kind"] != "polygon") and 0.05 <= f["size_m"] <= 0.15
+        assert (
+            spec.repetitions[0] <= f["repetitions"] <= spec.repetitions[1]
+            and (f["vertices"] == 0) == (f["kind"] != "polygon")
+            and 0.05 <= f["size_m"] <= 0.15
+        )
 
 
 def _circle_fit(points: np.ndarray) -> tuple[np.ndarray, float, float]:
@@ -102,11 +116,20 @@ def test_each_trial_is_a_valid_task_drawing_its_shape(index):
     assert set(reference.hands) == ({"left", "right"} if f["hand"] == "both" else {drawing})
     if f["hand"] == "both":
         carry = spec.carry
-        master, slave = (_matrix(Rotation.from_euler("xyz", grip.rpy).as_matrix(), grip.position) for grip in (carry.master_to_object, carry.slave_to_object))
+        master, slave = (
+            _matrix(Rotation.from_euler("xyz", grip.rpy).as_matrix(), grip.position)
+            for grip in (carry.master_to_object, carry.slave_to_object)
+        )
         left, right = reference.hands["left"], reference.hands["right"]
         for k in range(len(reference.t)):
-            assert np.allclose(_matrix(left.rotation[k], left.position[k]) @ master @ np.linalg.inv(slave), _matrix(right.rotation[k], right.position[k]), atol=1e-12)
-        assert np.allclose(np.linalg.norm(left.position - right.position, axis=1), 0.24, atol=1e-12)  # the palms hold the box's 0.24 m
+            assert np.allclose(
+                _matrix(left.rotation[k], left.position[k]) @ master @ np.linalg.inv(slave),
+                _matrix(right.rotation[k], right.position[k]),
+                atol=1e-12,
+            )
+        assert np.allclose(
+            np.linalg.norm(left.position - right.position, axis=1), 0.24, atol=1e-12
+        )  # the palms hold the box's 0.24 m
     p = reference.hands[drawing].position
     assert np.linalg.norm(p[0] - p[-1]) < 1e-9
     centred = p - p.mean(axis=0)
@@ -130,4 +153,6 @@ def test_each_trial_is_a_valid_task_drawing_its_shape(index):
         assert np.linalg.norm(c1 - c2) == pytest.approx(2 * r1, rel=1e-9)  # two loops touching at the start
         assert np.linalg.norm(planar[0] - (c1 + c2) / 2) < 1e-9
         out, back = moves[0][-1] - moves[0][-2], moves[1][1] - moves[1][0]
-        assert out @ back / np.linalg.norm(out) / np.linalg.norm(back) > 0.999  # through the centre without turning back: an eight
+        assert (
+            out @ back / np.linalg.norm(out) / np.linalg.norm(back) > 0.999
+        )  # through the centre without turning back: an eight

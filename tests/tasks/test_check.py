@@ -58,7 +58,11 @@ def test_an_unreachable_waypoint_is_named_and_exits_3(tmp_path):
 def test_a_malformed_task_is_one_line_exit_2(tmp_path):
     path = _triangle(tmp_path, "[0.300, 0.270]")
     result = runner.invoke(app, ["task", "check", str(path)])
-    assert result.exit_code == 2 and len(result.stderr.strip().splitlines()) == 1 and "waypoints.A.position" in result.stderr
+    assert (
+        result.exit_code == 2
+        and len(result.stderr.strip().splitlines()) == 1
+        and "waypoints.A.position" in result.stderr
+    )
 
 
 def test_a_relative_robot_path_is_taken_from_the_working_directory(tmp_path, monkeypatch):

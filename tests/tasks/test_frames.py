@@ -124,9 +124,18 @@ def test_a_link_frame_turns_and_moves_the_waypoints(tmp_path, iiwa_ready):
     from dualarm.model.poses import pose_matrix
     from dualarm.tasks import load_task
 
-    text = (TASKS / "triangle.toml").read_text().replace('frame = "left.shoulder"', 'frame = "left_lbr_iiwa_link_0"').replace('scale = "arm"', "")
+    text = (
+        (TASKS / "triangle.toml")
+        .read_text()
+        .replace('frame = "left.shoulder"', 'frame = "left_lbr_iiwa_link_0"')
+        .replace('scale = "arm"', "")
+    )
     text = text.replace('robot = "../robots/humanoid"', f'robot = "{DUAL_IIWA}"')
-    for old, new in (("[0.300, 0.070, -0.397]", "[0.5, 0.1, 0.2]"), ("[0.300, -0.200, -0.097]", "[0.5, -0.1, 0.3]"), ("[0.300, -0.200, -0.397]", "[0.5, -0.1, 0.1]")):
+    for old, new in (
+        ("[0.300, 0.070, -0.397]", "[0.5, 0.1, 0.2]"),
+        ("[0.300, -0.200, -0.097]", "[0.5, -0.1, 0.3]"),
+        ("[0.300, -0.200, -0.397]", "[0.5, -0.1, 0.1]"),
+    ):
         text = text.replace(old, new)
     file = tmp_path / "triangle.toml"
     file.write_text(text)
@@ -140,7 +149,12 @@ def test_a_link_frame_turns_and_moves_the_waypoints(tmp_path, iiwa_ready):
 
 
 def test_a_bad_frame_name_is_one_line_naming_the_key_and_the_frames(tmp_path):
-    text = (TASKS / "triangle.toml").read_text().replace('frame = "left.shoulder"', 'frame = "left_elbow_centre"').replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    text = (
+        (TASKS / "triangle.toml")
+        .read_text()
+        .replace('frame = "left.shoulder"', 'frame = "left_elbow_centre"')
+        .replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    )
     file = tmp_path / "triangle.toml"
     file.write_text(text)
     result = runner.invoke(app, ["task", "check", str(file)])
@@ -162,7 +176,21 @@ def test_the_triangle_runs_on_the_dual_iiwa_and_its_hand_draws_the_triangle_abou
     """`dualarm run triangle --robot robots/dual_iiwa --ik mc-inverse --stages path,ik` completes; PyBullet's FK of the recorded IK joints puts the hand on A, B, C, A (the file's numbers about the PyBullet shoulder, scaled) at 0, 2, 4, 6 s times the file's [transfer] duration_scale, and on the reference throughout."""
     from dualarm.record.readback import read_run
 
-    result = runner.invoke(app, ["run", "triangle", "--robot", str(DUAL_IIWA), "--ik", "mc-inverse", "--stages", "path,ik", "--out", str(tmp_path)])
+    result = runner.invoke(
+        app,
+        [
+            "run",
+            "triangle",
+            "--robot",
+            str(DUAL_IIWA),
+            "--ik",
+            "mc-inverse",
+            "--stages",
+            "path,ik",
+            "--out",
+            str(tmp_path),
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert "verdict: complete" in result.stderr
     run = read_run(result.stdout.strip().splitlines()[-1])
@@ -173,16 +201,22 @@ def test_the_triangle_runs_on_the_dual_iiwa_and_its_hand_draws_the_triangle_abou
     data = tomllib.loads((TASKS / "triangle.toml").read_text())
     names = [f"left_lbr_iiwa_joint_{k}" for k in range(1, 8)]
     stretch = data["transfer"]["duration_scale"]
-    vertices = {round(k * 200 * stretch): name for k, name in enumerate("ABCA")}  # samples at 0, 2, 4 and 6 s stretched (0.01 s apart)
+    vertices = {
+        round(k * 200 * stretch): name for k, name in enumerate("ABCA")
+    }  # samples at 0, 2, 4 and 6 s stretched (0.01 s apart)
     assert np.allclose(ik["t"].to_numpy()[list(vertices)], np.array([0.0, 2.0, 4.0, 6.0]) * stretch)
     for i in range(0, len(ik), 25):  # the right arm stays at ready, as the fixture set it
         row = ik.iloc[i]
         for n in names:
-            pb.resetJointState(iiwa_ready.body, iiwa_ready.joint[n], float(row[f"position.{n}"]), physicsClientId=iiwa_ready.client)
+            pb.resetJointState(
+                iiwa_ready.body, iiwa_ready.joint[n], float(row[f"position.{n}"]), physicsClientId=iiwa_ready.client
+            )
         hand = iiwa_ready.frame("left_lbr_iiwa_link_7")
         ref = reference.iloc[i]
         assert np.linalg.norm(hand[:3, 3] - [ref["position.x"], ref["position.y"], ref["position.z"]]) < 1e-6
-        R = Rotation.from_quat([ref["orientation.x"], ref["orientation.y"], ref["orientation.z"], ref["orientation.w"]]).as_matrix()
+        R = Rotation.from_quat(
+            [ref["orientation.x"], ref["orientation.y"], ref["orientation.z"], ref["orientation.w"]]
+        ).as_matrix()
         assert np.abs(hand[:3, :3] - R).max() < 1e-6
         if i in vertices:
             written = data["waypoints"][vertices[i]]
@@ -195,11 +229,24 @@ def test_a_waypoint_scaled_beyond_the_coordinate_range_is_one_line_naming_it():
     from dualarm.errors import TaskFileError
     from dualarm.tasks.load import task_from_dict
 
-    with pytest.raises(TaskFileError, match=r"^<dict>:waypoints\.far: in the robot base frame its position .* outside \[-100, 100\] m$"):
-        task_from_dict(name="far", robot=DUAL_IIWA, control_period_s=0.01, initial="ready", start={}, frame="left.shoulder", scale="arm", waypoints={"far": {"position": [99.0, 0.0, 0.0]}})
+    with pytest.raises(
+        TaskFileError, match=r"^<dict>:waypoints\.far: in the robot base frame its position .* outside \[-100, 100\] m$"
+    ):
+        task_from_dict(
+            name="far",
+            robot=DUAL_IIWA,
+            control_period_s=0.01,
+            initial="ready",
+            start={},
+            frame="left.shoulder",
+            scale="arm",
+            waypoints={"far": {"position": [99.0, 0.0, 0.0]}},
+        )
 
 
-def test_the_ball_game_runs_on_the_dual_iiwa_through_every_stage_from_its_ready_pose_at_its_own_limits(tmp_path, iiwa_ready):
+def test_the_ball_game_runs_on_the_dual_iiwa_through_every_stage_from_its_ready_pose_at_its_own_limits(
+    tmp_path, iiwa_ready
+):
     """`dualarm run ball_game --robot dual_iiwa --ik tvgdd` completes through execution; the IK starts at robot.toml's ready (PyBullet FK of both hands), the first stroke lifts both hands by 0.10 m times the arm's scale (from PyBullet's joint axes), and the joints are held to KUKA's data-sheet velocities, not the paper's 6 rad/s."""
     import math
 
@@ -216,10 +263,17 @@ def test_the_ball_game_runs_on_the_dual_iiwa_through_every_stage_from_its_ready_
     after_stroke = ik.iloc[int(np.argmin(np.abs(ik["t"].to_numpy() - 3.0)))]
     for n in iiwa_ready.joint:
         if f"position.{n}" in ik:
-            pb.resetJointState(iiwa_ready.body, iiwa_ready.joint[n], float(after_stroke[f"position.{n}"]), physicsClientId=iiwa_ready.client)
+            pb.resetJointState(
+                iiwa_ready.body,
+                iiwa_ready.joint[n],
+                float(after_stroke[f"position.{n}"]),
+                physicsClientId=iiwa_ready.client,
+            )
     for hand in ("left", "right"):
         lifted = iiwa_ready.frame(f"{hand}_lbr_iiwa_link_7")[:3, 3] - start[hand]
-        assert np.linalg.norm(lifted - [0.0, 0.0, 0.10 * scale]) < 1e-3  # TV-GDD tracks to its feedback error, well under a millimetre
+        assert (
+            np.linalg.norm(lifted - [0.0, 0.0, 0.10 * scale]) < 1e-3
+        )  # TV-GDD tracks to its feedback error, well under a millimetre
     first = ik.iloc[0]
     from dualarm.model.robot import load_robot
 

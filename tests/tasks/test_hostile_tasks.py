@@ -74,7 +74,11 @@ def toml_value(value: object) -> str:
     if isinstance(value, list):
         return "[" + ", ".join(toml_value(v) for v in value) + "]"
     if isinstance(value, dict):
-        return "{ " + ", ".join(f"{toml_string(str(k))} = {toml_value(v)}" for k, v in value.items()) + " }" if value else "{}"
+        return (
+            "{ " + ", ".join(f"{toml_string(str(k))} = {toml_value(v)}" for k, v in value.items()) + " }"
+            if value
+            else "{}"
+        )
     raise TypeError(type(value))
 
 
@@ -196,7 +200,16 @@ def hostile_paths(tmp_path: Path) -> dict[str, str]:
     }
 
 
-CASES = ["missing", "directory", "fifo", "symlink_loop", "component_over_255_bytes", "through_a_regular_file", "nul_byte", "10000_characters"]
+CASES = [
+    "missing",
+    "directory",
+    "fifo",
+    "symlink_loop",
+    "component_over_255_bytes",
+    "through_a_regular_file",
+    "nul_byte",
+    "10000_characters",
+]
 
 
 def assert_names(message: str, path: str, reason: str) -> None:
@@ -248,7 +261,12 @@ def test_robot_directory_path_error_is_one_line(hostile_paths, case: str):
 
 @pytest.mark.parametrize("case", CASES)
 def test_task_whose_robot_key_is_a_hostile_path(tmp_path: Path, hostile_paths, case: str):
-    path = write(tmp_path, shipped_text("triangle").replace(f'robot = "{ROBOT_DIR.as_posix()}"', f"robot = {toml_string(hostile_paths[case])}"))
+    path = write(
+        tmp_path,
+        shipped_text("triangle").replace(
+            f'robot = "{ROBOT_DIR.as_posix()}"', f"robot = {toml_string(hostile_paths[case])}"
+        ),
+    )
     with pytest.raises(TaskFileError) as info:
         load_task(path)
     message = str(info.value)
@@ -256,7 +274,9 @@ def test_task_whose_robot_key_is_a_hostile_path(tmp_path: Path, hostile_paths, c
     assert "\n" not in message and len(message) <= MAX_LINE_CHARS
 
 
-@pytest.mark.parametrize("case", [c for c in CASES if c != "nul_byte"])  # a command line cannot hold a NUL byte (C strings)
+@pytest.mark.parametrize(
+    "case", [c for c in CASES if c != "nul_byte"]
+)  # a command line cannot hold a NUL byte (C strings)
 def test_cli_run_on_a_hostile_path(tmp_path: Path, hostile_paths, case: str):
     out = tmp_path / "out"
     result = cli_run(hostile_paths[case], out)
@@ -300,14 +320,18 @@ def test_task_file_not_utf8(tmp_path: Path):
         load_task(path)
 
 
-@pytest.mark.parametrize("value", ["[" * 100_000 + "]" * 100_000, "{ a = " * 5_000 + "1" + " }" * 5_000], ids=["arrays", "tables"])
+@pytest.mark.parametrize(
+    "value", ["[" * 100_000 + "]" * 100_000, "{ a = " * 5_000 + "1" + " }" * 5_000], ids=["arrays", "tables"]
+)
 def test_task_file_nested_deeply(tmp_path: Path, value: str):
     path = write(tmp_path, shipped_text("carry_box", ('initial = "ready"', f"initial = {value}")))
     with pytest.raises(TaskFileError) as info:
         load_task(path)
     message = str(info.value)
     assert message.startswith(f"{path}:"), message[:300]
-    assert "nested too deeply" in message or message.startswith(f"{path}:initial"), message[:300]  # by tomllib or by the schema
+    assert "nested too deeply" in message or message.startswith(f"{path}:initial"), message[
+        :300
+    ]  # by tomllib or by the schema
     assert "\n" not in message and len(message) <= MAX_LINE_CHARS
 
 
@@ -317,7 +341,25 @@ def test_urdf_option_naming_a_directory(tmp_path: Path, command: str):
     if command == "check":
         args = ["robot", "check", "--urdf", str(tmp_path), "--base", "a", "--tip", "b"]
     else:
-        args = ["ik", "srs", "--urdf", str(tmp_path), "--base", "a", "--tip", "b", "--pose", "0.3", "0.2", "1.0", "0", "0", "0", "--arm-angle", "0"]
+        args = [
+            "ik",
+            "srs",
+            "--urdf",
+            str(tmp_path),
+            "--base",
+            "a",
+            "--tip",
+            "b",
+            "--pose",
+            "0.3",
+            "0.2",
+            "1.0",
+            "0",
+            "0",
+            "0",
+            "--arm-angle",
+            "0",
+        ]
     result = runner.invoke(app, args)
     assert result.exit_code == 2, result.output
     line = error_line(result.stderr)
@@ -326,7 +368,9 @@ def test_urdf_option_naming_a_directory(tmp_path: Path, command: str):
 
 def run_subprocess(args: list[str]) -> subprocess.CompletedProcess:
     """``dualarm ARGS`` in a fresh interpreter (the real stderr); the timeout turns a hang into a failure."""
-    return subprocess.run([sys.executable, "-c", "from dualarm.cli import app; app()", *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-c", "from dualarm.cli import app; app()", *args], capture_output=True, text=True, timeout=300
+    )
 
 
 def test_subprocess_fifo_and_long_path_no_traceback_no_hang(tmp_path: Path, hostile_paths):
@@ -341,7 +385,10 @@ def test_subprocess_fifo_and_long_path_no_traceback_no_hang(tmp_path: Path, host
 
 @pytest.mark.parametrize(
     "edit",
-    [('initial = "ready"', "initial = " + "[" * 100_000 + "]" * 100_000), ('waist = "locked"', 'waist = "locked"\n' + toml_string("\x1b[2J\u202e" * 2000) + " = 1")],
+    [
+        ('initial = "ready"', "initial = " + "[" * 100_000 + "]" * 100_000),
+        ('waist = "locked"', 'waist = "locked"\n' + toml_string("\x1b[2J\u202e" * 2000) + " = 1"),
+    ],
     ids=["nesting_beyond_the_stack", "terminal_codes_in_a_key"],
 )
 def test_subprocess_hostile_content_no_traceback(tmp_path: Path, edit):
@@ -359,7 +406,9 @@ def test_task_file_too_large(tmp_path: Path):
     path = tmp_path / "huge.toml"
     with path.open("wb") as file:
         file.truncate(17 * 1024 * 1024)
-    with pytest.raises(TaskFileError, match=rf"huge\.toml: cannot read the task file: {17 * 1024 * 1024:,} bytes, more than the"):
+    with pytest.raises(
+        TaskFileError, match=rf"huge\.toml: cannot read the task file: {17 * 1024 * 1024:,} bytes, more than the"
+    ):
         load_task(path)
 
 
@@ -381,30 +430,144 @@ FIRST_MOVE = 'duration_s = 2.0\nleft = { to = "B" }'
 ARM_ANGLE = "range_rad = [-3.141592653589793, 0.0]"
 
 ABSURD = [
-    ("margin_1e300", "triangle", (ARM_ANGLE, ARM_ANGLE + "\nmargin_rad = 1e300"), "arm_angle.margin_rad", "[0, 3.14159] rad"),
-    ("period_1e-12", "triangle", ("control_period_s = 0.01", "control_period_s = 1e-12"), "control_period_s", "[0.0001, 1] s"),
-    ("period_10", "triangle", ("control_period_s = 0.01", "control_period_s = 10.0"), "control_period_s", "[0.0001, 1] s"),
+    (
+        "margin_1e300",
+        "triangle",
+        (ARM_ANGLE, ARM_ANGLE + "\nmargin_rad = 1e300"),
+        "arm_angle.margin_rad",
+        "[0, 3.14159] rad",
+    ),
+    (
+        "period_1e-12",
+        "triangle",
+        ("control_period_s = 0.01", "control_period_s = 1e-12"),
+        "control_period_s",
+        "[0.0001, 1] s",
+    ),
+    (
+        "period_10",
+        "triangle",
+        ("control_period_s = 0.01", "control_period_s = 10.0"),
+        "control_period_s",
+        "[0.0001, 1] s",
+    ),
     ("repetitions_1e7", "triangle", ("repetitions = 5", "repetitions = 10000000"), "repetitions", "[1, 1000]"),
     ("repetitions_2e80", "triangle", ("repetitions = 5", "repetitions = 1" + "0" * 80), "repetitions", "[1, 1000]"),
-    ("duration_1e9_samples", "triangle", (FIRST_MOVE, 'duration_s = 1e7\nleft = { to = "B" }'), "moves[0].duration_s", "(0, 86400] s"),
-    ("arc_axis_1e200", "circle", ("arc_axis = [1.0, 0.0, 0.0]", "arc_axis = [1e200, 0.0, 0.0]"), "moves[0].left.arc_axis[0]", "[-1e+06, 1e+06]"),
-    ("arc_angle_1e300", "circle", ("arc_angle_rad = 6.283185307179586", "arc_angle_rad = 1e300"), "moves[0].left.arc_angle_rad", "[-12.5664, 12.5664] rad"),
-    ("obstacle_1e300", "bowl_grasp", ("size_m = [0.50, 1.00, 0.04]", "size_m = [1e300, 1.00, 0.04]"), "environment[0].size_m[0]", "[0.0001, 100] m"),
-    ("obstacle_far", "bowl_grasp", ("pose = { position = [0.55, 0.0, 0.88] }", "pose = { position = [1e300, 0.0, 0.88] }"), "environment[0].pose.position[0]", "[-100, 100] m"),
-    ("radius_1e-300", "bowl_grasp", ("radius_m = 0.07", "radius_m = 1e-300"), "environment[1].radius_m", "[0.0001, 100] m"),
-    ("max_joint_step_huge", "triangle", (ARM_ANGLE, ARM_ANGLE + "\nmax_joint_step_rad = 1e300"), "arm_angle.max_joint_step_rad", "(0, 6.28319] rad"),
-    ("vertical_1e200", "triangle", (ARM_ANGLE, ARM_ANGLE + "\nvertical = [1e200, 0.0, 0.0]"), "arm_angle.vertical[0]", "[-1e+06, 1e+06]"),
-    ("waypoint_1e300", "triangle", ("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0, 1e300]"), "waypoints.B.position[2]", "[-100, 100] m"),
-    ("rpy_1e300", "triangle", ("rpy = [-0.517, -1.380, 2.390]", "rpy = [-0.517, -1.380, 1e300]"), "waypoints.B.rpy[2]", "[-6.28319, 6.28319] rad"),
-    ("by_1e300", "carry_box", ("left = { by = [0.0, 0.0, 0.20] }", "left = { by = [0.0, 0.0, 1e300] }"), "moves[0].left.by[2]", "[-100, 100] m"),
-    ("box_1e-300", "carry_box", ("size_m = [0.15, 0.24, 0.15]", "size_m = [0.15, 0.24, 1e-300]"), "object.size_m[2]", "[0.0001, 100] m"),
-    ("velocity_limit_tiny", "ball_game", ("velocity = 6.0", "velocity = 1e-300"), "limits.velocity", "[0.01, 100] rad/s"),
-    ("velocity_limit_huge", "ball_game", ("velocity = 6.0", "velocity = 1e300"), "limits.velocity", "[0.01, 100] rad/s"),
+    (
+        "duration_1e9_samples",
+        "triangle",
+        (FIRST_MOVE, 'duration_s = 1e7\nleft = { to = "B" }'),
+        "moves[0].duration_s",
+        "(0, 86400] s",
+    ),
+    (
+        "arc_axis_1e200",
+        "circle",
+        ("arc_axis = [1.0, 0.0, 0.0]", "arc_axis = [1e200, 0.0, 0.0]"),
+        "moves[0].left.arc_axis[0]",
+        "[-1e+06, 1e+06]",
+    ),
+    (
+        "arc_angle_1e300",
+        "circle",
+        ("arc_angle_rad = 6.283185307179586", "arc_angle_rad = 1e300"),
+        "moves[0].left.arc_angle_rad",
+        "[-12.5664, 12.5664] rad",
+    ),
+    (
+        "obstacle_1e300",
+        "bowl_grasp",
+        ("size_m = [0.50, 1.00, 0.04]", "size_m = [1e300, 1.00, 0.04]"),
+        "environment[0].size_m[0]",
+        "[0.0001, 100] m",
+    ),
+    (
+        "obstacle_far",
+        "bowl_grasp",
+        ("pose = { position = [0.55, 0.0, 0.88] }", "pose = { position = [1e300, 0.0, 0.88] }"),
+        "environment[0].pose.position[0]",
+        "[-100, 100] m",
+    ),
+    (
+        "radius_1e-300",
+        "bowl_grasp",
+        ("radius_m = 0.07", "radius_m = 1e-300"),
+        "environment[1].radius_m",
+        "[0.0001, 100] m",
+    ),
+    (
+        "max_joint_step_huge",
+        "triangle",
+        (ARM_ANGLE, ARM_ANGLE + "\nmax_joint_step_rad = 1e300"),
+        "arm_angle.max_joint_step_rad",
+        "(0, 6.28319] rad",
+    ),
+    (
+        "vertical_1e200",
+        "triangle",
+        (ARM_ANGLE, ARM_ANGLE + "\nvertical = [1e200, 0.0, 0.0]"),
+        "arm_angle.vertical[0]",
+        "[-1e+06, 1e+06]",
+    ),
+    (
+        "waypoint_1e300",
+        "triangle",
+        ("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0, 1e300]"),
+        "waypoints.B.position[2]",
+        "[-100, 100] m",
+    ),
+    (
+        "rpy_1e300",
+        "triangle",
+        ("rpy = [-0.517, -1.380, 2.390]", "rpy = [-0.517, -1.380, 1e300]"),
+        "waypoints.B.rpy[2]",
+        "[-6.28319, 6.28319] rad",
+    ),
+    (
+        "by_1e300",
+        "carry_box",
+        ("left = { by = [0.0, 0.0, 0.20] }", "left = { by = [0.0, 0.0, 1e300] }"),
+        "moves[0].left.by[2]",
+        "[-100, 100] m",
+    ),
+    (
+        "box_1e-300",
+        "carry_box",
+        ("size_m = [0.15, 0.24, 0.15]", "size_m = [0.15, 0.24, 1e-300]"),
+        "object.size_m[2]",
+        "[0.0001, 100] m",
+    ),
+    (
+        "velocity_limit_tiny",
+        "ball_game",
+        ("velocity = 6.0", "velocity = 1e-300"),
+        "limits.velocity",
+        "[0.01, 100] rad/s",
+    ),
+    (
+        "velocity_limit_huge",
+        "ball_game",
+        ("velocity = 6.0", "velocity = 1e300"),
+        "limits.velocity",
+        "[0.01, 100] rad/s",
+    ),
     ("gesture_nu", "ball_game", ("nu = 2.0", "nu = 1e300"), "gesture.nu", "(0, 1000] 1/s"),
-    ("gesture_gain", "ball_game", ("feedback_gain = 50.0", "feedback_gain = 1e300"), "gesture.feedback_gain", "(0, 1000] 1/s"),
+    (
+        "gesture_gain",
+        "ball_game",
+        ("feedback_gain = 50.0", "feedback_gain = 1e300"),
+        "gesture.feedback_gain",
+        "(0, 1000] 1/s",
+    ),
     ("gesture_t_sp", "ball_game", ("t_sp_s = 0.75", "t_sp_s = 1e300"), "gesture.t_sp_s", "(0, 86400] s"),
     ("gesture_c_tuning", "ball_game", ("c_tuning = 1.0", "c_tuning = 1e-300"), "gesture.c_tuning", "[0.0001, 1] s"),
-    ("retime_fraction", "ball_game", ('timing = "task"', 'timing = "task"\nvelocity_fraction = 1e-300'), "retime.velocity_fraction", "[0.01, 1]"),
+    (
+        "retime_fraction",
+        "ball_game",
+        ('timing = "task"', 'timing = "task"\nvelocity_fraction = 1e-300'),
+        "retime.velocity_fraction",
+        "[0.01, 1]",
+    ),
     (
         "wta_bound",
         "bowl_grasp",
@@ -415,12 +578,26 @@ ABSURD = [
         "wta[0].bounds[0][0]",
         "[-100, 100] m",
     ),
-    ("wta_weight", "bowl_grasp", ('name = "bowl_right"', 'name = "bowl_right"\nweight = 1e300'), "wta[1].weight", "[1e-06, 1e+06]"),
-    ("initial_joint_1e300", "carry_box", ('initial = "ready"', "initial = { left_elbow = 1e300 }"), "initial.left_elbow", "[-100, 100]"),
+    (
+        "wta_weight",
+        "bowl_grasp",
+        ('name = "bowl_right"', 'name = "bowl_right"\nweight = 1e300'),
+        "wta[1].weight",
+        "[1e-06, 1e+06]",
+    ),
+    (
+        "initial_joint_1e300",
+        "carry_box",
+        ('initial = "ready"', "initial = { left_elbow = 1e300 }"),
+        "initial.left_elbow",
+        "[-100, 100]",
+    ),
 ]
 
 
-@pytest.mark.parametrize(("edit", "key", "allowed"), [(e, k, a) for _, _, e, k, a in ABSURD], ids=[i for i, *_ in ABSURD])
+@pytest.mark.parametrize(
+    ("edit", "key", "allowed"), [(e, k, a) for _, _, e, k, a in ABSURD], ids=[i for i, *_ in ABSURD]
+)
 def test_absurd_number_refused_with_key_and_range(tmp_path: Path, edit, key: str, allowed: str):
     task = next(t for i, t, e, *_ in ABSURD if e == edit)
     path = write(tmp_path, shipped_text(task, edit))
@@ -436,7 +613,9 @@ def test_margin_at_half_the_narrowest_arm_joint_range(tmp_path: Path):
     """margin_rad must stay below half the narrowest range of the driven (left) arm's joints, taken from the URDF."""
     left = {n: r for n, r in urdf_joint_ranges().items() if n.startswith("left_")}
     half = min(left.values()) / 2
-    ok = load_task(write(tmp_path, shipped_text("triangle", (ARM_ANGLE, f"{ARM_ANGLE}\nmargin_rad = {half - 1e-3!r}")), "ok.toml"))
+    ok = load_task(
+        write(tmp_path, shipped_text("triangle", (ARM_ANGLE, f"{ARM_ANGLE}\nmargin_rad = {half - 1e-3!r}")), "ok.toml")
+    )
     assert ok.spec.arm_angle.margin_rad == pytest.approx(half - 1e-3)
     path = write(tmp_path, shipped_text("triangle", (ARM_ANGLE, f"{ARM_ANGLE}\nmargin_rad = {half + 1e-3!r}")))
     with pytest.raises(TaskFileError) as info:
@@ -467,7 +646,12 @@ def test_sample_budget(tmp_path: Path):
     fits = 1 + 166 * SAMPLES_PER_TRIANGLE_REPETITION
     over = 1 + 167 * SAMPLES_PER_TRIANGLE_REPETITION
     assert fits <= 100_000 < over
-    assert load_task(write(tmp_path, shipped_text("triangle", ("repetitions = 5", "repetitions = 166")), "ok.toml")).spec.repetitions == 166
+    assert (
+        load_task(
+            write(tmp_path, shipped_text("triangle", ("repetitions = 5", "repetitions = 166")), "ok.toml")
+        ).spec.repetitions
+        == 166
+    )
     path = write(tmp_path, shipped_text("triangle", ("repetitions = 5", "repetitions = 167")))
     with pytest.raises(TaskFileError) as info:
         load_task(path)
@@ -492,7 +676,11 @@ def test_arc_axis_of_any_length_gives_the_same_circle(tmp_path: Path):
     """arc_axis is normalised without overflow: [1e6, 0, 0] and [1e-5, 0, 0] draw the circle [1, 0, 0] does, radius 0.15 m about [0.31, 0.09, 1.05]."""
     references = {}
     for axis in ("1.0", "1e6", "1e-5"):
-        text = shipped_text("circle", ("arc_axis = [1.0, 0.0, 0.0]", f"arc_axis = [{axis}, 0.0, 0.0]"), ("repetitions = 5", "repetitions = 1"))
+        text = shipped_text(
+            "circle",
+            ("arc_axis = [1.0, 0.0, 0.0]", f"arc_axis = [{axis}, 0.0, 0.0]"),
+            ("repetitions = 5", "repetitions = 1"),
+        )
         references[axis] = build_reference(load_task(write(tmp_path, text, f"a{axis}.toml"))).hands["left"].position
     p = references["1.0"]
     assert np.allclose(np.linalg.norm(p - [0.31, 0.09, 1.05], axis=1), 0.15, atol=1e-12)
@@ -510,13 +698,20 @@ def test_zero_or_tiny_directions_refused(tmp_path: Path):
         path = write(tmp_path, shipped_text("circle", edit))
         with pytest.raises(TaskFileError) as info:
             load_task(path)
-        assert str(info.value).startswith(f"{path}:{key}: ") and "length of at least 1e-06" in str(info.value), str(info.value)
+        assert str(info.value).startswith(f"{path}:{key}: ") and "length of at least 1e-06" in str(info.value), str(
+            info.value
+        )
 
 
 def test_a_huge_obstacle_around_the_robot_overlaps_its_base(tmp_path: Path):
     """Within the size range, a 100 m box centred on the robot is refused by PyBullet's overlap check (it holds the base)."""
     path = write(
-        tmp_path, shipped_text("bowl_grasp", ("size_m = [0.50, 1.00, 0.04]", "size_m = [100.0, 100.0, 100.0]"), ("pose = { position = [0.55, 0.0, 0.88] }", "pose = { position = [0.0, 0.0, 0.0] }"))
+        tmp_path,
+        shipped_text(
+            "bowl_grasp",
+            ("size_m = [0.50, 1.00, 0.04]", "size_m = [100.0, 100.0, 100.0]"),
+            ("pose = { position = [0.55, 0.0, 0.88] }", "pose = { position = [0.0, 0.0, 0.0] }"),
+        ),
     )
     with pytest.raises(TaskFileError, match=r":environment\[0\]: 'table' overlaps the robot's base link"):
         load_task(path)
@@ -524,8 +719,14 @@ def test_a_huge_obstacle_around_the_robot_overlaps_its_base(tmp_path: Path):
 
 def test_gesture_goal_outside_the_joint_limits(tmp_path: Path):
     """A goal beyond the joint's URDF limits would move eq (19)'s bounds outside them."""
-    upper = next(float(j.find("limit").get("upper")) for j in ET.parse(URDF).getroot().iter("joint") if j.get("name") == "left_shoulder_yaw")
-    path = write(tmp_path, shipped_text("ball_game", ("left_shoulder_yaw = 1.1439", f"left_shoulder_yaw = {upper + 0.01!r}")))
+    upper = next(
+        float(j.find("limit").get("upper"))
+        for j in ET.parse(URDF).getroot().iter("joint")
+        if j.get("name") == "left_shoulder_yaw"
+    )
+    path = write(
+        tmp_path, shipped_text("ball_game", ("left_shoulder_yaw = 1.1439", f"left_shoulder_yaw = {upper + 0.01!r}"))
+    )
     with pytest.raises(TaskFileError) as info:
         load_task(path)
     assert str(info.value).startswith(f"{path}:gesture.goal_upper.left_shoulder_yaw: "), str(info.value)
@@ -553,7 +754,26 @@ def test_long_user_strings_are_quoted_short(tmp_path: Path, edit, message: str):
 # Property-based: task files from the schema and mutations of the shipped ones, through the CLI
 
 #: Names the generator uses for strings, so that references resolve now and then.
-NAMES = ["A", "B", "C", "P0", "grasp", "initial", "ready", "zero", "left", "right", "left_elbow", "right_elbow", "waist_yaw", "box", "table", "left_palm", "humanoid", "triangle"]
+NAMES = [
+    "A",
+    "B",
+    "C",
+    "P0",
+    "grasp",
+    "initial",
+    "ready",
+    "zero",
+    "left",
+    "right",
+    "left_elbow",
+    "right_elbow",
+    "waist_yaw",
+    "box",
+    "table",
+    "left_palm",
+    "humanoid",
+    "triangle",
+]
 
 
 def nested(depth: int) -> list:
@@ -563,8 +783,40 @@ def nested(depth: int) -> list:
     return value
 
 
-HOSTILE = [0, -1, 1, 10**7, 2**63, -(2**63), 10**30, 1e300, -1e300, 1e-12, 5e-324, -0.0, math.nan, math.inf, -math.inf, True, False]
-HOSTILE += ["", "nan", "inf", "1e300", "0.01", "é✓\u202e\x00\n", "x" * 10_000, [], {}, [1e300, 0.0, 0.0], [0.0, 0.0, 0.0], {"left": 1e300}, {"": {}}]
+HOSTILE = [
+    0,
+    -1,
+    1,
+    10**7,
+    2**63,
+    -(2**63),
+    10**30,
+    1e300,
+    -1e300,
+    1e-12,
+    5e-324,
+    -0.0,
+    math.nan,
+    math.inf,
+    -math.inf,
+    True,
+    False,
+]
+HOSTILE += [
+    "",
+    "nan",
+    "inf",
+    "1e300",
+    "0.01",
+    "é✓\u202e\x00\n",
+    "x" * 10_000,
+    [],
+    {},
+    [1e300, 0.0, 0.0],
+    [0.0, 0.0, 0.0],
+    {"left": 1e300},
+    {"": {}},
+]
 hostile_values = st.one_of(
     st.sampled_from(HOSTILE).map(copy.deepcopy),
     st.floats(),
@@ -650,7 +902,11 @@ def strategy_for(annotation: object, metadata: tuple = ()) -> st.SearchStrategy:
         if not ranges:
             return st.floats(-10, 10) if annotation is float else st.integers(-10, 10)
         r = ranges[0]
-        inside = st.floats(r.low, r.high, exclude_min=r.low_open) if annotation is float else st.integers(int(r.low), int(r.high))
+        inside = (
+            st.floats(r.low, r.high, exclude_min=r.low_open)
+            if annotation is float
+            else st.integers(int(r.low), int(r.high))
+        )
         edges = st.sampled_from([r.low, r.high, r.high * 1.5 + 1, r.low - 1, -r.high])
         return mostly(inside, st.one_of(edges, hostile_values))
     raise NotImplementedError(annotation)
@@ -679,7 +935,12 @@ PROPERTY = settings(
     derandomize=True,
     database=None,
     deadline=timedelta(seconds=120),
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much, HealthCheck.large_base_example],
+    suppress_health_check=[
+        HealthCheck.too_slow,
+        HealthCheck.data_too_large,
+        HealthCheck.filter_too_much,
+        HealthCheck.large_base_example,
+    ],
 )
 
 

@@ -100,8 +100,12 @@ def test_unmodified_copy_loads(tmp_path: Path):
     task = load_task(variant(tmp_path))
     data = tomllib.loads(TRIANGLE.read_text())
     for name, wp in data["waypoints"].items():
-        assert np.allclose(task.waypoint_pose(name)[:3, 3], np.add(wp["position"], (0.0, 0.2, 1.4)), atol=1e-15)  # frame = "left.shoulder": S at [0, 0.2, 1.4] on the humanoid, scale 1
-        assert np.allclose(task.waypoint_pose(name)[:3, :3], Rotation.from_euler("xyz", wp["rpy"]).as_matrix(), atol=1e-12)
+        assert np.allclose(
+            task.waypoint_pose(name)[:3, 3], np.add(wp["position"], (0.0, 0.2, 1.4)), atol=1e-15
+        )  # frame = "left.shoulder": S at [0, 0.2, 1.4] on the humanoid, scale 1
+        assert np.allclose(
+            task.waypoint_pose(name)[:3, :3], Rotation.from_euler("xyz", wp["rpy"]).as_matrix(), atol=1e-12
+        )
     # the [initial] table as tomllib reads it; the joints it does not name start at zero
     assert data["initial"] and all(task.initial_q[joint] == value for joint, value in data["initial"].items())
     assert all(value == 0.0 for joint, value in task.initial_q.items() if joint not in data["initial"])
@@ -116,8 +120,16 @@ MALFORMED = [
     ("unknown_top_level_key", [('waist = "locked"', 'waist = "locked"\ncolour = "red"')], "colour"),
     ("unknown_key_in_move", [('left = { to = "B" }', 'left = { to = "B", speed = 1.0 }')], "moves[0].left.speed"),
     ("string_control_period", [("control_period_s = 0.01", 'control_period_s = "0.01"')], "control_period_s"),
-    ("position_two_numbers", [("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0]")], "waypoints.B.position"),
-    ("position_four_numbers", [("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0, 1.303, 0.0]")], "waypoints.B.position"),
+    (
+        "position_two_numbers",
+        [("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0]")],
+        "waypoints.B.position",
+    ),
+    (
+        "position_four_numbers",
+        [("position = [0.300, -0.200, -0.097]", "position = [0.300, 0.0, 1.303, 0.0]")],
+        "waypoints.B.position",
+    ),
     ("zero_duration", [(FIRST_MOVE, 'duration_s = 0.0\nleft = { to = "B" }')], "moves[0].duration_s"),
     ("negative_duration", [(FIRST_MOVE, 'duration_s = -2.0\nleft = { to = "B" }')], "moves[0].duration_s"),
     ("zero_control_period", [("control_period_s = 0.01", "control_period_s = 0.0")], "control_period_s"),
@@ -138,7 +150,11 @@ MALFORMED = [
     ("initial_unknown_joint", [initial_is("{ left_knee = 0.1 }")], "initial.left_knee"),
     ("initial_joint_above_limit", [initial_is("{ left_elbow = 5.0 }")], "initial.left_elbow"),
     ("initial_joint_below_limit", [initial_is("{ left_elbow = -5.0 }")], "initial.left_elbow"),
-    ("initial_table_joint_above_limit", [(INITIAL, re.sub(r"^left_elbow = .*$", "left_elbow = 5.0", INITIAL, flags=re.MULTILINE))], "initial.left_elbow"),
+    (
+        "initial_table_joint_above_limit",
+        [(INITIAL, re.sub(r"^left_elbow = .*$", "left_elbow = 5.0", INITIAL, flags=re.MULTILINE))],
+        "initial.left_elbow",
+    ),
     ("initial_table_unknown_joint", [(INITIAL, INITIAL + "left_knee = 0.1\n")], "initial.left_knee"),
 ]
 
@@ -202,7 +218,9 @@ def test_shipped_waypoints_are_within_reach_by_geometry():
     data = tomllib.loads(TRIANGLE.read_text())
     for wp in data["waypoints"].values():
         R = Rotation.from_euler("xyz", wp["rpy"]).as_matrix()
-        wrist = LEFT_SHOULDER + np.asarray(wp["position"]) - WRIST_TO_HAND_M * R[:, 2]  # frame = "left.shoulder", scale 1 on the humanoid
+        wrist = (
+            LEFT_SHOULDER + np.asarray(wp["position"]) - WRIST_TO_HAND_M * R[:, 2]
+        )  # frame = "left.shoulder", scale 1 on the humanoid
         assert abs(0.32 - 0.28) < np.linalg.norm(wrist - LEFT_SHOULDER) < ARM_REACH_M
 
 
@@ -302,10 +320,18 @@ def test_cli_run_bad_task(tmp_path: Path, edits):
 def test_bound_feedforward_refused_when_the_bounds_would_cross(tmp_path: Path):
     """With the feedforward, the band of eq (19) (relative shrink rate up to 1/c_tuning) must not
     close faster than nu: nu * c_tuning = 2 * 0.4 <= 1 is refused, naming the gesture table."""
-    text = (REPO / "tasks" / "ball_game.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{ROBOT_DIR.as_posix()}"')
+    text = (
+        (REPO / "tasks" / "ball_game.toml")
+        .read_text()
+        .replace('robot = "../robots/humanoid"', f'robot = "{ROBOT_DIR.as_posix()}"')
+    )
     path = tmp_path / "ball_game.toml"
     path.write_text(text.replace("c_tuning = 1.0", "c_tuning = 0.4"))
     with pytest.raises(TaskFileError, match=r"ball_game\.toml:gesture: .*nu \* c_tuning > 1 \(here 0\.8\)"):
         load_task(path)
-    path.write_text(text.replace("c_tuning = 1.0", "c_tuning = 0.4").replace("bound_feedforward = true", "bound_feedforward = false"))
+    path.write_text(
+        text.replace("c_tuning = 1.0", "c_tuning = 0.4").replace(
+            "bound_feedforward = true", "bound_feedforward = false"
+        )
+    )
     assert load_task(path).spec.gesture.c_tuning == 0.4

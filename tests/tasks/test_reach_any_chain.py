@@ -29,14 +29,23 @@ def _pybullet_reach(seeds: int) -> float:
     """The farthest any of ``seeds`` random configurations within the limits puts the Panda's grasp target from its base [m], by PyBullet on pybullet_data's URDF (a lower bound of the true reach)."""
     client = pb.connect(pb.DIRECT)
     try:
-        body = pb.loadURDF(str(Path(pybullet_data.getDataPath()) / "franka_panda" / "panda.urdf"), useFixedBase=True, physicsClientId=client)
+        body = pb.loadURDF(
+            str(Path(pybullet_data.getDataPath()) / "franka_panda" / "panda.urdf"),
+            useFixedBase=True,
+            physicsClientId=client,
+        )
         limits = np.array([pb.getJointInfo(body, i, physicsClientId=client)[8:10] for i in range(7)])
         rng = np.random.default_rng(0)
         far = 0.0
         for _ in range(seeds):
             for i, value in enumerate(rng.uniform(limits[:, 0], limits[:, 1])):
                 pb.resetJointState(body, i, value, physicsClientId=client)
-            far = max(far, float(np.linalg.norm(pb.getLinkState(body, 11, computeForwardKinematics=True, physicsClientId=client)[4])))
+            far = max(
+                far,
+                float(
+                    np.linalg.norm(pb.getLinkState(body, 11, computeForwardKinematics=True, physicsClientId=client)[4])
+                ),
+            )
     finally:
         pb.disconnect(client)
     return far
@@ -52,7 +61,11 @@ def test_a_pose_outside_the_workspace_is_refused_naming_the_key(tmp_path):
     with pytest.raises(UnreachablePoseError) as caught:
         load_task(_task_with_b_at(tmp_path, [0.0, 0.0, 1.55], [3.14, 0.0, 0.0]))
     message = str(caught.value)
-    assert "\n" not in message and ":waypoints.B: the right hand cannot reach [0.000, 0.000, 1.550]" in message and "joint limits" in message
+    assert (
+        "\n" not in message
+        and ":waypoints.B: the right hand cannot reach [0.000, 0.000, 1.550]" in message
+        and "joint limits" in message
+    )
 
 
 def test_a_pose_made_by_forward_kinematics_inside_the_limits_is_accepted_and_pybullet_reaches_it(tmp_path):
@@ -67,7 +80,11 @@ def test_a_pose_made_by_forward_kinematics_inside_the_limits_is_accepted_and_pyb
     # the configuration the test found, put into PyBullet's own panda.urdf, reaches the pose
     client = pb.connect(pb.DIRECT)
     try:
-        body = pb.loadURDF(str(Path(pybullet_data.getDataPath()) / "franka_panda" / "panda.urdf"), useFixedBase=True, physicsClientId=client)
+        body = pb.loadURDF(
+            str(Path(pybullet_data.getDataPath()) / "franka_panda" / "panda.urdf"),
+            useFixedBase=True,
+            physicsClientId=client,
+        )
         for i, value in enumerate(x):
             pb.resetJointState(body, i, value, physicsClientId=client)
         state = pb.getLinkState(body, 11, computeForwardKinematics=True, physicsClientId=client)

@@ -130,7 +130,9 @@ def ratios(rows: Sequence[IkBenchRow], reference_name: str | None = None) -> dic
     return {r.name: r.mean_s / reference for r in rows}
 
 
-def reachable_poses(robot: Robot, arm: str, poses: int, seed: int, mc: McInverse | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reachable_poses(
+    robot: Robot, arm: str, poses: int, seed: int, mc: McInverse | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Random reachable hand poses of the arm chain of hand ``arm``.
 
     Args:
@@ -162,7 +164,9 @@ def reachable_poses(robot: Robot, arm: str, poses: int, seed: int, mc: McInverse
     return Q, T, psi
 
 
-def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, seed: int = 0, progress: Progress | None = None) -> list[IkBenchRow]:
+def bench_ik(
+    robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, seed: int = 0, progress: Progress | None = None
+) -> list[IkBenchRow]:
     """Time and success rate of the arm's analytic solver (MC-Inverse on an S-R-S arm, SEW and its peer IK-Geo on an arm of the SEW family; single and batched), DLS-SVD, TRAC-IK and PyBullet on the same random reachable poses of one arm (see the module docstring).
 
     Args:
@@ -195,7 +199,9 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
     chain = robot.hand_chain(arm)
     srs = not not_srs(robot, (arm,))
     if not srs and not_sew(robot, (arm,)):
-        raise NotSRSError(f"bench ik: the {arm} arm of '{robot.name}' is neither S-R-S nor of the SEW solver's family: {not_sew(robot, (arm,))[arm]}")
+        raise NotSRSError(
+            f"bench ik: the {arm} arm of '{robot.name}' is neither S-R-S nor of the SEW solver's family: {not_sew(robot, (arm,))[arm]}"
+        )
     mc = McInverse.of(chain) if srs else None
     Q, T, psi = reachable_poses(robot, arm, poses, seed, mc)
     lower, upper = robot.lower_upper(chain.joint_names)
@@ -207,7 +213,11 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
         row, ok = _timed(name, poses, solve, report)
         return replace(row, success_rate=float(np.mean(ok)))
 
-    rows = _mc_rows(mc, T, psi, Q, per_pose, report) + _ik_geo_rows(robot, arm, T, Q, report) if mc is not None else _sew_rows(robot, arm, T, psi, Q, report)
+    rows = (
+        _mc_rows(mc, T, psi, Q, per_pose, report) + _ik_geo_rows(robot, arm, T, Q, report)
+        if mc is not None
+        else _sew_rows(robot, arm, T, psi, Q, report)
+    )
 
     # 3. Iterative solvers from perturbed seeds.
     dls = DlsSolver.of(robot, chain.base, [chain.tip])
@@ -223,22 +233,44 @@ def bench_ik(robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, 
 
     row = per_pose(DLS, dls_solve)
     tolerances = f"{dls.settings.position_tolerance_m:g} m, {dls.settings.orientation_tolerance_rad:g} rad"
-    rows.append(replace(row, note=f"tolerances {tolerances}; median {np.median(iterations):.0f} iterations, at most {max(iterations)}"))
+    rows.append(
+        replace(
+            row,
+            note=f"tolerances {tolerances}; median {np.median(iterations):.0f} iterations, at most {max(iterations)}",
+        )
+    )
 
     with c_output_silenced():  # TRAC-IK's C++ prints on construction
         trac = TracIkSolver.of(robot, chain.base, chain.tip)
     row = per_pose(TRAC_IK, lambda i: trac.solve(T[i], seeds[i]).ok)
-    rows.append(replace(row, note=f"timeout {trac.timeout_s * 1e3:g} ms, epsilon {trac.epsilon:g}, {trac.solve_type}; ok confirmed by FK"))
+    rows.append(
+        replace(
+            row,
+            note=f"timeout {trac.timeout_s * 1e3:g} ms, epsilon {trac.epsilon:g}, {trac.solve_type}; ok confirmed by FK",
+        )
+    )
 
     with c_output_silenced():  # PyBullet's banner
         bullet = PyBulletIkSolver.of(robot, chain.base, chain.tip)
     with bullet:
         row = per_pose(PYBULLET, lambda i: bullet.solve(T[i], seeds[i]).ok)
-    rows.append(replace(row, note=f"{bullet.max_iterations} iterations max, tolerances {bullet.position_tolerance_m:g} m, {bullet.orientation_tolerance_rad:g} rad by FK"))
+    rows.append(
+        replace(
+            row,
+            note=f"{bullet.max_iterations} iterations max, tolerances {bullet.position_tolerance_m:g} m, {bullet.orientation_tolerance_rad:g} rad by FK",
+        )
+    )
     return rows
 
 
-def _mc_rows(mc: "McInverse", T: np.ndarray, psi: np.ndarray, Q: np.ndarray, per_pose: Callable[[str, Callable[[int], bool]], IkBenchRow], report: Progress) -> list[IkBenchRow]:
+def _mc_rows(
+    mc: McInverse,
+    T: np.ndarray,
+    psi: np.ndarray,
+    Q: np.ndarray,
+    per_pose: Callable[[str, Callable[[int], bool]], IkBenchRow],
+    report: Progress,
+) -> list[IkBenchRow]:
     """MC-Inverse called singly and batched (the module docstring)."""
     from dualarm.numerics.batched import THREADS, BatchedCandidates
 
@@ -268,11 +300,22 @@ def _mc_rows(mc: "McInverse", T: np.ndarray, psi: np.ndarray, Q: np.ndarray, per
     distance = np.array([_closest(c, r, q) for c, r, q in zip(q_all, reason_all, Q)])
     note = f"{_mc_note(distance)}; best of {BATCH_REPEATS} calls {min(calls) * 1e6:.2f} µs/pose"
     note += f"; mapped calls of {BatchedCandidates.chunk} poses on {THREADS} threads"
-    rows.append(IkBenchRow(MC_BATCHED, poses, float(np.mean(calls)), float(np.median(calls)), float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note))
+    rows.append(
+        IkBenchRow(
+            MC_BATCHED,
+            poses,
+            float(np.mean(calls)),
+            float(np.median(calls)),
+            float(np.mean(distance <= MATCH_TOLERANCE_RAD)),
+            note,
+        )
+    )
     return rows
 
 
-def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndarray, report: Progress) -> list[IkBenchRow]:
+def _sew_rows(
+    robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndarray, report: Progress
+) -> list[IkBenchRow]:
     """SEW called singly (the first :data:`SEW_SINGLE_POSES` poses) and batched, and IK-Geo with one joint fixed (the module docstring)."""
     from dualarm.ik.analytic.sew import solve, solve_many
     from dualarm.ik.analytic.sew_path import sew_angle_of
@@ -287,7 +330,13 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
     single = min(poses, SEW_SINGLE_POSES)
     row, answers = _timed(SEW_SINGLE, single, lambda i: solve(sew_arm, T[i], float(psi[i]), sew).q, report)
     success = float(np.mean([_found(a, q) for a, q in zip(answers, Q)]))
-    rows.append(replace(row, success_rate=success, note=f"the first {single} poses; original q among the solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad"))
+    rows.append(
+        replace(
+            row,
+            success_rate=success,
+            note=f"the first {single} poses; original q among the solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad",
+        )
+    )
 
     report(SEW_BATCHED, 0, poses)
     start = time.perf_counter()
@@ -296,7 +345,16 @@ def _sew_rows(robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndar
     report(SEW_BATCHED, poses, poses)
     counts = np.array([len(b.q) for b in batched])
     success = float(np.mean([_found(b.q, q) for b, q in zip(batched, Q)]))
-    rows.append(IkBenchRow(SEW_BATCHED, poses, elapsed, elapsed, success, f"one call; {counts.min()}-{counts.max()} solutions per pose (median {np.median(counts):.0f})"))
+    rows.append(
+        IkBenchRow(
+            SEW_BATCHED,
+            poses,
+            elapsed,
+            elapsed,
+            success,
+            f"one call; {counts.min()}-{counts.max()} solutions per pose (median {np.median(counts):.0f})",
+        )
+    )
 
     return rows + _ik_geo_rows(robot, arm, T, Q, report)
 
@@ -308,13 +366,22 @@ def _ik_geo_rows(robot: Robot, arm: str, T: np.ndarray, Q: np.ndarray, report: P
     from dualarm.model.sew import UPPER_ARM_FAMILY, sew_chain
 
     sew_arm = sew_chain(robot.hand_chain(arm))
-    problems = [ik_geo_problem(sew_arm, T[i], Q[i]) for i in range(len(Q))]  # made before the timing, as the other rows' poses
+    problems = [
+        ik_geo_problem(sew_arm, T[i], Q[i]) for i in range(len(Q))
+    ]  # made before the timing, as the other rows' poses
     if sew_arm.family == UPPER_ARM_FAMILY:  # the robot depends on the fixed joint: built in each call
-        row, answers = _timed(IK_GEO, len(Q), lambda i: ik_geo.Robot.spherical_two_intersecting(*problems[i][:2]).get_ik(*problems[i][2:]), report)
+        row, answers = _timed(
+            IK_GEO,
+            len(Q),
+            lambda i: ik_geo.Robot.spherical_two_intersecting(*problems[i][:2]).get_ik(*problems[i][2:]),
+            report,
+        )
     else:
         robot_6r = ik_geo.Robot.spherical_two_intersecting(*problems[0][:2])
         row, answers = _timed(IK_GEO, len(Q), lambda i: robot_6r.get_ik(*problems[i][2:]), report)
-    success = float(np.mean([_found(np.array(ik_geo_rows(sew_arm, a, q)).reshape(-1, 7), q) for a, q in zip(answers, Q)]))
+    success = float(
+        np.mean([_found(np.array(ik_geo_rows(sew_arm, a, q)).reshape(-1, 7), q) for a, q in zip(answers, Q)])
+    )
     fixed = "q7, joints 6..1" if sew_arm.family == UPPER_ARM_FAMILY else "q1, joints 2..7"
     note = f"ik-geo's spherical_two_intersecting with {fixed} fixed at the original's; original q among its exact solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad"
     return [replace(row, success_rate=success, note=note)]
@@ -322,15 +389,18 @@ def _ik_geo_rows(robot: Robot, arm: str, T: np.ndarray, Q: np.ndarray, report: P
 
 def _found(q_all: np.ndarray, q: np.ndarray) -> bool:
     """Whether ``q`` (7,) [rad] is among the rows of ``q_all`` to :data:`SEW_MATCH_TOLERANCE_RAD` (angles compared modulo 2 pi)."""
-    return bool(len(q_all)) and float(np.abs(np.angle(np.exp(1j * (np.asarray(q_all) - q)))).max(axis=1).min()) <= SEW_MATCH_TOLERANCE_RAD
+    return (
+        bool(len(q_all))
+        and float(np.abs(np.angle(np.exp(1j * (np.asarray(q_all) - q)))).max(axis=1).min()) <= SEW_MATCH_TOLERANCE_RAD
+    )
 
 
-def ik_geo_solutions(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list[np.ndarray]:
+def ik_geo_solutions(arm: SewChain, T: np.ndarray, q: np.ndarray) -> list[np.ndarray]:
     """IK-Geo's exact solutions (each (7,) [rad]) of the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,): :func:`ik_geo_call`'s answer as rows of the 7 joints."""
     return ik_geo_rows(arm, ik_geo_call(arm, T, q), q)
 
 
-def ik_geo_call(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list:
+def ik_geo_call(arm: SewChain, T: np.ndarray, q: np.ndarray) -> list:
     """IK-Geo's answer (its list of (6 joints, least-squares flag)) for the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,): :func:`ik_geo_problem`'s robot built and solved."""
     import ik_geo
 
@@ -338,7 +408,7 @@ def ik_geo_call(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> list:
     return ik_geo.Robot.spherical_two_intersecting(axes, offsets).get_ik(R, p)
 
 
-def ik_geo_problem(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> tuple[list, list, list, list]:
+def ik_geo_problem(arm: SewChain, T: np.ndarray, q: np.ndarray) -> tuple[list, list, list, list]:
     """IK-Geo's 6R robot (its axes and offsets) and the rotation and position it solves, for the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,).
 
     Both SEW families are IK-Geo's ``spherical_two_intersecting`` 6R (the ``ik-geo`` package: axes
@@ -353,7 +423,15 @@ def ik_geo_problem(arm: "SewChain", T: np.ndarray, q: np.ndarray) -> tuple[list,
     S, E, C, W = arm.shoulder, arm.elbow, arm.crossing, arm.wrist
     if arm.family == UPPER_ARM_FAMILY:
         R67 = _rotation(arm.axes[6], float(q[6]))
-        P = [C - (W + R67 @ arm.tool), np.zeros(3), E - C, S - E, np.zeros(3), np.zeros(3), -S]  # from the 6R's tip at q = 0
+        P = [
+            C - (W + R67 @ arm.tool),
+            np.zeros(3),
+            E - C,
+            S - E,
+            np.zeros(3),
+            np.zeros(3),
+            -S,
+        ]  # from the 6R's tip at q = 0
         R06 = T[:3, :3] @ arm.tool_rotation.T @ R67.T
         return (-arm.axes[:6][::-1]).tolist(), np.array(P).tolist(), R06.tolist(), (-R06.T @ T[:3, 3]).tolist()
     R1 = _rotation(arm.axes[0], float(q[0]))
@@ -370,7 +448,7 @@ def _rotation(k: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
 
 
-def ik_geo_rows(arm: "SewChain", answer: list, q: np.ndarray) -> list[np.ndarray]:
+def ik_geo_rows(arm: SewChain, answer: list, q: np.ndarray) -> list[np.ndarray]:
     """The exact solutions of :func:`ik_geo_call`'s ``answer`` as rows of the 7 joints [rad], the fixed one at ``q``'s."""
     from dualarm.model.sew import UPPER_ARM_FAMILY
 

@@ -27,7 +27,11 @@ from dualarm.run import record_run
 from dualarm.tasks import load_task
 
 #: (task file, IK method) of the benchmark: the issue's three tasks with their papers' methods.
-DEFAULT_RUNS = (("tasks/triangle.toml", "mc-inverse"), ("tasks/circle.toml", "mc-inverse"), ("tasks/ball_game.toml", "tvgdd"))
+DEFAULT_RUNS = (
+    ("tasks/triangle.toml", "mc-inverse"),
+    ("tasks/circle.toml", "mc-inverse"),
+    ("tasks/ball_game.toml", "tvgdd"),
+)
 #: The parts of a run, in order.
 PARTS = ("path", "ik", "retime", "smooth", "execute", "record")
 #: Timed calls of the arm-angle search per arm.
@@ -50,7 +54,9 @@ class PipelineTiming:
         return sum(self.seconds.values())
 
 
-def bench_pipeline(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Callable[[str], None] = lambda text: None) -> list[PipelineTiming]:
+def bench_pipeline(
+    runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Callable[[str], None] = lambda text: None
+) -> list[PipelineTiming]:
     """Run each (task file, IK method) once through every stage and time its parts."""
     timings = []
     with tempfile.TemporaryDirectory(prefix="dualarm-bench-") as out:
@@ -58,7 +64,11 @@ def bench_pipeline(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Cal
             task = load_task(task_file)
             run = record_run(task, ik, out_dir=out, progress=lambda stage: progress(f"{task.name} ({ik}): {stage}"))
             search = search_seconds(task) if ik == "mc-inverse" else {}
-            timings.append(PipelineTiming(task.name, ik, run.stage_seconds, float(run.metrics.get("execute.duration_s", 0.0)), search))
+            timings.append(
+                PipelineTiming(
+                    task.name, ik, run.stage_seconds, float(run.metrics.get("execute.duration_s", 0.0)), search
+                )
+            )
     return timings
 
 
@@ -73,7 +83,9 @@ def search_seconds(task) -> dict[str, tuple[float, int, int]]:
     reference = build_reference(task)
     samples = int(np.sum(reference.rep == reference.rep[0]))
     searches = {}
-    for arm, solver, initial in mc_path.arm_solvers(task.robot, reference, task.robot.configuration(task.initial_q, "q0"), spec):
+    for arm, solver, initial in mc_path.arm_solvers(
+        task.robot, reference, task.robot.configuration(task.initial_q, "q0"), spec
+    ):
         inputs = (solver, arm.targets, reference, initial, arm.q0, spec, arm.hand)
         mc_path._auto(*inputs)  # loads the compiled Function
         times = []

@@ -91,7 +91,9 @@ class PlanBench:
     disagreements: int
 
 
-def bench_plan(task_file: str | Path, trials: int, seed: int = 0, progress: Callable[[str], None] = lambda text: None) -> PlanBench:
+def bench_plan(
+    task_file: str | Path, trials: int, seed: int = 0, progress: Callable[[str], None] = lambda text: None
+) -> PlanBench:
     """Plan ``trials`` times with each of :data:`PLANNERS` on ``task_file``, then time the checkers."""
     task = load_task(task_file)
     rows: dict[str, list] = {p: [] for p in PLANNERS}
@@ -125,7 +127,9 @@ def bench_plan(task_file: str | Path, trials: int, seed: int = 0, progress: Call
     return PlanBench(planners, checkers, sum(len(e) for e in edges), disagreements)
 
 
-def bench_checkers(problem: PlanningProblem, rng: np.random.Generator) -> tuple[list[CheckerBench], list[np.ndarray], int]:
+def bench_checkers(
+    problem: PlanningProblem, rng: np.random.Generator
+) -> tuple[list[CheckerBench], list[np.ndarray], int]:
     """Time the reference and ``problem``'s checker on the configurations of :data:`CHECKER_EDGES` planner-like edges (module docstring) over :data:`CHECKER_ROUNDS` interleaved rounds.
 
     Returns:
@@ -139,11 +143,21 @@ def bench_checkers(problem: PlanningProblem, rng: np.random.Generator) -> tuple[
         b = a + (target - a) * min(1.0, step / np.linalg.norm(target - a))
         edges.append(np.vstack([b, checker.segment_configurations(a, b)]))
     Q = np.vstack(edges)
-    with PyBulletChecker(task.robot, problem.joint_names, problem.fixed, task.spec.environment, task.spec.expected_contacts, settings.margin_m, settings.resolution_rad) as reference:
+    with PyBulletChecker(
+        task.robot,
+        problem.joint_names,
+        problem.fixed,
+        task.spec.environment,
+        task.spec.expected_contacts,
+        settings.margin_m,
+        settings.resolution_rad,
+    ) as reference:
         runs: dict[tuple[str, str, int], Callable[[], object]] = {
             ("pybullet", "one at a time", 1): lambda: [reference.free(q) for q in Q],
             ("closed form", "one at a time", 1): lambda: [checker.free(q) for q in Q],
-            ("closed form", "one edge at a time", int(np.median([len(e) for e in edges]))): lambda: [checker.free_many(e) for e in edges],
+            ("closed form", "one edge at a time", int(np.median([len(e) for e in edges]))): lambda: [
+                checker.free_many(e) for e in edges
+            ],
             ("closed form", "all at once", len(Q)): lambda: checker.free_many(Q),
         }
         best = dict.fromkeys(runs, np.inf)
@@ -153,4 +167,8 @@ def bench_checkers(problem: PlanningProblem, rng: np.random.Generator) -> tuple[
                 run()
                 best[key] = min(best[key], (time.perf_counter() - started) / len(Q))
         disagreements = int((reference.free_many(Q) != checker.free_many(Q)).sum())
-    return [CheckerBench(name, batch, size, seconds) for (name, batch, size), seconds in best.items()], edges, disagreements
+    return (
+        [CheckerBench(name, batch, size, seconds) for (name, batch, size), seconds in best.items()],
+        edges,
+        disagreements,
+    )

@@ -90,7 +90,18 @@ def loopback_cluster(workers: int = 2, directory: Path | None = None) -> Iterato
 
     with tempfile.TemporaryDirectory(dir=directory) as tmp:
         file = Path(tmp) / "scheduler.json"
-        scheduler = [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file", str(file)]
+        scheduler = [
+            sys.executable,
+            "-m",
+            "distributed.cli.dask_scheduler",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--no-dashboard",
+            "--scheduler-file",
+            str(file),
+        ]
         processes = [subprocess.Popen(scheduler, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
         try:
             deadline = time.monotonic() + 60
@@ -101,7 +112,21 @@ def loopback_cluster(workers: int = 2, directory: Path | None = None) -> Iterato
             address = json.loads(file.read_text())["address"]
             for k in range(workers):
                 name = f"node-{chr(ord('a') + k)}"
-                command = [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--nworkers", "1", "--name", name, "--host", "127.0.0.1", "--no-dashboard"]
+                command = [
+                    sys.executable,
+                    "-m",
+                    "distributed.cli.dask_worker",
+                    address,
+                    "--nthreads",
+                    "1",
+                    "--nworkers",
+                    "1",
+                    "--name",
+                    name,
+                    "--host",
+                    "127.0.0.1",
+                    "--no-dashboard",
+                ]
                 processes.append(subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
             with Client(address, timeout="60s") as client:
                 try:
@@ -154,7 +179,13 @@ def plain_run(spec: StudySpec, base_dir: Path, processes: int) -> PlainRun:
     environment = {**os.environ, **WORKER_ENVIRON}
     code = "import sys; from dualarm.bench.study import _plain_process; _plain_process(*sys.argv[1:])"
     runs = [
-        subprocess.Popen([sys.executable, "-c", code, spec.model_dump_json(), str(base_dir), str(p), str(processes)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=environment)
+        subprocess.Popen(
+            [sys.executable, "-c", code, spec.model_dump_json(), str(base_dir), str(p), str(processes)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+            env=environment,
+        )
         for p in range(processes)
     ]
     answers = [run.communicate()[0] for run in runs]
@@ -197,7 +228,14 @@ def _with_steal(steal: dict[str, float], name: str, run: Callable[[], T]) -> T:
 
 
 def bench_study(
-    spec: StudySpec, base_dir: Path, *, workers: int = 2, scaling_trials: int = 100, whole: bool = True, whole_out: Path | None = None, progress: Callable[[str], None] | None = None
+    spec: StudySpec,
+    base_dir: Path,
+    *,
+    workers: int = 2,
+    scaling_trials: int = 100,
+    whole: bool = True,
+    whole_out: Path | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> StudyBench:
     """Run the benchmark (module docstring) on ``spec``: its first ``scaling_trials`` trials on 1 and ``workers`` workers, on a loopback cluster and in plain processes, then (``whole``) every trial, into ``whole_out`` (kept; claimed as :func:`~dualarm.study.run.run_study` claims it) or a temporary directory."""
     say = progress or (lambda text: None)
@@ -223,7 +261,9 @@ def bench_study(
         done = None
         if whole:
             say(f"the whole study: {spec.trials} trials on {workers} workers")
-            done = _with_steal(steal, "whole", lambda: run_study(spec, base_dir, whole_out or out / "whole", workers=workers))
+            done = _with_steal(
+                steal, "whole", lambda: run_study(spec, base_dir, whole_out or out / "whole", workers=workers)
+            )
     return StudyBench(one, many, nodes, differ, len(kept), done, plain_one, plain_many, steal)
 
 
@@ -236,13 +276,21 @@ def method_seconds(one: StudyRun, many: StudyRun) -> pd.DataFrame:
 def trial_sizes(results: pd.DataFrame) -> dict[str, str]:
     """The trials' sizes, from one method's rows: shapes (share of each kind), repetitions, IK samples per trial and per repetition (range and mean)."""
     rows = results.drop_duplicates("trial")
-    samples = results.groupby("trial")["path.samples"].max().dropna() if "path.samples" in results.columns else pd.Series(dtype=float)
+    samples = (
+        results.groupby("trial")["path.samples"].max().dropna()
+        if "path.samples" in results.columns
+        else pd.Series(dtype=float)
+    )
     per_rep = (samples / rows.set_index("trial")["repetitions"]).dropna()
     shares = rows["kind"].value_counts(normalize=True)
     return {
         "shapes": ", ".join(f"{kind} {share:.0%}" for kind, share in shares.items()),
         "repetitions": f"{rows['repetitions'].min()}-{rows['repetitions'].max()} (mean {rows['repetitions'].mean():.2f})",
-        "IK samples per trial": f"{samples.min():.0f}-{samples.max():.0f} (mean {samples.mean():.0f})" if len(samples) else "-",
-        "IK samples per repetition": f"{per_rep.min():.0f}-{per_rep.max():.0f} (mean {per_rep.mean():.1f})" if len(per_rep) else "-",
+        "IK samples per trial": f"{samples.min():.0f}-{samples.max():.0f} (mean {samples.mean():.0f})"
+        if len(samples)
+        else "-",
+        "IK samples per repetition": f"{per_rep.min():.0f}-{per_rep.max():.0f} (mean {per_rep.mean():.1f})"
+        if len(per_rep)
+        else "-",
         "cores": str(os.cpu_count()),
     }

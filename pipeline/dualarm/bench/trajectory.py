@@ -37,7 +37,12 @@ from dualarm.run import run_task
 from dualarm.tasks import Task, load_task
 
 #: (task file, IK method or planner) of the benchmark.
-DEFAULT_RUNS = (("tasks/triangle.toml", "mc-inverse"), ("tasks/circle.toml", "mc-inverse"), ("tasks/ball_game.toml", "tvgdd"), ("tasks/bowl_grasp.toml", "mcikrrt"))
+DEFAULT_RUNS = (
+    ("tasks/triangle.toml", "mc-inverse"),
+    ("tasks/circle.toml", "mc-inverse"),
+    ("tasks/ball_game.toml", "tvgdd"),
+    ("tasks/bowl_grasp.toml", "mcikrrt"),
+)
 #: The methods, in the table's order.
 METHODS = ("jerk-limited", "TOPP-RA 0.9/0.3 + tracking", "TOPP-RA 1.0/1.0 + tracking")
 #: Finite-difference step of the jerk-limited motion's limit ratios [s].
@@ -74,17 +79,26 @@ class TrajectoryRow:
 
 def _ratios(q: np.ndarray, step_s: float, limits: Sequence[np.ndarray]) -> tuple[float, float, float]:
     """Velocity, acceleration and jerk ratios of positions ``q`` (M, n) sampled every ``step_s`` [s], by first, second and third differences."""
-    velocity, acceleration, jerk = (float((np.abs(np.diff(q, order, axis=0)) / step_s**order / limit).max()) for order, limit in zip((1, 2, 3), limits))
+    velocity, acceleration, jerk = (
+        float((np.abs(np.diff(q, order, axis=0)) / step_s**order / limit).max())
+        for order, limit in zip((1, 2, 3), limits)
+    )
     return velocity, acceleration, jerk
 
 
-def _hand_distance(task: Task, names: tuple[str, ...], q: np.ndarray, reference: np.ndarray, fixed: Mapping[str, float]) -> float:
+def _hand_distance(
+    task: Task, names: tuple[str, ...], q: np.ndarray, reference: np.ndarray, fixed: Mapping[str, float]
+) -> float:
     """The largest distance between where the configurations ``q`` and ``reference`` (M, n) [rad] put each driven hand (forward kinematics) [m]."""
     at, to = (task.hand_poses(names, x, fixed) for x in (q, reference))
-    return max((float(np.linalg.norm(at[hand][:, :3, 3] - to[hand][:, :3, 3], axis=1).max()) for hand in at), default=0.0)
+    return max(
+        (float(np.linalg.norm(at[hand][:, :3, 3] - to[hand][:, :3, 3], axis=1).max()) for hand in at), default=0.0
+    )
 
 
-def bench_trajectory(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Callable[[str], None] = lambda text: None) -> list[TrajectoryRow]:
+def bench_trajectory(
+    runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: Callable[[str], None] = lambda text: None
+) -> list[TrajectoryRow]:
     """Make each task's joint path, then time it by each of :data:`METHODS` (module docstring)."""
     from dualarm.methods import METHODS as REGISTRY
     from dualarm.smooth import smooth_trajectory
@@ -103,13 +117,26 @@ def bench_trajectory(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: C
         try:
             timing = plan(path, v, a, jerk=j)
         except StageError as error:
-            rows.append(TrajectoryRow(task.name, METHODS[0], np.nan, optimal, (np.nan,) * 3, np.nan, np.nan, np.nan, str(error)))
+            rows.append(
+                TrajectoryRow(task.name, METHODS[0], np.nan, optimal, (np.nan,) * 3, np.nan, np.nan, np.nan, str(error))
+            )
         else:
             timing.sample(PERIOD_S)
             compute = time.perf_counter() - start
             q = timing.evaluate(np.arange(0.0, timing.duration_s, STEP_S))[0]
             hands = _hand_distance(task, names, timing.evaluate(timing.sample_times_s)[0], path.q, path.fixed)
-            rows.append(TrajectoryRow(task.name, METHODS[0], timing.duration_s, optimal, _ratios(q, STEP_S, (v, a, j)), path_deviation_max_rad(timing, path), hands, compute))
+            rows.append(
+                TrajectoryRow(
+                    task.name,
+                    METHODS[0],
+                    timing.duration_s,
+                    optimal,
+                    _ratios(q, STEP_S, (v, a, j)),
+                    path_deviation_max_rad(timing, path),
+                    hands,
+                    compute,
+                )
+            )
         for name, share in zip(METHODS[1:], ((0.9, 0.3), (1.0, 1.0))):
             progress(f"{task.name}: {name}")
             start = time.perf_counter()
@@ -117,6 +144,19 @@ def bench_trajectory(runs: Sequence[tuple[str, str]] = DEFAULT_RUNS, progress: C
             smoothed = smooth_trajectory(retimed, v, a, j, period_s=PERIOD_S)
             compute = time.perf_counter() - start
             q = smoothed.trajectory.q[:-1]  # every period, without the final sample (the last step may be shorter)
-            hands = _hand_distance(task, names, smoothed.trajectory.q, retimed.interpolate(smoothed.trajectory.t)[0], path.fixed)
-            rows.append(TrajectoryRow(task.name, name, smoothed.trajectory.duration_s, optimal, _ratios(q, PERIOD_S, (v, a, j)), smoothed.path_deviation_max_rad, hands, compute))
+            hands = _hand_distance(
+                task, names, smoothed.trajectory.q, retimed.interpolate(smoothed.trajectory.t)[0], path.fixed
+            )
+            rows.append(
+                TrajectoryRow(
+                    task.name,
+                    name,
+                    smoothed.trajectory.duration_s,
+                    optimal,
+                    _ratios(q, PERIOD_S, (v, a, j)),
+                    smoothed.path_deviation_max_rad,
+                    hands,
+                    compute,
+                )
+            )
     return rows

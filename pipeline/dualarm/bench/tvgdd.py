@@ -42,7 +42,9 @@ class BenchRow:
     failure: str = ""
 
 
-def bench_tvgdd(task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...] = (), progress=None) -> list[BenchRow]:
+def bench_tvgdd(
+    task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...] = (), progress=None
+) -> list[BenchRow]:
     """TV-GDD on a task, in rows: the ``casadi`` backend (DAQP) per step, the paper's LVI solver per step, the ``casadi`` backend with each conic plugin in ``plugins`` (e.g. qpoases, osqp, proxqp, qrqp) per step, and the DAQP QP as one mapaccum rollout (best of ``repeats``)."""
     from dualarm.errors import StageError
     from dualarm.ik.velocity.stack import reference_stack, stacked_reference
@@ -68,7 +70,16 @@ def bench_tvgdd(task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...
             continue
         first = path.qd if first is None else first
         times = path.solve_time_s
-        rows.append(BenchRow(name, float(np.median(times)), float(np.percentile(times, 99)), float(times.sum()), len(times), float(np.abs(path.qd - first).max())))
+        rows.append(
+            BenchRow(
+                name,
+                float(np.median(times)),
+                float(np.percentile(times, 99)),
+                float(times.sum()),
+                len(times),
+                float(np.abs(path.qd - first).max()),
+            )
+        )
     if progress:
         progress("TV-GDD, casadi backend, whole path in one call")
     stack = reference_stack(task.robot, reference, task.initial_q, settings.free_waist)
@@ -83,5 +94,14 @@ def bench_tvgdd(task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...
         _, thetadot = rollout(theta0, U, theta0)
         best = min(best, time.perf_counter() - start)
     n = len(reference)
-    rows.append(BenchRow(f"casadi {settings.qp_plugin}, one call", best / n, best / n, best, n, float(np.abs(np.asarray(thetadot).T - first).max())))
+    rows.append(
+        BenchRow(
+            f"casadi {settings.qp_plugin}, one call",
+            best / n,
+            best / n,
+            best,
+            n,
+            float(np.abs(np.asarray(thetadot).T - first).max()),
+        )
+    )
     return rows

@@ -6,7 +6,8 @@ import functools
 import signal
 import sys
 import threading
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import typer
 from rich.console import Console
@@ -15,10 +16,19 @@ from rich.status import Status
 from dualarm.errors import DualarmError, StageError, Terminated, excerpt
 
 #: Exit codes of every command.
-EXIT_CODES = {"complete": 0, "violated": 3, "failed": 1, "user error": 2, "interrupted (SIGINT)": 130, "terminated (SIGTERM)": 143}
+EXIT_CODES = {
+    "complete": 0,
+    "violated": 3,
+    "failed": 1,
+    "user error": 2,
+    "interrupted (SIGINT)": 130,
+    "terminated (SIGTERM)": 143,
+}
 app = typer.Typer(
     name="dualarm",
-    help="Humanoid dual-arm motion papers as runnable, recorded, repeatable experiments.\n\nExit codes: " + ", ".join(f"{code} {what}" for what, code in EXIT_CODES.items()) + ".",
+    help="Humanoid dual-arm motion papers as runnable, recorded, repeatable experiments.\n\nExit codes: "
+    + ", ".join(f"{code} {what}" for what, code in EXIT_CODES.items())
+    + ".",
     no_args_is_help=True,
     rich_markup_mode=None,  # help as written: rich markup would eat "[s]", "[rad]", ...
     add_completion=False,
@@ -33,7 +43,9 @@ app.add_typer(ik_app, name="ik")
 task_app = typer.Typer(help="Author and validate task files.", no_args_is_help=True)
 app.add_typer(task_app, name="task")
 # Text is printed as it is: no markup, no emoji codes (":robot:" stays), in messages and table cells.
-out = Console(highlight=False, markup=False, emoji=False, width=None if sys.stdout.isatty() else 120)  # tables unwrapped in pipes and files
+out = Console(
+    highlight=False, markup=False, emoji=False, width=None if sys.stdout.isatty() else 120
+)  # tables unwrapped in pipes and files
 err = Console(stderr=True, highlight=False, markup=False, emoji=False)
 #: The longest line an error prints [characters] (a message quotes a user's string in ~80).
 MAX_LINE = 400
@@ -74,7 +86,9 @@ def user_errors(func: Callable) -> Callable:
             if received:  # also when a library swallowed the exception (CasADi turns it into a failed solve)
                 what = "interrupted (SIGINT)" if received[0] == signal.SIGINT else "terminated (SIGTERM)"
                 err.print(what, markup=False)
-                raise typer.Exit(EXIT_CODES[what]) from None  # the signal decides the exit code, whatever the command was doing
+                raise typer.Exit(
+                    EXIT_CODES[what]
+                ) from None  # the signal decides the exit code, whatever the command was doing
 
     return wrapper
 

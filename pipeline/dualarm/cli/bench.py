@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.console import Console
@@ -19,28 +19,47 @@ from dualarm.cli.options import MAX_POSES, MAX_REPEATS, MAX_TRIALS, _out_path, _
 @user_errors
 def bench_tvgdd_command(
     task: Annotated[Path, typer.Option(help="Task to run TV-GDD on.")] = Path("tasks/ball_game.toml"),
-    repeats: Annotated[int, typer.Option(min=1, help=f"Repeats of the one-call rollout (best is kept; at most {MAX_REPEATS}).")] = 5,
-    plugins: Annotated[str, typer.Option(help="Comma-separated CasADi conic plugins to compare with DAQP, e.g. qpoases,osqp,proxqp,qrqp.")] = "",
+    repeats: Annotated[
+        int, typer.Option(min=1, help=f"Repeats of the one-call rollout (best is kept; at most {MAX_REPEATS}).")
+    ] = 5,
+    plugins: Annotated[
+        str,
+        typer.Option(help="Comma-separated CasADi conic plugins to compare with DAQP, e.g. qpoases,osqp,proxqp,qrqp."),
+    ] = "",
 ) -> None:
     """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s (optionally other conic plugins for the casadi backend)."""
     from dualarm.bench.tvgdd import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
 
     _within(repeats, "--repeats", 1, MAX_REPEATS)
     with err.status("benchmarking ...") as status:
-        rows = bench_tvgdd(task, repeats, tuple(p.strip() for p in plugins.split(",") if p.strip()), progress=lambda text: status.update(text))
+        rows = bench_tvgdd(
+            task,
+            repeats,
+            tuple(p.strip() for p in plugins.split(",") if p.strip()),
+            progress=lambda text: status.update(text),
+        )
     table = Table(title=f"TV-GDD on {task} ({rows[0].steps} steps)", title_justify="left")
     for column in ("solver", "median µs", "p99 µs", "task s", "T_ave/ours", "T_sum/ours", "max |Δq̇| rad/s"):
         table.add_column(column, justify="left" if column == "solver" else "right")
     for r in rows:
         table.add_row(
-            r.name, f"{r.median_s * 1e6:.1f}", f"{r.p99_s * 1e6:.1f}", f"{r.total_s:.4f}", f"{PAPER_T_AVE_S / r.median_s:.1f}x", f"{PAPER_T_SUM_S / r.total_s:.1f}x", f"{r.velocity_gap_rad_s:.2g}"
+            r.name,
+            f"{r.median_s * 1e6:.1f}",
+            f"{r.p99_s * 1e6:.1f}",
+            f"{r.total_s:.4f}",
+            f"{PAPER_T_AVE_S / r.median_s:.1f}x",
+            f"{PAPER_T_SUM_S / r.total_s:.1f}x",
+            f"{r.velocity_gap_rad_s:.2g}",
         )
     out.print(table)
     for r in rows:
         if r.failure:
             out.print(f"{r.name} failed: {r.failure}", markup=False, soft_wrap=True)
     out.print(f"per-step median, lvi / casadi: {rows[1].median_s / rows[0].median_s:.1f}x", markup=False)
-    out.print("max |Δq̇|: largest joint-velocity difference from the first row along the task (lvi stops at ||eps|| <= 1e-5, as published)", markup=False)
+    out.print(
+        "max |Δq̇|: largest joint-velocity difference from the first row along the task (lvi stops at ||eps|| <= 1e-5, as published)",
+        markup=False,
+    )
 
 
 @bench_app.command("ik")
@@ -54,13 +73,30 @@ def bench_ik_command(
     """The arm's analytic IK time per pose called singly and batched (MC-Inverse's 8 candidates on an S-R-S arm, SEW's solutions on an arm of the SEW family such as the Panda) and its analytic peer IK-Geo's, and DLS-SVD, TRAC-IK and PyBullet IK time and success rate, on the same random reachable poses, with ratios."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
-    from dualarm.bench.ik import IK_GEO, MC_BATCHED, MC_SINGLE, SEW_BATCHED, TARGET_BATCHED_S, TARGET_DLS_SUCCESS, TARGET_SINGLE_S, bench_ik, ratios
+    from dualarm.bench.ik import (
+        IK_GEO,
+        MC_BATCHED,
+        MC_SINGLE,
+        SEW_BATCHED,
+        TARGET_BATCHED_S,
+        TARGET_DLS_SUCCESS,
+        TARGET_SINGLE_S,
+        bench_ik,
+        ratios,
+    )
     from dualarm.model.robot import load_robot
 
     _seed(seed)
     _within(poses, "--poses", 1, MAX_POSES)
     model = load_robot(robot_dir)
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=err, transient=True) as bar:
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+    ) as bar:
         tasks: dict[str, TaskID] = {}
 
         def progress(name: str, done: int, total: int) -> None:
@@ -72,11 +108,16 @@ def bench_ik_command(
     ratio = ratios(rows)
     by_name = {r.name: r for r in rows}
     reference = MC_BATCHED if MC_BATCHED in by_name else SEW_BATCHED
-    table = Table(title=f"IK of the {arm} arm of {model.name} on {poses} random reachable poses (seed {seed})", title_justify="left")
+    table = Table(
+        title=f"IK of the {arm} arm of {model.name} on {poses} random reachable poses (seed {seed})",
+        title_justify="left",
+    )
     for column in ("solver", "mean µs/pose", "median µs/pose", "success", f"time / {reference}"):
         table.add_column(column, justify="left" if column == "solver" else "right")
     for r in rows:
-        table.add_row(r.name, f"{r.mean_s * 1e6:.2f}", f"{r.median_s * 1e6:.2f}", f"{r.success_rate:.2%}", f"{ratio[r.name]:.3g}x")
+        table.add_row(
+            r.name, f"{r.mean_s * 1e6:.2f}", f"{r.median_s * 1e6:.2f}", f"{r.success_rate:.2%}", f"{ratio[r.name]:.3g}x"
+        )
     out.print(table)
     for r in rows:
         out.print(f"- {r.name}: {r.note}", markup=False, soft_wrap=True)
@@ -100,22 +141,42 @@ def bench_pipeline_command() -> None:
     for column in ("task", "ik", *PARTS, "total s", "motion s", "run / motion"):
         table.add_column(column, justify="left" if column in ("task", "ik") else "right")
     for r in timings:
-        table.add_row(r.task, r.ik, *(f"{r.seconds.get(p, 0.0) / r.total_s:.1%}" for p in PARTS), f"{r.total_s:.2f}", f"{r.motion_s:.2f}", f"{r.total_s / r.motion_s:.2f}x" if r.motion_s else "-")
+        table.add_row(
+            r.task,
+            r.ik,
+            *(f"{r.seconds.get(p, 0.0) / r.total_s:.1%}" for p in PARTS),
+            f"{r.total_s:.2f}",
+            f"{r.motion_s:.2f}",
+            f"{r.total_s / r.motion_s:.2f}x" if r.motion_s else "-",
+        )
     out.print(table)
     for r in timings:
         for hand, (seconds, samples, angles) in r.search.items():
-            out.print(f"{r.task}, {hand} arm: the auto arm-angle search alone {seconds * 1e3:.0f} ms (median of {SEARCH_REPEATS}; {samples} samples x {angles} angles x 8 branches)", markup=False)
+            out.print(
+                f"{r.task}, {hand} arm: the auto arm-angle search alone {seconds * 1e3:.0f} ms (median of {SEARCH_REPEATS}; {samples} samples x {angles} angles x 8 branches)",
+                markup=False,
+            )
 
 
 @bench_app.command("study")
 @user_errors
 def bench_study_command(
-    spec_file: Annotated[Path, typer.Argument(help="A study spec (default the example, studies/inconsistency.toml).")] = Path("studies/inconsistency.toml"),
+    spec_file: Annotated[
+        Path, typer.Argument(help="A study spec (default the example, studies/inconsistency.toml).")
+    ] = Path("studies/inconsistency.toml"),
     workers: Annotated[int, typer.Option(min=1, help="Workers of the scaling, two-node and whole runs.")] = 2,
-    scaling_trials: Annotated[int, typer.Option(min=1, help="Trials of the scaling and two-node runs (the spec's first).")] = 100,
-    whole: Annotated[bool, typer.Option(help="Also run every trial of the spec (the example: 1,000 trials x 7 methods).")] = True,
+    scaling_trials: Annotated[
+        int, typer.Option(min=1, help="Trials of the scaling and two-node runs (the spec's first).")
+    ] = 100,
+    whole: Annotated[
+        bool, typer.Option(help="Also run every trial of the spec (the example: 1,000 trials x 7 methods).")
+    ] = True,
     whole_out: Annotated[
-        Optional[str], typer.Option("--out", help="Keep the whole study's directory here (as dualarm study --out writes it; dualarm study report reads it); default a temporary directory.")
+        str | None,
+        typer.Option(
+            "--out",
+            help="Keep the whole study's directory here (as dualarm study --out writes it; dualarm study report reads it); default a temporary directory.",
+        ),
     ] = None,
 ) -> None:
     """A study on Dask: trials per second per worker on 1 and on --workers workers (LocalCluster), per method; the same trials in plain processes without Dask (what the machine gives) and on workers started apart on 127.0.0.1 (two nodes) compared row by row; the whole study's time with the trials' sizes; the hypervisor's share of CPU time (steal) during each run.
@@ -128,22 +189,50 @@ def bench_study_command(
     spec, base = load_study(spec_file)
     with err.status("benchmarking ...") as status:
         kept = _out_path(whole_out, "--out") if whole_out is not None else None
-        bench = bench_study(spec, base, workers=workers, scaling_trials=scaling_trials, whole=whole, whole_out=kept, progress=lambda text: _update(status, f"benchmarking: {text} ..."))
+        bench = bench_study(
+            spec,
+            base,
+            workers=workers,
+            scaling_trials=scaling_trials,
+            whole=whole,
+            whole_out=kept,
+            progress=lambda text: _update(status, f"benchmarking: {text} ..."),
+        )
     table = Table(title=f"study {spec.name} on this machine ({os.cpu_count()} cores)", title_justify="left")
     for column in ("run", "workers", "trials", "startup s", "trials s", "trials/s per worker", "x 1 worker", "steal"):
         table.add_column(column, justify="left" if column == "run" else "right")
-    runs = [("LocalCluster", "one", bench.one), ("LocalCluster", "many", bench.many), ("workers started apart", "nodes", bench.nodes)] + (
-        [("whole study", "whole", bench.whole)] if bench.whole else []
-    )
+    runs = [
+        ("LocalCluster", "one", bench.one),
+        ("LocalCluster", "many", bench.many),
+        ("workers started apart", "nodes", bench.nodes),
+    ] + ([("whole study", "whole", bench.whole)] if bench.whole else [])
     for name, key, r in runs:
         rate = StudyBench.rate(r)
-        table.add_row(name, str(r.workers), str(r.ran), f"{r.startup_s:.1f}", f"{r.seconds:.1f}", f"{rate:.3f}", f"{rate / StudyBench.rate(bench.one):.3f}", f"{bench.steal[key]:.1%}")
+        table.add_row(
+            name,
+            str(r.workers),
+            str(r.ran),
+            f"{r.startup_s:.1f}",
+            f"{r.seconds:.1f}",
+            f"{rate:.3f}",
+            f"{rate / StudyBench.rate(bench.one):.3f}",
+            f"{bench.steal[key]:.1%}",
+        )
     for key, p in (("plain_one", bench.plain_one), ("plain_many", bench.plain_many)):
         table.add_row(
-            "plain processes, no Dask", str(len(p.trials)), str(sum(p.trials)), "-", f"{max(p.seconds):.1f}", f"{p.rate:.3f}", f"{p.rate / bench.plain_one.rate:.3f}", f"{bench.steal[key]:.1%}"
+            "plain processes, no Dask",
+            str(len(p.trials)),
+            str(sum(p.trials)),
+            "-",
+            f"{max(p.seconds):.1f}",
+            f"{p.rate:.3f}",
+            f"{p.rate / bench.plain_one.rate:.3f}",
+            f"{bench.steal[key]:.1%}",
         )
     out.print(table)
-    methods = Table(title=f"mean time per trial on 1 and on {bench.many.workers} workers (LocalCluster)", title_justify="left")
+    methods = Table(
+        title=f"mean time per trial on 1 and on {bench.many.workers} workers (LocalCluster)", title_justify="left"
+    )
     for column in ("method", "1 worker s", f"{bench.many.workers} workers s", "ratio"):
         methods.add_column(column, justify="left" if column == "method" else "right")
     for method, row in method_seconds(bench.one, bench.many).iterrows():
@@ -152,11 +241,21 @@ def bench_study_command(
     for what, value in trial_sizes((bench.whole or bench.many).results).items():
         out.print(f"{what}: {value}", markup=False, soft_wrap=True)
     if bench.whole is not None:
-        out.print(f"whole study: {bench.whole.ran} trials x {len(spec.methods)} methods in {(bench.whole.startup_s + bench.whole.seconds) / 60:.1f} min, cluster start included", markup=False)
+        out.print(
+            f"whole study: {bench.whole.ran} trials x {len(spec.methods)} methods in {(bench.whole.startup_s + bench.whole.seconds) / 60:.1f} min, cluster start included",
+            markup=False,
+        )
     if bench.nodes_differ:
-        err.print(f"the two-node run's rows differ from the LocalCluster's in: {', '.join(bench.nodes_differ)}", markup=False, soft_wrap=True)
+        err.print(
+            f"the two-node run's rows differ from the LocalCluster's in: {', '.join(bench.nodes_differ)}",
+            markup=False,
+            soft_wrap=True,
+        )
         raise typer.Exit(1)
-    out.print(f"two nodes: {bench.compared_rows} rows identical bit for bit to the LocalCluster's (times, workers and TRAC-IK's rows left out)", markup=False)
+    out.print(
+        f"two nodes: {bench.compared_rows} rows identical bit for bit to the LocalCluster's (times, workers and TRAC-IK's rows left out)",
+        markup=False,
+    )
 
 
 @bench_app.command("trajectory")
@@ -188,7 +287,9 @@ def bench_trajectory_command() -> None:
             f"{r.hand_deviation_m * 1e6:.3g}" if r.hand_deviation_m < 1e-3 else f"{r.hand_deviation_m * 1e6:.0f}",
             f"{r.compute_s / r.duration_s * 1e3:.1f}" if r.duration_s else "-",
         )
-    Console(highlight=False, emoji=False, width=max(out.width, 150), file=out.file).print(table)  # ten columns of numbers, none cut
+    Console(highlight=False, emoji=False, width=max(out.width, 150), file=out.file).print(
+        table
+    )  # ten columns of numbers, none cut
     exceeded = [
         f"- {r.task}, {r.method}: its {kind} reaches {x:.7f} times the limit"
         for r in rows
@@ -218,7 +319,17 @@ def bench_plan_command(
     with err.status("benchmarking ...") as status:
         bench = bench_plan(task, trials, seed, progress=lambda text: status.update(f"benchmarking {text} ..."))
     table = Table(title=f"planning {task} ({trials} trials each, interleaved)", title_justify="left")
-    for column in ("planner", "success", "median ms", "p95 ms", "mean ms", "checks (median)", "µs / check", "path rad (median)", "paper mean / ours"):
+    for column in (
+        "planner",
+        "success",
+        "median ms",
+        "p95 ms",
+        "mean ms",
+        "checks (median)",
+        "µs / check",
+        "path rad (median)",
+        "paper mean / ours",
+    ):
         table.add_column(column, justify="left" if column == "planner" else "right", no_wrap=column == "planner")
     for r in bench.planners:
         table.add_row(
@@ -235,11 +346,20 @@ def bench_plan_command(
     out.print(table)
     mcikrrt, ompl = bench.planners[0], bench.planners[1]
     out.print(f"median planning time, ompl-rrtconnect / mcikrrt: {ompl.median_s / mcikrrt.median_s:.2f}x", markup=False)
-    checks = Table(title=f"one collision check, the same {bench.configurations} configurations of planner-like edges (fastest of the rounds)", title_justify="left")
+    checks = Table(
+        title=f"one collision check, the same {bench.configurations} configurations of planner-like edges (fastest of the rounds)",
+        title_justify="left",
+    )
     for column in ("checker", "configurations given", "per call", "µs / check", "pybullet / this"):
-        checks.add_column(column, justify="left" if column in ("checker", "configurations given") else "right", no_wrap=True)
+        checks.add_column(
+            column, justify="left" if column in ("checker", "configurations given") else "right", no_wrap=True
+        )
     reference = bench.checkers[0].check_time_s
     for c in bench.checkers:
-        checks.add_row(c.checker, c.batch, str(c.batch_size), f"{c.check_time_s * 1e6:.2f}", f"{reference / c.check_time_s:.1f}x")
+        checks.add_row(
+            c.checker, c.batch, str(c.batch_size), f"{c.check_time_s * 1e6:.2f}", f"{reference / c.check_time_s:.1f}x"
+        )
     out.print(checks)
-    out.print(f"verdicts that differ between the two checkers: {bench.disagreements} of {bench.configurations}", markup=False)
+    out.print(
+        f"verdicts that differ between the two checkers: {bench.disagreements} of {bench.configurations}", markup=False
+    )

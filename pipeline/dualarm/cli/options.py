@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -38,7 +38,11 @@ def _within(value: float, option: str, low: float, high: float = math.inf, *, ab
     """``value``, given as ``option``, if it is finite and in [low, high] ((low, high] with ``above_low``); a DualarmError with the range otherwise."""
     if math.isfinite(value) and (value > low if above_low else value >= low) and value <= high:
         return value
-    bounds = f"{'>' if above_low else '>='} {low:g}" if high == math.inf else f"in {'(' if above_low else '['}{low:g}, {high:g}]"
+    bounds = (
+        f"{'>' if above_low else '>='} {low:g}"
+        if high == math.inf
+        else f"in {'(' if above_low else '['}{low:g}, {high:g}]"
+    )
     raise DualarmError(f"{option} {excerpt(value)}: give a finite number {bounds}")
 
 
@@ -84,7 +88,7 @@ def _execution(gui: bool, execute_anyway: bool = False):
     return ExecutionSettings(gui=gui, execute_anyway=execute_anyway)
 
 
-def _robot(robot_dir: Optional[Path], urdf: Optional[Path], base: Optional[str], tip: Optional[str]):
+def _robot(robot_dir: Path | None, urdf: Path | None, base: str | None, tip: str | None):
     """The robot of ``ROBOT_DIR`` or of ``--urdf PATH --base LINK --tip LINK`` (one chain named ``chain``)."""
     from dualarm.model.robot import load_robot, robot_from_urdf
 
@@ -97,6 +101,6 @@ def _robot(robot_dir: Optional[Path], urdf: Optional[Path], base: Optional[str],
     return robot_from_urdf(urdf, base, tip)
 
 
-UrdfOption = Annotated[Optional[Path], typer.Option(help="A bare URDF instead (needs --base and --tip).")]
-BaseLinkOption = Annotated[Optional[str], typer.Option(help="Base link of the arm chain (with --urdf).")]
-TipLinkOption = Annotated[Optional[str], typer.Option(help="Tip link of the arm chain (with --urdf).")]
+UrdfOption = Annotated[Path | None, typer.Option(help="A bare URDF instead (needs --base and --tip).")]
+BaseLinkOption = Annotated[str | None, typer.Option(help="Base link of the arm chain (with --urdf).")]
+TipLinkOption = Annotated[str | None, typer.Option(help="Tip link of the arm chain (with --urdf).")]

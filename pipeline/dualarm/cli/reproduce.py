@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.table import Table
@@ -17,25 +17,38 @@ from dualarm.cli.options import _out_path
 @user_errors
 def reproduce(
     out_text: Annotated[
-        Optional[str],
+        str | None,
         typer.Option(
             "--out",
             help="Directory that receives every run, table and figure, and report.md (emptied first if it holds only an earlier reproduction); default reports/reproduction, or reports/reproduction-NAME with --robot.",
         ),
     ] = None,
-    only: Annotated[Optional[str], typer.Option(help="Comma-separated parts to run (default: all): ball-game-tvgdd, ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp.")] = None,
+    only: Annotated[
+        str | None,
+        typer.Option(
+            help="Comma-separated parts to run (default: all): ball-game-tvgdd, ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp."
+        ),
+    ] = None,
     jobs: Annotated[
         int,
-        typer.Option("--jobs", "--workers", min=1, help="Parts run at once: the worker processes of a Dask LocalCluster (default: 2, or 1 on a 1-core machine, which runs the parts in this process)."),
+        typer.Option(
+            "--jobs",
+            "--workers",
+            min=1,
+            help="Parts run at once: the worker processes of a Dask LocalCluster (default: 2, or 1 on a 1-core machine, which runs the parts in this process).",
+        ),
     ] = min(2, os.cpu_count() or 1),
     scheduler: Annotated[
-        Optional[str],
-        typer.Option(help="An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the parts on instead of a LocalCluster; --out must be on a file system its workers share."),
+        str | None,
+        typer.Option(
+            help="An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the parts on instead of a LocalCluster; --out must be on a file system its workers share."
+        ),
     ] = None,
     robot_dir: Annotated[
-        Optional[Path],
+        Path | None,
         typer.Option(
-            "--robot", help="Robot directory (or shipped robot's name) to run the experiments on instead of the humanoid; a part it cannot run is reported as not available, with the reason."
+            "--robot",
+            help="Robot directory (or shipped robot's name) to run the experiments on instead of the humanoid; a part it cannot run is reported as not available, with the reason.",
         ),
     ] = None,
 ) -> None:
@@ -57,9 +70,19 @@ def reproduce(
     out_dir = _out_path(out_text if out_text is not None else default_out, "--out")
     names = parts_named([n.strip() for n in only.split(",") if n.strip()] if only is not None else None)
     _claim = prepare(out_dir)  # out_dir stays locked until the command ends: a second reproduction into it is refused
-    columns = (TextColumn("{task.fields[part]:<16}", markup=False), BarColumn(), TextColumn("{task.percentage:>3.0f} %"), TimeElapsedColumn(), TextColumn("{task.fields[text]}", markup=False))
-    with Progress(*columns, console=err, transient=not err.is_terminal) as bar:  # in a file, the bars would print once at the end: the time table says it
-        tasks = {name: bar.add_task(BY_NAME[name].title, total=1.0, part=name, text="waiting", start=False) for name in names}
+    columns = (
+        TextColumn("{task.fields[part]:<16}", markup=False),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f} %"),
+        TimeElapsedColumn(),
+        TextColumn("{task.fields[text]}", markup=False),
+    )
+    with Progress(
+        *columns, console=err, transient=not err.is_terminal
+    ) as bar:  # in a file, the bars would print once at the end: the time table says it
+        tasks = {
+            name: bar.add_task(BY_NAME[name].title, total=1.0, part=name, text="waiting", start=False) for name in names
+        }
 
         def on_progress(name: str, fraction: float, text: str) -> None:
             _raise_swallowed()
@@ -73,7 +96,9 @@ def reproduce(
         claims = reproduction_claims(out_dir)
         report_path = write_reproduction_report(out_dir, claims)
         bar.update(report_task, completed=1.0, text="done")
-    table = Table(title=f"time of each part ({'on ' + scheduler if scheduler else f'{jobs} at a time'})", title_justify="left")
+    table = Table(
+        title=f"time of each part ({'on ' + scheduler if scheduler else f'{jobs} at a time'})", title_justify="left"
+    )
     for column in ("part", "status", "seconds"):
         table.add_column(column, justify="right" if column == "seconds" else "left")
     for r in results:
@@ -86,7 +111,11 @@ def reproduce(
     if any(r.status not in ("complete", NOT_AVAILABLE) for r in results):
         raise typer.Exit(1)
     if all(r.status == NOT_AVAILABLE for r in results):
-        err.print(f"error: no part of the reproduction runs on {robot_name} (the report says why each is not available)", markup=False, soft_wrap=True)
+        err.print(
+            f"error: no part of the reproduction runs on {robot_name} (the report says why each is not available)",
+            markup=False,
+            soft_wrap=True,
+        )
         raise typer.Exit(2)
     if any(c.contradicted for c in claims):
         raise typer.Exit(3)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -18,11 +18,17 @@ from dualarm.errors import NotSRSError
 @robot_app.command("check")
 @user_errors
 def robot_check(
-    robot_dir: Annotated[Optional[Path], typer.Argument(help="Robot directory holding robot.toml (e.g. robots/humanoid).")] = None,
-    urdf: Annotated[Optional[Path], typer.Option(help="Check one chain of a bare URDF instead (needs --base and --tip).")] = None,
-    base: Annotated[Optional[str], typer.Option(help="Base link of the chain (with --urdf).")] = None,
-    tip: Annotated[Optional[str], typer.Option(help="Tip link of the chain (with --urdf).")] = None,
-    samples: Annotated[int, typer.Option(min=1, help=f"Random configurations per chain (at most {MAX_SAMPLES}).")] = 1000,
+    robot_dir: Annotated[
+        Path | None, typer.Argument(help="Robot directory holding robot.toml (e.g. robots/humanoid).")
+    ] = None,
+    urdf: Annotated[
+        Path | None, typer.Option(help="Check one chain of a bare URDF instead (needs --base and --tip).")
+    ] = None,
+    base: Annotated[str | None, typer.Option(help="Base link of the chain (with --urdf).")] = None,
+    tip: Annotated[str | None, typer.Option(help="Tip link of the chain (with --urdf).")] = None,
+    samples: Annotated[
+        int, typer.Option(min=1, help=f"Random configurations per chain (at most {MAX_SAMPLES}).")
+    ] = 1000,
     seed: Annotated[int, typer.Option(help="Seed of the random configurations (an integer >= 0).")] = 0,
 ) -> None:
     """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics, PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
@@ -36,13 +42,19 @@ def robot_check(
     out.print(f"robot {robot.name}: {robot.urdf.path}  ({len(robot.joint_names)} movable joints)", markup=False)
     results = []
     for chain in robot.chains.values():
-        out.print(f"\nchain {chain.name}: {chain.base} -> {chain.tip}, {chain.dof} DOF" + (f", hand '{chain.hand}'" if chain.hand else ""), markup=False)
+        out.print(
+            f"\nchain {chain.name}: {chain.base} -> {chain.tip}, {chain.dof} DOF"
+            + (f", hand '{chain.hand}'" if chain.hand else ""),
+            markup=False,
+        )
         limits = Table(show_edge=False, pad_edge=False)
         for column in ("joint", "lower [rad]", "upper [rad]", "vel [rad/s]", "acc [rad/s²]", "jerk [rad/s³]"):
             limits.add_column(column, justify="left" if column == "joint" else "right")
         for name in chain.joint_names:
             lim = robot.limits[name]
-            limits.add_row(name, *(f"{v:.4g}" for v in (lim.lower, lim.upper, lim.velocity, lim.acceleration, lim.jerk)))
+            limits.add_row(
+                name, *(f"{v:.4g}" for v in (lim.lower, lim.upper, lim.velocity, lim.acceleration, lim.jerk))
+            )
         out.print(limits)
         if chain.dof == 7:
             try:
@@ -57,7 +69,9 @@ def robot_check(
             out.print(_sew_line(chain), markup=False)
         with err.status(f"checking {chain.name} on {samples} configurations ..."):
             results.append(check_chain(robot, chain, samples=samples, seed=seed))
-    table = Table(title=f"kinematics check ({samples} random configurations per chain, seed {seed})", title_justify="left")
+    table = Table(
+        title=f"kinematics check ({samples} random configurations per chain, seed {seed})", title_justify="left"
+    )
     for column in ("chain", "FK vs adam [m]", "[rad]", "FK vs PyBullet [m]", "[rad]", "Jacobian vs FD", "result"):
         table.add_column(column, justify="left" if column == "chain" else "right")
     for r in results:
@@ -83,15 +97,48 @@ def robot_check(
 @robot_app.command("init")
 @user_errors
 def robot_init(
-    urdf: Annotated[Path, typer.Argument(help="The robot's URDF (mesh paths: package:// through ROS_PACKAGE_PATH or the URDF's own folders, file://, absolute or relative).")],
-    out_dir: Annotated[str, typer.Option("--out", help="The robot directory to write (new or empty): robot.toml, a copy of the URDF and its meshes.")],
-    left_tip: Annotated[Optional[str], typer.Option(help="Tip link (hand frame) of the left arm; default: proposed from the tree.")] = None,
-    right_tip: Annotated[Optional[str], typer.Option(help="Tip link of the right arm; default: proposed from the tree.")] = None,
-    left_base: Annotated[Optional[str], typer.Option(help="Base link of the left arm's chain; default: the torso.")] = None,
-    right_base: Annotated[Optional[str], typer.Option(help="Base link of the right arm's chain; default: the torso.")] = None,
-    torso: Annotated[Optional[str], typer.Option(help="The link the arms hang from; default: their common root. The waist is the movable joints above it.")] = None,
-    acceleration: Annotated[Optional[float], typer.Option(help="Acceleration limit of every chain joint [rad/s^2]; default: an assumed 5, marked so in robot.toml.")] = None,
-    jerk: Annotated[Optional[float], typer.Option(help="Jerk limit of every chain joint [rad/s^3]; default: an assumed 50, marked so in robot.toml.")] = None,
+    urdf: Annotated[
+        Path,
+        typer.Argument(
+            help="The robot's URDF (mesh paths: package:// through ROS_PACKAGE_PATH or the URDF's own folders, file://, absolute or relative)."
+        ),
+    ],
+    out_dir: Annotated[
+        str,
+        typer.Option(
+            "--out", help="The robot directory to write (new or empty): robot.toml, a copy of the URDF and its meshes."
+        ),
+    ],
+    left_tip: Annotated[
+        str | None, typer.Option(help="Tip link (hand frame) of the left arm; default: proposed from the tree.")
+    ] = None,
+    right_tip: Annotated[
+        str | None, typer.Option(help="Tip link of the right arm; default: proposed from the tree.")
+    ] = None,
+    left_base: Annotated[
+        str | None, typer.Option(help="Base link of the left arm's chain; default: the torso.")
+    ] = None,
+    right_base: Annotated[
+        str | None, typer.Option(help="Base link of the right arm's chain; default: the torso.")
+    ] = None,
+    torso: Annotated[
+        str | None,
+        typer.Option(
+            help="The link the arms hang from; default: their common root. The waist is the movable joints above it."
+        ),
+    ] = None,
+    acceleration: Annotated[
+        float | None,
+        typer.Option(
+            help="Acceleration limit of every chain joint [rad/s^2]; default: an assumed 5, marked so in robot.toml."
+        ),
+    ] = None,
+    jerk: Annotated[
+        float | None,
+        typer.Option(
+            help="Jerk limit of every chain joint [rad/s^3]; default: an assumed 50, marked so in robot.toml."
+        ),
+    ] = None,
 ) -> None:
     """Write a robot directory from a URDF: arm chains, waist, locked joints, S-R-S verdicts, limits, home poses zero and ready; print every choice (robots/README.md)."""
     from dualarm.describe.init import init_robot
@@ -100,18 +147,34 @@ def robot_init(
         if value is not None:
             _within(value, option, 0.0, above_low=True)
     with err.status("robot init: sampling configurations ..."):
-        result = init_robot(urdf, _out_path(out_dir, "--out"), left_tip=left_tip, right_tip=right_tip, left_base=left_base, right_base=right_base, torso=torso, acceleration=acceleration, jerk=jerk)
+        result = init_robot(
+            urdf,
+            _out_path(out_dir, "--out"),
+            left_tip=left_tip,
+            right_tip=right_tip,
+            left_base=left_base,
+            right_base=right_base,
+            torso=torso,
+            acceleration=acceleration,
+            jerk=jerk,
+        )
     for line in result.notes:
         out.print(line, markup=False, soft_wrap=True)
-    out.print(f"wrote {result.directory / 'robot.toml'}; next: dualarm robot check {result.directory}, dualarm robot poses {result.directory}", markup=False, soft_wrap=True)
+    out.print(
+        f"wrote {result.directory / 'robot.toml'}; next: dualarm robot check {result.directory}, dualarm robot poses {result.directory}",
+        markup=False,
+        soft_wrap=True,
+    )
 
 
 @robot_app.command("poses")
 @user_errors
 def robot_poses(
     robot_dir: Annotated[Path, typer.Argument(help="Robot directory holding robot.toml (or a shipped robot's name).")],
-    pose: Annotated[Optional[str], typer.Option(help="Only this home pose (default: every one).")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON: [{home, hand, position_m, rpy_rad, arm_angle_rad}].")] = False,
+    pose: Annotated[str | None, typer.Option(help="Only this home pose (default: every one).")] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print JSON: [{home, hand, position_m, rpy_rad, arm_angle_rad}].")
+    ] = False,
 ) -> None:
     """Each hand's pose at each home pose: position [m] and roll, pitch, yaw (extrinsic x-y-z, as task files) [rad] in the robot base frame, and the arm angle psi [rad] where the arm is S-R-S."""
     import dataclasses
@@ -128,6 +191,14 @@ def robot_poses(
     for column in ("home", "hand", "x [m]", "y [m]", "z [m]", "roll [rad]", "pitch [rad]", "yaw [rad]", "ψ [rad]"):
         table.add_column(column, justify="left" if column in ("home", "hand") else "right", no_wrap=True)
     for p in poses:
-        table.add_row(p.home, p.hand, *(f"{v:.4f}" for v in (*p.position_m, *p.rpy_rad)), "-" if p.arm_angle_rad is None else f"{p.arm_angle_rad:.4f}")
+        table.add_row(
+            p.home,
+            p.hand,
+            *(f"{v:.4f}" for v in (*p.position_m, *p.rpy_rad)),
+            "-" if p.arm_angle_rad is None else f"{p.arm_angle_rad:.4f}",
+        )
     out.print(table)
-    out.print("ψ: the arm angle of MC-Inverse eq (1) (V = +z of the arm's base frame); '-' where the arm is not S-R-S or ψ is undefined (shoulder-wrist line vertical)", markup=False)
+    out.print(
+        "ψ: the arm angle of MC-Inverse eq (1) (V = +z of the arm's base frame); '-' where the arm is not S-R-S or ψ is undefined (shoulder-wrist line vertical)",
+        markup=False,
+    )

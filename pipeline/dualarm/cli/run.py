@@ -4,46 +4,102 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from dualarm.cli.app import _update, app, err, out, user_errors
-from dualarm.cli.options import MAX_TIMEOUT_S, MAX_TRIALS, RECORD_HELP, _execution, _method, _out_path, _record, _seed, _stages, _within
+from dualarm.cli.options import (
+    MAX_TIMEOUT_S,
+    MAX_TRIALS,
+    RECORD_HELP,
+    _execution,
+    _method,
+    _out_path,
+    _record,
+    _seed,
+    _stages,
+    _within,
+)
 from dualarm.errors import DualarmError, excerpt
 
 
 @app.command()
 @user_errors
 def run(
-    task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml, or a shipped task's name (triangle).")],
+    task: Annotated[
+        Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml, or a shipped task's name (triangle).")
+    ],
     stages: Annotated[
-        Optional[str],
+        str | None,
         typer.Option(
             help="Comma-separated stages to run: path, ik or plan, retime, smooth, approach (from the task's initial configuration to the motion's start), execute (default: all of them when --ik or --planner is given, else path)."
         ),
     ] = None,
-    ik: Annotated[Optional[str], typer.Option("--ik", help="IK method of the ik stage: tvgdd, pinv, mc-inverse, sew, trac-ik, pybullet, dls-svd or ikfast-style.")] = None,
-    scheme: Annotated[str, typer.Option(help="TV-GDD scheme: mvn (minimum velocity norm), rmp (repetitive motion) or mke (minimum kinetic energy).")] = "mvn",
-    qp_backend: Annotated[str, typer.Option(help="TV-GDD QP solver: casadi (DAQP through CasADi conic) or lvi (the paper's projection solver).")] = "casadi",
-    lvi_tolerance: Annotated[float, typer.Option(help="Stop of the lvi backend on ||eps(u)||_2 (the paper's 1e-5; its velocity error can be ~35x this, see docs).")] = 1e-5,
-    out_text: Annotated[str, typer.Option("--out", help="Directory that receives <task>/<run-id>/ (a recordings directory: runs are added, nothing in it is deleted or overwritten).")] = "recordings",
+    ik: Annotated[
+        str | None,
+        typer.Option(
+            "--ik",
+            help="IK method of the ik stage: tvgdd, pinv, mc-inverse, sew, trac-ik, pybullet, dls-svd or ikfast-style.",
+        ),
+    ] = None,
+    scheme: Annotated[
+        str,
+        typer.Option(
+            help="TV-GDD scheme: mvn (minimum velocity norm), rmp (repetitive motion) or mke (minimum kinetic energy)."
+        ),
+    ] = "mvn",
+    qp_backend: Annotated[
+        str,
+        typer.Option(
+            help="TV-GDD QP solver: casadi (DAQP through CasADi conic) or lvi (the paper's projection solver)."
+        ),
+    ] = "casadi",
+    lvi_tolerance: Annotated[
+        float,
+        typer.Option(
+            help="Stop of the lvi backend on ||eps(u)||_2 (the paper's 1e-5; its velocity error can be ~35x this, see docs)."
+        ),
+    ] = 1e-5,
+    out_text: Annotated[
+        str,
+        typer.Option(
+            "--out",
+            help="Directory that receives <task>/<run-id>/ (a recordings directory: runs are added, nothing in it is deleted or overwritten).",
+        ),
+    ] = "recordings",
     seed: Annotated[int, typer.Option(help="Random seed (an integer >= 0), recorded in the manifest.")] = 0,
-    reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
+    reps: Annotated[int | None, typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
     timing: Annotated[
-        Optional[str],
+        str | None,
         typer.Option(
             help="Retime: jerk-limited (on the path, within the velocity, acceleration and jerk limits), optimal (TOPP-RA, then Ruckig tracking) or task (the task's own timing, checked against the limits); default: the task file's retime.timing."
         ),
     ] = None,
-    gui: Annotated[bool, typer.Option("--gui", help="Show the execution in a PyBullet window (needs a display).")] = False,
-    execute_anyway: Annotated[
-        bool, typer.Option("--execute-anyway", help="Play a trajectory that fails its validation (limits, collisions) for diagnosis; the run is then at best 'violated'.")
+    gui: Annotated[
+        bool, typer.Option("--gui", help="Show the execution in a PyBullet window (needs a display).")
     ] = False,
-    planner: Annotated[Optional[str], typer.Option(help="Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no --ik: mcikrrt).")] = None,
-    timeout: Annotated[Optional[float], typer.Option(help="Planning timeout [s] (default 5).")] = None,
+    execute_anyway: Annotated[
+        bool,
+        typer.Option(
+            "--execute-anyway",
+            help="Play a trajectory that fails its validation (limits, collisions) for diagnosis; the run is then at best 'violated'.",
+        ),
+    ] = False,
+    planner: Annotated[
+        str | None,
+        typer.Option(
+            help="Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no --ik: mcikrrt)."
+        ),
+    ] = None,
+    timeout: Annotated[float | None, typer.Option(help="Planning timeout [s] (default 5).")] = None,
     record: Annotated[str, typer.Option("--record", metavar="LEVEL", help=RECORD_HELP)] = "full",
-    robot_dir: Annotated[Optional[Path], typer.Option("--robot", help="Robot directory (or shipped robot's name) to run the task on instead of the one it names.")] = None,
+    robot_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--robot", help="Robot directory (or shipped robot's name) to run the task on instead of the one it names."
+        ),
+    ] = None,
 ) -> None:
     """Run a task through the pipeline and record it; prints the run directory as the last line.
 
@@ -113,13 +169,29 @@ def _print_arm_angles(result) -> None:
 @user_errors
 def plan(
     task: Annotated[Path, typer.Argument(help="Task file (TOML) with [[wta]] tables, e.g. tasks/bowl_grasp.toml.")],
-    planner: Annotated[str, typer.Option(help="mcikrrt (Li & Liang) or ompl-rrtconnect (OMPL's RRTConnect, same checker and goals).")] = "mcikrrt",
-    trials: Annotated[int, typer.Option(min=1, help=f"Planning trials (at most {MAX_TRIALS}); trial i uses seed SEED + i.")] = 100,
+    planner: Annotated[
+        str, typer.Option(help="mcikrrt (Li & Liang) or ompl-rrtconnect (OMPL's RRTConnect, same checker and goals).")
+    ] = "mcikrrt",
+    trials: Annotated[
+        int, typer.Option(min=1, help=f"Planning trials (at most {MAX_TRIALS}); trial i uses seed SEED + i.")
+    ] = 100,
     seed: Annotated[int, typer.Option(help="Seed of the first trial (an integer >= 0).")] = 0,
-    timeout: Annotated[Optional[float], typer.Option(help="Planning timeout per trial [s] (default 5).")] = None,
-    out_text: Annotated[Optional[str], typer.Option("--out", help="Directory for plan_trials.csv and plan_summary.json (default plans/<task>-<planner>).")] = None,
-    recordings_text: Annotated[str, typer.Option("--recordings", help="Directory that receives the recorded run of the first successful plan.")] = "recordings",
-    robot_dir: Annotated[Optional[Path], typer.Option("--robot", help="Robot directory (or shipped robot's name) to plan the task on instead of the one it names.")] = None,
+    timeout: Annotated[float | None, typer.Option(help="Planning timeout per trial [s] (default 5).")] = None,
+    out_text: Annotated[
+        str | None,
+        typer.Option(
+            "--out", help="Directory for plan_trials.csv and plan_summary.json (default plans/<task>-<planner>)."
+        ),
+    ] = None,
+    recordings_text: Annotated[
+        str, typer.Option("--recordings", help="Directory that receives the recorded run of the first successful plan.")
+    ] = "recordings",
+    robot_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--robot", help="Robot directory (or shipped robot's name) to plan the task on instead of the one it names."
+        ),
+    ] = None,
 ) -> None:
     """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed, smoothed, executed and recorded as a run; exits 1 when no trial succeeded, else with the verdict of that run (0 complete, 3 violated, 1 failed)."""
     from dualarm.plan.problem import PlanningSettings
@@ -143,7 +215,10 @@ def plan(
             PlanningSettings().with_timeout(timeout),
             recordings,
             ["dualarm", *sys.argv[1:]],
-            progress=lambda done, total: _update(status, f"planning {task}: trial {done}/{total}" + (" (recording the first plan)" if done == total else "")),
+            progress=lambda done, total: _update(
+                status,
+                f"planning {task}: trial {done}/{total}" + (" (recording the first plan)" if done == total else ""),
+            ),
             robot=robot_dir,
         )
     s = result.summary

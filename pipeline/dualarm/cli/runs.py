@@ -6,7 +6,7 @@ import os
 import stat
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -52,9 +52,23 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
 @app.command()
 @user_errors
 def view(
-    run_dir: Annotated[Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>), recorded with --record full or ik.")],
-    web: Annotated[bool, typer.Option("--web", help="Serve the run with Rerun's web viewer on 127.0.0.1 and print the URL to open (no browser is started); serves until Ctrl-C.")] = False,
-    stage: Annotated[Optional[str], typer.Option(metavar="STAGE", help="Open Rerun on this stage's robot and plots (one the run recorded: path, ik or plan, retime, smooth, execute).")] = None,
+    run_dir: Annotated[
+        Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>), recorded with --record full or ik.")
+    ],
+    web: Annotated[
+        bool,
+        typer.Option(
+            "--web",
+            help="Serve the run with Rerun's web viewer on 127.0.0.1 and print the URL to open (no browser is started); serves until Ctrl-C.",
+        ),
+    ] = False,
+    stage: Annotated[
+        str | None,
+        typer.Option(
+            metavar="STAGE",
+            help="Open Rerun on this stage's robot and plots (one the run recorded: path, ik or plan, retime, smooth, execute).",
+        ),
+    ] = None,
 ) -> None:
     """Open a recorded run in Rerun's viewer (a window, or with --web the web viewer) and print how to open its run.mcap in Foxglove, with the run's layout.
 
@@ -62,7 +76,15 @@ def view(
     """
     import tempfile
 
-    from dualarm.record.view import blueprint_file, check_display, check_stage, open_native, rerun_executable, serve_web, viewable
+    from dualarm.record.view import (
+        blueprint_file,
+        check_display,
+        check_stage,
+        open_native,
+        rerun_executable,
+        serve_web,
+        viewable,
+    )
 
     run = viewable(run_dir)
     if stage is not None:
@@ -88,8 +110,19 @@ def view(
 @app.command()
 @user_errors
 def report(
-    run_dirs: Annotated[list[Path], typer.Argument(help="One or more run directories (recordings/<task>/<run-id>), from this machine or copied from another.")],
-    out_text: Annotated[Optional[str], typer.Option("--out", help="Report directory (default reports/<task>/<run-id> for one run, reports/<task or runs>/<first run-id>+<n-1> for several).")] = None,
+    run_dirs: Annotated[
+        list[Path],
+        typer.Argument(
+            help="One or more run directories (recordings/<task>/<run-id>), from this machine or copied from another."
+        ),
+    ],
+    out_text: Annotated[
+        str | None,
+        typer.Option(
+            "--out",
+            help="Report directory (default reports/<task>/<run-id> for one run, reports/<task or runs>/<first run-id>+<n-1> for several).",
+        ),
+    ] = None,
 ) -> None:
     """Write a markdown summary and the figures each run's recording allows; for several runs also runs.csv and runs.md (a row per run, every metric), figures setting them side by side and report.md linking it all.
 
@@ -108,8 +141,19 @@ def report(
 def compare(
     run_a: Annotated[Path, typer.Argument(help="A run directory.")],
     run_b: Annotated[Path, typer.Argument(help="Another run directory.")],
-    tol: Annotated[float, typer.Option(help="Largest absolute difference accepted, in each field's own unit (a finite number >= 0; 0: identical).")] = 0.0,
-    csv_text: Annotated[Optional[str], typer.Option("--csv", help="Also write the whole table (a row per topic and field) to this CSV file (a new file, or one an earlier compare wrote).")] = None,
+    tol: Annotated[
+        float,
+        typer.Option(
+            help="Largest absolute difference accepted, in each field's own unit (a finite number >= 0; 0: identical)."
+        ),
+    ] = 0.0,
+    csv_text: Annotated[
+        str | None,
+        typer.Option(
+            "--csv",
+            help="Also write the whole table (a row per topic and field) to this CSV file (a new file, or one an earlier compare wrote).",
+        ),
+    ] = None,
 ) -> None:
     """Per topic and field, the largest difference between two runs, aligned on repetition and time; exits 0 when every field is within --tol and 1 otherwise, naming where they differ first.
 
@@ -123,17 +167,49 @@ def compare(
     with err.status(f"comparing {run_a} and {run_b} ..."):
         result = compare_runs(run_a, run_b, tol)
     table = Table(title=f"A = {run_a}\nB = {run_b}", title_justify="left")
-    for column in ("topic", "rows A", "rows B", "aligned", "largest |A - B|", "in field", "at t [s]", "rep", f"within {tol:g}"):
-        table.add_column(column, justify="left" if column in ("topic", "in field") else "right", no_wrap=column == "topic")
+    for column in (
+        "topic",
+        "rows A",
+        "rows B",
+        "aligned",
+        "largest |A - B|",
+        "in field",
+        "at t [s]",
+        "rep",
+        f"within {tol:g}",
+    ):
+        table.add_column(
+            column, justify="left" if column in ("topic", "in field") else "right", no_wrap=column == "topic"
+        )
     judged = result.table[~result.table["wall_clock"]]
     for topic, rows in judged.groupby("topic", sort=False):
         worst = rows.iloc[rows["max_difference"].fillna(-np.inf).argmax()]
-        located = ("", "", "") if worst["max_difference"] == 0 else (str(worst["field"]), "" if _missing(worst["t"]) else f"{worst['t']:.3f}", "" if _missing(worst["rep"]) else str(int(worst["rep"])))
-        table.add_row(str(topic), str(worst["rows_a"]), str(worst["rows_b"]), str(worst["aligned"]), f"{worst['max_difference']:.3g}", *located, "yes" if worst["max_difference"] <= tol else "NO")
+        located = (
+            ("", "", "")
+            if worst["max_difference"] == 0
+            else (
+                str(worst["field"]),
+                "" if _missing(worst["t"]) else f"{worst['t']:.3f}",
+                "" if _missing(worst["rep"]) else str(int(worst["rep"])),
+            )
+        )
+        table.add_row(
+            str(topic),
+            str(worst["rows_a"]),
+            str(worst["rows_b"]),
+            str(worst["aligned"]),
+            f"{worst['max_difference']:.3g}",
+            *located,
+            "yes" if worst["max_difference"] <= tol else "NO",
+        )
     out.print(table)
     clock = result.table[result.table["wall_clock"]]
     if len(clock):
-        out.print(f"not judged (wall clock): {', '.join(f'{r.topic} {r.field}' for r in clock.itertuples())}", markup=False, soft_wrap=True)
+        out.print(
+            f"not judged (wall clock): {', '.join(f'{r.topic} {r.field}' for r in clock.itertuples())}",
+            markup=False,
+            soft_wrap=True,
+        )
     if csv is not None:
         write_whole(csv, result.table.to_csv(index=False))
     if result.within:
@@ -141,12 +217,21 @@ def compare(
         return
     beyond = result.beyond
     first = beyond.iloc[0]
-    where = f"at t = {first['first_beyond_t']:.4f} s, rep {int(first['first_beyond_rep'])}" if not _missing(first["first_beyond_t"]) else "(whole topic or field)"
-    out.print(
-        f"differ first: {first['topic']} {first['field']} {where}" + (f" ({first['note']})" if first["note"] else f" (largest |A - B| = {first['max_difference']:.3g})"), markup=False, soft_wrap=True
+    where = (
+        f"at t = {first['first_beyond_t']:.4f} s, rep {int(first['first_beyond_rep'])}"
+        if not _missing(first["first_beyond_t"])
+        else "(whole topic or field)"
     )
     out.print(
-        f"{len(beyond)} fields beyond {tol:g}, earliest first: " + ", ".join(f"{r.topic} {r.field}" for r in beyond.head(12).itertuples()) + (" ..." if len(beyond) > 12 else ""),
+        f"differ first: {first['topic']} {first['field']} {where}"
+        + (f" ({first['note']})" if first["note"] else f" (largest |A - B| = {first['max_difference']:.3g})"),
+        markup=False,
+        soft_wrap=True,
+    )
+    out.print(
+        f"{len(beyond)} fields beyond {tol:g}, earliest first: "
+        + ", ".join(f"{r.topic} {r.field}" for r in beyond.head(12).itertuples())
+        + (" ..." if len(beyond) > 12 else ""),
         markup=False,
         soft_wrap=True,
     )
@@ -174,9 +259,13 @@ def _compare_csv(text: str) -> Path:
             with path.open("rb") as f:
                 first = f.readline(len(COMPARE_HEADER)).decode("utf-8", errors="replace")
         except OSError as exc:
-            raise DualarmError(f"--csv {excerpt(path)}: cannot read it ({exc.strerror}); give another file name") from None
+            raise DualarmError(
+                f"--csv {excerpt(path)}: cannot read it ({exc.strerror}); give another file name"
+            ) from None
     if not first.startswith(COMPARE_HEADER):
-        raise DualarmError(f"--csv {excerpt(path)}: exists and is not a table dualarm compare wrote (it does not begin '{COMPARE_HEADER}'); give another file name")
+        raise DualarmError(
+            f"--csv {excerpt(path)}: exists and is not a table dualarm compare wrote (it does not begin '{COMPARE_HEADER}'); give another file name"
+        )
     return path
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.table import Table
@@ -19,12 +19,22 @@ from dualarm.errors import DualarmError, excerpt
 def consistency(
     task: Annotated[Path, typer.Argument(help="Task file (TOML), e.g. tasks/triangle.toml.")],
     methods: Annotated[
-        Optional[str], typer.Option(help="Comma-separated IK methods to compare (default: mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd,tvgdd,pinv, those that run on the task's robot).")
+        str | None,
+        typer.Option(
+            help="Comma-separated IK methods to compare (default: mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd,tvgdd,pinv, those that run on the task's robot)."
+        ),
     ] = None,
-    reps: Annotated[Optional[int], typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
-    out_text: Annotated[Optional[str], typer.Option("--out", help="Output directory (default consistency/<task>).")] = None,
+    reps: Annotated[int | None, typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
+    out_text: Annotated[
+        str | None, typer.Option("--out", help="Output directory (default consistency/<task>).")
+    ] = None,
     seed: Annotated[int, typer.Option(help="Random seed (an integer >= 0), recorded in each run's manifest.")] = 0,
-    robot_dir: Annotated[Optional[Path], typer.Option("--robot", help="Robot directory (or shipped robot's name) to run the task on instead of the one it names.")] = None,
+    robot_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--robot", help="Robot directory (or shipped robot's name) to run the task on instead of the one it names."
+        ),
+    ] = None,
 ) -> None:
     """Run each IK method on a repeated task as a recorded run and compare repetition by repetition: consistency.csv, consistency.md and figures; prints the table (with each run's verdict) and the directory.
 
@@ -34,10 +44,14 @@ def consistency(
 
     out_dir = _out_path(out_text, "--out") if out_text is not None else None
     _seed(seed)
-    chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else None  # None: DEFAULT_METHODS that run on the task's robot
+    chosen = (
+        [m.strip() for m in methods.split(",") if m.strip()] if methods is not None else None
+    )  # None: DEFAULT_METHODS that run on the task's robot
     directory = out_dir or Path("consistency") / task.stem
     with err.status("consistency ...") as status:
-        result = run_consistency(task, chosen, directory, reps, seed, progress=lambda text: _update(status, text), robot=robot_dir)
+        result = run_consistency(
+            task, chosen, directory, reps, seed, progress=lambda text: _update(status, text), robot=robot_dir
+        )
     shown = {
         "rep_joint_deviation_max_rad": "rep Δq max rad",
         "rep_arm_angle_deviation_max_rad": "rep Δψ max rad",
@@ -51,16 +65,24 @@ def consistency(
     shown = {c: label for c, label in shown.items() if c in result.table.columns}  # no arm angle on a non-S-R-S robot
     table = Table(title=f"{task}: consistency over repetitions (all columns in {result.csv})", title_justify="left")
     for column in ("method", "verdict", *shown.values()):
-        table.add_column(column, justify="left" if column in ("method", "verdict") else "right", no_wrap=column in ("method", "verdict"))
+        table.add_column(
+            column,
+            justify="left" if column in ("method", "verdict") else "right",
+            no_wrap=column in ("method", "verdict"),
+        )
     for _, row in result.table.iterrows():
         if row["status"] == "failed":
             table.add_row(row["method"], f"failed: {row['error']}", *[""] * len(shown))
             continue
-        table.add_row(method_label(row), row["status"], *(f"{row[c] * (1e3 if c.endswith('_s') else 1):.3g}" for c in shown))
+        table.add_row(
+            method_label(row), row["status"], *(f"{row[c] * (1e3 if c.endswith('_s') else 1):.3g}" for c in shown)
+        )
     out.print(table)
     for _, row in result.table.iterrows():
         if row["status"] != "complete":
-            err.print(f"{row['method']}: {row['status']}: {row['error'] or row['violation']}", markup=False, soft_wrap=True)
+            err.print(
+                f"{row['method']}: {row['status']}: {row['error'] or row['violation']}", markup=False, soft_wrap=True
+            )
     out.print(str(directory), markup=False, soft_wrap=True)
     raise typer.Exit(_worst(result.table["status"]))
 
@@ -68,13 +90,39 @@ def consistency(
 @app.command()
 @user_errors
 def study(
-    spec_or_report: Annotated[str, typer.Argument(metavar="SPEC.toml | report", help="A study spec file (studies/inconsistency.toml) to run, or the word report.")],
-    directory_text: Annotated[Optional[str], typer.Argument(metavar="[DIR]", help="With report: the study's directory.")] = None,
-    scheduler: Annotated[Optional[str], typer.Option(help="An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the trials on; default a LocalCluster on this machine.")] = None,
-    workers: Annotated[Optional[int], typer.Option(min=1, help="The LocalCluster's worker processes (one thread each; default one per core).")] = None,
-    out_text: Annotated[Optional[str], typer.Option("--out", help="The study's directory (default studies/results/<name>).")] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Run only the trials not yet in --out (a study stopped or crashed half-way).")] = False,
-    record: Annotated[str, typer.Option(help="metrics (no recordings, the default), ik or full: each trial's runs in DIR/runs (full runs every stage).")] = "metrics",
+    spec_or_report: Annotated[
+        str,
+        typer.Argument(
+            metavar="SPEC.toml | report",
+            help="A study spec file (studies/inconsistency.toml) to run, or the word report.",
+        ),
+    ],
+    directory_text: Annotated[
+        str | None, typer.Argument(metavar="[DIR]", help="With report: the study's directory.")
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the trials on; default a LocalCluster on this machine."
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(min=1, help="The LocalCluster's worker processes (one thread each; default one per core)."),
+    ] = None,
+    out_text: Annotated[
+        str | None, typer.Option("--out", help="The study's directory (default studies/results/<name>).")
+    ] = None,
+    resume: Annotated[
+        bool,
+        typer.Option("--resume", help="Run only the trials not yet in --out (a study stopped or crashed half-way)."),
+    ] = False,
+    record: Annotated[
+        str,
+        typer.Option(
+            help="metrics (no recordings, the default), ik or full: each trial's runs in DIR/runs (full runs every stage)."
+        ),
+    ] = "metrics",
 ) -> None:
     """Run a study: every generated trial of SPEC.toml with every method, on Dask (dualarm study SPEC.toml); or write a study's report (dualarm study report DIR).
 
@@ -92,21 +140,44 @@ def study(
         out.print(str(write_study_report(_out_path(directory_text, "DIR"))), markup=False, soft_wrap=True)
         return
     if directory_text is not None:
-        raise DualarmError(f"unexpected argument '{excerpt(directory_text)}': dualarm study SPEC.toml [--out DIR], or dualarm study report DIR")
+        raise DualarmError(
+            f"unexpected argument '{excerpt(directory_text)}': dualarm study SPEC.toml [--out DIR], or dualarm study report DIR"
+        )
     spec, base = load_study(spec_or_report)
     level = _record(record)
     directory = _out_path(out_text, "--out") if out_text is not None else Path("studies") / "results" / spec.name
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
-    columns = (TextColumn(f"study {spec.name}", markup=False), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[text]}", markup=False), TimeElapsedColumn(), TimeRemainingColumn())
+    columns = (
+        TextColumn(f"study {spec.name}", markup=False),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[text]}", markup=False),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
     with Progress(*columns, console=err, transient=not err.is_terminal) as bar:
         task = bar.add_task("trials", total=None, text="starting the cluster")
 
         def on_trial(done: int, failed: int, total: int, errors: int) -> None:
             seconds = bar.tasks[task].elapsed or 1e-9
-            bar.update(task, completed=done, total=total, text=f"{failed} with a failed method, {errors} errors, {done / seconds:.2f} trials/s")
+            bar.update(
+                task,
+                completed=done,
+                total=total,
+                text=f"{failed} with a failed method, {errors} errors, {done / seconds:.2f} trials/s",
+            )
 
-        result = run_study(spec, base, directory, scheduler=scheduler, workers=workers, resume=resume, record=level, progress=on_trial)
+        result = run_study(
+            spec, base, directory, scheduler=scheduler, workers=workers, resume=resume, record=level, progress=on_trial
+        )
     rates = method_rates(result.results)
     table = Table(
         title=f"study {spec.name}: {result.results['trial'].nunique()} trials ({result.ran} now in {result.seconds:.1f} s on {result.workers} workers, after {result.startup_s:.1f} s starting them)",
@@ -127,7 +198,11 @@ def study(
     errors = result.results[result.results["status"] == "error"]
     if len(errors):
         first = errors.iloc[0]
-        err.print(f"error: {len(errors)} rows are errors, the first trial {first['trial']} {first['method']}: {first['error']}", markup=False, soft_wrap=True)
+        err.print(
+            f"error: {len(errors)} rows are errors, the first trial {first['trial']} {first['method']}: {first['error']}",
+            markup=False,
+            soft_wrap=True,
+        )
         raise typer.Exit(1)
 
 

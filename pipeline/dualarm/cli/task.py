@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -14,14 +14,20 @@ from dualarm.cli.app import EXIT_CODES, err, out, task_app, user_errors
 @user_errors
 def task_check(
     task: Annotated[str, typer.Argument(help="Task file (TOML), or a shipped task's name.")],
-    robot_dir: Annotated[Optional[Path], typer.Option("--robot", help="Robot directory to check the task on instead of the one it names.")] = None,
+    robot_dir: Annotated[
+        Path | None, typer.Option("--robot", help="Robot directory to check the task on instead of the one it names.")
+    ] = None,
 ) -> None:
     """Validate a task without running it: schema, robot, and every waypoint's reach within the joint limits (per waypoint the hand pose and, for an S-R-S arm, the MC-Inverse branches and psi intervals that reach it); exits 3 when a waypoint is unreachable, 2 for a malformed task."""
     from dualarm.task_check import check_task, report_lines, unreachable_lines
 
     result = check_task(task, robot_dir)
     if not result.waypoints:
-        out.print(f"{result.source}: valid; no waypoints to check (the hands start at the initial configuration and move by displacements or arcs)", markup=False, soft_wrap=True)
+        out.print(
+            f"{result.source}: valid; no waypoints to check (the hands start at the initial configuration and move by displacements or arcs)",
+            markup=False,
+            soft_wrap=True,
+        )
     for line in report_lines(result):
         out.print(line, markup=False, soft_wrap=True)
     for line in unreachable_lines(result):

@@ -91,7 +91,7 @@ class ExecutionLog:
     contact_events: tuple[ContactEvent, ...] = ()
     fixed: Mapping[str, float] = field(default_factory=dict)
     preflight: tuple[Violation, ...] = ()
-    approach: "ExecutionLog | None" = None
+    approach: ExecutionLog | None = None
     hand_error_m: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -107,9 +107,17 @@ class ExecutionLog:
             ("expected_contacts", (K,), int),
         ):
             object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
-        object.__setattr__(self, "hand_poses", MappingProxyType({h: frozen(p, (K, 4, 4), f"hand_poses[{h}]") for h, p in self.hand_poses.items()}))
+        object.__setattr__(
+            self,
+            "hand_poses",
+            MappingProxyType({h: frozen(p, (K, 4, 4), f"hand_poses[{h}]") for h, p in self.hand_poses.items()}),
+        )
         object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
-        object.__setattr__(self, "hand_error_m", MappingProxyType({h: frozen(e, (K,), f"hand_error_m[{h}]") for h, e in self.hand_error_m.items()}))
+        object.__setattr__(
+            self,
+            "hand_error_m",
+            MappingProxyType({h: frozen(e, (K,), f"hand_error_m[{h}]") for h, e in self.hand_error_m.items()}),
+        )
         object.__setattr__(self, "contact_events", tuple(self.contact_events))
 
     @cached_property
@@ -121,5 +129,7 @@ class ExecutionLog:
             if seen is None:
                 pairs[(e.first, e.second)] = PairContact(e.first, e.second, e.expected, e.t_s, e.depth_m, 1)
             else:
-                pairs[(e.first, e.second)] = PairContact(e.first, e.second, e.expected, seen.first_t_s, max(seen.depth_max_m, e.depth_m), seen.steps + 1)
+                pairs[(e.first, e.second)] = PairContact(
+                    e.first, e.second, e.expected, seen.first_t_s, max(seen.depth_max_m, e.depth_m), seen.steps + 1
+                )
         return tuple(pairs.values())

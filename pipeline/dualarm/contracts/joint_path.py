@@ -21,7 +21,9 @@ TASK_SPACES = ("pose", "position")
 def check_task_space(task_space: object) -> None:
     """Refuse a task space not in :data:`TASK_SPACES` (an InvalidArgumentError naming ``task_space``)."""
     if task_space not in TASK_SPACES:
-        raise InvalidArgumentError("task_space", f"unknown task space '{excerpt(task_space)}' (task spaces: {', '.join(TASK_SPACES)})")
+        raise InvalidArgumentError(
+            "task_space", f"unknown task space '{excerpt(task_space)}' (task spaces: {', '.join(TASK_SPACES)})"
+        )
 
 
 #: The default of ``hand_orientation_error_rad``: not measured (NaN), e.g. a planner's path, which follows no reference.

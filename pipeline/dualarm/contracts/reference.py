@@ -96,11 +96,16 @@ class CartesianReference:
         uniform = np.arange(n) * float(self.period_s)
         t = uniform if self.t is _UNSET else finite_array(self.t, "t", (n,))
         if np.abs(t - uniform).max(initial=0.0) > 1e-9 * max(1.0, float(uniform[-1]) if n else 1.0):
-            raise InvalidArgumentError("t", f"sample times must be arange(N) * period_s ({self.period_s} s): the reference's period is its only control period")
+            raise InvalidArgumentError(
+                "t",
+                f"sample times must be arange(N) * period_s ({self.period_s} s): the reference's period is its only control period",
+            )
         object.__setattr__(self, "period_s", float(self.period_s))
         object.__setattr__(self, "t", frozen(t, (n,), "t"))
         object.__setattr__(self, "rep", frozen(np.zeros(n, int) if self.rep is _UNSET else self.rep, (n,), "rep", int))
-        object.__setattr__(self, "segment", frozen(np.zeros(n, int) if self.segment is _UNSET else self.segment, (n,), "segment", int))
+        object.__setattr__(
+            self, "segment", frozen(np.zeros(n, int) if self.segment is _UNSET else self.segment, (n,), "segment", int)
+        )
         if n and ((np.diff(self.rep) < 0).any() or self.rep[0] < 0):
             raise InvalidArgumentError("rep", "repetition indices must start at 0 or more and never decrease")
         object.__setattr__(self, "hands", MappingProxyType(dict(self.hands)))
@@ -150,7 +155,7 @@ class CartesianReference:
         """Time of the last sample [s]."""
         return float(self.t[-1])
 
-    def frame_in(self, robot: "Robot") -> str:
+    def frame_in(self, robot: Robot) -> str:
         """The link of ``robot`` the poses are in (its root link when :attr:`frame` is ""), after checking that the robot has the reference's hands.
 
         Raises:
@@ -161,12 +166,18 @@ class CartesianReference:
             raise InvalidArgumentError("reference.frame", f"robot '{robot.name}' has no link '{frame}'")
         for hand in self.hands:
             if hand not in robot.hands:
-                raise InvalidArgumentError("reference.hands", f"robot '{robot.name}' has no hand '{hand}' (hands: {', '.join(robot.hands)})")
+                raise InvalidArgumentError(
+                    "reference.hands", f"robot '{robot.name}' has no hand '{hand}' (hands: {', '.join(robot.hands)})"
+                )
         return frame
 
 
 def _check_period(period_s: object) -> None:
-    if isinstance(period_s, bool) or not isinstance(period_s, (int, float, np.floating)) or not (np.isfinite(period_s) and period_s > 0):
+    if (
+        isinstance(period_s, bool)
+        or not isinstance(period_s, (int, float, np.floating))
+        or not (np.isfinite(period_s) and period_s > 0)
+    ):
         raise InvalidArgumentError("period_s", f"must be a positive number of seconds, got {period_s!r}")
 
 

@@ -45,7 +45,7 @@ class RunResult:
     retimed: JointTrajectory | None = None
     smoothed: JointTrajectory | None = None
     approached: JointTrajectory | None = None
-    execution: "ExecutionLog | None" = None
+    execution: ExecutionLog | None = None
     metrics: dict[str, float] = field(default_factory=dict)
     verdict: Verdict = field(default_factory=lambda: Verdict("complete"))
     stage_seconds: dict[str, float] = field(default_factory=dict)

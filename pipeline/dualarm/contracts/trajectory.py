@@ -36,11 +36,17 @@ class JointTrajectory:
     qdd: np.ndarray
     rep: np.ndarray
     fixed: Mapping[str, float] = field(default_factory=dict)
-    approach: "JointTrajectory | None" = None
+    approach: JointTrajectory | None = None
 
     def __post_init__(self) -> None:
         M, n = len(self.t), len(self.joint_names)
-        for name, shape, dtype in (("t", (M,), float), ("q", (M, n), float), ("qd", (M, n), float), ("qdd", (M, n), float), ("rep", (M,), int)):
+        for name, shape, dtype in (
+            ("t", (M,), float),
+            ("q", (M, n), float),
+            ("qd", (M, n), float),
+            ("qdd", (M, n), float),
+            ("rep", (M,), int),
+        ):
             object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
         if M and (self.t[0] != 0 or (np.diff(self.t) <= 0).any()):
             raise ValueError("t: must start at 0 and increase")
@@ -59,7 +65,12 @@ class JointTrajectory:
     def interpolate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """q, qd, qdd (K, n) linearly interpolated at ``times`` (K,) [s] (held at the ends), and the repetition index of the last sample at or before each time (K,)."""
         times = np.asarray(times, dtype=float)
-        q, qd, qdd = (np.stack([np.interp(times, self.t, x[:, j]) for j in range(x.shape[1])], axis=1).reshape(len(times), x.shape[1]) for x in (self.q, self.qd, self.qdd))
+        q, qd, qdd = (
+            np.stack([np.interp(times, self.t, x[:, j]) for j in range(x.shape[1])], axis=1).reshape(
+                len(times), x.shape[1]
+            )
+            for x in (self.q, self.qd, self.qdd)
+        )
         rep = self.rep[np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, len(self) - 1)]
         return q, qd, qdd, rep
 

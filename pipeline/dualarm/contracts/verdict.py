@@ -67,13 +67,13 @@ class Verdict:
     error: str | None = None
 
     @classmethod
-    def of(cls, violations: Sequence[Violation]) -> "Verdict":
+    def of(cls, violations: Sequence[Violation]) -> Verdict:
         """``violated`` with ``violations`` (each message once: the execute stage's preflight re-checks the smoothed trajectory), or ``complete`` without any."""
         unique = tuple({v.message: v for v in violations}.values())  # dicts keep the first insertion's place
         return cls("violated" if unique else "complete", unique)
 
     @classmethod
-    def failure(cls, error: str, violations: Sequence[Violation] = ()) -> "Verdict":
+    def failure(cls, error: str, violations: Sequence[Violation] = ()) -> Verdict:
         """``failed`` because of ``error``."""
         return cls("failed", tuple(violations), error)
 
@@ -92,6 +92,13 @@ class Verdict:
     def lines(self) -> list[str]:
         """The verdict as the last lines a command prints: the status, then each violation (at most 10)."""
         more = len(self.violations) - 10
-        head = f"verdict: {self.status}" + (f" ({len(self.violations)} violation{'s' * (len(self.violations) > 1)})" if self.violations else "")
+        head = f"verdict: {self.status}" + (
+            f" ({len(self.violations)} violation{'s' * (len(self.violations) > 1)})" if self.violations else ""
+        )
         tail = [f"... and {more} more (manifest.json: violations)"] if more > 0 else []
-        return [head, *([f"error: {self.error}"] if self.error else []), *(f"  {v.message}" for v in self.violations[:10]), *tail]
+        return [
+            head,
+            *([f"error: {self.error}"] if self.error else []),
+            *(f"  {v.message}" for v in self.violations[:10]),
+            *tail,
+        ]

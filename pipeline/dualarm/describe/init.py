@@ -43,7 +43,12 @@ import numpy as np
 from dualarm.describe.layout import ArmPlan, _Layout, _layout, _srs_verdict, lock_value
 from dualarm.describe.meshes import copy_urdf, resolve_mesh
 from dualarm.describe.ready import SAMPLES, _collision_world, always_in_contact, held_values, ready_pose
-from dualarm.describe.robot_toml import DEFAULT_ACCELERATION_RAD_S2, DEFAULT_JERK_RAD_S3, DEFAULT_VELOCITY_RAD_S, robot_toml
+from dualarm.describe.robot_toml import (
+    DEFAULT_ACCELERATION_RAD_S2,
+    DEFAULT_JERK_RAD_S3,
+    DEFAULT_VELOCITY_RAD_S,
+    robot_toml,
+)
 from dualarm.errors import OutputError, RobotModelError, excerpt
 from dualarm.files import DIRECTORY, kind
 from dualarm.model.robot import Robot, load_robot
@@ -135,18 +140,27 @@ def init_robot(
         raise
 
 
-def _write(source: Path, out: Path, urdf: UrdfModel, layout: _Layout, acceleration: float | None, jerk: float | None, name: str) -> RobotInit:
+def _write(
+    source: Path, out: Path, urdf: UrdfModel, layout: _Layout, acceleration: float | None, jerk: float | None, name: str
+) -> RobotInit:
     notes = list(layout.notes)
     copy = copy_urdf(source, out)
-    notes.append(f"URDF copied to {copy} with its meshes under {out / 'meshes'} (the directory is self-contained: it works when moved or shipped)")
+    notes.append(
+        f"URDF copied to {copy} with its meshes under {out / 'meshes'} (the directory is self-contained: it works when moved or shipped)"
+    )
     urdf = load_urdf(copy)
     srs = {hand: _srs_verdict(urdf, f"{hand}_arm", base, tip) for hand, base, tip in layout.arms}
     for hand, base, tip in layout.arms:
-        notes.append(f"chain {hand}_arm: {base} -> {tip}, hand '{hand}': " + ("S-R-S" if srs[hand] is None else f"not S-R-S ({srs[hand]})"))
+        notes.append(
+            f"chain {hand}_arm: {base} -> {tip}, hand '{hand}': "
+            + ("S-R-S" if srs[hand] is None else f"not S-R-S ({srs[hand]})")
+        )
     if layout.waist:
         notes.append(f"chain waist: {layout.waist[0]} -> {layout.waist[1]}")
     for j in layout.locked:
-        notes.append(f"locked: {j.name} = {lock_value(j):g} rad (between the torso and an arm's base; name a base above it to move it)")
+        notes.append(
+            f"locked: {j.name} = {lock_value(j):g} rad (between the torso and an arm's base; name a base above it to move it)"
+        )
     chain_joints = [j.name for hand, base, tip in layout.arms for j in urdf.chain(base, tip) if j.movable]
     if layout.waist:
         chain_joints = [j.name for j in urdf.chain(*layout.waist) if j.movable] + chain_joints
@@ -154,9 +168,15 @@ def _write(source: Path, out: Path, urdf: UrdfModel, layout: _Layout, accelerati
     for joint in chain_joints:
         if not np.isfinite(urdf.joint(joint).velocity):
             limits["velocity"][joint] = (DEFAULT_VELOCITY_RAD_S, True)
-        limits["acceleration"][joint] = (acceleration, False) if acceleration is not None else (DEFAULT_ACCELERATION_RAD_S2, True)
+        limits["acceleration"][joint] = (
+            (acceleration, False) if acceleration is not None else (DEFAULT_ACCELERATION_RAD_S2, True)
+        )
         limits["jerk"][joint] = (jerk, False) if jerk is not None else (DEFAULT_JERK_RAD_S3, True)
-    for kind_, default, unit in (("velocity", DEFAULT_VELOCITY_RAD_S, "rad/s"), ("acceleration", DEFAULT_ACCELERATION_RAD_S2, "rad/s^2"), ("jerk", DEFAULT_JERK_RAD_S3, "rad/s^3")):
+    for kind_, default, unit in (
+        ("velocity", DEFAULT_VELOCITY_RAD_S, "rad/s"),
+        ("acceleration", DEFAULT_ACCELERATION_RAD_S2, "rad/s^2"),
+        ("jerk", DEFAULT_JERK_RAD_S3, "rad/s^3"),
+    ):
         assumed = [j for j, (_, a) in limits[kind_].items() if a]
         if assumed:
             notes.append(
@@ -170,7 +190,9 @@ def _write(source: Path, out: Path, urdf: UrdfModel, layout: _Layout, accelerati
         held = held_values(robot, sim, chain_joints)
         for joint, value in held.items():
             if value != lock_value(urdf.joint(joint)):
-                notes.append(f"held: {joint} = {value:g} (in no chain; at {lock_value(urdf.joint(joint)):g} its links touch another link)")
+                notes.append(
+                    f"held: {joint} = {value:g} (in no chain; at {lock_value(urdf.joint(joint)):g} its links touch another link)"
+                )
         everywhere = always_in_contact(robot, sim, held)
         if everywhere:
             a, b = sorted(everywhere)[0]
@@ -186,7 +208,9 @@ def _write(source: Path, out: Path, urdf: UrdfModel, layout: _Layout, accelerati
     )
     (out / "robot.toml").write_text(robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, touching))
     robot = load_robot(out)
-    arms = tuple(ArmPlan(chain=f"{hand}_arm", hand=hand, base=base, tip=tip, srs=srs[hand]) for hand, base, tip in layout.arms)
+    arms = tuple(
+        ArmPlan(chain=f"{hand}_arm", hand=hand, base=base, tip=tip, srs=srs[hand]) for hand, base, tip in layout.arms
+    )
     return RobotInit(
         directory=out,
         robot=robot,

@@ -41,7 +41,9 @@ class _Layout:
     notes: tuple[str, ...]
 
 
-def _layout(urdf: UrdfModel, tips: Mapping[str, str | None], bases: Mapping[str, str | None], torso: str | None) -> _Layout:
+def _layout(
+    urdf: UrdfModel, tips: Mapping[str, str | None], bases: Mapping[str, str | None], torso: str | None
+) -> _Layout:
     """Arms, torso, waist and locked joints from the options (see the module docstring)."""
     notes: list[str] = []
     given = {hand: _link(urdf, tip, f"--{hand}-tip") for hand, tip in tips.items() if tip}
@@ -58,7 +60,9 @@ def _layout(urdf: UrdfModel, tips: Mapping[str, str | None], bases: Mapping[str,
         a, b = given["left"], given["right"]
         root = _common_root(urdf, a, b)
         if root in (a, b):
-            raise RobotModelError(f"tips '{excerpt(a, 40)}' and '{excerpt(b, 40)}' are not on separate branches below a common root (one is above the other)")
+            raise RobotModelError(
+                f"tips '{excerpt(a, 40)}' and '{excerpt(b, 40)}' are not on separate branches below a common root (one is above the other)"
+            )
     else:
         root = _first_movable(urdf, urdf.root, given[hands[0]]).parent
     torso_link = _link(urdf, torso, "--torso") if torso else root
@@ -66,15 +70,23 @@ def _layout(urdf: UrdfModel, tips: Mapping[str, str | None], bases: Mapping[str,
     for hand in hands:
         base = _link(urdf, bases[hand], f"--{hand}-base") if bases.get(hand) else torso_link  # type: ignore[arg-type]
         if torso_link not in _ancestors(urdf, base):
-            raise RobotModelError(f"--{hand}-base '{excerpt(base, 40)}' is not below the torso '{excerpt(torso_link, 40)}'")
+            raise RobotModelError(
+                f"--{hand}-base '{excerpt(base, 40)}' is not below the torso '{excerpt(torso_link, 40)}'"
+            )
         if base not in _ancestors(urdf, given[hand]):
-            raise RobotModelError(f"--{hand}-tip '{excerpt(given[hand], 40)}' is not below its base '{excerpt(base, 40)}'")
+            raise RobotModelError(
+                f"--{hand}-tip '{excerpt(given[hand], 40)}' is not below its base '{excerpt(base, 40)}'"
+            )
         _first_movable(urdf, base, given[hand])
         arms.append((hand, base, given[hand]))
     if len(arms) == 2:
-        shared = {j.name for j in urdf.chain(arms[0][1], arms[0][2]) if j.movable} & {j.name for j in urdf.chain(arms[1][1], arms[1][2]) if j.movable}
+        shared = {j.name for j in urdf.chain(arms[0][1], arms[0][2]) if j.movable} & {
+            j.name for j in urdf.chain(arms[1][1], arms[1][2]) if j.movable
+        }
         if shared:
-            raise RobotModelError(f"the arms share joint '{excerpt(sorted(shared)[0], 40)}': give --torso at or below their common root '{excerpt(root, 40)}'")
+            raise RobotModelError(
+                f"the arms share joint '{excerpt(sorted(shared)[0], 40)}': give --torso at or below their common root '{excerpt(root, 40)}'"
+            )
     waist_joints = [j for j in urdf.chain(urdf.root, torso_link) if j.movable]
     waist = (waist_joints[0].parent, torso_link) if waist_joints else None
     locked = tuple(j for _, base, _ in arms for j in urdf.chain(torso_link, base) if j.movable)

@@ -67,6 +67,9 @@ def home_hand_poses(robot: Robot, home: str | None = None) -> tuple[HandPose, ..
             T = hand_pose(robot, hand, q)
             chain = robot.hand_chain(hand)
             psi = _arm_angle(SrsKinematics, chain, np.array([q[n] for n in chain.joint_names]))
-            rpy = Rotation.from_matrix(T[:3, :3]).as_euler("xyz")
-            out.append(HandPose(home=name, hand=hand, position_m=tuple(float(v) for v in T[:3, 3]), rpy_rad=tuple(float(v) for v in rpy), arm_angle_rad=psi))  # type: ignore[arg-type]
+            x, y, z = (float(v) for v in T[:3, 3])
+            roll, pitch, yaw = (float(v) for v in Rotation.from_matrix(T[:3, :3]).as_euler("xyz"))
+            out.append(
+                HandPose(home=name, hand=hand, position_m=(x, y, z), rpy_rad=(roll, pitch, yaw), arm_angle_rad=psi)
+            )
     return tuple(out)

@@ -69,13 +69,18 @@ def held_values(robot: Robot, sim, chain_joints: Sequence[str]) -> dict[str, flo
         j = urdf.joint(joint)
         options = [held[joint]] + [v for v in (j.upper, j.lower, (j.lower + j.upper) / 2) if np.isfinite(v)]
         for value in options:
-            if not any(a in below or b in below for a, b in contact_pairs(sim, {**dict.fromkeys(chain_joints, 0.0), **held, joint: value})):
+            if not any(
+                a in below or b in below
+                for a, b in contact_pairs(sim, {**dict.fromkeys(chain_joints, 0.0), **held, joint: value})
+            ):
                 held[joint] = float(value)
                 break
     return held
 
 
-def always_in_contact(robot: Robot, sim, base: Mapping[str, float], samples: int = SAMPLES, seed: int = SEED) -> set[tuple[str, str]]:
+def always_in_contact(
+    robot: Robot, sim, base: Mapping[str, float], samples: int = SAMPLES, seed: int = SEED
+) -> set[tuple[str, str]]:
     """Link pairs PyBullet finds penetrating at every one of ``samples`` random configurations of the chains' joints (the others at ``base``), after dualarm's touching pairs are skipped."""
     joints = sorted({n for c in robot.chains.values() for n in c.joint_names})
     always: set[tuple[str, str]] | None = None
@@ -87,7 +92,9 @@ def always_in_contact(robot: Robot, sim, base: Mapping[str, float], samples: int
     return always or set()
 
 
-def ready_pose(robot: Robot, sim, base: Mapping[str, float], samples: int = SAMPLES * 10, seed: int = SEED) -> dict[str, float]:
+def ready_pose(
+    robot: Robot, sim, base: Mapping[str, float], samples: int = SAMPLES * 10, seed: int = SEED
+) -> dict[str, float]:
     """A ``ready`` home pose [rad] by joint: for each arm, random configurations within the limits (:data:`READY_LIMIT_MARGIN` in from each) whose hand is :data:`READY_FORWARD` of the arm's length in front of its first joint, :data:`READY_MIN_HEIGHT_M` above the root, at :data:`READY_REACH` of the arm's length from its first joint and at most :data:`READY_OUTWARD` of it further out sideways, the hand nearest :data:`READY_TARGET` first; the first combination of the arms clear of self-collision in PyBullet.
 
     Raises:
@@ -99,7 +106,12 @@ def ready_pose(robot: Robot, sim, base: Mapping[str, float], samples: int = SAMP
     for k, arm in enumerate(c for c in robot.chains.values() if c.hand):
         to_tip = robot.chain_between(robot.urdf.root, arm.tip)
         shoulder = _zero_position(robot.urdf, arm.joints[[j.movable for j in arm.joints].index(True)].child)
-        length = float(np.linalg.norm(ChainKinematics.of(to_tip).pose(np.array([base.get(n, 0.0) for n in to_tip.joint_names]))[:3, 3] - shoulder))
+        length = float(
+            np.linalg.norm(
+                ChainKinematics.of(to_tip).pose(np.array([base.get(n, 0.0) for n in to_tip.joint_names]))[:3, 3]
+                - shoulder
+            )
+        )
         Q = np.round(_samples(robot, arm.joint_names, samples, seed + k, READY_LIMIT_MARGIN), 3)
         full = np.array([[base.get(n, 0.0) for n in to_tip.joint_names]] * len(Q))
         columns = [to_tip.joint_names.index(n) for n in arm.joint_names]
@@ -115,7 +127,9 @@ def ready_pose(robot: Robot, sim, base: Mapping[str, float], samples: int = SAMP
             & (reach <= READY_REACH[1])
             & (outward <= READY_OUTWARD * length)
         )
-        score = np.linalg.norm(p - (shoulder + length * np.array(READY_TARGET)), axis=1) / length + 0.01 * np.linalg.norm(Q, axis=1)
+        score = np.linalg.norm(
+            p - (shoulder + length * np.array(READY_TARGET)), axis=1
+        ) / length + 0.01 * np.linalg.norm(Q, axis=1)
         order = [i for i in np.argsort(score, kind="stable") if ok[i]]
         free = []
         for i in order:
@@ -125,10 +139,14 @@ def ready_pose(robot: Robot, sim, base: Mapping[str, float], samples: int = SAMP
             if len(free) == 8:
                 break
         if not free:
-            raise RobotModelError(f"robot init: no configuration of '{arm.name}' among {samples} samples has the hand in front and is clear of self-collision; write [home.ready] by hand")
+            raise RobotModelError(
+                f"robot init: no configuration of '{arm.name}' among {samples} samples has the hand in front and is clear of self-collision; write [home.ready] by hand"
+            )
         candidates.append(free)
     for combination in sorted(product(*candidates), key=lambda qs: sum(np.linalg.norm(list(q.values())) for q in qs)):
         q = {k: v for part in combination for k, v in part.items()}
         if not contact_pairs(sim, {**base, **q}):
             return {**base, **q}
-    raise RobotModelError("robot init: the arms' candidate ready poses collide with each other; write [home.ready] by hand")
+    raise RobotModelError(
+        "robot init: the arms' candidate ready poses collide with each other; write [home.ready] by hand"
+    )

@@ -59,26 +59,49 @@ def robot_toml(
     ]
     for hand, base, tip in layout.arms:
         verdict = "S-R-S" if srs[hand] is None else f"not S-R-S: {srs[hand]}"
-        lines += [f"[chains.{hand}_arm]  # {verdict}", f"base = {_string(base)}", f"tip = {_string(tip)}", f"hand = {_string(hand)}", ""]
+        lines += [
+            f"[chains.{hand}_arm]  # {verdict}",
+            f"base = {_string(base)}",
+            f"tip = {_string(tip)}",
+            f"hand = {_string(hand)}",
+            "",
+        ]
     if layout.waist:
-        lines += [f"[chains.waist]  # the joints between the root link and the torso '{layout.torso}'", f"base = {_string(layout.waist[0])}", f"tip = {_string(layout.waist[1])}", ""]
+        lines += [
+            f"[chains.waist]  # the joints between the root link and the torso '{layout.torso}'",
+            f"base = {_string(layout.waist[0])}",
+            f"tip = {_string(layout.waist[1])}",
+            "",
+        ]
     if layout.locked:
-        lines += [f"# Locked: {', '.join(f'{j.name} = {lock_value(j):g}' for j in layout.locked)} (between the torso and an arm's base, in no chain; every home pose holds them)", ""]
+        lines += [
+            f"# Locked: {', '.join(f'{j.name} = {lock_value(j):g}' for j in layout.locked)} (between the torso and an arm's base, in no chain; every home pose holds them)",
+            "",
+        ]
     for kind_, unit in (("velocity", "rad/s"), ("acceleration", "rad/s^2"), ("jerk", "rad/s^3")):
         table = limits.get(kind_, {})
         if not table:
             continue
         assumed = any(a for _, a in table.values())
-        lines.append(f"[limits.{kind_}]  # [{unit}]" + ("; '# assumed': a default of dualarm robot init, not the robot's data: replace it" if assumed else ""))
-        lines += [f"{_key(joint)} = {_number(value)}" + ("  # assumed" if a else "") for joint, (value, a) in table.items()]
+        lines.append(
+            f"[limits.{kind_}]  # [{unit}]"
+            + ("; '# assumed': a default of dualarm robot init, not the robot's data: replace it" if assumed else "")
+        )
+        lines += [
+            f"{_key(joint)} = {_number(value)}" + ("  # assumed" if a else "") for joint, (value, a) in table.items()
+        ]
         lines.append("")
     lines.append("# Home poses: joint values in rad; joints not named are 0.")
     for home, values in homes.items():
-        comment = "  # inside the limits, clear of self-collision in PyBullet, hands in front" if home == "ready" else ""
+        comment = (
+            "  # inside the limits, clear of self-collision in PyBullet, hands in front" if home == "ready" else ""
+        )
         lines.append(f"[home.{home}]{comment}")
         lines += [f"{_key(joint)} = {_number(value)}" for joint, value in values.items()]
         lines.append("")
     if touching:
-        lines.append("# Link pairs dualarm never checks for collision (touching by construction, see dualarm.sim.world.disable_touching_pairs; no key needed):")
+        lines.append(
+            "# Link pairs dualarm never checks for collision (touching by construction, see dualarm.sim.world.disable_touching_pairs; no key needed):"
+        )
         lines += [f"#   {a} - {b}" for a, b in sorted(touching)]
     return "\n".join(lines).rstrip() + "\n"

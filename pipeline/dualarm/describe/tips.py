@@ -39,7 +39,9 @@ def _ancestors(urdf: UrdfModel, link: str) -> list[str]:
 
 def _link(urdf: UrdfModel, link: str, option: str) -> str:
     if link not in urdf.links:
-        raise RobotModelError(f"{option} '{excerpt(link, 40)}': no such link in {excerpt(urdf.path)} (links: {listing(urdf.links)})")
+        raise RobotModelError(
+            f"{option} '{excerpt(link, 40)}': no such link in {excerpt(urdf.path)} (links: {listing(urdf.links)})"
+        )
     return link
 
 
@@ -100,11 +102,16 @@ def propose_tips(urdf: UrdfModel) -> tuple[dict[str, str], str]:
             f"arms proposed from the tree: the two branches below '{root}' with the most revolute joints; left = the one further along +y at the zero pose (give --left-tip/--right-tip to choose)"
         )
     tip = max(tips, key=lambda t: _revolute_count(urdf.chain(urdf.root, t)))
-    return {"left": tip}, f"one arm proposed from the tree (no two branches with {MIN_ARM_DOF}+ revolute joints each): tip '{tip}', driving hand 'left' (give --left-tip to choose)"
+    return (
+        {"left": tip},
+        f"one arm proposed from the tree (no two branches with {MIN_ARM_DOF}+ revolute joints each): tip '{tip}', driving hand 'left' (give --left-tip to choose)",
+    )
 
 
 def _first_movable(urdf: UrdfModel, base: str, tip: str) -> JointSpec:
     joints = [j for j in urdf.chain(base, tip) if j.type in MOVABLE]
     if not joints:
-        raise RobotModelError(f"{excerpt(urdf.path)}: no movable joint between '{excerpt(base, 40)}' and '{excerpt(tip, 40)}'")
+        raise RobotModelError(
+            f"{excerpt(urdf.path)}: no movable joint between '{excerpt(base, 40)}' and '{excerpt(tip, 40)}'"
+        )
     return joints[0]

@@ -43,7 +43,9 @@ def checked_samples(q: np.ndarray, resolution_rad: float) -> np.ndarray:
     return np.array(kept)
 
 
-def collision_violations(checker: "CollisionChecker", traj: JointTrajectory, resolution_rad: float = RESOLUTION_RAD) -> list[Violation]:
+def collision_violations(
+    checker: CollisionChecker, traj: JointTrajectory, resolution_rad: float = RESOLUTION_RAD
+) -> list[Violation]:
     """Each pair of bodies ``checker`` finds in collision along ``traj``, with the first time and the deepest overlap found."""
     first: dict[tuple[str, str], tuple[float, float, int]] = {}
     for k in checked_samples(traj.q, resolution_rad):
@@ -51,7 +53,12 @@ def collision_violations(checker: "CollisionChecker", traj: JointTrajectory, res
             t, depth, count = first.get((c.a, c.b), (float(traj.t[k]), 0.0, 0))
             first[(c.a, c.b)] = (t, max(depth, c.depth_m), count + 1)
     return [
-        Violation("contact", traj.stage, f"{traj.stage}: {a} collides with {b} at t = {t:.3f} s, {depth * 1e3:.3g} mm deep at most, at {count} checked configurations", t)
+        Violation(
+            "contact",
+            traj.stage,
+            f"{traj.stage}: {a} collides with {b} at t = {t:.3f} s, {depth * 1e3:.3g} mm deep at most, at {count} checked configurations",
+            t,
+        )
         for (a, b), (t, depth, count) in sorted(first.items(), key=lambda item: item[1][0])
     ]
 
@@ -64,8 +71,18 @@ def preflight(traj: JointTrajectory, task: Task, resolution_rad: float = RESOLUT
     from dualarm.plan.collision import CollisionChecker
 
     spec, found = task.spec, []
-    with CollisionChecker(task.robot, traj.joint_names, traj.fixed, spec.environment, spec.expected_contacts, margin_m=0.0, resolution_rad=resolution_rad) as checker:
+    with CollisionChecker(
+        task.robot,
+        traj.joint_names,
+        traj.fixed,
+        spec.environment,
+        spec.expected_contacts,
+        margin_m=0.0,
+        resolution_rad=resolution_rad,
+    ) as checker:
         for played in (traj.approach, traj):
             if played is not None:
-                found += trajectory_violations(played, task.robot, jerk=True) + collision_violations(checker, played, resolution_rad)
+                found += trajectory_violations(played, task.robot, jerk=True) + collision_violations(
+                    checker, played, resolution_rad
+                )
     return found

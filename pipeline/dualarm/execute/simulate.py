@@ -33,7 +33,14 @@ from dualarm.contracts.execution import ContactEvent, ExecutionLog
 from dualarm.contracts.trajectory import JointTrajectory
 from dualarm.errors import StageError
 from dualarm.model.robot import Robot
-from dualarm.sim.world import PyBulletRobot, add_environment, disable_touching_pairs, in_contact, load_pybullet_robot, pb
+from dualarm.sim.world import (
+    PyBulletRobot,
+    add_environment,
+    disable_touching_pairs,
+    in_contact,
+    load_pybullet_robot,
+    pb,
+)
 
 
 @dataclass(frozen=True)
@@ -90,7 +97,14 @@ def execute_trajectory(
         if missing:
             raise StageError(f"execute: the robot has no joint {missing[0]}")
         disable_touching_pairs(sim)
-        player = _Player(sim, robot, hands, add_environment(sim, environment), {tuple(sorted(pair)) for pair in expected_contacts}, settings)
+        player = _Player(
+            sim,
+            robot,
+            hands,
+            add_environment(sim, environment),
+            {tuple(sorted(pair)) for pair in expected_contacts},
+            settings,
+        )
         pb.setGravity(0, 0, -settings.gravity_m_s2, physicsClientId=sim.client)
         pb.setTimeStep(settings.step_s, physicsClientId=sim.client)
         first = trajectory.approach if trajectory.approach is not None else trajectory
@@ -117,7 +131,9 @@ class _Player:
         index = [sim.joint_index[n] for n in names]
         effort = [self.robot.limits[n].effort for n in names]
         t = np.arange(0, int(np.ceil(trajectory.duration_s / settings.step_s - 1e-9)) + 1) * settings.step_s
-        command, command_velocity, _, _ = trajectory.interpolate(np.maximum(t - settings.step_s, 0.0))  # row k's step starts at t[k] - step
+        command, command_velocity, _, _ = trajectory.interpolate(
+            np.maximum(t - settings.step_s, 0.0)
+        )  # row k's step starts at t[k] - step
         expected, _, _, rep = trajectory.interpolate(t)
         held = np.array(list(trajectory.fixed.values()))
         K, n = len(t), len(trajectory.joint_names)
@@ -127,7 +143,9 @@ class _Player:
         self_contacts, environment_contacts, expected_contacts = (np.zeros(K, int) for _ in range(3))
         events: list[ContactEvent] = []
         link_name = {i: n for n, i in sim.link_index.items()}
-        targets = np.hstack([command, np.broadcast_to(held, (K, len(held)))]).tolist()  # one list per step, made at once
+        targets = np.hstack(
+            [command, np.broadcast_to(held, (K, len(held)))]
+        ).tolist()  # one list per step, made at once
         target_velocities = np.hstack([command_velocity, np.zeros((K, len(held)))]).tolist()
         position_gains, velocity_gains = [settings.position_gain] * len(index), [settings.velocity_gain] * len(index)
         start = time.monotonic()
@@ -155,12 +173,26 @@ class _Player:
             depth: dict[tuple[str, str], float] = {}
             for contact in filter(in_contact, pb.getContactPoints(bodyA=body, physicsClientId=client)):
                 other = contact[2]
-                first, second = sorted((link_name[contact[3]], link_name[contact[4]] if other == body else self.objects.get(other, str(other))))
+                first, second = sorted(
+                    (
+                        link_name[contact[3]],
+                        link_name[contact[4]] if other == body else self.objects.get(other, str(other)),
+                    )
+                )
                 key = (first, second)
                 depth[key] = max(depth.get(key, 0.0), -float(contact[8]))
-                counter = expected_contacts if key in self.expected_pairs else self_contacts if other == body else environment_contacts
+                counter = (
+                    expected_contacts
+                    if key in self.expected_pairs
+                    else self_contacts
+                    if other == body
+                    else environment_contacts
+                )
                 counter[k] += 1
-            events += [ContactEvent(float(t[k]), int(rep[k]), a, b, d, (a, b) in self.expected_pairs) for (a, b), d in sorted(depth.items())]
+            events += [
+                ContactEvent(float(t[k]), int(rep[k]), a, b, d, (a, b) in self.expected_pairs)
+                for (a, b), d in sorted(depth.items())
+            ]
             if settings.gui:
                 time.sleep(max(0.0, start + t[k] - time.monotonic()))
         return ExecutionLog(

@@ -68,7 +68,13 @@ def arm_problems(robot: Robot, reference: CartesianReference, q0: Mapping[str, f
     return problems
 
 
-def joint_path(method: str, reference: CartesianReference, problems: Sequence[ArmProblem], solutions: Sequence[ArmSolution], q0: Mapping[str, float]) -> JointPath:
+def joint_path(
+    method: str,
+    reference: CartesianReference,
+    problems: Sequence[ArmProblem],
+    solutions: Sequence[ArmSolution],
+    q0: Mapping[str, float],
+) -> JointPath:
     """The stage output of per-arm solutions: velocities by central differences [rad/s], status failed where any arm failed, solve times summed over the arms, hand position [m] and orientation [rad] errors by the chains' FK, every other joint fixed at ``q0`` [rad]."""
     q = np.hstack([s.q for s in solutions])
     names = tuple(n for p in problems for n in p.chain.joint_names)

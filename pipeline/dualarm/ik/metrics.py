@@ -35,7 +35,9 @@ def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
         "ik.position_error_max_m": float(error.max()),
         "ik.position_error_mean_m": float(error.mean()),
         "ik.position_error_rmse_m": float(np.sqrt((error**2).mean())),
-        "ik.joint_limit_violations": float(((path.q < lower - VIOLATION_TOLERANCE) | (path.q > upper + VIOLATION_TOLERANCE)).sum()),
+        "ik.joint_limit_violations": float(
+            ((path.q < lower - VIOLATION_TOLERANCE) | (path.q > upper + VIOLATION_TOLERANCE)).sum()
+        ),
         "ik.velocity_limit_violations": float((np.abs(path.qd) > vmax + VIOLATION_TOLERANCE).sum()),
         "ik.max_joint_step_rad": float(steps.max()) if len(steps) else 0.0,
         "ik.solve_time_mean_s": float(path.solve_time_s.mean()),
@@ -53,7 +55,9 @@ def condition_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
     lower, upper = robot.lower_upper(path.joint_names)
     margin = np.minimum(path.q - lower, upper - path.q)
     bounded = np.isfinite(margin).all(axis=0)
-    metrics = {"ik.joint_limit_margin_min_rad": float(margin[:, bounded].min())} if bounded.any() and len(path.q) else {}
+    metrics = (
+        {"ik.joint_limit_margin_min_rad": float(margin[:, bounded].min())} if bounded.any() and len(path.q) else {}
+    )
     least = []
     for hand in path.hands:
         chain = robot.hand_chain(hand)
@@ -71,11 +75,16 @@ def _orientation_metrics(path: JointPath) -> dict[str, float]:
     angle = path.hand_orientation_error_rad
     metrics = {"ik.orientation_solved": 1.0 if path.task_space == "pose" else 0.0}
     if angle.size and np.isfinite(angle).all():
-        metrics |= {"ik.orientation_error_max_rad": float(angle.max()), "ik.orientation_error_mean_rad": float(angle.mean())}
+        metrics |= {
+            "ik.orientation_error_max_rad": float(angle.max()),
+            "ik.orientation_error_mean_rad": float(angle.mean()),
+        }
     return metrics
 
 
-def arm_angles(path: JointPath, robot: Robot, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict[str, np.ndarray]:
+def arm_angles(
+    path: JointPath, robot: Robot, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)
+) -> dict[str, np.ndarray]:
     """The arm angle per hand of the path along it (N,) [rad]: psi of eq (1) of MC-Inverse, with V = ``vertical`` in each arm's base frame, on an S-R-S arm; on another arm of a SEW family the stereographic SEW angle that ``--ik sew`` holds or schedules (:func:`dualarm.ik.analytic.sew.SewAngle.stereographic` of ``vertical``). Hands whose arm joints are not all in the path, or whose arm has neither, are left out."""
     from dualarm.ik.analytic.sew import SewAngle
     from dualarm.model.sew import sew_chain
@@ -97,7 +106,9 @@ def arm_angles(path: JointPath, robot: Robot, vertical: tuple[float, float, floa
     return angles
 
 
-def consistency_metrics(path: JointPath, reference: CartesianReference, angles: dict[str, np.ndarray]) -> dict[str, float]:
+def consistency_metrics(
+    path: JointPath, reference: CartesianReference, angles: dict[str, np.ndarray]
+) -> dict[str, float]:
     """``ik.*`` consistency across repetitions (DESIGN.md; rep 0 is the reference), for a path of two or more repetitions, with the hands' arm angles ``angles`` (see :func:`arm_angles`) [rad].
 
     - ``failed_reps``: repetitions with a failed sample.
@@ -121,7 +132,9 @@ def consistency_metrics(path: JointPath, reference: CartesianReference, angles: 
     if a.size:
         metrics["ik.rep_joint_deviation_max_rad"] = float(np.abs(path.q[a] - path.q[b]).max())
         if angles:
-            metrics["ik.rep_arm_angle_deviation_max_rad"] = float(max(np.abs(np.angle(np.exp(1j * (psi[a] - psi[b])))).max() for psi in angles.values()))
+            metrics["ik.rep_arm_angle_deviation_max_rad"] = float(
+                max(np.abs(np.angle(np.exp(1j * (psi[a] - psi[b])))).max() for psi in angles.values())
+            )
     ends = np.array([0, *[np.flatnonzero(path.rep == r)[-1] for r in reps]])
     poses = np.stack([h.poses[ends] for h in reference.hands.values()])
     if np.abs(poses - poses[:, :1]).max() < CLOSED_TOLERANCE_M:

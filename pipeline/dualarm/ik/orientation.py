@@ -25,7 +25,12 @@ _SMALL = 1e-12
 def _quaternion(E) -> cs.SX:
     """Unit quaternion [w, x, y, z] of a rotation matrix (3x3 SX/MX/DM) by Shepperd's method, with w >= 0."""
     trace = E[0, 0] + E[1, 1] + E[2, 2]
-    squares = [1 + trace, 1 + 2 * E[0, 0] - trace, 1 + 2 * E[1, 1] - trace, 1 + 2 * E[2, 2] - trace]  # 4 w^2, 4 x^2, 4 y^2, 4 z^2
+    squares = [
+        1 + trace,
+        1 + 2 * E[0, 0] - trace,
+        1 + 2 * E[1, 1] - trace,
+        1 + 2 * E[2, 2] - trace,
+    ]  # 4 w^2, 4 x^2, 4 y^2, 4 z^2
     a = (E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])  # 4 w x, 4 w y, 4 w z
     s = (E[0, 1] + E[1, 0], E[0, 2] + E[2, 0], E[1, 2] + E[2, 1])  # 4 x y, 4 x z, 4 y z
     products = [
@@ -35,8 +40,15 @@ def _quaternion(E) -> cs.SX:
         cs.vertcat(a[2], s[1], s[2], squares[3]),  # 4 z * (w, x, y, z)
     ]
     candidates = [p / (2 * cs.sqrt(cs.fmax(sq, _SMALL))) for p, sq in zip(products, squares)]
-    largest = [cs.logic_and(cs.logic_and(sq >= squares[(i + 1) % 4], sq >= squares[(i + 2) % 4]), sq >= squares[(i + 3) % 4]) for i, sq in enumerate(squares)]
-    q = cs.if_else(largest[0], candidates[0], cs.if_else(largest[1], candidates[1], cs.if_else(largest[2], candidates[2], candidates[3])))
+    largest = [
+        cs.logic_and(cs.logic_and(sq >= squares[(i + 1) % 4], sq >= squares[(i + 2) % 4]), sq >= squares[(i + 3) % 4])
+        for i, sq in enumerate(squares)
+    ]
+    q = cs.if_else(
+        largest[0],
+        candidates[0],
+        cs.if_else(largest[1], candidates[1], cs.if_else(largest[2], candidates[2], candidates[3])),
+    )
     return cs.if_else(q[0] < 0, -q, q)
 
 
@@ -48,7 +60,9 @@ def rotation_vector(E):
     q = _quaternion(E)
     w, v = q[0], q[1:]
     norm = cs.norm_2(v)
-    scale = cs.if_else(norm < _SMALL, 2 / cs.fmax(w, _SMALL), 2 * cs.atan2(norm, w) / cs.fmax(norm, _SMALL))  # angle / sin(angle / 2)
+    scale = cs.if_else(
+        norm < _SMALL, 2 / cs.fmax(w, _SMALL), 2 * cs.atan2(norm, w) / cs.fmax(norm, _SMALL)
+    )  # angle / sin(angle / 2)
     return scale * v
 
 

@@ -123,12 +123,12 @@ class ChainKinematics:
     jacobian: cs.Function
 
     @classmethod
-    def of(cls, chain: Chain) -> "ChainKinematics":
+    def of(cls, chain: Chain) -> ChainKinematics:
         """The Functions for ``chain`` (built once per chain and kept)."""
         return _chain_kinematics(chain)
 
     @classmethod
-    def _build(cls, chain: Chain) -> "ChainKinematics":
+    def _build(cls, chain: Chain) -> ChainKinematics:
         frames = chain_frames(chain)
         fk = cs.Function(f"fk_{chain.tip}", [frames.q], [frames.tip], ["q"], ["T"])
         jac = cs.Function(f"jac_{chain.tip}", [frames.q], [geometric_jacobian(frames, chain)], ["q"], ["J"])
@@ -165,12 +165,12 @@ def _chain_kinematics(chain: Chain) -> ChainKinematics:
     return ChainKinematics._build(chain)
 
 
-def _values(robot: Robot, chain: Chain, q: "Mapping[str, float] | str | None") -> np.ndarray:
+def _values(robot: Robot, chain: Chain, q: Mapping[str, float] | str | None) -> np.ndarray:
     configuration = robot.configuration(q)
     return np.array([configuration[n] for n in chain.joint_names])
 
 
-def hand_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
+def hand_pose(robot: Robot, hand: str, q: Mapping[str, float] | str | None = None) -> np.ndarray:
     """The pose of ``hand``'s frame in the robot's base frame (its root link) [m], 4x4, at configuration ``q``: a home pose's name, a mapping joint -> value [rad] (others at 0), or None (all at 0).
 
     Task poses are given in this frame.
@@ -179,13 +179,13 @@ def hand_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = N
     return ChainKinematics.of(chain).pose(_values(robot, chain, q))
 
 
-def arm_base_pose(robot: Robot, hand: str, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
+def arm_base_pose(robot: Robot, hand: str, q: Mapping[str, float] | str | None = None) -> np.ndarray:
     """The pose of the base frame of ``hand``'s arm chain (the torso, for the humanoid) in the robot's base frame [m], 4x4, with the joints between them (a waist) at ``q`` (as :func:`hand_pose`)."""
     chain = robot.chain_between(robot.urdf.root, robot.hand_chain(hand).base)
     return ChainKinematics.of(chain).pose(_values(robot, chain, q))
 
 
-def to_arm_frame(robot: Robot, hand: str, pose: np.ndarray, q: "Mapping[str, float] | str | None" = None) -> np.ndarray:
+def to_arm_frame(robot: Robot, hand: str, pose: np.ndarray, q: Mapping[str, float] | str | None = None) -> np.ndarray:
     """A hand pose (4x4, or (N, 4, 4)) [m] given in the robot's base frame, expressed in the base frame of ``hand``'s arm chain, the frame analytic arm solvers work in (``dualarm ik srs`` takes poses in it); the waist at ``q`` (as :func:`hand_pose`).
 
     Raises:
@@ -203,14 +203,23 @@ def motion_matrix(joint: JointSpec, q: float | np.ndarray) -> np.ndarray:
     if joint.type == "prismatic":
         T[..., :3, 3] = np.asarray(joint.axis) * q[..., None]
     elif joint.movable:
-        T[..., :3, :3] = Rotation.from_rotvec((np.asarray(joint.axis) * q[..., None]).reshape(-1, 3)).as_matrix().reshape(*q.shape, 3, 3)
+        T[..., :3, :3] = (
+            Rotation.from_rotvec((np.asarray(joint.axis) * q[..., None]).reshape(-1, 3))
+            .as_matrix()
+            .reshape(*q.shape, 3, 3)
+        )
     return T
 
 
-def joint_transforms(joints: tuple[JointSpec, ...], q: Mapping[str, float | np.ndarray]) -> list[tuple[str, str, np.ndarray]]:
+def joint_transforms(
+    joints: tuple[JointSpec, ...], q: Mapping[str, float | np.ndarray]
+) -> list[tuple[str, str, np.ndarray]]:
     """(parent link, child link, child-in-parent transform) of every joint at configuration ``q`` (joint name -> a value, or (K,) values for K configurations; joints not named are at 0).
 
     The transforms are (4, 4), or (K, 4, 4) when any value is an array of K.
     """
     shape = np.broadcast_shapes(*(np.shape(v) for v in q.values()))
-    return [(j.parent, j.child, origin_matrix(j) @ motion_matrix(j, np.broadcast_to(q.get(j.name, 0.0), shape))) for j in joints]
+    return [
+        (j.parent, j.child, origin_matrix(j) @ motion_matrix(j, np.broadcast_to(q.get(j.name, 0.0), shape)))
+        for j in joints
+    ]

@@ -107,7 +107,9 @@ class Robot:
     def chain(self, name: str) -> Chain:
         """The chain called ``name``; RobotModelError listing the valid names otherwise."""
         if name not in self.chains:
-            raise RobotModelError(f"robot '{excerpt(self.name, 40)}' has no chain '{excerpt(name, 40)}' (chains: {listing(self.chains)})")
+            raise RobotModelError(
+                f"robot '{excerpt(self.name, 40)}' has no chain '{excerpt(name, 40)}' (chains: {listing(self.chains)})"
+            )
         return self.chains[name]
 
     def chain_between(self, base: str, tip: str) -> Chain:
@@ -120,7 +122,9 @@ class Robot:
             if chain.hand == hand:
                 return chain
         hands = [c.hand for c in self.chains.values() if c.hand]
-        raise RobotModelError(f"robot '{excerpt(self.name, 40)}' has no hand '{excerpt(hand, 40)}' (hands: {listing(hands)})")
+        raise RobotModelError(
+            f"robot '{excerpt(self.name, 40)}' has no hand '{excerpt(hand, 40)}' (hands: {listing(hands)})"
+        )
 
     @property
     def hands(self) -> tuple[str, ...]:
@@ -130,7 +134,9 @@ class Robot:
     def home(self, name: str) -> Mapping[str, float]:
         """Home pose ``name`` as joint -> value [rad]."""
         if name not in self.homes:
-            raise RobotModelError(f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(name, 40)}' (homes: {listing(self.homes)})")
+            raise RobotModelError(
+                f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(name, 40)}' (homes: {listing(self.homes)})"
+            )
         return self.homes[name]
 
     def lower_upper(self, joint_names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -144,7 +150,7 @@ class Robot:
         """The ``kind`` limits (``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3], ``effort`` [N m]) of ``joint_names``, (n,)."""
         return np.array([getattr(self.limits[n], kind) for n in joint_names], dtype=float)
 
-    def with_limits(self, **overrides: float | Mapping[str, float] | None) -> "Robot":
+    def with_limits(self, **overrides: float | Mapping[str, float] | None) -> Robot:
         """The same robot with some limits replaced: ``kind=value`` for every joint, or ``kind={joint: value}`` for some (kinds ``velocity``, ``acceleration``, ``jerk``; None keeps the robot's).
 
         A task's ``[limits]`` table is applied so. With nothing to replace (every override None) it is
@@ -165,14 +171,16 @@ class Robot:
             table = value if isinstance(value, Mapping) else dict.fromkeys(limits, value)
             for name, v in table.items():
                 if name not in limits:
-                    raise InvalidArgumentError(f"{kind}.{excerpt(name, 40)}", f"no such joint in robot '{excerpt(self.name, 40)}'")
+                    raise InvalidArgumentError(
+                        f"{kind}.{excerpt(name, 40)}", f"no such joint in robot '{excerpt(self.name, 40)}'"
+                    )
                 v = _number(v, f"{kind}.{name}")
                 if v <= 0:
                     raise InvalidArgumentError(f"{kind}.{name}", f"must be positive, got {v:g}")
                 limits[name] = replace(limits[name], **{kind: v})
         return replace(self, limits=MappingProxyType(limits))
 
-    def configuration(self, q: "Mapping[str, float] | str | None" = None, name: str = "q") -> Mapping[str, float]:
+    def configuration(self, q: Mapping[str, float] | str | None = None, name: str = "q") -> Mapping[str, float]:
         """Every movable joint's value [rad]: a home pose's name, or a mapping joint -> value (joints not named at 0), or None (all at 0).
 
         Raises:
@@ -183,18 +191,27 @@ class Robot:
             return MappingProxyType(dict.fromkeys(self.joint_names, 0.0))
         if isinstance(q, str):
             if q not in self.homes:
-                raise InvalidArgumentError(name, f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(q, 40)}' (homes: {listing(self.homes)})")
+                raise InvalidArgumentError(
+                    name,
+                    f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(q, 40)}' (homes: {listing(self.homes)})",
+                )
             return self.homes[q]
         if not isinstance(q, Mapping):
-            raise InvalidArgumentError(name, f"expected a home pose's name or a mapping joint name -> value, got {type(q).__name__}")
+            raise InvalidArgumentError(
+                name, f"expected a home pose's name or a mapping joint name -> value, got {type(q).__name__}"
+            )
         values = dict.fromkeys(self.joint_names, 0.0)
         for joint, value in q.items():
             if joint not in self.limits:
-                raise InvalidArgumentError(f"{name}.{excerpt(joint, 40)}", f"no such joint in robot '{excerpt(self.name, 40)}'")
+                raise InvalidArgumentError(
+                    f"{name}.{excerpt(joint, 40)}", f"no such joint in robot '{excerpt(self.name, 40)}'"
+                )
             value = _number(value, f"{name}.{joint}")
             lim = self.limits[joint]
             if not lim.lower <= value <= lim.upper:
-                raise InvalidArgumentError(f"{name}.{joint}", f"{value:g} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]")
+                raise InvalidArgumentError(
+                    f"{name}.{joint}", f"{value:g} rad outside the joint limits [{lim.lower:.4f}, {lim.upper:.4f}]"
+                )
             values[joint] = value
         return MappingProxyType(values)
 
@@ -207,7 +224,12 @@ def _number(value: Any, name: str) -> float:
     return number
 
 
-def _limits_from_urdf(urdf: UrdfModel, acceleration: Mapping[str, float], jerk: Mapping[str, float], velocity: Mapping[str, float] | None = None) -> dict[str, JointLimits]:
+def _limits_from_urdf(
+    urdf: UrdfModel,
+    acceleration: Mapping[str, float],
+    jerk: Mapping[str, float],
+    velocity: Mapping[str, float] | None = None,
+) -> dict[str, JointLimits]:
     """Every movable joint's limits: position and effort from the URDF, velocity from ``velocity`` or else the URDF, acceleration and jerk from the maps (inf where absent)."""
     velocity = velocity or {}
     return {
@@ -263,7 +285,9 @@ def _string(value: object, at: str) -> str:
 def _unknown(data: dict, allowed: set[str], where: str) -> None:
     extra = sorted(set(data) - allowed)
     if extra:
-        raise RobotModelError(f"{where}{'' if where.endswith(':') else '.'}{excerpt(extra[0], 40)}: unknown key (allowed: {', '.join(sorted(allowed))})")
+        raise RobotModelError(
+            f"{where}{'' if where.endswith(':') else '.'}{excerpt(extra[0], 40)}: unknown key (allowed: {', '.join(sorted(allowed))})"
+        )
 
 
 def _joint_values(data: object, where: str, joints: tuple[str, ...]) -> dict[str, float]:
@@ -295,7 +319,9 @@ def _robot_toml(directory: Path) -> tuple[Path, dict]:
     try:
         os.stat(toml_path)
     except FileNotFoundError:
-        raise RobotModelError(f"{excerpt(directory)}: no robot.toml (a robot directory holds robot.toml and its URDF)") from None
+        raise RobotModelError(
+            f"{excerpt(directory)}: no robot.toml (a robot directory holds robot.toml and its URDF)"
+        ) from None
     except (OSError, ValueError):
         pass  # read_text names the cause
     text = read_text(toml_path, "robot description", RobotModelError)
@@ -342,7 +368,13 @@ def load_robot(directory: str | Path) -> Robot:
             if key not in spec:
                 raise RobotModelError(f"{at}.{key}: missing")
         base, tip = _string(spec["base"], f"{at}.base"), _string(spec["tip"], f"{at}.tip")
-        chains[chain] = Chain(name=chain, base=base, tip=tip, joints=urdf.chain(base, tip), hand=_string(spec["hand"], f"{at}.hand") if "hand" in spec else None)
+        chains[chain] = Chain(
+            name=chain,
+            base=base,
+            tip=tip,
+            joints=urdf.chain(base, tip),
+            hand=_string(spec["hand"], f"{at}.hand") if "hand" in spec else None,
+        )
 
     limits_data = _table(data.get("limits", {}), f"{where}:limits")
     _unknown(limits_data, set(LIMIT_RANGES), f"{where}:limits")
@@ -351,7 +383,9 @@ def load_robot(directory: str | Path) -> Robot:
         low, high = LIMIT_RANGES[kind]
         for joint, value in values.items():
             if not low <= value <= high:
-                raise RobotModelError(f"{where}:limits.{kind}.{joint}: {value:g} is outside the allowed range [{low:g}, {high:g}]")
+                raise RobotModelError(
+                    f"{where}:limits.{kind}.{joint}: {value:g} is outside the allowed range [{low:g}, {high:g}]"
+                )
     limits = _limits_from_urdf(urdf, given["acceleration"], given["jerk"], given["velocity"])
 
     homes: dict[str, Mapping[str, float]] = {}
@@ -361,7 +395,9 @@ def load_robot(directory: str | Path) -> Robot:
         for joint, value in pose.items():
             lim = limits[joint]
             if not lim.lower <= value <= lim.upper:
-                raise RobotModelError(f"{at}.{joint}: {value:g} outside the joint limits [{lim.lower:g}, {lim.upper:g}]")
+                raise RobotModelError(
+                    f"{at}.{joint}: {value:g} outside the joint limits [{lim.lower:g}, {lim.upper:g}]"
+                )
         homes[home] = MappingProxyType({n: pose.get(n, 0.0) for n in movable})
 
     return Robot(

@@ -87,7 +87,9 @@ class SewChain:
         """E, W (3x1) [m] and the tip pose T (4x4) for q (CasADi, 7x1), from one product of exponentials."""
         frames = self.transforms(q)
         (R3, t3), (R6, t6), (R7, t7) = frames[2], frames[5], frames[6]
-        T = cs.vertcat(cs.horzcat(R7 @ self.tool_rotation, R7 @ (self.wrist + self.tool) + t7), cs.DM([[0.0, 0.0, 0.0, 1.0]]))
+        T = cs.vertcat(
+            cs.horzcat(R7 @ self.tool_rotation, R7 @ (self.wrist + self.tool) + t7), cs.DM([[0.0, 0.0, 0.0, 1.0]])
+        )
         return R3 @ self.elbow + t3, R6 @ self.wrist + t6, T
 
     def cached(self, name: Hashable, build: Callable[[], _Built]) -> _Built:
@@ -121,7 +123,7 @@ def _foot(point: np.ndarray, line: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     return p + d * np.dot(point - p, d)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def sew_chain(chain: Chain) -> SewChain:
     """The geometry of ``chain`` in the first family it belongs to, R-2R-R-3R then 3R-R-2R-R (once per chain).
 
@@ -132,9 +134,14 @@ def sew_chain(chain: Chain) -> SewChain:
     movable = [j for j in chain.joints if j.movable]
     names = [j.name for j in movable]
     if len(movable) != 7 or any(j.type == "prismatic" for j in movable):
-        raise NotSewError(f"chain '{chain.name}' has {len(movable)} movable joints; the SEW solver needs 7 revolute joints", chain.name)
+        raise NotSewError(
+            f"chain '{chain.name}' has {len(movable)} movable joints; the SEW solver needs 7 revolute joints",
+            chain.name,
+        )
     check = _axis_lines(chain, np.random.default_rng(7).uniform(-0.8, 0.8, 7))  # no coincidence of the zero pose
-    miss: dict[tuple[int, ...], float] = {idx: _meeting_point([check[i] for i in idx])[1] for idx in ((1, 2), (4, 5, 6), (0, 1, 2), (4, 5))}
+    miss: dict[tuple[int, ...], float] = {
+        idx: _meeting_point([check[i] for i in idx])[1] for idx in ((1, 2), (4, 5, 6), (0, 1, 2), (4, 5))
+    }
     lines = _axis_lines(chain, np.zeros(7))
     if max(miss[(1, 2)], miss[(4, 5, 6)]) <= INTERSECTION_TOLERANCE_M:
         family, C = FIRST_JOINT_FAMILY, _meeting_point(lines[1:3])[0]

@@ -47,7 +47,12 @@ class SrsGeometry:
     forearm: float
 
     def __post_init__(self) -> None:
-        for name in ("shoulder", "elbow_local", "wrist_local", "tool_from_wrist"):  # read-only: one geometry is shared per chain
+        for name in (
+            "shoulder",
+            "elbow_local",
+            "wrist_local",
+            "tool_from_wrist",
+        ):  # read-only: one geometry is shared per chain
             object.__setattr__(self, name, frozen(getattr(self, name), (3,), name))
 
     @property
@@ -86,7 +91,7 @@ def _meeting_point(lines: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarr
     return x, float(worst)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def srs_geometry(chain: Chain, *, seed: int = 7) -> SrsGeometry:
     """Derive the S-R-S geometry of ``chain`` from its joints (once per chain and seed, kept: the task loader, reach tests and solvers all ask for it).
 
@@ -111,7 +116,9 @@ def srs_geometry(chain: Chain, *, seed: int = 7) -> SrsGeometry:
     p4, d4 = lines[3]
     elbow = p4 + d4 * np.dot(shoulder - p4, d4)  # the point of the elbow axis nearest S
     if abs(np.dot(wrist - elbow, d4)) > INTERSECTION_TOLERANCE_M:
-        raise NotSRSError(f"chain '{chain.name}': shoulder, elbow axis ({names[3]}) and wrist are not coplanar, the elbow axis must be normal to S-E-W")
+        raise NotSRSError(
+            f"chain '{chain.name}': shoulder, elbow axis ({names[3]}) and wrist are not coplanar, the elbow axis must be normal to S-E-W"
+        )
 
     frames = chain_frames(chain)
     f = cs.Function("frames", [frames.q], [frames.after[2], frames.after[3], frames.tip])
@@ -175,12 +182,12 @@ class SrsKinematics:
     vertical: tuple[float, float, float]
 
     @classmethod
-    def of(cls, chain: Chain, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> "SrsKinematics":
+    def of(cls, chain: Chain, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> SrsKinematics:
         """The Functions for ``chain`` (raises NotSRSError if it is not S-R-S); built once per chain and vertical in a process, then kept."""
         return _srs_kinematics(chain, (float(vertical[0]), float(vertical[1]), float(vertical[2])))
 
     @classmethod
-    def _build(cls, chain: Chain, vertical: tuple[float, float, float]) -> "SrsKinematics":
+    def _build(cls, chain: Chain, vertical: tuple[float, float, float]) -> SrsKinematics:
         geometry = srs_geometry(chain)
         frames = chain_frames(chain)
         S = cs.SX(geometry.shoulder)
@@ -196,6 +203,6 @@ class SrsKinematics:
         return np.asarray(self.psi.map(Q.shape[0])(Q.T)).ravel()
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _srs_kinematics(chain: Chain, vertical: tuple[float, float, float]) -> SrsKinematics:
     return SrsKinematics._build(chain, vertical)

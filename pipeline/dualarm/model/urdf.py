@@ -83,7 +83,9 @@ class UrdfModel:
         for j in self.joints:
             if j.name == name:
                 return j
-        raise RobotModelError(f"{excerpt(self.path)}: no joint '{excerpt(name, 40)}' (joints: {listing(j.name for j in self.joints)})")
+        raise RobotModelError(
+            f"{excerpt(self.path)}: no joint '{excerpt(name, 40)}' (joints: {listing(j.name for j in self.joints)})"
+        )
 
     def chain(self, base: str, tip: str) -> tuple[JointSpec, ...]:
         """The joints from link ``base`` down to link ``tip``, fixed joints included.
@@ -93,13 +95,17 @@ class UrdfModel:
         """
         for link in (base, tip):
             if link not in self.links:
-                raise RobotModelError(f"{excerpt(self.path)}: no link '{excerpt(link, 40)}' (links: {listing(self.links)})")
+                raise RobotModelError(
+                    f"{excerpt(self.path)}: no link '{excerpt(link, 40)}' (links: {listing(self.links)})"
+                )
         by_child = {j.child: j for j in self.joints}
         path: list[JointSpec] = []
         link = tip
         while link != base:
             if link not in by_child:
-                raise RobotModelError(f"{excerpt(self.path)}: link '{excerpt(tip, 40)}' is not below link '{excerpt(base, 40)}'")
+                raise RobotModelError(
+                    f"{excerpt(self.path)}: link '{excerpt(tip, 40)}' is not below link '{excerpt(base, 40)}'"
+                )
             path.append(by_child[link])
             link = path[-1].parent
         return tuple(reversed(path))
@@ -124,7 +130,9 @@ def _parse(path: Path, text: str) -> tuple[URDF, str]:
         if root.tag != "robot":
             raise RobotModelError(f"{excerpt(path)}: root element is <{excerpt(root.tag, 40)}>, a URDF needs <robot>")
         for link in root.iter("link"):
-            for element in link.findall("collision") + link.findall("contact"):  # <contact>: PyBullet's, which urdf_parser_py reports on stderr
+            for element in link.findall("collision") + link.findall(
+                "contact"
+            ):  # <contact>: PyBullet's, which urdf_parser_py reports on stderr
                 link.remove(element)
         kinematic_xml = ET.tostring(root, encoding="unicode")
     except ET.ParseError as exc:
@@ -158,8 +166,12 @@ def load_urdf(path: str | Path) -> UrdfModel:
     for j in robot.joints:
         origin = j.origin
         joint = f"{where}: joint '{excerpt(j.name, 40)}'"
-        xyz = _vector3(origin.xyz if origin is not None and origin.xyz is not None else (0, 0, 0), f"{joint} origin xyz")
-        rpy = _vector3(origin.rpy if origin is not None and origin.rpy is not None else (0, 0, 0), f"{joint} origin rpy")
+        xyz = _vector3(
+            origin.xyz if origin is not None and origin.xyz is not None else (0, 0, 0), f"{joint} origin xyz"
+        )
+        rpy = _vector3(
+            origin.rpy if origin is not None and origin.rpy is not None else (0, 0, 0), f"{joint} origin rpy"
+        )
         axis = np.asarray(_vector3(j.axis if j.axis is not None else (1.0, 0.0, 0.0), f"{joint} axis"))
         if j.type in MOVABLE_TYPES and not np.isclose(np.linalg.norm(axis), 1.0, atol=1e-9):
             norm = math.hypot(*axis)  # no overflow for huge entries
@@ -224,7 +236,11 @@ def viewer_urdf(text: str) -> str:
             rpy = origin.get("rpy", "0 0 0") if origin is not None else "0 0 0"
             axis = pose_matrix(xyz, [float(v) for v in rpy.split()])[:3, 2]
             link.remove(element)
-            shapes = (("cylinder", xyz, {"radius": radius, "length": f"{length:g}"}), ("sphere", xyz + axis * length / 2, {"radius": radius}), ("sphere", xyz - axis * length / 2, {"radius": radius}))
+            shapes = (
+                ("cylinder", xyz, {"radius": radius, "length": f"{length:g}"}),
+                ("sphere", xyz + axis * length / 2, {"radius": radius}),
+                ("sphere", xyz - axis * length / 2, {"radius": radius}),
+            )
             for offset, (shape, centre, size) in enumerate(shapes):
                 copy = ET.Element(element.tag, element.attrib)
                 ET.SubElement(copy, "origin", {"xyz": " ".join(f"{v:.9g}" for v in centre), "rpy": rpy})

@@ -79,7 +79,9 @@ class Batched:
         flat = []
         for i, value in enumerate(inputs):
             r, c = f.size_in(i)
-            flat.append(np.asarray(value, dtype=float).reshape(-1, r, c).transpose(0, 2, 1).reshape(-1, r * c))  # column-major
+            flat.append(
+                np.asarray(value, dtype=float).reshape(-1, r, c).transpose(0, 2, 1).reshape(-1, r * c)
+            )  # column-major
         N = max(len(a) for a in flat)
         results = [np.empty((N, f.numel_out(i))) for i in range(f.n_out())]
         for start in range(0, N, self.chunk):
@@ -118,7 +120,9 @@ class Single:
     def __init__(self, function: cs.Function):
         self._buffer, self._evaluate = function.buffer()
         self._ins = [np.zeros(function.numel_in(i)) for i in range(function.n_in())]
-        self._views = [a.reshape(function.size_in(i)[::-1]).T for i, a in enumerate(self._ins)]  # (r, c) over column-major storage
+        self._views = [
+            a.reshape(function.size_in(i)[::-1]).T for i, a in enumerate(self._ins)
+        ]  # (r, c) over column-major storage
         sizes = [function.numel_out(i) for i in range(function.n_out())]
         self._out = np.zeros(sum(sizes))
         for i, array in enumerate(self._ins):

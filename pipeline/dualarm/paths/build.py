@@ -70,7 +70,9 @@ def _slave_from_master(task: Task, master: HandReference) -> HandReference:
     """MC-Inverse eq (11): B_T_Tl Tl_T_obj = B_T_Tr Tr_T_obj, so T_r = T_l Tl_T_obj (Tr_T_obj)^-1."""
     obj = task.spec.object
     assert obj is not None  # called only for a task that carries an object
-    relative = pose_matrix(obj.master_to_object.position, obj.master_to_object.rpy) @ invert(pose_matrix(obj.slave_to_object.position, obj.slave_to_object.rpy))
+    relative = pose_matrix(obj.master_to_object.position, obj.master_to_object.rpy) @ invert(
+        pose_matrix(obj.slave_to_object.position, obj.slave_to_object.rpy)
+    )
     T = master.poses @ relative
     offset = T[:, :3, 3] - master.position
     return HandReference(
@@ -115,7 +117,10 @@ def build_reference(task: Task) -> CartesianReference:
             current[h][:3, :3], current[h][:3, 3] = piece[1][-1], piece[0][-1]
         segment.append(np.full(steps, i))
     reps = spec.repetitions
-    hands = {h: HandReference(*(np.concatenate([start, *(moves * reps)]) for start, *moves in zip(*pieces[h]))) for h in driven}
+    hands = {
+        h: HandReference(*(np.concatenate([start, *(moves * reps)]) for start, *moves in zip(*pieces[h])))
+        for h in driven
+    }
     if spec.object is not None:
         hands[spec.object.slave] = _slave_from_master(task, hands[spec.object.master])
     once = np.concatenate(segment) if segment else np.zeros(0, int)  # a task without moves: its start alone
@@ -130,7 +135,9 @@ def build_reference(task: Task) -> CartesianReference:
         ok = reach.within(ref.poses)
         if not ok.all():
             k = int(np.argmin(ok))
-            raise UnreachablePoseError(f"{task.where(f'moves[{seg_index[k]}]')}: at t = {k * period:.3f} s (repetition {rep_index[k]}) {reach.explain(ref.poses[k])}")
+            raise UnreachablePoseError(
+                f"{task.where(f'moves[{seg_index[k]}]')}: at t = {k * period:.3f} s (repetition {rep_index[k]}) {reach.explain(ref.poses[k])}"
+            )
     return CartesianReference(
         task=task.name,
         frame=task.robot.urdf.root,

@@ -145,9 +145,13 @@ class _Checker:
 
     def __init__(self, joint_names: Sequence[str], margin_m: float, resolution_rad: float):
         if not (np.isfinite(margin_m) and margin_m >= 0):
-            raise StageError(f"collision checking: the safety margin must be a non-negative number of metres, not {margin_m}")
+            raise StageError(
+                f"collision checking: the safety margin must be a non-negative number of metres, not {margin_m}"
+            )
         if not (np.isfinite(resolution_rad) and resolution_rad > 0):
-            raise StageError(f"collision checking: the segment resolution must be a positive number of radians, not {resolution_rad}")
+            raise StageError(
+                f"collision checking: the segment resolution must be a positive number of radians, not {resolution_rad}"
+            )
         self.joint_names = tuple(joint_names)
         self.margin_m = float(margin_m)
         self.resolution_rad = float(resolution_rad)
@@ -183,7 +187,9 @@ class _Checker:
         """``Q`` as an (N, n) float array; InvalidArgumentError otherwise."""
         Q = np.ascontiguousarray(Q, dtype=float)
         if Q.ndim != 2 or Q.shape[1] != len(self.joint_names):
-            raise InvalidArgumentError("Q", f"expected configurations of shape (N, {len(self.joint_names)}), got {Q.shape}")
+            raise InvalidArgumentError(
+                "Q", f"expected configurations of shape (N, {len(self.joint_names)}), got {Q.shape}"
+            )
         return Q
 
     def close(self) -> None:
@@ -239,21 +245,43 @@ class PyBulletChecker(_Checker):
                 self.close()
                 raise StageError(f"collision checking: allowed contact ({a}, {b}) names no robot link")
             if other in self._bodies:
-                pb.setCollisionFilterPair(sim.body, self._bodies[other], sim.link_index[link], -1, enableCollision=0, physicsClientId=sim.client)
+                pb.setCollisionFilterPair(
+                    sim.body,
+                    self._bodies[other],
+                    sim.link_index[link],
+                    -1,
+                    enableCollision=0,
+                    physicsClientId=sim.client,
+                )
             elif other in sim.link_index:
-                pb.setCollisionFilterPair(sim.body, sim.body, sim.link_index[link], sim.link_index[other], enableCollision=0, physicsClientId=sim.client)
+                pb.setCollisionFilterPair(
+                    sim.body,
+                    sim.body,
+                    sim.link_index[link],
+                    sim.link_index[other],
+                    enableCollision=0,
+                    physicsClientId=sim.client,
+                )
             else:
                 self.close()
-                raise StageError(f"collision checking: allowed contact ({a}, {b}): '{other}' is neither a robot link nor an object of the task")
+                raise StageError(
+                    f"collision checking: allowed contact ({a}, {b}): '{other}' is neither a robot link nor an object of the task"
+                )
 
     def overlaps(self, q: np.ndarray, pairs: Sequence[tuple[str, str]]) -> dict[tuple[str, str], float]:
         """How deep [m] each of ``pairs`` (a robot link, another link or an object) of the inflated robot overlaps at ``q`` [rad], by PyBullet's closest points (a query that keeps no state between calls, unlike the contact points); the pairs apart are left out. Not a check (neither counted nor timed)."""
         sim, out = self._sim, {}
         if pairs:
-            pb.resetJointStatesMultiDof(sim.body, self._index, np.asarray(q, dtype=float).reshape(-1, 1).tolist(), physicsClientId=sim.client)
+            pb.resetJointStatesMultiDof(
+                sim.body, self._index, np.asarray(q, dtype=float).reshape(-1, 1).tolist(), physicsClientId=sim.client
+            )
         for a, b in pairs:
             other, link = (self._bodies[b], -1) if b in self._bodies else (sim.body, sim.link_index[b])
-            points = [p for p in pb.getClosestPoints(sim.body, other, 0.0, sim.link_index[a], link, physicsClientId=sim.client) if in_contact(p)]
+            points = [
+                p
+                for p in pb.getClosestPoints(sim.body, other, 0.0, sim.link_index[a], link, physicsClientId=sim.client)
+                if in_contact(p)
+            ]
             if points:
                 out[(a, b)] = -min(p[8] for p in points)
         return out
@@ -262,7 +290,9 @@ class PyBulletChecker(_Checker):
         """PyBullet's contact points of the robot at ``q`` [rad] (timed and counted as a check)."""
         started = time.perf_counter()
         sim = self._sim
-        pb.resetJointStatesMultiDof(sim.body, self._index, np.asarray(q, dtype=float).reshape(-1, 1).tolist(), physicsClientId=sim.client)
+        pb.resetJointStatesMultiDof(
+            sim.body, self._index, np.asarray(q, dtype=float).reshape(-1, 1).tolist(), physicsClientId=sim.client
+        )
         pb.performCollisionDetection(physicsClientId=sim.client)
         points = pb.getContactPoints(bodyA=sim.body, physicsClientId=sim.client)
         self.checks += 1
@@ -334,7 +364,9 @@ class _Box:
 _Pair = tuple[tuple[str, str], _Segment, "_Segment | _Box", float]
 
 
-def _robot_shapes(robot: Robot, frames: Mapping[str, cs.SX], q: cs.SX) -> tuple[dict[str, list[_Segment] | None], cs.SX]:
+def _robot_shapes(
+    robot: Robot, frames: Mapping[str, cs.SX], q: cs.SX
+) -> tuple[dict[str, list[_Segment] | None], cs.SX]:
     """The robot's links with collision shapes: each one's capsules and spheres as segments, or None when it has another shape (a mesh, box or cylinder); and the matrix of the segments' ends (3 x 2S) in the root frame, SX of ``q`` (``frames``: the links' frames)."""
     shapes: dict[str, list[_Segment] | None] = {}
     ends: list[cs.SX] = []
@@ -342,7 +374,10 @@ def _robot_shapes(robot: Robot, frames: Mapping[str, cs.SX], q: cs.SX) -> tuple[
         name = link.get("name", "")
         for collision in link.findall("collision"):
             origin = collision.find("origin")
-            xyz, rpy = ([float(v) for v in origin.get(key, "0 0 0").split()] if origin is not None else [0.0] * 3 for key in ("xyz", "rpy"))
+            xyz, rpy = (
+                [float(v) for v in origin.get(key, "0 0 0").split()] if origin is not None else [0.0] * 3
+                for key in ("xyz", "rpy")
+            )
             geometry = collision.find("geometry")
             shape = geometry[0] if geometry is not None and len(geometry) else None
             if shape is None or shape.tag not in ("capsule", "sphere") or shapes.get(name, []) is None:
@@ -351,7 +386,13 @@ def _robot_shapes(robot: Robot, frames: Mapping[str, cs.SX], q: cs.SX) -> tuple[
             T = frames[name] @ pose_matrix(xyz, rpy)
             half = float(_attribute(shape, "length")) / 2 if shape.tag == "capsule" else 0.0
             two = [T[:3, :3] @ np.array([0.0, 0.0, z]) + T[:3, 3] for z in (-half, half)]
-            segment = _Segment(name, float(_attribute(shape, "radius")), half, column=len(ends), moving=bool(cs.depends_on(cs.vertcat(*two), q)))
+            segment = _Segment(
+                name,
+                float(_attribute(shape, "radius")),
+                half,
+                column=len(ends),
+                moving=bool(cs.depends_on(cs.vertcat(*two), q)),
+            )
             ends += two
             shapes.setdefault(name, []).append(segment)  # type: ignore[union-attr]
     return shapes, cs.horzcat(*ends) if ends else cs.SX(3, 0)
@@ -424,7 +465,9 @@ def _compiled_checks(q: cs.SX, ends: cs.SX, pairs: list[_Pair], otherwise: int) 
             exact = cs.if_else(_slab_near(a, b, E, t), exact, cs.inf, True)
         d.append(cs.if_else(keep[k], exact, cs.inf, True))
     exact_clearance = cs.mmin(cs.vertcat(cs.MX(cs.inf), *[dk - t for dk, (_, _, b, t) in zip(d, pairs) if b.exact]))
-    bounded_clearance = cs.mmin(cs.vertcat(cs.MX(cs.inf), *[dk - t for dk, (_, _, b, t) in zip(d, pairs) if not b.exact]))
+    bounded_clearance = cs.mmin(
+        cs.vertcat(cs.MX(cs.inf), *[dk - t for dk, (_, _, b, t) in zip(d, pairs) if not b.exact])
+    )
     verdict = cs.if_else(exact_clearance < 0, COLLIDES, cs.if_else(bounded_clearance < 0, UNDECIDED, otherwise))
     narrow = cs.Function("narrow", [E, keep], [cs.vertcat(*d, verdict)])
     return compiled(cs.Function("collision_checks", [x], [narrow(*broad(x))]))
@@ -481,31 +524,61 @@ class CollisionChecker(_Checker):
         resolution_rad: float = 0.02,
     ):
         super().__init__(joint_names, margin_m, resolution_rad)
-        self._pybullet = PyBulletChecker(robot, joint_names, fixed, environment, allowed_contacts, margin_m, resolution_rad)
+        self._pybullet = PyBulletChecker(
+            robot, joint_names, fixed, environment, allowed_contacts, margin_m, resolution_rad
+        )
         self.unchecked_pairs = self._pybullet.unchecked_pairs
         try:
-            self._build(robot, fixed, [_object_shape(obj) for obj in environment], {frozenset(pair) for pair in allowed_contacts})
+            self._build(
+                robot,
+                fixed,
+                [_object_shape(obj) for obj in environment],
+                {frozenset(pair) for pair in allowed_contacts},
+            )
         except BaseException:
             self.close()
             raise
 
-    def _build(self, robot: Robot, fixed: Mapping[str, float], objects: list[_Segment | _Box], allowed: set[frozenset[str]]) -> None:
+    def _build(
+        self, robot: Robot, fixed: Mapping[str, float], objects: list[_Segment | _Box], allowed: set[frozenset[str]]
+    ) -> None:
         """The checked pairs, the contacts of those no planned joint moves, and the compiled Function of the others."""
         q = cs.SX.sym("q", len(self.joint_names))
-        shapes, ends = _robot_shapes(robot, link_frames(robot.urdf.joints, robot.urdf.root, {**fixed, **dict(zip(self.joint_names, cs.vertsplit(q)))}), q)
+        shapes, ends = _robot_shapes(
+            robot,
+            link_frames(robot.urdf.joints, robot.urdf.root, {**fixed, **dict(zip(self.joint_names, cs.vertsplit(q)))}),
+            q,
+        )
         checked: list[tuple[tuple[str, str], float, list[_Segment] | None, Sequence[_Segment | _Box] | None]] = [
-            ((a, b), 2 * self.margin_m, shapes[a], shapes[b]) for a, b in itertools.combinations(sorted(shapes), 2) if (a, b) not in self.unchecked_pairs and frozenset((a, b)) not in allowed
+            ((a, b), 2 * self.margin_m, shapes[a], shapes[b])
+            for a, b in itertools.combinations(sorted(shapes), 2)
+            if (a, b) not in self.unchecked_pairs and frozenset((a, b)) not in allowed
         ]
-        checked += [((link, obj.owner), self.margin_m, shapes[link], [obj]) for link in shapes for obj in objects if frozenset((link, obj.owner)) not in allowed]
-        self._pybullet_pairs = [names for names, _, first, second in checked if first is None or second is None]  # of a link without a closed form: PyBullet's in every configuration
-        pairs: list[_Pair] = [(names, a, b, threshold) for names, threshold, first, second in checked if first and second for a in first for b in second]
+        checked += [
+            ((link, obj.owner), self.margin_m, shapes[link], [obj])
+            for link in shapes
+            for obj in objects
+            if frozenset((link, obj.owner)) not in allowed
+        ]
+        self._pybullet_pairs = [
+            names for names, _, first, second in checked if first is None or second is None
+        ]  # of a link without a closed form: PyBullet's in every configuration
+        pairs: list[_Pair] = [
+            (names, a, b, threshold)
+            for names, threshold, first, second in checked
+            if first and second
+            for a in first
+            for b in second
+        ]
         moving = [pair for pair in pairs if pair[1].moving or pair[2].moving]
         constant_ends = cs.Function("ends", [q], [ends])(np.zeros(q.numel()))
         self._constant_contacts: dict[tuple[str, str], float] = {}
         for names, a, b, threshold in (pair for pair in pairs if pair not in moving):
             d = float(_distance(a, b, constant_ends))
             if d < threshold:
-                depth = threshold - d if b.exact else self._pybullet.overlaps(np.zeros(q.numel()), [names]).get(names, 0.0)
+                depth = (
+                    threshold - d if b.exact else self._pybullet.overlaps(np.zeros(q.numel()), [names]).get(names, 0.0)
+                )
                 if depth > 0:
                     self._constant_contacts[names] = max(self._constant_contacts.get(names, 0.0), depth)
         self._names = [names for names, *_ in moving]
@@ -553,7 +626,9 @@ class CollisionChecker(_Checker):
 
     def _decide(self, q: np.ndarray, out: np.ndarray) -> bool:
         """Whether ``q`` [rad] is free, from its compiled distances and verdict ``out``; PyBullet decides an undecided one."""
-        return bool(out[-1] == FREE or (out[-1] == UNDECIDED and not self._pybullet.overlaps(q, self._undecided(out[:-1]))))
+        return bool(
+            out[-1] == FREE or (out[-1] == UNDECIDED and not self._pybullet.overlaps(q, self._undecided(out[:-1])))
+        )
 
     def _undecided(self, d: np.ndarray) -> list[tuple[str, str]]:
         """The pairs PyBullet decides at a configuration whose distances :attr:`pairs` are ``d`` [m]: those of a link without a closed form, and each cylinder whose bounding capsule is near."""

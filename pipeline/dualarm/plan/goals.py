@@ -70,7 +70,14 @@ class WtaGoalSampler:
     @staticmethod
     def ik_solver(robot, base: str, tips: Sequence[str]) -> DlsSolver:
         """The goal IK: DLS-SVD of ``tips`` from ``base`` at :data:`GOAL_TOLERANCE`."""
-        return DlsSolver.of(robot, base, tips, DlsSettings(position_tolerance_m=GOAL_TOLERANCE[0], orientation_tolerance_rad=GOAL_TOLERANCE[1], max_iterations=100))
+        return DlsSolver.of(
+            robot,
+            base,
+            tips,
+            DlsSettings(
+                position_tolerance_m=GOAL_TOLERANCE[0], orientation_tolerance_rad=GOAL_TOLERANCE[1], max_iterations=100
+            ),
+        )
 
     def __call__(self) -> np.ndarray | None:
         """One goal sample: a goal configuration [rad], or None when the IK did not converge or the solution collides."""
@@ -102,8 +109,14 @@ class WtaGoalSampler:
 
     def explain(self) -> str:
         """Why no goal was found: the WTAs no sample reached, the farthest first, else the collisions."""
-        worst_first = sorted(self.stats.items(), key=lambda item: -item[1].nearest_m)  # a far area also drags the other hand off over the shared waist
-        unreached = [f"WTA '{name}' ({stats.drawn} samples, nearest {stats.nearest_m:.3g} m)" for name, stats in worst_first if stats.reached == 0]
+        worst_first = sorted(
+            self.stats.items(), key=lambda item: -item[1].nearest_m
+        )  # a far area also drags the other hand off over the shared waist
+        unreached = [
+            f"WTA '{name}' ({stats.drawn} samples, nearest {stats.nearest_m:.3g} m)"
+            for name, stats in worst_first
+            if stats.reached == 0
+        ]
         if unreached:
             return "no IK sample reached " + "; ".join(unreached)
         if self.collided:

@@ -226,7 +226,16 @@ def mcikrrt(
         a, b = b, a  # 09
     nodes = trees[0].size + trees[1].size
     if path is None:
-        return PlanResult(False, np.empty((0, len(start))), 0.0, time.perf_counter() - started, nodes, goals, checker.checks - checks_before, f"no path within the timeout of {settings.timeout_s:g} s")
+        return PlanResult(
+            False,
+            np.empty((0, len(start))),
+            0.0,
+            time.perf_counter() - started,
+            nodes,
+            goals,
+            checker.checks - checks_before,
+            f"no path within the timeout of {settings.timeout_s:g} s",
+        )
     raw = path_length(np.array(path))
     smoothed = np.array(shortcut(path, checker, settings.smoothing_iterations, rng))  # 08
     return PlanResult(True, smoothed, raw, time.perf_counter() - started, nodes, goals, checker.checks - checks_before)

@@ -116,7 +116,16 @@ def ompl_rrtconnect(
     nodes = data.numVertices()
     exact = str(status) == "Exact solution"
     if not exact:
-        return PlanResult(False, np.empty((0, n)), 0.0, time.perf_counter() - started + goal_time_s, nodes, len(goals), checker.checks - checks_before, f"RRTConnect: {status}")
+        return PlanResult(
+            False,
+            np.empty((0, n)),
+            0.0,
+            time.perf_counter() - started + goal_time_s,
+            nodes,
+            len(goals),
+            checker.checks - checks_before,
+            f"RRTConnect: {status}",
+        )
     path = problem.getSolutionPath()
 
     def waypoints():
@@ -124,4 +133,12 @@ def ompl_rrtconnect(
 
     raw = path_length(waypoints())
     og.PathSimplifier(si).reduceVertices(path, settings.smoothing_iterations, settings.smoothing_iterations)
-    return PlanResult(True, waypoints(), raw, time.perf_counter() - started + goal_time_s, nodes, len(goals), checker.checks - checks_before)
+    return PlanResult(
+        True,
+        waypoints(),
+        raw,
+        time.perf_counter() - started + goal_time_s,
+        nodes,
+        len(goals),
+        checker.checks - checks_before,
+    )

@@ -43,7 +43,7 @@ class PlanningSettings:
     resolution_rad: float = 0.02
     ompl_goals: int = 4
 
-    def with_timeout(self, timeout_s: float | None) -> "PlanningSettings":
+    def with_timeout(self, timeout_s: float | None) -> PlanningSettings:
         """The same settings with the planner's timeout [s] (unchanged for None)."""
         return self if timeout_s is None else replace(self, planner=replace(self.planner, timeout_s=timeout_s))
 
@@ -74,13 +74,25 @@ class PlanningProblem:
         if task.spec.waist == "locked":
             base = robot.hand_chain(hands[0]).base
             chain = robot.chain_between(robot.urdf.root, base)
-            self._base_pose = ChainKinematics.of(chain).pose(np.array([task.initial_q[n] for n in chain.joint_names])) if chain.dof else np.eye(4)
+            self._base_pose = (
+                ChainKinematics.of(chain).pose(np.array([task.initial_q[n] for n in chain.joint_names]))
+                if chain.dof
+                else np.eye(4)
+            )
         self.solver = WtaGoalSampler.ik_solver(robot, base, tips)
         self.joint_names = self.solver.joint_names
         self.fixed = {n: v for n, v in task.initial_q.items() if n not in self.joint_names}
         self.start = np.array([task.initial_q[n] for n in self.joint_names])
         self.lower, self.upper = self.solver.lower, self.solver.upper
-        self.checker = CollisionChecker(robot, self.joint_names, self.fixed, task.spec.environment, task.spec.expected_contacts, settings.margin_m, settings.resolution_rad)
+        self.checker = CollisionChecker(
+            robot,
+            self.joint_names,
+            self.fixed,
+            task.spec.environment,
+            task.spec.expected_contacts,
+            settings.margin_m,
+            settings.resolution_rad,
+        )
         contacts = self.checker.contacts(self.start)
         if contacts:
             worst = contacts[0]
@@ -98,7 +110,9 @@ class PlanningProblem:
         """``area`` with its reference in the IK base frame (the torso when the waist is locked)."""
         if np.array_equal(self._base_pose, np.eye(4)):
             return area
-        return Wta(area.name, area.hand, invert(self._base_pose) @ area.reference, area.offset, area.bounds, area.weight)
+        return Wta(
+            area.name, area.hand, invert(self._base_pose) @ area.reference, area.offset, area.bounds, area.weight
+        )
 
     def solve(self, planner: str, seed: int) -> PlanResult:
         """One query with ``planner`` (:data:`PLANNERS`) from ``seed``.
@@ -109,24 +123,40 @@ class PlanningProblem:
         settings = self.settings
         sampler = self.goal_sampler(seed)
         if planner == "mcikrrt":
-            result = mcikrrt(self.start, self.lower, self.upper, self.checker, sampler, np.random.default_rng([seed, 1]), settings.planner)
+            result = mcikrrt(
+                self.start,
+                self.lower,
+                self.upper,
+                self.checker,
+                sampler,
+                np.random.default_rng([seed, 1]),
+                settings.planner,
+            )
         elif planner == "ompl-rrtconnect":
             from dualarm.plan.ompl_rrtconnect import ompl_rrtconnect  # imports OMPL only when used
 
             started = time.perf_counter()
             checks = self.checker.checks
-            while len(sampler.goals) < settings.ompl_goals and time.perf_counter() - started < settings.planner.timeout_s:
+            while (
+                len(sampler.goals) < settings.ompl_goals and time.perf_counter() - started < settings.planner.timeout_s
+            ):
                 sampler()
             goal_time = time.perf_counter() - started
             if sampler.goals:  # the goals' collision checks count too
-                result = ompl_rrtconnect(self.start, self.lower, self.upper, self.checker, sampler.goals, seed, settings.planner, goal_time)
+                result = ompl_rrtconnect(
+                    self.start, self.lower, self.upper, self.checker, sampler.goals, seed, settings.planner, goal_time
+                )
                 result = replace(result, collision_checks=self.checker.checks - checks)
             else:
-                result = PlanResult(False, np.empty((0, len(self.start))), 0.0, goal_time, 0, 0, self.checker.checks - checks)
+                result = PlanResult(
+                    False, np.empty((0, len(self.start))), 0.0, goal_time, 0, 0, self.checker.checks - checks
+                )
         else:
             raise StageError(f"unknown planner '{planner}' (planners: {', '.join(PLANNERS)})")
         if not result.success and not sampler.goals:
-            reason = f"no goal configuration within the timeout of {settings.planner.timeout_s:g} s: {sampler.explain()}"
+            reason = (
+                f"no goal configuration within the timeout of {settings.planner.timeout_s:g} s: {sampler.explain()}"
+            )
             result = replace(result, reason=reason)
         return result
 
@@ -134,7 +164,7 @@ class PlanningProblem:
         """Release the collision checker."""
         self.checker.close()
 
-    def __enter__(self) -> "PlanningProblem":
+    def __enter__(self) -> PlanningProblem:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -44,7 +44,19 @@ def planned_joint_path(problem: PlanningProblem, result: PlanResult, method: str
     N = len(q)
     poses = task.hand_poses(problem.joint_names, q, problem.fixed)
     hands = tuple(problem.areas)
-    error = np.stack([np.min([np.linalg.norm(displacement(a.carried_vector(poses[h]), a.bounds)[:, :3], axis=1) for a in problem.areas[h]], axis=0) for h in hands], axis=1)
+    error = np.stack(
+        [
+            np.min(
+                [
+                    np.linalg.norm(displacement(a.carried_vector(poses[h]), a.bounds)[:, :3], axis=1)
+                    for a in problem.areas[h]
+                ],
+                axis=0,
+            )
+            for h in hands
+        ],
+        axis=1,
+    )
     return JointPath(
         method=method,
         joint_names=problem.joint_names,

@@ -76,7 +76,7 @@ class Wta:
             object.__setattr__(self, name, frozen(getattr(self, name), shape, name))
 
     @classmethod
-    def of(cls, spec: WorkspaceTargetArea) -> "Wta":
+    def of(cls, spec: WorkspaceTargetArea) -> Wta:
         """The WTA of a task file's ``[[wta]]`` table."""
         return cls(
             name=spec.name,

@@ -54,7 +54,9 @@ THREE_D_PANEL = "3D!dualarm"
 _PLAIN_FIELD = re.compile(r"^[a-zA-Z0-9_-]+$")
 
 
-def foxglove_layout(robot: Robot, stages: Sequence[str], hands: Sequence[str], joint_names: Sequence[str] | None = None) -> dict:
+def foxglove_layout(
+    robot: Robot, stages: Sequence[str], hands: Sequence[str], joint_names: Sequence[str] | None = None
+) -> dict:
     """The Foxglove Studio layout of a run of ``stages`` of ``robot`` moving ``hands``.
 
     Args:
@@ -73,14 +75,29 @@ def foxglove_layout(robot: Robot, stages: Sequence[str], hands: Sequence[str], j
     """
     _check("stages", stages, STAGES)
     _check("hands", hands, robot.hands)
-    joints = tuple(joint_names) if joint_names is not None else tuple(j for hand in hands for j in robot.hand_chain(hand).joint_names)
+    joints = (
+        tuple(joint_names)
+        if joint_names is not None
+        else tuple(j for hand in hands for j in robot.hand_chain(hand).joint_names)
+    )
     _check("joint_names", joints, robot.joint_names)
     plots = _plots(robot, tuple(stages), tuple(hands), joints)
     configs = {THREE_D_PANEL: _three_d(stages), **{panel_id: config for panel_id, config in plots}}
     layout: str | dict = THREE_D_PANEL
     if plots:
-        layout = {"first": THREE_D_PANEL, "second": _stack([panel_id for panel_id, _ in plots]), "direction": "row", "splitPercentage": 55}
-    return {"configById": configs, "globalVariables": {}, "userNodes": {}, "playbackConfig": {"speed": 1.0}, "layout": layout}
+        layout = {
+            "first": THREE_D_PANEL,
+            "second": _stack([panel_id for panel_id, _ in plots]),
+            "direction": "row",
+            "splitPercentage": 55,
+        }
+    return {
+        "configById": configs,
+        "globalVariables": {},
+        "userNodes": {},
+        "playbackConfig": {"speed": 1.0},
+        "layout": layout,
+    }
 
 
 def _check(argument: str, given: Sequence[str], valid: Sequence[str]) -> None:
@@ -130,7 +147,9 @@ def _three_d(stages: Sequence[str]) -> dict:
     }
 
 
-def _plots(robot: Robot, stages: tuple[str, ...], hands: tuple[str, ...], joints: tuple[str, ...]) -> list[tuple[str, dict]]:
+def _plots(
+    robot: Robot, stages: tuple[str, ...], hands: tuple[str, ...], joints: tuple[str, ...]
+) -> list[tuple[str, dict]]:
     """``(panel id, Plot config)`` per quantity the run records, in display order."""
     plots: list[tuple[str, dict]] = []
     error_stage = next((s for s in HAND_ERROR_STAGES if s in stages), None)
@@ -162,19 +181,28 @@ def _joint_groups(robot: Robot, joints: tuple[str, ...]) -> list[tuple[str, tupl
 def _short(name: str, names: tuple[str, ...]) -> str:
     """``name`` without the ``<word>_`` prefix every one of ``names`` shares (``left_elbow`` among the left arm's joints: ``elbow``), for short legends."""
     prefix = name.split("_", 1)[0] + "_"
-    return name.removeprefix(prefix) if len(names) > 1 and all(n.startswith(prefix) and n != prefix for n in names) else name
+    return (
+        name.removeprefix(prefix)
+        if len(names) > 1 and all(n.startswith(prefix) and n != prefix for n in names)
+        else name
+    )
 
 
 def _path(topic: str, *fields: str) -> str:
     """A message path ``<topic>.<field>...``, each field quoted as Studio's grammar needs."""
-    return topic + "".join("." + (f if _PLAIN_FIELD.match(f) else '"' + f.replace("\\", "\\\\").replace('"', '\\"') + '"') for f in fields)
+    return topic + "".join(
+        "." + (f if _PLAIN_FIELD.match(f) else '"' + f.replace("\\", "\\\\").replace('"', '\\"') + '"') for f in fields
+    )
 
 
 def _plot(title: str, paths: list[tuple[str, str]], min_y: float | None = None) -> dict:
     """A Plot panel of ``paths`` (message path, legend label) against the log time (the motion time)."""
     config = {
         TITLE: title,
-        "paths": [{"value": value, "label": label, "enabled": True, "timestampMethod": "receiveTime"} for value, label in paths],
+        "paths": [
+            {"value": value, "label": label, "enabled": True, "timestampMethod": "receiveTime"}
+            for value, label in paths
+        ],
         "showXAxisLabels": True,
         "showYAxisLabels": True,
         "showLegend": True,
@@ -193,4 +221,9 @@ def _stack(panel_ids: list[str]) -> str | dict:
     """``panel_ids`` as a column of equal heights (Studio's layout tree splits in two at each node)."""
     if len(panel_ids) == 1:
         return panel_ids[0]
-    return {"first": panel_ids[0], "second": _stack(panel_ids[1:]), "direction": "column", "splitPercentage": 100 / len(panel_ids)}
+    return {
+        "first": panel_ids[0],
+        "second": _stack(panel_ids[1:]),
+        "direction": "column",
+        "splitPercentage": 100 / len(panel_ids),
+    }

@@ -55,7 +55,15 @@ if TYPE_CHECKING:  # pybullet is imported only by runs that execute
     from dualarm.contracts.execution import ExecutionLog
 
 #: MCAP topic family of each stage.
-STAGE_TOPICS = {"path": "/task", "ik": "/ik", "plan": "/plan", "retime": "/retime", "smooth": "/smooth", "approach": "/approach", "execute": "/execute"}
+STAGE_TOPICS = {
+    "path": "/task",
+    "ik": "/ik",
+    "plan": "/plan",
+    "retime": "/retime",
+    "smooth": "/smooth",
+    "approach": "/approach",
+    "execute": "/execute",
+}
 
 
 def _ns(t: float) -> int:
@@ -89,7 +97,9 @@ class McapSink(NullSink):
             opens on and the robot on ``/tf``).
     """
 
-    def __init__(self, directory: Path, robot: Robot, attachments: Mapping[str, str], stages: Sequence[str] = tuple(STAGE_TOPICS)) -> None:
+    def __init__(
+        self, directory: Path, robot: Robot, attachments: Mapping[str, str], stages: Sequence[str] = tuple(STAGE_TOPICS)
+    ) -> None:
         super().__init__()
         self.stages = tuple(stages)
         self.shown = shown_stage(self.stages)
@@ -106,12 +116,16 @@ class McapSink(NullSink):
         for name, text in attachments.items():
             media = "application/xml" if name.endswith(".urdf") else "application/toml"
             self._mcap.attach(log_time=0, create_time=0, name=name, media_type=media, data=text.encode())
-        self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log({"data": viewer_urdf(robot.urdf.path.read_text())}, log_time=0)
+        self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log(
+            {"data": viewer_urdf(robot.urdf.path.read_text())}, log_time=0
+        )
 
     def _json(self, topic: str, schema: dict, **keys: Sequence[str]) -> foxglove.Channel:
         """The JSON channel ``topic``, opened on first use with ``schema``, its maps keyed by the robot's joints and hands (and ``keys``: kind -> names)."""
         if topic not in self._channels:
-            self._channels[topic] = foxglove.Channel(topic, schema=schemas.named(schema, {**self._keys, **keys}), context=self._context)
+            self._channels[topic] = foxglove.Channel(
+                topic, schema=schemas.named(schema, {**self._keys, **keys}), context=self._context
+            )
         return self._channels[topic]
 
     def _tf(self, stage: str, t: np.ndarray | float, q: Mapping[str, np.ndarray | float]) -> None:
@@ -120,8 +134,12 @@ class McapSink(NullSink):
             return
         t = np.atleast_1d(np.asarray(t, dtype=float))
         q = {name: np.broadcast_to(np.asarray(v, dtype=float), t.shape) for name, v in q.items()}
-        links = [("world", self.robot.urdf.root, np.broadcast_to(np.eye(4), (len(t), 4, 4)))] + joint_transforms(self.robot.urdf.joints, q)
-        frames = [(parent, child, T[:, :3, 3].tolist(), quaternion_xyzw(T[:, :3, :3]).tolist()) for parent, child, T in links]
+        links = [("world", self.robot.urdf.root, np.broadcast_to(np.eye(4), (len(t), 4, 4)))] + joint_transforms(
+            self.robot.urdf.joints, q
+        )
+        frames = [
+            (parent, child, T[:, :3, 3].tolist(), quaternion_xyzw(T[:, :3, :3]).tolist()) for parent, child, T in links
+        ]
         for k, time in enumerate(t.tolist()):
             stamp = Timestamp(sec=_ns(time) // 10**9, nsec=_ns(time) % 10**9)  # the log time, to the nanosecond
             self._tf_channel.log(
@@ -146,9 +164,13 @@ class McapSink(NullSink):
             return
         self._tf(stage, t, q)
         family = STAGE_TOPICS.get(stage, f"/{stage}")
-        self._json(f"{family}/joint_state", schemas.JOINT_STATE).log({"t": t, "rep": rep, "position": {n: float(v) for n, v in q.items()}}, log_time=_ns(t))
+        self._json(f"{family}/joint_state", schemas.JOINT_STATE).log(
+            {"t": t, "rep": rep, "position": {n: float(v) for n, v in q.items()}}, log_time=_ns(t)
+        )
 
-    def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+    def joint_path(
+        self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik"
+    ) -> None:
         """The IK (or plan) stage's product, under ``stage``'s topics.
 
         ``/ik/limits`` once (the robot's position limits and ``velocity_limits`` [rad/s] of the
@@ -165,7 +187,15 @@ class McapSink(NullSink):
         bounds = self._json(f"{family}/bounds", schemas.JOINT_BOUNDS) if path.extras else None
         angle = path.hand_orientation_error_rad
         measured = bool(np.isfinite(angle).all())  # a planner's path measures no orientation: the field is left out
-        encode = _encoder(path.q, path.qd, path.solve_time_s, path.hand_error_m, angle if measured else 0.0, *arm_angles.values(), *path.extras.values())
+        encode = _encoder(
+            path.q,
+            path.qd,
+            path.solve_time_s,
+            path.hand_error_m,
+            angle if measured else 0.0,
+            *arm_angles.values(),
+            *path.extras.values(),
+        )
         for k in range(len(path)):
             t, rep = float(path.t[k]), int(path.rep[k])
             sample.log(
@@ -179,20 +209,40 @@ class McapSink(NullSink):
                         "position": dict(zip(names, path.q[k].tolist())),
                         "velocity": dict(zip(names, path.qd[k].tolist())),
                         "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist())),
-                        **({"hand_orientation_error_rad": dict(zip(path.hands, angle[k].tolist())), "task_space": path.task_space} if measured else {}),
+                        **(
+                            {
+                                "hand_orientation_error_rad": dict(zip(path.hands, angle[k].tolist())),
+                                "task_space": path.task_space,
+                            }
+                            if measured
+                            else {}
+                        ),
                         "arm_angle_rad": {hand: float(psi[k]) for hand, psi in arm_angles.items()},
                     }
                 ),
                 log_time=_ns(t),
             )
             if bounds is not None:
-                bounds.log(encode({"t": t, "rep": rep, **{key: dict(zip(names, v[k].tolist())) for key, v in path.extras.items()}}), log_time=_ns(t))
+                bounds.log(
+                    encode(
+                        {"t": t, "rep": rep, **{key: dict(zip(names, v[k].tolist())) for key, v in path.extras.items()}}
+                    ),
+                    log_time=_ns(t),
+                )
         self._animation(stage, path.t, names, path.q, path.fixed)
         if stage == self.shown:
             fixed = {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed}
-            self._hand_path(stage, {hand: T[:, :3, 3] for hand, T in hand_poses_at(self.robot, path.hands, path.joint_names, path.q, fixed).items()})
+            self._hand_path(
+                stage,
+                {
+                    hand: T[:, :3, 3]
+                    for hand, T in hand_poses_at(self.robot, path.hands, path.joint_names, path.q, fixed).items()
+                },
+            )
 
-    def _animation(self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> None:
+    def _animation(
+        self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]
+    ) -> None:
         """The robot of ``stage`` on ``/tf`` at :func:`~dualarm.record.sink.animation_rows`."""
         rows = animation_rows(t)
         self._tf(stage, t[rows], {**fixed, **dict(zip(names, q[rows].T))})
@@ -201,14 +251,24 @@ class McapSink(NullSink):
         lower, upper = self.robot.lower_upper(names)
         values = {"lower": lower, "upper": upper, **limits}
         self._json(f"{STAGE_TOPICS[stage]}/limits", schemas.JOINT_LIMITS).log(
-            {"t": 0.0, "rep": 0, **{key: dict(zip(names, np.asarray(v, dtype=float).tolist())) for key, v in values.items()}}, log_time=0
+            {
+                "t": 0.0,
+                "rep": 0,
+                **{key: dict(zip(names, np.asarray(v, dtype=float).tolist())) for key, v in values.items()},
+            },
+            log_time=0,
         )
 
     def _hand_path(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
         """Each hand's path (M, 3) [m] in ``stage`` on ``/<stage>/hand_path`` (Foxglove lines, the stage's colour): the shown stage's."""
         if stage == self.shown:
             color = STAGE_COLORS.get(stage, (200, 200, 200))
-            self._lines(f"{STAGE_TOPICS[stage]}/hand_path", "world", positions, Color(r=color[0] / 255, g=color[1] / 255, b=color[2] / 255, a=1.0))
+            self._lines(
+                f"{STAGE_TOPICS[stage]}/hand_path",
+                "world",
+                positions,
+                Color(r=color[0] / 255, g=color[1] / 255, b=color[2] / 255, a=1.0),
+            )
 
     def _lines(self, topic: str, frame: str, positions: Mapping[str, np.ndarray], color: Color | None = None) -> None:
         """Paths (name -> (M, 3) [m]) as Foxglove line strips in ``frame``, once at t = 0 on ``topic`` (each hand in its colour unless ``color``)."""
@@ -223,7 +283,9 @@ class McapSink(NullSink):
                 points=[Point3(x=float(x), y=float(y), z=float(z)) for x, y, z in np.asarray(p, dtype=float)],
                 color=color or Color(r=r / 255, g=g / 255, b=b / 255, a=1.0),
             )
-            entities.append(SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id=frame, id=name, lines=[line]))
+            entities.append(
+                SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id=frame, id=name, lines=[line])
+            )
         SceneUpdateChannel(topic, context=self._context).log(SceneUpdate(entities=entities), log_time=0)
 
     def trajectory(
@@ -264,7 +326,7 @@ class McapSink(NullSink):
         self._animation(stage, traj.t, names, traj.q, traj.fixed)
         self._hand_path(stage, hand_positions)
 
-    def execution(self, log: "ExecutionLog") -> None:
+    def execution(self, log: ExecutionLog) -> None:
         """The execute stage's product.
 
         ``/execute/sample`` per physics step (measured joints, the command, hand positions,
@@ -282,7 +344,7 @@ class McapSink(NullSink):
         if log.approach is not None:
             self._executed(log.approach, f"{STAGE_TOPICS['approach']}/executed", f"{STAGE_TOPICS['approach']}/contacts")
 
-    def _executed(self, log: "ExecutionLog", samples: str, contacts: str) -> None:
+    def _executed(self, log: ExecutionLog, samples: str, contacts: str) -> None:
         """One played trajectory's steps on topic ``samples``, its contacts on ``contacts``."""
         names = log.joint_names
         channel = self._json(samples, schemas.EXECUTED_SAMPLE)
@@ -309,7 +371,17 @@ class McapSink(NullSink):
             )
         touching = self._json(contacts, schemas.CONTACT)
         for e in log.contact_events:
-            touching.log({"t": e.t_s, "rep": e.rep, "first": e.first, "second": e.second, "depth_m": e.depth_m, "expected": e.expected}, log_time=_ns(e.t_s))
+            touching.log(
+                {
+                    "t": e.t_s,
+                    "rep": e.rep,
+                    "first": e.first,
+                    "second": e.second,
+                    "depth_m": e.depth_m,
+                    "expected": e.expected,
+                },
+                log_time=_ns(e.t_s),
+            )
 
     def environment(self, objects) -> None:
         """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate)."""
@@ -324,18 +396,28 @@ class McapSink(NullSink):
             if obj.shape == "box":
                 size = obj.size_m
                 cube = CubePrimitive(pose=pose, size=Vector3(x=size[0], y=size[1], z=size[2]), color=color)
-                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, cubes=[cube])
+                entity = SceneEntity(
+                    timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, cubes=[cube]
+                )
             elif obj.shape == "cylinder":
                 d = 2 * obj.radius_m
-                cylinder = CylinderPrimitive(pose=pose, size=Vector3(x=d, y=d, z=obj.height_m), bottom_scale=1.0, top_scale=1.0, color=color)
-                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, cylinders=[cylinder])
+                cylinder = CylinderPrimitive(
+                    pose=pose, size=Vector3(x=d, y=d, z=obj.height_m), bottom_scale=1.0, top_scale=1.0, color=color
+                )
+                entity = SceneEntity(
+                    timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, cylinders=[cylinder]
+                )
             else:
                 d = 2 * obj.radius_m
                 sphere = SpherePrimitive(pose=pose, size=Vector3(x=d, y=d, z=d), color=color)
-                entity = SceneEntity(timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, spheres=[sphere])
+                entity = SceneEntity(
+                    timestamp=Timestamp.from_epoch_secs(0.0), frame_id="world", id=obj.name, spheres=[sphere]
+                )
             entities.append(entity)
         if entities:
-            SceneUpdateChannel(f"{STAGE_TOPICS['path']}/environment", context=self._context).log(SceneUpdate(entities=entities), log_time=0)
+            SceneUpdateChannel(f"{STAGE_TOPICS['path']}/environment", context=self._context).log(
+                SceneUpdate(entities=entities), log_time=0
+            )
 
     def reference(self, ref: CartesianReference) -> None:
         """The path stage's product: one ``/task/reference/<hand>`` message per sample, the hands' whole paths once on ``/task/reference_path`` (Foxglove line strips in the reference's frame)."""
@@ -368,7 +450,9 @@ class McapSink(NullSink):
 
     def metrics(self, values: Mapping[str, float], t: float) -> None:
         """The run's metrics on ``/metrics`` at motion time ``t`` [s]."""
-        self._json("/metrics", schemas.METRICS, metrics=list(values)).log({"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t))
+        self._json("/metrics", schemas.METRICS, metrics=list(values)).log(
+            {"t": t, "rep": 0, "values": dict(values)}, log_time=_ns(t)
+        )
 
     def close(self, manifest: Mapping[str, object]) -> None:
         """Write the Foxglove layout (``foxglove-layout.json``) and the manifest as MCAP metadata, and finish the file."""

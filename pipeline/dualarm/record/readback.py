@@ -33,7 +33,18 @@ from dualarm.files import cause
 from dualarm.record.mcap_sink import STAGE_TOPICS
 from dualarm.record.run_dir import MANIFEST, METRICS
 from dualarm.record.sink import recorded_stages
-from dualarm.record.verify import MCAP_FILE, RRD_FILE, VerifiedMcap, _check_metrics, _check_one_run, _manifest, _metrics, _quote, _regular_file, verify_mcap
+from dualarm.record.verify import (
+    MCAP_FILE,
+    RRD_FILE,
+    VerifiedMcap,
+    _check_metrics,
+    _check_one_run,
+    _manifest,
+    _metrics,
+    _quote,
+    _regular_file,
+    verify_mcap,
+)
 
 _STAGE_OF_FAMILY = {family: stage for stage, family in STAGE_TOPICS.items()}
 
@@ -47,7 +58,17 @@ def stage_of(topic: str) -> str:
 
 
 #: Columns of ``/tf``: one row per transform (the per-transform timestamp equals ``t``).
-_TF_COLUMNS = ("parent_frame_id", "child_frame_id", "translation.x", "translation.y", "translation.z", "rotation.x", "rotation.y", "rotation.z", "rotation.w")
+_TF_COLUMNS = (
+    "parent_frame_id",
+    "child_frame_id",
+    "translation.x",
+    "translation.y",
+    "translation.z",
+    "rotation.x",
+    "rotation.y",
+    "rotation.z",
+    "rotation.w",
+)
 
 
 def _json_frame(times: list[float], payloads: list[bytes]) -> pd.DataFrame:
@@ -61,7 +82,18 @@ def _json_frame(times: list[float], payloads: list[bytes]) -> pd.DataFrame:
 def _frame_transforms(times: list[float], messages: list) -> pd.DataFrame:
     """``foxglove.FrameTransforms`` -> a row per transform."""
     rows = [
-        (t, tr.parent_frame_id, tr.child_frame_id, tr.translation.x, tr.translation.y, tr.translation.z, tr.rotation.x, tr.rotation.y, tr.rotation.z, tr.rotation.w)
+        (
+            t,
+            tr.parent_frame_id,
+            tr.child_frame_id,
+            tr.translation.x,
+            tr.translation.y,
+            tr.translation.z,
+            tr.rotation.x,
+            tr.rotation.y,
+            tr.rotation.z,
+            tr.rotation.w,
+        )
         for t, message in zip(times, messages)
         for tr in message.transforms
     ]
@@ -87,7 +119,12 @@ def _protobuf_frame(schema_name: str, times: list[float], messages: list) -> pd.
         items = data.pop("poses", None) if schema_name == "foxglove.PosesInFrame" else None
         entities = data.get("entities") if schema_name == "foxglove.SceneUpdate" else None
         if entities and all(e.get("lines") for e in entities):  # paths drawn as lines: a row per point
-            rows.extend({"t": t, "id": e["id"], "frame_id": e["frame_id"], "line": i, **_flatten(p)} for e in entities for i, line in enumerate(e["lines"]) for p in line["points"])
+            rows.extend(
+                {"t": t, "id": e["id"], "frame_id": e["frame_id"], "line": i, **_flatten(p)}
+                for e in entities
+                for i, line in enumerate(e["lines"])
+                for p in line["points"]
+            )
         elif items is None:
             rows.append({"t": t, **_flatten(data)})
         else:
@@ -111,7 +148,9 @@ class McapTopics(Mapping[str, pd.DataFrame]):
         self._path = mcap.path
         statistics = mcap.summary.statistics
         counts = statistics.channel_message_counts if statistics is not None else {}
-        self._topics = tuple(dict.fromkeys(c.topic for i, c in sorted(mcap.summary.channels.items()) if counts.get(i, 0) > 0))
+        self._topics = tuple(
+            dict.fromkeys(c.topic for i, c in sorted(mcap.summary.channels.items()) if counts.get(i, 0) > 0)
+        )
         self._frames: dict[str, pd.DataFrame] = {}
 
     def __getitem__(self, topic: str) -> pd.DataFrame:
@@ -132,7 +171,9 @@ class McapTopics(Mapping[str, pd.DataFrame]):
         payloads: list[bytes] = []
         try:
             with self._path.open("rb") as stream:
-                for schema, channel, message in make_reader(stream, validate_crcs=True).iter_messages(topics=[topic], log_time_order=True):
+                for schema, channel, message in make_reader(stream, validate_crcs=True).iter_messages(
+                    topics=[topic], log_time_order=True
+                ):
                     times.append(message.log_time / 1e9)
                     payloads.append(message.data)
             if channel.message_encoding == "json":
@@ -147,7 +188,9 @@ class McapTopics(Mapping[str, pd.DataFrame]):
                 else:
                     df = _protobuf_frame(schema.name, times, messages)
         except Exception as exc:  # any failure to decode (struct, McapError, protobuf, JSON...) is corruption
-            raise RecordingError(f"{excerpt(self._path)}: topic {_quote(topic)} is not readable ({excerpt(f'{type(exc).__name__}: {exc}')})") from None
+            raise RecordingError(
+                f"{excerpt(self._path)}: topic {_quote(topic)} is not readable ({excerpt(f'{type(exc).__name__}: {exc}')})"
+            ) from None
         if "rep" not in df:
             df["rep"] = 0
         df["stage"] = stage_of(topic)
@@ -199,7 +242,11 @@ class RunData:
     def violations(self) -> list[str]:
         """The messages of the verdict's violations, in order (empty for a complete run, or a run recorded before verdicts)."""
         violations = self.manifest.get("violations", [])
-        return [str(v.get("message", "")) for v in violations if isinstance(v, Mapping)] if isinstance(violations, list) else []
+        return (
+            [str(v.get("message", "")) for v in violations if isinstance(v, Mapping)]
+            if isinstance(violations, list)
+            else []
+        )
 
     @property
     def error(self) -> str:
@@ -238,9 +285,15 @@ class RunData:
                 that left the topic out: a ``metrics`` run, or an ``ik`` run asked for a later stage).
         """
         if topic not in self.topics:
-            if self.record == "metrics" or (self.record != "full" and stage_of(topic) in self.stages and stage_of(topic) not in self.recorded_stages):
-                raise RecordingError(f"{excerpt(self.directory)}: no topic {_quote(topic)}: the run was recorded with --record {self.record} ({self.lacks()})")
-            raise RecordingError(f"{excerpt(self.directory)}: no topic {_quote(topic)} (topics: {', '.join(self.topics)})")
+            if self.record == "metrics" or (
+                self.record != "full" and stage_of(topic) in self.stages and stage_of(topic) not in self.recorded_stages
+            ):
+                raise RecordingError(
+                    f"{excerpt(self.directory)}: no topic {_quote(topic)}: the run was recorded with --record {self.record} ({self.lacks()})"
+                )
+            raise RecordingError(
+                f"{excerpt(self.directory)}: no topic {_quote(topic)} (topics: {', '.join(self.topics)})"
+            )
         return self.topics[topic]
 
 
@@ -260,7 +313,9 @@ def read_run(directory: str | Path) -> RunData:
     except (OSError, ValueError) as exc:
         raise RecordingError(f"{excerpt(directory)}: cannot read the run directory: {cause(exc)}") from None
     if not is_directory:
-        raise RecordingError(f"{excerpt(directory)}: not a directory (a run directory holds {MANIFEST}, {METRICS}, {MCAP_FILE} and {RRD_FILE})")
+        raise RecordingError(
+            f"{excerpt(directory)}: not a directory (a run directory holds {MANIFEST}, {METRICS}, {MCAP_FILE} and {RRD_FILE})"
+        )
     manifest = _manifest(directory / MANIFEST)
     if manifest.get("record") == "metrics":
         return _metrics_run(directory, manifest)
@@ -270,17 +325,29 @@ def read_run(directory: str | Path) -> RunData:
     _check_metrics(directory / METRICS, str(manifest["status"]), metrics, mcap.metrics)
     if _regular_file(directory / RRD_FILE, "Rerun recording").st_size == 0:
         raise RecordingError(f"{excerpt(directory / RRD_FILE)}: empty (not a Rerun recording)")
-    return RunData(directory=directory, manifest=MappingProxyType(manifest), metrics=MappingProxyType(cast(dict[str, float], metrics or {})), topics=McapTopics(mcap))
+    return RunData(
+        directory=directory,
+        manifest=MappingProxyType(manifest),
+        metrics=MappingProxyType(cast(dict[str, float], metrics or {})),
+        topics=McapTopics(mcap),
+    )
 
 
 def _metrics_run(directory: Path, manifest: dict[str, Any]) -> RunData:
     """A run recorded with ``--record metrics``: its manifest and metrics, no topics; a recording beside it is refused."""
     for name in (MCAP_FILE, RRD_FILE):
         if os.path.lexists(directory / name):
-            raise RecordingError(f"{excerpt(directory / name)}: present, but {MANIFEST} says the run was recorded with --record metrics (no {MCAP_FILE}, no {RRD_FILE}): the files are not of one run")
+            raise RecordingError(
+                f"{excerpt(directory / name)}: present, but {MANIFEST} says the run was recorded with --record metrics (no {MCAP_FILE}, no {RRD_FILE}): the files are not of one run"
+            )
     metrics = _metrics(directory / METRICS)
     _check_metrics(directory / METRICS, str(manifest["status"]), metrics, None, in_mcap=False)
-    return RunData(directory=directory, manifest=MappingProxyType(manifest), metrics=MappingProxyType(cast(dict[str, float], metrics or {})), topics=MappingProxyType({}))
+    return RunData(
+        directory=directory,
+        manifest=MappingProxyType(manifest),
+        metrics=MappingProxyType(cast(dict[str, float], metrics or {})),
+        topics=MappingProxyType({}),
+    )
 
 
 def read_runs(directories: Iterable[str | Path], topics: Iterable[str] | None = None) -> dict[str, pd.DataFrame]:

@@ -30,7 +30,15 @@ class Recorder(Tee):
         on_begin: called with each stage's name as it begins.
     """
 
-    def __init__(self, directory: Path, run_id: str, robot: Robot, attachments: Mapping[str, str], stages: Sequence[str] = ALL_STAGES, on_begin: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self,
+        directory: Path,
+        run_id: str,
+        robot: Robot,
+        attachments: Mapping[str, str],
+        stages: Sequence[str] = ALL_STAGES,
+        on_begin: Callable[[str], None] | None = None,
+    ) -> None:
         mcap = McapSink(directory, robot, attachments, stages)
         super().__init__(mcap, RerunSink(directory, run_id, robot, stages), on_begin=on_begin)
         self.stages = mcap.stages

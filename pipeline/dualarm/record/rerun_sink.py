@@ -49,10 +49,20 @@ def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> 
     scene = ["+ /world/reference/**", "+ /world/environment/**"]
 
     def view3d(stage: str, name: str) -> rrb.Spatial3DView:
-        return rrb.Spatial3DView(origin="/", name=name, contents=[*scene, f"+ /{stage}/**", f"+ /world/{stage}/**", *hidden], eye_controls=EYE)
+        return rrb.Spatial3DView(
+            origin="/",
+            name=name,
+            contents=[*scene, f"+ /{stage}/**", f"+ /world/{stage}/**", *hidden],
+            eye_controls=EYE,
+        )
 
     def plot(name: str, *paths: str, legend: bool = True) -> rrb.TimeSeriesView:
-        return rrb.TimeSeriesView(origin="/plots", name=name, contents=[f"+ /plots/{p}/**" for p in paths], plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=legend))
+        return rrb.TimeSeriesView(
+            origin="/plots",
+            name=name,
+            contents=[f"+ /plots/{p}/**" for p in paths],
+            plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=legend),
+        )
 
     driven = next((s for s in ("smooth", "retime") if s in stages), focus) if focus == "execute" else focus
     solved = next((s for s in ("ik", "plan") if s in stages), None)
@@ -62,12 +72,21 @@ def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> 
         rrb.Tabs(
             plot(f"joint positions [rad] ({driven})", f"{driven}/position", legend=False),
             *([plot("arm angle [rad]", f"{solved}/arm_angle_rad")] if solved == "ik" else []),
-            *([plot("contacts", "execute/contacts"), plot("tracking error [rad]", "execute/tracking_error_rad", legend=False)] if focus == "execute" else []),
+            *(
+                [
+                    plot("contacts", "execute/contacts"),
+                    plot("tracking error [rad]", "execute/tracking_error_rad", legend=False),
+                ]
+                if focus == "execute"
+                else []
+            ),
         ),
     ]
     return rrb.Blueprint(
         rrb.Tabs(
-            rrb.Horizontal(view3d(focus, f"{focus}: robot and hand paths"), rrb.Vertical(*plots), column_shares=[3, 2], name="run"),
+            rrb.Horizontal(
+                view3d(focus, f"{focus}: robot and hand paths"), rrb.Vertical(*plots), column_shares=[3, 2], name="run"
+            ),
             rrb.Grid(*[view3d(stage, stage) for stage in stages if stage != "approach"], name="stages"),
         ),
         collapse_panels=True,
@@ -100,7 +119,12 @@ class RerunSink(NullSink):
         """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world (logged on first use)."""
         if stage not in self._robot_trees:
             # one static entity per stage robot: static data logged twice to one entity replaces the first
-            tree = rr.urdf.UrdfTree.from_file_path(self.robot.urdf.path, entity_path_prefix=stage, frame_prefix=f"{stage}/", static_transform_entity_path=f"/{stage}/tf_static")
+            tree = rr.urdf.UrdfTree.from_file_path(
+                self.robot.urdf.path,
+                entity_path_prefix=stage,
+                frame_prefix=f"{stage}/",
+                static_transform_entity_path=f"/{stage}/tf_static",
+            )
             tree.log_urdf_to_recording(self._rr)
             self._rr.log(
                 f"{stage}/root",
@@ -117,13 +141,19 @@ class RerunSink(NullSink):
         for joint in tree.joints():
             if joint.joint_type != "fixed":
                 values = q.get(joint.name, np.zeros(len(t)))
-                self._rr.send_columns(f"{stage}/transforms/{joint.name}", indexes=[times], columns=joint.compute_transform_columns(np.asarray(values, float).tolist(), clamp=False))
+                self._rr.send_columns(
+                    f"{stage}/transforms/{joint.name}",
+                    indexes=[times],
+                    columns=joint.compute_transform_columns(np.asarray(values, float).tolist(), clamp=False),
+                )
 
     def _series(self, prefix: str, t: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
         """Rerun time series ``plots/<prefix>/<name>``."""
         times = rr.TimeColumn(TIMELINE, duration=t)
         for name, v in values.items():
-            self._rr.send_columns(f"plots/{prefix}/{name}", indexes=[times], columns=rr.Scalars.columns(scalars=np.asarray(v, float)))
+            self._rr.send_columns(
+                f"plots/{prefix}/{name}", indexes=[times], columns=rr.Scalars.columns(scalars=np.asarray(v, float))
+            )
 
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
         """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: the URDF under ``/<stage>``."""
@@ -131,7 +161,9 @@ class RerunSink(NullSink):
             return
         self._rerun_motion(stage, np.array([t]), {n: np.array([v]) for n, v in q.items()})
 
-    def joint_path(self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+    def joint_path(
+        self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik"
+    ) -> None:
         """The IK (or plan) stage's product: the animated robot under ``/<stage>``, every joint's position, velocity and bounds, the hand errors and the arm angles as time series, and the hand traces."""
         if stage not in self.stages:
             return
@@ -149,13 +181,27 @@ class RerunSink(NullSink):
         self._series(f"{stage}/solve_time_s", path.t, {"all": path.solve_time_s})
         self._series(f"{stage}/arm_angle_rad", path.t, arm_angles)
         self._hand_traces(
-            stage, {hand: T[:, :3, 3] for hand, T in hand_poses_at(self.robot, path.hands, path.joint_names, path.q, {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed}).items()}
+            stage,
+            {
+                hand: T[:, :3, 3]
+                for hand, T in hand_poses_at(
+                    self.robot,
+                    path.hands,
+                    path.joint_names,
+                    path.q,
+                    {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed},
+                ).items()
+            },
         )
 
-    def _animation(self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]) -> None:
+    def _animation(
+        self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]
+    ) -> None:
         """The robot of ``stage`` at :func:`~dualarm.record.sink.animation_rows`."""
         rows = animation_rows(t)
-        self._rerun_motion(stage, t[rows], {**{n: np.full(len(rows), v) for n, v in fixed.items()}, **dict(zip(names, q[rows].T))})
+        self._rerun_motion(
+            stage, t[rows], {**{n: np.full(len(rows), v) for n, v in fixed.items()}, **dict(zip(names, q[rows].T))}
+        )
 
     def _hand_traces(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
         """Each hand's path (M, 3) [m] in ``stage`` under ``/world/<stage>/<hand>``, in the stage's colour."""
@@ -190,7 +236,7 @@ class RerunSink(NullSink):
         if "deviation_rad" in extras:
             self._series(f"{stage}/deviation_rad", traj.t, dict(zip(names, extras["deviation_rad"].T)))
 
-    def execution(self, log: "ExecutionLog") -> None:
+    def execution(self, log: ExecutionLog) -> None:
         """The execute stage's product: the robot under ``/execute``, the measured hand traces under ``/world/execute``, and under ``/plots/execute`` the hand errors, contacts and the joints' tracking error (``/plots/approach/executed_*`` for the approach)."""
         if "execute" not in self.stages:
             return
@@ -201,12 +247,16 @@ class RerunSink(NullSink):
         if log.approach is not None:
             self._executed(log.approach, "approach/executed_")
 
-    def _executed(self, log: "ExecutionLog", plots: str) -> None:
+    def _executed(self, log: ExecutionLog, plots: str) -> None:
         """One played trajectory's plots, named ``plots/<plots><quantity>``."""
         names = log.joint_names
         self._series(f"{plots}hand_error_m", log.t, dict(log.hand_error_m))
         self._series(f"{plots}tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
-        self._series(f"{plots}contacts", log.t, {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts})
+        self._series(
+            f"{plots}contacts",
+            log.t,
+            {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts},
+        )
 
     def environment(self, objects) -> None:
         """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame) under ``/world/environment/<name>``."""
@@ -217,9 +267,20 @@ class RerunSink(NullSink):
             x, y, z, w = quaternion_xyzw(T[:3, :3]).tolist()
             archetype: rr.Boxes3D | rr.Cylinders3D | rr.Ellipsoids3D
             if obj.shape == "box":
-                archetype = rr.Boxes3D(half_sizes=[[s / 2 for s in obj.size_m]], centers=[T[:3, 3]], quaternions=[[x, y, z, w]], fill_mode="solid")
+                archetype = rr.Boxes3D(
+                    half_sizes=[[s / 2 for s in obj.size_m]],
+                    centers=[T[:3, 3]],
+                    quaternions=[[x, y, z, w]],
+                    fill_mode="solid",
+                )
             elif obj.shape == "cylinder":
-                archetype = rr.Cylinders3D(lengths=[obj.height_m], radii=[obj.radius_m], centers=[T[:3, 3]], quaternions=[[x, y, z, w]], fill_mode="solid")
+                archetype = rr.Cylinders3D(
+                    lengths=[obj.height_m],
+                    radii=[obj.radius_m],
+                    centers=[T[:3, 3]],
+                    quaternions=[[x, y, z, w]],
+                    fill_mode="solid",
+                )
             else:
                 archetype = rr.Ellipsoids3D(half_sizes=[[obj.radius_m] * 3], centers=[T[:3, 3]], fill_mode="solid")
             self._rr.log(f"world/environment/{obj.name}", archetype, static=True)
@@ -234,7 +295,11 @@ class RerunSink(NullSink):
                 rr.LineStrips3D([hr.position], colors=[HAND_COLORS.get(hand, (200, 200, 200))], radii=0.003),
                 static=True,
             )
-            self._series(f"reference/{hand}", ref.t, {**{f"position/{a}": hr.position[:, i] for i, a in enumerate("xyz")}, "rep": ref.rep})
+            self._series(
+                f"reference/{hand}",
+                ref.t,
+                {**{f"position/{a}": hr.position[:, i] for i, a in enumerate("xyz")}, "rep": ref.rep},
+            )
 
     def close(self, manifest: Mapping[str, object]) -> None:
         """Finish the file."""

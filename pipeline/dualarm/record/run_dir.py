@@ -32,7 +32,7 @@ import shutil
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -44,7 +44,20 @@ if TYPE_CHECKING:
 
 MANIFEST = "manifest.json"
 METRICS = "metrics.json"
-PACKAGES = ("dualarm", "casadi", "numpy", "scipy", "pybullet", "mcap", "foxglove-sdk", "rerun-sdk", "pandas", "pydantic", "toppra", "ruckig")
+PACKAGES = (
+    "dualarm",
+    "casadi",
+    "numpy",
+    "scipy",
+    "pybullet",
+    "mcap",
+    "foxglove-sdk",
+    "rerun-sdk",
+    "pandas",
+    "pydantic",
+    "toppra",
+    "ruckig",
+)
 
 
 def sha256_file(path: Path) -> str:
@@ -118,7 +131,7 @@ class Layout:
     """
 
     files: tuple[str, ...] = ()
-    dirs: Mapping[str, "Layout | str"] = field(default_factory=dict)
+    dirs: Mapping[str, Layout | str] = field(default_factory=dict)
     add_only: bool = False
 
 
@@ -140,7 +153,9 @@ _TASK = Layout(dirs={_RUN_ID: _RUN, PARTIAL.format(_RUN_ID): _RUN})
 KINDS: Mapping[str, Layout] = {
     "recordings": Layout(dirs={"*": _TASK}, add_only=True),
     "plan": Layout(files=("plan_trials.csv", "plan_summary.json")),
-    "consistency": Layout(files=("consistency.csv", "consistency.md", "joints_*.png", "arm_angle.png"), dirs={"runs": "recordings"}),
+    "consistency": Layout(
+        files=("consistency.csv", "consistency.md", "joints_*.png", "arm_angle.png"), dirs={"runs": "recordings"}
+    ),
     "report": Layout(
         files=(
             "summary.md",
@@ -196,7 +211,7 @@ class OutputDir:
         if fd >= 0:
             os.close(fd)  # closing the last descriptor of the open file releases its flock
 
-    def __enter__(self) -> "OutputDir":
+    def __enter__(self) -> OutputDir:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -243,7 +258,9 @@ def claim_output_dir(path: str | Path, kind: str) -> OutputDir:
             or that holds an entry it does not write (named); a directory locked by another process.
     """
     if kind not in KINDS:
-        raise InvalidArgumentError("kind", f"unknown kind of output directory '{excerpt(kind)}' (kinds: {', '.join(KINDS)})")
+        raise InvalidArgumentError(
+            "kind", f"unknown kind of output directory '{excerpt(kind)}' (kinds: {', '.join(KINDS)})"
+        )
     layout = KINDS[kind]
     target = _output_path(path)
     _make(target, kind)
@@ -256,7 +273,10 @@ def claim_output_dir(path: str | Path, kind: str) -> OutputDir:
         fcntl.flock(fd, (fcntl.LOCK_SH if layout.add_only else fcntl.LOCK_EX) | fcntl.LOCK_NB)
     except BlockingIOError:
         claimed.release()
-        raise OutputError(f"{excerpt(target)}: in use by another dualarm process (locked); wait for it to end or give another output directory", str(target)) from None
+        raise OutputError(
+            f"{excerpt(target)}: in use by another dualarm process (locked); wait for it to end or give another output directory",
+            str(target),
+        ) from None
     try:
         _check(target, kind, layout)
     except BaseException:
@@ -285,7 +305,9 @@ def _make(target: Path, kind: str) -> None:
         target.mkdir(parents=True)
     except FileExistsError:
         if not target.is_dir():
-            raise OutputError(f"{excerpt(target)}: exists and is not a directory; give a directory", str(target)) from None
+            raise OutputError(
+                f"{excerpt(target)}: exists and is not a directory; give a directory", str(target)
+            ) from None
         return
     except OSError as exc:
         raise _os_error(target, "cannot create the directory", exc) from None
@@ -327,10 +349,14 @@ def _check(target: Path, kind: str, layout: Layout) -> None:
             return
         if marked is None and not layout.add_only:
             raise OutputError(
-                f"{excerpt(target)}: not a {kind} directory made by dualarm (no {MARKER} marker) and not empty: it holds '{excerpt(entries[0])}'; give an empty or new directory", str(target)
+                f"{excerpt(target)}: not a {kind} directory made by dualarm (no {MARKER} marker) and not empty: it holds '{excerpt(entries[0])}'; give an empty or new directory",
+                str(target),
             )
         if marked is not None and marked != kind:
-            raise OutputError(f"{excerpt(target)}: not a {kind} directory (its {MARKER} marker says '{excerpt(marked)}'); give another directory", str(target))
+            raise OutputError(
+                f"{excerpt(target)}: not a {kind} directory (its {MARKER} marker says '{excerpt(marked)}'); give another directory",
+                str(target),
+            )
         foreign = _foreign(target, layout, strict=False, held=[])
     except OSError as exc:
         raise _os_error(target, "cannot read the directory", exc) from None
@@ -339,10 +365,13 @@ def _check(target: Path, kind: str, layout: Layout) -> None:
 
 
 def _foreign_error(target: Path, kind: str, foreign: Path) -> OutputError:
-    return OutputError(f"{excerpt(target)}: holds '{excerpt(foreign.relative_to(target))}', which dualarm does not write into a {kind} directory; move it away or give another directory", str(target))
+    return OutputError(
+        f"{excerpt(target)}: holds '{excerpt(foreign.relative_to(target))}', which dualarm does not write into a {kind} directory; move it away or give another directory",
+        str(target),
+    )
 
 
-def _match(name: str, patterns: "Mapping[str, Layout | str] | tuple[str, ...]") -> "Layout | str | None":
+def _match(name: str, patterns: Mapping[str, Layout | str] | tuple[str, ...]) -> Layout | str | None:
     for pattern in patterns:
         if fnmatch.fnmatchcase(name, pattern):
             return patterns[pattern] if isinstance(patterns, Mapping) else pattern
@@ -367,7 +396,10 @@ def _foreign(directory: Path, layout: Layout, *, strict: bool, held: list[int]) 
             return path  # dualarm writes no links
         if entry.is_file():
             ours = (MARKER, *layout.files)
-            if _match(entry.name, ours) is not None or _match(entry.name, tuple(PARTIAL.format(p) for p in ours)) is not None:
+            if (
+                _match(entry.name, ours) is not None
+                or _match(entry.name, tuple(PARTIAL.format(p) for p in ours)) is not None
+            ):
                 continue
             return path
         sub = _match(entry.name, layout.dirs) if entry.is_dir() else None
@@ -391,16 +423,18 @@ def _lock_inside(path: Path, held: list[int]) -> None:
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        raise OutputError(f"{excerpt(path)}: in use by another dualarm process (locked); wait for it to end", str(path)) from None
+        raise OutputError(
+            f"{excerpt(path)}: in use by another dualarm process (locked); wait for it to end", str(path)
+        ) from None
 
 
 def new_run_id() -> str:
     """A run id: UTC start time and 6 random hex digits, e.g. ``20261121-130501-a1b2c3``."""
-    return datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
+    return datetime.now(UTC).strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 @dataclass
@@ -421,7 +455,7 @@ class RunDirectory:
     output: OutputDir | None = None
 
     @classmethod
-    def create(cls, out_dir: Path, task_name: str, manifest: Mapping[str, object]) -> "RunDirectory":
+    def create(cls, out_dir: Path, task_name: str, manifest: Mapping[str, object]) -> RunDirectory:
         """Make the staging directory for a new run of ``task_name`` under ``out_dir``.
 
         ``out_dir`` is claimed as a recordings directory (:func:`claim_output_dir`) and stays
@@ -460,7 +494,7 @@ class RunDirectory:
         """The run's id (its directory name)."""
         return self.final.name
 
-    def conclude(self, verdict: "Verdict") -> None:
+    def conclude(self, verdict: Verdict) -> None:
         """Fix the run's verdict (``status``: complete, violated or failed; ``error``; ``violations``, each with its check, stage, message and time) and end time in the manifest."""
         self.manifest["status"] = verdict.status
         self.manifest["error"] = verdict.error

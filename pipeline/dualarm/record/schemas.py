@@ -25,7 +25,11 @@ _HAND_VECTORS = {"type": "object", "additionalProperties": _VECTOR3, _KEYS: "han
 
 def named(schema: Mapping, keys: Mapping[str, Sequence[str]]) -> dict:
     """``schema`` with each map's keys (kind -> names; kinds ``joints``, ``hands``, ``metrics``) listed as its ``properties``."""
-    filled = {key: named(value, keys) if isinstance(value, Mapping) else value for key, value in schema.items() if key != _KEYS}
+    filled = {
+        key: named(value, keys) if isinstance(value, Mapping) else value
+        for key, value in schema.items()
+        if key != _KEYS
+    }
     if _KEYS in schema:
         filled["properties"] = {name: filled["additionalProperties"] for name in keys.get(schema[_KEYS], ())}
     return filled
@@ -52,7 +56,11 @@ METRICS = {
     "title": "dualarm.Metrics",
     "description": "The run's metrics, keys <stage>.<name> with the unit as suffix (as in metrics.json).",
     "type": "object",
-    "properties": {"t": _NUMBER, "rep": {"type": "integer"}, "values": {"type": "object", "additionalProperties": _NUMBER, _KEYS: "metrics"}},
+    "properties": {
+        "t": _NUMBER,
+        "rep": {"type": "integer"},
+        "values": {"type": "object", "additionalProperties": _NUMBER, _KEYS: "metrics"},
+    },
     "required": ["t", "rep", "values"],
 }
 
@@ -94,10 +102,27 @@ IK_SAMPLE = {
             **_HAND_MAP,
             "description": "hand -> angle of R_asked^T R_reached [rad] (IK stages; measured even where the method solved positions only)",
         },
-        "task_space": {"type": "string", "enum": ["pose", "position"], "description": "what the method solved: the hands' poses, or their positions only"},
-        "arm_angle_rad": {**_HAND_MAP, "description": "hand -> arm angle [rad]: psi of MC-Inverse eq (1) on an S-R-S arm, else the stereographic SEW angle"},
+        "task_space": {
+            "type": "string",
+            "enum": ["pose", "position"],
+            "description": "what the method solved: the hands' poses, or their positions only",
+        },
+        "arm_angle_rad": {
+            **_HAND_MAP,
+            "description": "hand -> arm angle [rad]: psi of MC-Inverse eq (1) on an S-R-S arm, else the stereographic SEW angle",
+        },
     },
-    "required": ["t", "rep", "method", "status", "solve_time_s", "position", "velocity", "hand_error_m", "arm_angle_rad"],
+    "required": [
+        "t",
+        "rep",
+        "method",
+        "status",
+        "solve_time_s",
+        "position",
+        "velocity",
+        "hand_error_m",
+        "arm_angle_rad",
+    ],
 }
 
 JOINT_LIMITS = {
@@ -164,7 +189,18 @@ EXECUTED_SAMPLE = {
         "environment_contacts": {"type": "integer", "description": "unexpected robot-environment contact points"},
         "expected_contacts": {"type": "integer", "description": "contact points of pairs the task expects"},
     },
-    "required": ["t", "rep", "position", "velocity", "command", "hand_position", "hand_error_m", "self_contacts", "environment_contacts", "expected_contacts"],
+    "required": [
+        "t",
+        "rep",
+        "position",
+        "velocity",
+        "command",
+        "hand_position",
+        "hand_error_m",
+        "self_contacts",
+        "environment_contacts",
+        "expected_contacts",
+    ],
 }
 
 CONTACT = {

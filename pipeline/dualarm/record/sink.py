@@ -38,16 +38,24 @@ class Sink(Protocol):
     def environment(self, objects: Sequence[Any]) -> None:
         """The task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`)."""
 
-    def reference(self, ref: "CartesianReference") -> None:
+    def reference(self, ref: CartesianReference) -> None:
         """The path stage's product."""
 
-    def joint_path(self, path: "JointPath", velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+    def joint_path(
+        self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik"
+    ) -> None:
         """The IK (or plan) stage's product, with the joints' velocity limits [rad/s] and each hand's arm angle [rad] per sample."""
 
-    def trajectory(self, traj: "JointTrajectory", limits: Mapping[str, np.ndarray], hand_positions: Mapping[str, np.ndarray], extras: Mapping[str, np.ndarray] = ...) -> None:
+    def trajectory(
+        self,
+        traj: JointTrajectory,
+        limits: Mapping[str, np.ndarray],
+        hand_positions: Mapping[str, np.ndarray],
+        extras: Mapping[str, np.ndarray] = ...,
+    ) -> None:
         """A retime or smooth stage's product, its limits (kind -> (n,)), the hands' positions (M, 3) [m] and extra per-sample arrays."""
 
-    def execution(self, log: "ExecutionLog") -> None:
+    def execution(self, log: ExecutionLog) -> None:
         """The execute stage's product (with its approach's log, when the approach was played)."""
 
     def metrics(self, values: Mapping[str, float], t: float) -> None:
@@ -90,16 +98,24 @@ class NullSink:
     def environment(self, objects: Sequence[Any]) -> None:
         """Ignored."""
 
-    def reference(self, ref: "CartesianReference") -> None:
+    def reference(self, ref: CartesianReference) -> None:
         """Ignored."""
 
-    def joint_path(self, path: "JointPath", velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+    def joint_path(
+        self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik"
+    ) -> None:
         """Ignored."""
 
-    def trajectory(self, traj: "JointTrajectory", limits: Mapping[str, np.ndarray], hand_positions: Mapping[str, np.ndarray], extras: Mapping[str, np.ndarray] = {}) -> None:
+    def trajectory(
+        self,
+        traj: JointTrajectory,
+        limits: Mapping[str, np.ndarray],
+        hand_positions: Mapping[str, np.ndarray],
+        extras: Mapping[str, np.ndarray] = {},
+    ) -> None:
         """Ignored."""
 
-    def execution(self, log: "ExecutionLog") -> None:
+    def execution(self, log: ExecutionLog) -> None:
         """Ignored."""
 
     def metrics(self, values: Mapping[str, float], t: float) -> None:
@@ -141,7 +157,9 @@ def record_level(level: str) -> str:
         InvalidArgumentError: another value (naming the levels).
     """
     if level not in _RECORDED:
-        raise InvalidArgumentError("record", f"unknown recording level '{excerpt(level)}' (levels: {', '.join(RECORD_LEVELS)})")
+        raise InvalidArgumentError(
+            "record", f"unknown recording level '{excerpt(level)}' (levels: {', '.join(RECORD_LEVELS)})"
+        )
     return level
 
 
@@ -186,22 +204,30 @@ class Tee(NullSink):
         for sink in self.sinks:
             sink.environment(objects)
 
-    def reference(self, ref: "CartesianReference") -> None:
+    def reference(self, ref: CartesianReference) -> None:
         """Handed to each sink."""
         for sink in self.sinks:
             sink.reference(ref)
 
-    def joint_path(self, path: "JointPath", velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik") -> None:
+    def joint_path(
+        self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik"
+    ) -> None:
         """Handed to each sink."""
         for sink in self.sinks:
             sink.joint_path(path, velocity_limits, arm_angles, stage)
 
-    def trajectory(self, traj: "JointTrajectory", limits: Mapping[str, np.ndarray], hand_positions: Mapping[str, np.ndarray], extras: Mapping[str, np.ndarray] = {}) -> None:
+    def trajectory(
+        self,
+        traj: JointTrajectory,
+        limits: Mapping[str, np.ndarray],
+        hand_positions: Mapping[str, np.ndarray],
+        extras: Mapping[str, np.ndarray] = {},
+    ) -> None:
         """Handed to each sink."""
         for sink in self.sinks:
             sink.trajectory(traj, limits, hand_positions, extras)
 
-    def execution(self, log: "ExecutionLog") -> None:
+    def execution(self, log: ExecutionLog) -> None:
         """Handed to each sink."""
         for sink in self.sinks:
             sink.execution(log)
@@ -221,7 +247,14 @@ class Tee(NullSink):
 #: Colour of each hand's reference path.
 HAND_COLORS = {"left": (40, 120, 230), "right": (230, 90, 40)}
 #: Colour of each stage's hand traces, one per stage so that the traces tell apart where they part.
-STAGE_COLORS = {"ik": (60, 170, 80), "plan": (60, 170, 80), "retime": (150, 90, 200), "smooth": (0, 170, 170), "approach": (150, 150, 150), "execute": (220, 40, 40)}
+STAGE_COLORS = {
+    "ik": (60, 170, 80),
+    "plan": (60, 170, 80),
+    "retime": (150, 90, 200),
+    "smooth": (0, 170, 170),
+    "approach": (150, 150, 150),
+    "execute": (220, 40, 40),
+}
 #: Period of the robot's animation (/tf and the Rerun URDF) for stages sampled faster [s].
 ANIMATION_PERIOD_S = 0.01
 

@@ -72,7 +72,15 @@ def _quote(value: object) -> str:
     return excerpt(repr(value))
 
 
-_JSON_TYPES = {dict: "an object", list: "a list", str: "a string", bool: "a boolean", int: "a number", float: "a number", type(None): "null"}
+_JSON_TYPES = {
+    dict: "an object",
+    list: "a list",
+    str: "a string",
+    bool: "a boolean",
+    int: "a number",
+    float: "a number",
+    type(None): "null",
+}
 
 
 def _json_type(value: object) -> str:
@@ -97,7 +105,9 @@ def _read_bytes(path: Path, what: str) -> bytes:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0))
         with os.fdopen(fd, "rb") as file:
             if not stat.S_ISREG(os.fstat(file.fileno()).st_mode):
-                raise RecordingError(f"{excerpt(path)}: cannot read the {what}: it was replaced by {kind(path)} while being opened")
+                raise RecordingError(
+                    f"{excerpt(path)}: cannot read the {what}: it was replaced by {kind(path)} while being opened"
+                )
             return file.read()
     except OSError as exc:
         raise RecordingError(f"{excerpt(path)}: cannot read the {what}: {cause(exc)}") from None
@@ -109,7 +119,9 @@ def _json_object(path: Path, what: str) -> dict[str, Any]:
     try:
         value = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise RecordingError(f"{excerpt(path)}: not valid JSON ({exc.msg}, line {exc.lineno} column {exc.colno})") from None
+        raise RecordingError(
+            f"{excerpt(path)}: not valid JSON ({exc.msg}, line {exc.lineno} column {exc.colno})"
+        ) from None
     except (ValueError, RecursionError) as exc:  # an integer of more than 4300 digits, nesting too deep
         raise RecordingError(f"{excerpt(path)}: not valid JSON ({excerpt(f'{type(exc).__name__}: {exc}')})") from None
     if not isinstance(value, dict):
@@ -132,9 +144,18 @@ class Manifest(BaseModel):
     record: RecordLevel = "full"
 
 
-_METRICS = TypeAdapter(dict[Annotated[str, StringConstraints(pattern=f"^{METRIC_KEY}$")], Annotated[float, Field(strict=True, allow_inf_nan=False)] | None])
+_METRICS = TypeAdapter(
+    dict[
+        Annotated[str, StringConstraints(pattern=f"^{METRIC_KEY}$")],
+        Annotated[float, Field(strict=True, allow_inf_nan=False)] | None,
+    ]
+)
 #: What a value that fails a pattern should be, by the key it sits at.
-_PATTERNS = {"run_id": "a run id (like 20261121-130501-a1b2c3)", "task": "a task name (letters, digits, '_' and '-')", "[key]": "a metric key <stage>.<name>"}
+_PATTERNS = {
+    "run_id": "a run id (like 20261121-130501-a1b2c3)",
+    "task": "a task name (letters, digits, '_' and '-')",
+    "[key]": "a metric key <stage>.<name>",
+}
 
 
 def _invalid(path: Path, exc: ValidationError) -> RecordingError:
@@ -182,7 +203,9 @@ def path_name(value: object, field: Literal["task", "run_id"], directory: Path) 
     """
     if isinstance(value, str) and re.fullmatch(TASK_NAME if field == "task" else RUN_ID, value):
         return value
-    raise RecordingError(f"{excerpt(directory / MANIFEST)}: {field} {_quote(value)} is not {_PATTERNS[field]}; it cannot name a directory")
+    raise RecordingError(
+        f"{excerpt(directory / MANIFEST)}: {field} {_quote(value)} is not {_PATTERNS[field]}; it cannot name a directory"
+    )
 
 
 @dataclass(frozen=True)
@@ -279,14 +302,27 @@ def verify_mcap(path: Path) -> VerifiedMcap:
         manifest, metrics = _stored_manifest(reader), _recorded_metrics(reader)
     except CRCValidationError as exc:
         part = "data section" if isinstance(exc.record, DataEnd) else type(exc.record).__name__.lower()
-        raise RecordingError(f"{excerpt(path)}: corrupt MCAP recording ({part} CRC mismatch: the file was altered after it was written)") from None
+        raise RecordingError(
+            f"{excerpt(path)}: corrupt MCAP recording ({part} CRC mismatch: the file was altered after it was written)"
+        ) from None
     except EndOfFile:
-        raise RecordingError(f"{excerpt(path)}: not a readable MCAP recording (truncated: it ends inside a record; its writer never finished?)") from None
+        raise RecordingError(
+            f"{excerpt(path)}: not a readable MCAP recording (truncated: it ends inside a record; its writer never finished?)"
+        ) from None
     except InvalidMagic:
-        raise RecordingError(f"{excerpt(path)}: not a readable MCAP recording (it does not begin and end with the MCAP magic bytes)") from None
+        raise RecordingError(
+            f"{excerpt(path)}: not a readable MCAP recording (it does not begin and end with the MCAP magic bytes)"
+        ) from None
     except Exception as exc:  # any other failure to parse (struct, McapError, JSON, zstd...) is corruption
-        raise RecordingError(f"{excerpt(path)}: not a readable MCAP recording ({excerpt(f'{type(exc).__name__}: {exc}')})") from None
-    return VerifiedMcap(path=path, summary=summary, manifest=MappingProxyType(manifest), metrics=None if metrics is None else MappingProxyType(metrics))
+        raise RecordingError(
+            f"{excerpt(path)}: not a readable MCAP recording ({excerpt(f'{type(exc).__name__}: {exc}')})"
+        ) from None
+    return VerifiedMcap(
+        path=path,
+        summary=summary,
+        manifest=MappingProxyType(manifest),
+        metrics=None if metrics is None else MappingProxyType(metrics),
+    )
 
 
 def _check_one_run(manifest: Mapping[str, object], mcap: VerifiedMcap) -> None:
@@ -294,7 +330,9 @@ def _check_one_run(manifest: Mapping[str, object], mcap: VerifiedMcap) -> None:
     for key in ("task", "run_id", "status", "stages", "record"):
         stored = mcap.manifest.get(key)
         if stored != manifest.get(key):
-            raise RecordingError(f"{excerpt(mcap.path)}: records {key} {_quote(stored)}, but {MANIFEST} says {_quote(manifest.get(key))}: the files are not of one run")
+            raise RecordingError(
+                f"{excerpt(mcap.path)}: records {key} {_quote(stored)}, but {MANIFEST} says {_quote(manifest.get(key))}: the files are not of one run"
+            )
 
 
 def _same_metric(value: float | None, recorded: object) -> bool:
@@ -303,19 +341,34 @@ def _same_metric(value: float | None, recorded: object) -> bool:
     return (value is None and not math.isfinite(recorded)) or value == recorded
 
 
-def _check_metrics(path: Path, status: str, metrics: Mapping[str, float | None] | None, recorded: Mapping[str, object] | None, *, in_mcap: bool = True) -> None:
+def _check_metrics(
+    path: Path,
+    status: str,
+    metrics: Mapping[str, float | None] | None,
+    recorded: Mapping[str, object] | None,
+    *,
+    in_mcap: bool = True,
+) -> None:
     """``metrics.json`` exists if the run finished and (``in_mcap``: the run has a ``run.mcap``) equals the metrics recorded in ``run.mcap``."""
     if metrics is None:
         if status in FINISHED:
-            raise RecordingError(f"{excerpt(path)}: missing, but the run's status is '{status}' (a finished run has its metrics)")
+            raise RecordingError(
+                f"{excerpt(path)}: missing, but the run's status is '{status}' (a finished run has its metrics)"
+            )
         return
     if not in_mcap:
         return
     if recorded is None:
-        raise RecordingError(f"{excerpt(path)}: {MCAP_FILE} records no metrics for this run (status '{status}'): not this run's metrics")
+        raise RecordingError(
+            f"{excerpt(path)}: {MCAP_FILE} records no metrics for this run (status '{status}'): not this run's metrics"
+        )
     extra, lacking = sorted(set(metrics) - set(recorded)), sorted(set(recorded) - set(metrics))
     if extra or lacking:
-        raise RecordingError(f"{excerpt(path)}: keys differ from the metrics {MCAP_FILE} records (here only: {_quote(extra)}; there only: {_quote(lacking)}): not this run's metrics")
+        raise RecordingError(
+            f"{excerpt(path)}: keys differ from the metrics {MCAP_FILE} records (here only: {_quote(extra)}; there only: {_quote(lacking)}): not this run's metrics"
+        )
     for key, value in metrics.items():
         if not _same_metric(value, recorded[key]):
-            raise RecordingError(f"{excerpt(path)}: {key} = {_quote(value)}, but {MCAP_FILE} records {_quote(recorded[key])}: not this run's metrics")
+            raise RecordingError(
+                f"{excerpt(path)}: {key} = {_quote(value)}, but {MCAP_FILE} records {_quote(recorded[key])}: not this run's metrics"
+            )

@@ -83,14 +83,18 @@ def viewable(run_dir: str | Path) -> Viewable:
     data = read_run(run_dir)
     directory = data.directory.absolute()
     if data.record == "metrics":
-        raise RecordingError(f"{excerpt(directory)}: recorded with --record metrics: nothing to view (only manifest.json and metrics.json)")
+        raise RecordingError(
+            f"{excerpt(directory)}: recorded with --record metrics: nothing to view (only manifest.json and metrics.json)"
+        )
     layout = directory / FOXGLOVE_LAYOUT
     foxglove = [f"Foxglove (or Lichtblick): open {directory / MCAP_FILE}"]
     if layout.is_file():
         foxglove.append(f"Foxglove layout: import {layout} (Layouts > Import from file...)")
     else:
         foxglove.append(f"Foxglove layout: none in this run (no {FOXGLOVE_LAYOUT}: recorded by an earlier dualarm)")
-    return Viewable(directory=directory, record=data.record, stages=tuple(data.recorded_stages), foxglove=tuple(foxglove))
+    return Viewable(
+        directory=directory, record=data.record, stages=tuple(data.recorded_stages), foxglove=tuple(foxglove)
+    )
 
 
 def check_stage(run: Viewable, stage: str) -> str:
@@ -105,7 +109,9 @@ def check_stage(run: Viewable, stage: str) -> str:
         return stage
     held = ", ".join(run.stages)
     if stage in ALL_STAGES and run.record != "full":
-        raise DualarmError(f"--stage '{stage}': not in this run's recording (recorded with --record {run.record}; stages: {held})")
+        raise DualarmError(
+            f"--stage '{stage}': not in this run's recording (recorded with --record {run.record}; stages: {held})"
+        )
     raise DualarmError(f"--stage '{excerpt(stage)}': the run has no such stage (stages: {held})")
 
 
@@ -125,7 +131,7 @@ def blueprint_file(run: Viewable, stage: str, directory: Path) -> Path:
     return path
 
 
-def _recorded_robot(mcap: Path, directory: Path) -> "Robot":
+def _recorded_robot(mcap: Path, directory: Path) -> Robot:
     """The robot whose robot.toml and URDF ``mcap`` holds as attachments, unpacked into ``directory``."""
     from mcap.reader import make_reader
 
@@ -153,7 +159,9 @@ def rerun_executable() -> Path:
         return beside
     found = shutil.which("rerun")
     if found is None:
-        raise DualarmError(f"no Rerun viewer: no 'rerun' beside {excerpt(sys.executable)} nor on PATH (it comes with rerun-sdk: pip install rerun-sdk)")
+        raise DualarmError(
+            f"no Rerun viewer: no 'rerun' beside {excerpt(sys.executable)} nor on PATH (it comes with rerun-sdk: pip install rerun-sdk)"
+        )
     return Path(found)
 
 
@@ -190,7 +198,14 @@ def _last_line(log: IO[bytes]) -> str:
 def _viewer(executable: Path, arguments: Sequence[str]) -> Iterator[tuple[subprocess.Popen, IO[bytes]]]:
     """Rerun's command line ``executable`` with ``arguments``, in its own session (its output kept in a temporary file); its process group is stopped when the block ends."""
     with tempfile.TemporaryFile() as log:
-        process = subprocess.Popen([str(executable), *arguments], stdin=subprocess.DEVNULL, stdout=log, stderr=log, start_new_session=True, env={**os.environ, "NO_COLOR": "1"})
+        process = subprocess.Popen(
+            [str(executable), *arguments],
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=log,
+            start_new_session=True,
+            env={**os.environ, "NO_COLOR": "1"},
+        )
         try:
             yield process, log
         finally:
@@ -235,7 +250,9 @@ def check_display() -> None:
         DualarmError: no display (:func:`has_display`), pointing to ``--web``.
     """
     if not has_display():
-        raise DualarmError("no display for Rerun's native viewer (DISPLAY and WAYLAND_DISPLAY are unset): use dualarm view --web")
+        raise DualarmError(
+            "no display for Rerun's native viewer (DISPLAY and WAYLAND_DISPLAY are unset): use dualarm view --web"
+        )
 
 
 def open_native(executable: Path, files: Sequence[Path]) -> None:
@@ -258,14 +275,25 @@ def serve_web(executable: Path, files: Sequence[Path]) -> Iterator[tuple[str, su
         DualarmError: the viewer stopped, or did not answer within :data:`START_TIMEOUT_S`.
     """
     grpc_port, web_port = _free_ports(2)
-    arguments = [*(str(f) for f in files), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
+    arguments = [
+        *(str(f) for f in files),
+        "--serve-web",
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        str(grpc_port),
+        "--web-viewer-port",
+        str(web_port),
+    ]
     with _viewer(executable, arguments) as (process, log):
         deadline = time.monotonic() + START_TIMEOUT_S
         while not all(_answers(port) for port in (grpc_port, web_port)):
             if process.poll() is not None:
                 raise _failed(process, log, "Rerun's web viewer")
             if time.monotonic() > deadline:
-                raise DualarmError(f"Rerun's web viewer did not answer on port {web_port} within {START_TIMEOUT_S:g} s: {excerpt(_last_line(log), 200)}")
+                raise DualarmError(
+                    f"Rerun's web viewer did not answer on port {web_port} within {START_TIMEOUT_S:g} s: {excerpt(_last_line(log), 200)}"
+                )
             time.sleep(0.05)
         yield web_url(web_port, grpc_port), process
         if process.poll() not in (None, 0):

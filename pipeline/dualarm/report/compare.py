@@ -35,7 +35,20 @@ WALL_CLOCK = re.compile(r"(solve|planning|check|wall)_time")
 MANIFEST_ROWS, METRICS_ROWS = "manifest.json", "metrics.json"
 _KEYS = ["rep", "t_ns", "k"]
 #: Columns of :attr:`Comparison.table`.
-COLUMNS = ("topic", "field", "max_difference", "t", "rep", "first_beyond_t", "first_beyond_rep", "rows_a", "rows_b", "aligned", "wall_clock", "note")
+COLUMNS = (
+    "topic",
+    "field",
+    "max_difference",
+    "t",
+    "rep",
+    "first_beyond_t",
+    "first_beyond_rep",
+    "rows_a",
+    "rows_b",
+    "aligned",
+    "wall_clock",
+    "note",
+)
 
 
 @dataclass(frozen=True)
@@ -62,7 +75,9 @@ class Comparison:
         """The judged rows beyond the tolerance, the earliest divergence first."""
         judged = self.table[~self.table["wall_clock"]]
         beyond = judged[judged["max_difference"] > self.tolerance]
-        return beyond.sort_values(["first_beyond_t", "first_beyond_rep", "topic", "field"], na_position="last", kind="stable")
+        return beyond.sort_values(
+            ["first_beyond_t", "first_beyond_rep", "topic", "field"], na_position="last", kind="stable"
+        )
 
     @property
     def within(self) -> bool:
@@ -96,7 +111,9 @@ def _row(topic: str, field: str, rows_a: int, rows_b: int, aligned: int, **value
     return row
 
 
-def _field(topic: str, field: str, both: pd.DataFrame, tolerance: float, counts: tuple[int, int, int]) -> dict[str, object]:
+def _field(
+    topic: str, field: str, both: pd.DataFrame, tolerance: float, counts: tuple[int, int, int]
+) -> dict[str, object]:
     """One field of the aligned rows ``both`` (columns ``<field>_a`` and ``<field>_b``)."""
     a, b = both[f"{field}_a"], both[f"{field}_b"]
     if pd.api.types.is_numeric_dtype(a) and pd.api.types.is_numeric_dtype(b):
@@ -108,7 +125,11 @@ def _field(topic: str, field: str, both: pd.DataFrame, tolerance: float, counts:
     else:
         unequal = (a.astype(str) != b.astype(str)).to_numpy()
         diff = np.where(unequal, np.inf, 0.0)
-        note = f"text differs in {unequal.sum()} rows, first {a[unequal].iloc[0]!r} vs {b[unequal].iloc[0]!r}" if unequal.any() else ""
+        note = (
+            f"text differs in {unequal.sum()} rows, first {a[unequal].iloc[0]!r} vs {b[unequal].iloc[0]!r}"
+            if unequal.any()
+            else ""
+        )
     if len(diff) == 0:
         return _row(topic, field, *counts, max_difference=np.nan, note="no rows aligned")
     worst = int(np.argmax(diff))
@@ -177,7 +198,15 @@ def compare_metrics(a: Mapping[str, float | None], b: Mapping[str, float | None]
         x, y = a[key], b[key]
         if x is None or y is None:
             same = x is None and y is None
-            rows.append(_row(METRICS_ROWS, key, *counts, max_difference=0.0 if same else np.inf, note="" if same else f"null in {'A' if x is None else 'B'} only"))
+            rows.append(
+                _row(
+                    METRICS_ROWS,
+                    key,
+                    *counts,
+                    max_difference=0.0 if same else np.inf,
+                    note="" if same else f"null in {'A' if x is None else 'B'} only",
+                )
+            )
         else:
             rows.append(_row(METRICS_ROWS, key, *counts, max_difference=_difference(float(x), float(y))))
     return rows
@@ -204,7 +233,14 @@ def compare_runs(run_a: str | Path | RunData, run_b: str | Path | RunData, toler
         if topic not in a.topics or topic not in b.topics:
             present = a.topics if topic in a.topics else b.topics
             rows.append(
-                _row(topic, "(topic)", len(present[topic]) if topic in a.topics else 0, len(present[topic]) if topic in b.topics else 0, 0, note=f"only in {'A' if topic in a.topics else 'B'}")
+                _row(
+                    topic,
+                    "(topic)",
+                    len(present[topic]) if topic in a.topics else 0,
+                    len(present[topic]) if topic in b.topics else 0,
+                    0,
+                    note=f"only in {'A' if topic in a.topics else 'B'}",
+                )
             )
             continue
         rows.extend(compare_topic(topic, a[topic], b[topic], tolerance))

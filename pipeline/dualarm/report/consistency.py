@@ -112,7 +112,9 @@ def run_consistency(
         refuse_unsuited(METHODS[m], task.robot, hands)
     columns = COLUMNS if any_arm_angle(task) else tuple(c for c in COLUMNS if c not in ARM_ANGLE_COLUMNS)
     out_dir = Path(out_dir)
-    _claim = claim_output_dir(out_dir, "consistency")  # refuses a directory holding files dualarm did not write; locked until this returns
+    _claim = claim_output_dir(
+        out_dir, "consistency"
+    )  # refuses a directory holding files dualarm did not write; locked until this returns
     runs_dir = out_dir / "runs"
     rows: list[dict[str, object]] = []
     samples: dict[str, pd.DataFrame] = {}
@@ -127,19 +129,37 @@ def run_consistency(
                 stages=CONSISTENCY_STAGES,
                 out_dir=runs_dir,
                 seed=seed,
-                command=["dualarm", "consistency", str(task_file), "--methods", method, *(["--robot", str(robot)] if robot is not None else [])],
+                command=[
+                    "dualarm",
+                    "consistency",
+                    str(task_file),
+                    "--methods",
+                    method,
+                    *(["--robot", str(robot)] if robot is not None else []),
+                ],
             )
             assert recorded.directory is not None  # record_run always returns its run directory
             run = read_run(recorded.directory)
         except DualarmError as exc:
             failed = sorted(set((runs_dir / task.name).glob("*")) - before)
-            rows.append({"method": method, "status": "failed", "error": str(exc), "violation": "", "run": str(failed[-1]) if failed else ""})
+            rows.append(
+                {
+                    "method": method,
+                    "status": "failed",
+                    "error": str(exc),
+                    "violation": "",
+                    "run": str(failed[-1]) if failed else "",
+                }
+            )
             continue
         rows.append(_row(method, run))
         samples[method] = run["/ik/sample"]
     table = pd.DataFrame(rows, columns=["method", "status", "error", "violation", "run", *columns])
     written = _figures(task, samples, out_dir)
-    csv = write_whole(out_dir / "consistency.csv", table[["method", *columns, "status", "violation", "error", "run"]].to_csv(index=False))
+    csv = write_whole(
+        out_dir / "consistency.csv",
+        table[["method", *columns, "status", "violation", "error", "run"]].to_csv(index=False),
+    )
     markdown = write_whole(out_dir / "consistency.md", _markdown(task, table, written, repetitions, columns))
     return Consistency(table=table, csv=csv, markdown=markdown, figures=written)
 
@@ -155,7 +175,14 @@ def _row(method: str, run: RunData) -> dict[str, object]:
     metrics = {k.removeprefix("ik."): v for k, v in run.metrics.items() if k.startswith("ik.")}
     violations = run.violations or [""]
     first = violations[0] + (f" (and {len(violations) - 1} more)" if len(violations) > 1 else "")
-    return {"method": method, "status": run.status, "error": "", "violation": first, "run": str(run.directory), **{c: metrics.get(c, np.nan) for c in COLUMNS}}
+    return {
+        "method": method,
+        "status": run.status,
+        "error": "",
+        "violation": first,
+        "run": str(run.directory),
+        **{c: metrics.get(c, np.nan) for c in COLUMNS},
+    }
 
 
 def _figures(task, samples: dict[str, pd.DataFrame], out_dir: Path) -> tuple[Path, ...]:
@@ -166,16 +193,24 @@ def _figures(task, samples: dict[str, pd.DataFrame], out_dir: Path) -> tuple[Pat
     written = []
     for hand in task.spec.hands:
         joints = list(task.robot.hand_chain(hand).joint_names)
-        title = f"{task.name}: {hand} arm joints per repetition" + (f" (cf. MC-Inverse {joints_figure})" if joints_figure != "-" else "")
+        title = f"{task.name}: {hand} arm joints per repetition" + (
+            f" (cf. MC-Inverse {joints_figure})" if joints_figure != "-" else ""
+        )
         written.append(figures.joints_per_repetition(samples, joints, title, out_dir / f"joints_{hand}.png"))
-    hands = [h for h in task.spec.hands if any(f"arm_angle_rad.{h}" in sample.columns for sample in samples.values())]  # arms with an arm angle only
+    hands = [
+        h for h in task.spec.hands if any(f"arm_angle_rad.{h}" in sample.columns for sample in samples.values())
+    ]  # arms with an arm angle only
     if hands:
-        title = f"{task.name}: arm angle per repetition" + (f" (cf. MC-Inverse {angle_figure})" if angle_figure != "-" else "")
+        title = f"{task.name}: arm angle per repetition" + (
+            f" (cf. MC-Inverse {angle_figure})" if angle_figure != "-" else ""
+        )
         written.append(figures.arm_angle_per_repetition(samples, hands, title, out_dir / "arm_angle.png"))
     return tuple(written)
 
 
-def _markdown(task, table: pd.DataFrame, written: tuple[Path, ...], repetitions: int | None, columns: tuple[str, ...] = COLUMNS) -> str:
+def _markdown(
+    task, table: pd.DataFrame, written: tuple[Path, ...], repetitions: int | None, columns: tuple[str, ...] = COLUMNS
+) -> str:
     reps = repetitions or task.spec.repetitions
     lines = [
         f"# Consistency: {task.name}, {reps} repetitions",
@@ -192,7 +227,13 @@ def _markdown(task, table: pd.DataFrame, written: tuple[Path, ...], repetitions:
         if row["status"] == "failed":
             lines.append(f"| {row['method']} | failed: {row['error']} |" + " |" * len(columns))
             continue
-        lines.append("| " + " | ".join([method_label(row), str(row["status"]), *(_cell(row[c]) for c in columns), str(row["violation"])]) + " |")
+        lines.append(
+            "| "
+            + " | ".join(
+                [method_label(row), str(row["status"]), *(_cell(row[c]) for c in columns), str(row["violation"])]
+            )
+            + " |"
+        )
     lines += ["", "Runs:", ""] + [f"- {row['method']}: `{row['run']}`" for _, row in table.iterrows() if row["run"]]
     if written:
         lines += ["", "Figures:", ""] + [f"![{p.stem}]({p.name})" for p in written]

@@ -113,13 +113,27 @@ TAB10 = tuple(TABLEAU_COLORS)
 def _per_repetition(ax, sample: pd.DataFrame, column: str, colours: tuple[str, ...]) -> None:
     """``column`` of ``sample`` against the time within the repetition, one line per repetition; failed samples are left out; a column the sample lacks (an arm angle of an arm that is not S-R-S) is said so in the panel."""
     if column not in sample.columns:
-        ax.text(0.5, 0.5, f"no {column}\n(not S-R-S)" if column.startswith("arm_angle_rad.") else f"no {column}", ha="center", va="center", fontsize=7, transform=ax.transAxes)
+        ax.text(
+            0.5,
+            0.5,
+            f"no {column}\n(not S-R-S)" if column.startswith("arm_angle_rad.") else f"no {column}",
+            ha="center",
+            va="center",
+            fontsize=7,
+            transform=ax.transAxes,
+        )
         return
     phase = time_in_repetition(sample["t"].to_numpy(), sample["rep"].to_numpy())
     values = np.where(sample["status"].to_numpy() == 0, sample[column].to_numpy(), np.nan)
     for i, rep in enumerate(np.unique(sample["rep"])):
         mine = sample["rep"].to_numpy() == rep
-        ax.plot(phase[mine], values[mine], color=colours[i % len(colours)], lw=1.0, label=ROMAN[i] if i < len(ROMAN) else str(rep + 1))
+        ax.plot(
+            phase[mine],
+            values[mine],
+            color=colours[i % len(colours)],
+            lw=1.0,
+            label=ROMAN[i] if i < len(ROMAN) else str(rep + 1),
+        )
     low, high = np.nanmin(values, initial=np.inf), np.nanmax(values, initial=-np.inf)
     if np.isfinite(low) and high - low < MIN_SPAN_RAD:  # a constant curve is drawn flat, not as rounding noise
         middle = (low + high) / 2
@@ -127,7 +141,9 @@ def _per_repetition(ax, sample: pd.DataFrame, column: str, colours: tuple[str, .
 
 
 def _finish_per_repetition(fig, axes, title: str, path: Path) -> Path:
-    drawn = next((ax for ax in (axes[0, -1], *axes.ravel()) if ax.get_legend_handles_labels()[0]), None)  # the top right panel, or else one with curves
+    drawn = next(
+        (ax for ax in (axes[0, -1], *axes.ravel()) if ax.get_legend_handles_labels()[0]), None
+    )  # the top right panel, or else one with curves
     if drawn is not None:
         drawn.legend(fontsize=6, title="rep", title_fontsize=6, loc="best")
     fig.suptitle(f"{title} [rad]; one line per repetition", fontsize=10)
@@ -140,7 +156,9 @@ def _finish_per_repetition(fig, axes, title: str, path: Path) -> Path:
 def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], title: str, path: Path) -> Path:
     """The MC-Inverse paper's Figs 9 and 12: each joint of ``joints`` (columns) per method (rows) against the time within the repetition, one line per repetition (I, II, ...), so a method that repeats itself draws one line [rad]."""
     colours = TAB10
-    fig, axes = plt.subplots(len(samples), len(joints), figsize=(2.1 * len(joints), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
+    fig, axes = plt.subplots(
+        len(samples), len(joints), figsize=(2.1 * len(joints), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True
+    )
     for row, (method, sample) in zip(axes, samples.items()):
         for ax, joint in zip(row, joints):
             _per_repetition(ax, sample, f"position.{joint}", colours)
@@ -156,7 +174,13 @@ def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], t
 def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str], title: str, path: Path) -> Path:
     """The MC-Inverse paper's Figs 10, 13 and 16: each hand's arm angle psi (columns) per method (rows) against the time within the repetition, one line per repetition [rad]; a hand without one (its arm not S-R-S) is a panel saying so."""
     colours = TAB10
-    fig, axes = plt.subplots(len(samples), len(hands), figsize=(max(7.5, 5 * len(hands)), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True)
+    fig, axes = plt.subplots(
+        len(samples),
+        len(hands),
+        figsize=(max(7.5, 5 * len(hands)), 1.8 * len(samples) + 0.8),
+        squeeze=False,
+        sharex=True,
+    )
     for row, (method, sample) in zip(axes, samples.items()):
         for ax, hand in zip(row, hands):
             _per_repetition(ax, sample, f"arm_angle_rad.{hand}", colours)

@@ -30,14 +30,23 @@ def _outside(sample: pd.DataFrame, kind: str, lower_of, upper_of) -> pd.DataFram
         v = sample[column].to_numpy()
         outside = np.maximum(lower_of(joint) - v, v - upper_of(joint))
         if outside.max() > 1e-9:
-            rows.append({"joint": joint, "max_outside": outside.max(), "t_first_out": t[np.argmax(outside > 1e-9)], "t_max_out": t[np.argmax(outside)]})
+            rows.append(
+                {
+                    "joint": joint,
+                    "max_outside": outside.max(),
+                    "t_first_out": t[np.argmax(outside > 1e-9)],
+                    "t_max_out": t[np.argmax(outside)],
+                }
+            )
     return pd.DataFrame(rows, columns=["joint", "max_outside", "t_first_out", "t_max_out"])
 
 
 def excursions(sample: pd.DataFrame, bounds: pd.DataFrame, kind: str) -> pd.DataFrame:
     """Where ``kind`` (position or velocity) leaves the time-varying bounds of ``/ik/bounds`` (theta_new+- or zeta_new+-); see :func:`_outside` for the columns."""
     lower, upper = ("theta_lower", "theta_upper") if kind == "position" else ("zeta_lower", "zeta_upper")
-    return _outside(sample, kind, lambda j: bounds[f"{lower}.{j}"].to_numpy(), lambda j: bounds[f"{upper}.{j}"].to_numpy())
+    return _outside(
+        sample, kind, lambda j: bounds[f"{lower}.{j}"].to_numpy(), lambda j: bounds[f"{upper}.{j}"].to_numpy()
+    )
 
 
 def limit_excursions(sample: pd.DataFrame, limits: pd.DataFrame, kind: str) -> pd.DataFrame:
@@ -56,8 +65,17 @@ def _section(ex: pd.DataFrame, heading: str, unit: str, csv: Path) -> list[str]:
     if ex.empty:
         return [f"{heading}: none.", ""]
     ex.to_csv(csv, index=False)
-    lines = [f"{heading}:", "", f"| joint | largest excursion [{unit}] | first out [s] | largest at [s] |", "|---|---:|---:|---:|"]
-    return lines + [f"| {r.joint} | {r.max_outside:.4g} | {r.t_first_out:.2f} | {r.t_max_out:.2f} |" for r in ex.itertuples()] + [""]
+    lines = [
+        f"{heading}:",
+        "",
+        f"| joint | largest excursion [{unit}] | first out [s] | largest at [s] |",
+        "|---|---:|---:|---:|",
+    ]
+    return (
+        lines
+        + [f"| {r.joint} | {r.max_outside:.4g} | {r.t_first_out:.2f} | {r.t_max_out:.2f} |" for r in ex.itertuples()]
+        + [""]
+    )
 
 
 def write_report(run_dir: str | Path | RunData, out_dir: str | Path | None = None) -> Path:
@@ -72,30 +90,73 @@ def write_report(run_dir: str | Path | RunData, out_dir: str | Path | None = Non
             cannot name a directory (:func:`~dualarm.record.verify.path_name`).
     """
     data = run_dir if isinstance(run_dir, RunData) else read_run(run_dir)
-    out = Path(out_dir) if out_dir is not None else Path("reports") / path_name(data.task, "task", data.directory) / path_name(data.run_id, "run_id", data.directory)
-    _claim = claim_output_dir(out, "report")  # refuses a directory holding files dualarm did not write; locked until this returns
+    out = (
+        Path(out_dir)
+        if out_dir is not None
+        else Path("reports")
+        / path_name(data.task, "task", data.directory)
+        / path_name(data.run_id, "run_id", data.directory)
+    )
+    _claim = claim_output_dir(
+        out, "report"
+    )  # refuses a directory holding files dualarm did not write; locked until this returns
     out.mkdir(parents=True, exist_ok=True)
     m = data.manifest
-    lines = [f"# Run {data.run_id}", "", f"- task: `{m.get('task')}` ({m.get('task_file')})", f"- status: {data.status}", f"- stages: {', '.join(data.stages)}"]
+    lines = [
+        f"# Run {data.run_id}",
+        "",
+        f"- task: `{m.get('task')}` ({m.get('task_file')})",
+        f"- status: {data.status}",
+        f"- stages: {', '.join(data.stages)}",
+    ]
     if m.get("error"):
         lines.append(f"- error: {m['error']}")
     if "/ik/sample" in data.topics:
         sample = data["/ik/sample"]
         method = str(sample["method"].iloc[0])
         lines += ["", f"## IK: {method}", ""]
-        lines.append(f"![hand errors]({figures.hand_errors(sample, f'{method}: hand position errors (cf. TV-GDD Fig. 8)', out / 'hand_errors.png').name})")
+        lines.append(
+            f"![hand errors]({figures.hand_errors(sample, f'{method}: hand position errors (cf. TV-GDD Fig. 8)', out / 'hand_errors.png').name})"
+        )
         if "/ik/bounds" in data.topics:
             bounds = data["/ik/bounds"]
             figs = ("3", "4") if method == "pinv" else ("5", "6")
-            joints_png = figures.joints_against_bounds(sample, bounds, "position", f"{method}: joint positions against theta_new± (cf. TV-GDD Fig. {figs[0]})", out / "joints_vs_bounds.png")
-            velocity_png = figures.joints_against_bounds(sample, bounds, "velocity", f"{method}: joint velocities against zeta_new± (cf. TV-GDD Fig. {figs[1]})", out / "velocities_vs_bounds.png")
+            joints_png = figures.joints_against_bounds(
+                sample,
+                bounds,
+                "position",
+                f"{method}: joint positions against theta_new± (cf. TV-GDD Fig. {figs[0]})",
+                out / "joints_vs_bounds.png",
+            )
+            velocity_png = figures.joints_against_bounds(
+                sample,
+                bounds,
+                "velocity",
+                f"{method}: joint velocities against zeta_new± (cf. TV-GDD Fig. {figs[1]})",
+                out / "velocities_vs_bounds.png",
+            )
             profiles_png = figures.bound_profiles(float(sample["t"].max()), out / "bound_profiles.png")
-            lines += [f"![joints]({joints_png.name})", f"![velocities]({velocity_png.name})", f"![bound profiles]({profiles_png.name})", ""]
+            lines += [
+                f"![joints]({joints_png.name})",
+                f"![velocities]({velocity_png.name})",
+                f"![bound profiles]({profiles_png.name})",
+                "",
+            ]
             for kind, unit, plural in KINDS:
-                lines += _section(excursions(sample, bounds, kind), f"Joint {plural} outside their time-varying bounds", unit, out / f"{kind}_excursions.csv")
+                lines += _section(
+                    excursions(sample, bounds, kind),
+                    f"Joint {plural} outside their time-varying bounds",
+                    unit,
+                    out / f"{kind}_excursions.csv",
+                )
         if "/ik/limits" in data.topics:
             for kind, unit, plural in KINDS:
-                lines += _section(limit_excursions(sample, data["/ik/limits"], kind), f"Joint {plural} outside their physical limits", unit, out / f"{kind}_limit_excursions.csv")
+                lines += _section(
+                    limit_excursions(sample, data["/ik/limits"], kind),
+                    f"Joint {plural} outside their physical limits",
+                    unit,
+                    out / f"{kind}_limit_excursions.csv",
+                )
     lines += ["## Metrics", "", "| key | value |", "|---|---:|"]
     lines += [f"| {k} | {v:.6g} |" if v is not None else f"| {k} | null |" for k, v in sorted(data.metrics.items())]
     (out / "summary.md").write_text("\n".join(lines) + "\n")
@@ -196,21 +257,44 @@ def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path)
     written = []
     ik = {label: _hand_error(r["/ik/sample"]) for r, label in zip(runs, labels) if "/ik/sample" in r.topics}
     if ik:
-        written.append(("IK: the larger hand position error, per run", figures.runs_over_time(ik, "position error [m]", "IK hand position error |r - f(q)| (larger hand)", out / "ik_hand_errors.png")))
-    executed = {label: _hand_error(r["/execute/sample"]) for r, label in zip(runs, labels) if "/execute/sample" in r.topics}
+        written.append(
+            (
+                "IK: the larger hand position error, per run",
+                figures.runs_over_time(
+                    ik,
+                    "position error [m]",
+                    "IK hand position error |r - f(q)| (larger hand)",
+                    out / "ik_hand_errors.png",
+                ),
+            )
+        )
+    executed = {
+        label: _hand_error(r["/execute/sample"]) for r, label in zip(runs, labels) if "/execute/sample" in r.topics
+    }
     if executed:
         written.append(
             (
                 "Execution: distance of the measured hand from the commanded one (larger hand), per run",
-                figures.runs_over_time(executed, "tracking error [m]", "PyBullet execution tracking error (larger hand)", out / "tracking_errors.png"),
+                figures.runs_over_time(
+                    executed,
+                    "tracking error [m]",
+                    "PyBullet execution tracking error (larger hand)",
+                    out / "tracking_errors.png",
+                ),
             )
         )
-    ratios = pd.DataFrame({name: [r.metrics.get(key, np.nan) for r in runs] for name, key in RATIOS}, index=list(labels)).dropna(how="all").dropna(axis=1, how="all")
+    ratios = (
+        pd.DataFrame({name: [r.metrics.get(key, np.nan) for r in runs] for name, key in RATIOS}, index=list(labels))
+        .dropna(how="all")
+        .dropna(axis=1, how="all")
+    )
     if not ratios.empty:
         written.append(
             (
                 "Retime and smooth: largest velocity, acceleration and jerk as a fraction of the limits",
-                figures.limit_ratios(ratios, "largest value / limit per run (dashed: the limit)", out / "limit_ratios.png"),
+                figures.limit_ratios(
+                    ratios, "largest value / limit per run (dashed: the limit)", out / "limit_ratios.png"
+                ),
             )
         )
     by_task: dict[str, dict[str, pd.DataFrame]] = {}
@@ -221,13 +305,28 @@ def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path)
         first = next(iter(samples.values()))
         hands = [c.split(".", 1)[1] for c in first.columns if c.startswith("arm_angle_rad.")]
         if hands and all(f"arm_angle_rad.{h}" in s for s in samples.values() for h in hands):
-            written.append((f"{task}: arm angle per repetition", figures.arm_angle_per_repetition(samples, hands, f"{task}: arm angle per repetition", out / f"arm_angle_{_slug(task)}.png")))
+            written.append(
+                (
+                    f"{task}: arm angle per repetition",
+                    figures.arm_angle_per_repetition(
+                        samples, hands, f"{task}: arm angle per repetition", out / f"arm_angle_{_slug(task)}.png"
+                    ),
+                )
+            )
         joints = [c.split(".", 1)[1] for c in first.columns if c.startswith("position.")]
         for hand in hands:
             mine = [j for j in joints if j.startswith(f"{hand}_")]
             if mine and all(f"position.{j}" in s for s in samples.values() for j in mine):
                 written.append(
-                    (f"{task}: {hand} arm joints per repetition", figures.joints_per_repetition(samples, mine, f"{task}: {hand} arm joints per repetition", out / f"joints_{_slug(task)}_{hand}.png"))
+                    (
+                        f"{task}: {hand} arm joints per repetition",
+                        figures.joints_per_repetition(
+                            samples,
+                            mine,
+                            f"{task}: {hand} arm joints per repetition",
+                            out / f"joints_{_slug(task)}_{hand}.png",
+                        ),
+                    )
                 )
     return written
 
@@ -243,18 +342,34 @@ def write_runs_report(run_dirs: Sequence[str | Path], out_dir: str | Path | None
     tasks = sorted(set(table["task"].astype(str)))
     if out_dir is None:  # named after the recordings' fields only once they are checked to be plain names
         first = runs[0]
-        out_dir = Path("reports") / (path_name(first.task, "task", first.directory) if len(tasks) == 1 else "runs") / f"{path_name(first.run_id, 'run_id', first.directory)}+{len(runs) - 1}"
+        out_dir = (
+            Path("reports")
+            / (path_name(first.task, "task", first.directory) if len(tasks) == 1 else "runs")
+            / f"{path_name(first.run_id, 'run_id', first.directory)}+{len(runs) - 1}"
+        )
     out = Path(out_dir)
-    _claim = claim_output_dir(out, "report")  # refuses a directory holding files dualarm did not write; locked until this returns
+    _claim = claim_output_dir(
+        out, "report"
+    )  # refuses a directory holding files dualarm did not write; locked until this returns
     out.mkdir(parents=True, exist_ok=True)
     names = _unique([f"{run.manifest.get('task')}-{run.run_id}" for run in runs])
     summaries = [write_report(run, out / _slug(name)) for run, name in zip(runs, names)]
     table.to_csv(out / "runs.csv", index=False)
-    lines = [f"# {len(runs)} runs", "", "| run | task | method | status | stages | reps | summary |", "|---|---|---|---|---|---:|---|"]
-    lines += [f"| {r.run} | {r.task} | {r.method} | {r.status} | {r.stages} | {_cell(r.repetitions)} | [{s.name}]({s.name}/summary.md) |" for r, s in zip(table.itertuples(), summaries)]
+    lines = [
+        f"# {len(runs)} runs",
+        "",
+        "| run | task | method | status | stages | reps | summary |",
+        "|---|---|---|---|---|---:|---|",
+    ]
+    lines += [
+        f"| {r.run} | {r.task} | {r.method} | {r.status} | {r.stages} | {_cell(r.repetitions)} | [{s.name}]({s.name}/summary.md) |"
+        for r, s in zip(table.itertuples(), summaries)
+    ]
     metrics = ["", "## Metrics", "", *metrics_markdown(table)]
     (out / "runs.md").write_text("\n".join(lines + metrics) + "\n")
     written = cross_run_figures(runs, list(table["label"]), out)
-    lines += metrics + ["", "## Figures", ""] + [f"{caption}:\n\n![{path.stem}]({path.name})\n" for caption, path in written]
+    lines += (
+        metrics + ["", "## Figures", ""] + [f"{caption}:\n\n![{path.stem}]({path.name})\n" for caption, path in written]
+    )
     (out / "report.md").write_text("\n".join(lines) + "\n")
     return out

@@ -70,7 +70,12 @@ def _needing(claim: Claim, label: str, run: RunData | None) -> Claim:
     if run is None:
         return claim
     contradicted = run.status != "complete"
-    return replace(claim, verdict=run_verdict(label, run), contradicted=contradicted, agrees=False if contradicted else claim.agrees)
+    return replace(
+        claim,
+        verdict=run_verdict(label, run),
+        contradicted=contradicted,
+        agrees=False if contradicted else claim.agrees,
+    )
 
 
 def _g(value: float, unit: str = "", digits: int = 3) -> str:
@@ -82,7 +87,9 @@ def _largest(table: pd.DataFrame, unit: str) -> tuple[float, str]:
     if table.empty:
         return 0.0, "none"
     row = table.iloc[table["max_outside"].argmax()]
-    return float(row["max_outside"]), f"{row['max_outside']:.3g} {unit} ({row['joint']}, first at {row['t_first_out']:.2f} s)"
+    return float(
+        row["max_outside"]
+    ), f"{row['max_outside']:.3g} {unit} ({row['joint']}, first at {row['t_first_out']:.2f} s)"
 
 
 def _unexpected_contact_steps(run: RunData) -> int:
@@ -99,7 +106,17 @@ def pinv_claims(pinv: RunData) -> list[Claim]:
     ):
         value, ours = _largest(excursions(pinv["/ik/sample"], pinv["/ik/bounds"], kind), unit)
         claims.append(
-            Claim("TV-GDD", where, text, "yes (drawn, no figure given)", ours, "outside by more than 0" if value > ZERO else "stays inside", value > ZERO, "ball-game-pinv", run_verdict("pinv", pinv))
+            Claim(
+                "TV-GDD",
+                where,
+                text,
+                "yes (drawn, no figure given)",
+                ours,
+                "outside by more than 0" if value > ZERO else "stays inside",
+                value > ZERO,
+                "ball-game-pinv",
+                run_verdict("pinv", pinv),
+            )
         )
     return claims
 
@@ -109,9 +126,22 @@ def tvgdd_claims(tvgdd: RunData) -> list[Claim]:
     claims = []
     sample, bounds = tvgdd["/ik/sample"], tvgdd["/ik/bounds"]
     value, ours = _largest(excursions(sample, bounds, "position"), "rad")
-    claims.append(Claim("TV-GDD", "Fig. 5", "TV-GDD's joints stay within θ_new±", "0 (drawn)", ours, "", value <= ZERO, "ball-game-tvgdd"))
+    claims.append(
+        Claim(
+            "TV-GDD",
+            "Fig. 5",
+            "TV-GDD's joints stay within θ_new±",
+            "0 (drawn)",
+            ours,
+            "",
+            value <= ZERO,
+            "ball-game-tvgdd",
+        )
+    )
     velocity, ours = _largest(excursions(sample, bounds, "velocity"), "rad/s")
-    physical, ours_physical = _largest(pd.concat([limit_excursions(sample, tvgdd["/ik/limits"], k) for k in ("position", "velocity")]), "rad or rad/s")
+    physical, ours_physical = _largest(
+        pd.concat([limit_excursions(sample, tvgdd["/ik/limits"], k) for k in ("position", "velocity")]), "rad or rad/s"
+    )
     claims.append(
         Claim(
             "TV-GDD",
@@ -165,8 +195,22 @@ def tvgdd_claims(tvgdd: RunData) -> list[Claim]:
             )
         )
     solve = sample["solve_time_s"].to_numpy()
-    for name, theirs, ours_value in (("T_ave, computing time per control step", 1e-3, float(solve.mean())), ("T_sum, computing time of the whole task", 1.12, float(solve.sum()))):
-        claims.append(Claim("TV-GDD", "section 4", name, _g(theirs, "s", 5), _g(ours_value, "s"), f"paper / ours = {theirs / ours_value:.0f}x", ours_value <= theirs, "ball-game-tvgdd"))
+    for name, theirs, ours_value in (
+        ("T_ave, computing time per control step", 1e-3, float(solve.mean())),
+        ("T_sum, computing time of the whole task", 1.12, float(solve.sum())),
+    ):
+        claims.append(
+            Claim(
+                "TV-GDD",
+                "section 4",
+                name,
+                _g(theirs, "s", 5),
+                _g(ours_value, "s"),
+                f"paper / ours = {theirs / ours_value:.0f}x",
+                ours_value <= theirs,
+                "ball-game-tvgdd",
+            )
+        )
     executed = tvgdd["/execute/sample"]
     tracking = float(hand_errors(executed).to_numpy().max())
     contacts = _unexpected_contact_steps(tvgdd)
@@ -203,7 +247,18 @@ def table_i_claims(table: Mapping) -> list[Claim]:
     q = np.array([c["q"] for c in candidates])
     valid = np.array([c["valid"] for c in candidates])
     psi = np.array([c["arm_angle_rad"] for c in candidates])
-    claims = [Claim("MC-Inverse", "Table I", "one pose and arm angle give 8 candidate solutions", "8", str(len(candidates)), "", len(candidates) == 8, "table-i")]
+    claims = [
+        Claim(
+            "MC-Inverse",
+            "Table I",
+            "one pose and arm angle give 8 candidate solutions",
+            "8",
+            str(len(candidates)),
+            "",
+            len(candidates) == 8,
+            "table-i",
+        )
+    ]
     elbow_sign = np.sign(PAPER_TABLE_I[0, 3])
     paper_sign = valid & (np.sign(q[:, 3]) == elbow_sign)
     claims.append(
@@ -219,7 +274,18 @@ def table_i_claims(table: Mapping) -> list[Claim]:
         )
     )
     spread = float(np.abs(psi[valid] - table["arm_angle"]).max()) if valid.any() else np.nan
-    claims.append(Claim("MC-Inverse", "Table I, Fig. 6", "the valid solutions have the arm angle asked for", "identical", f"largest |ψ(q) − ψ| = {spread:.2g} rad", "", spread <= ZERO, "table-i"))
+    claims.append(
+        Claim(
+            "MC-Inverse",
+            "Table I, Fig. 6",
+            "the valid solutions have the arm angle asked for",
+            "identical",
+            f"largest |ψ(q) − ψ| = {spread:.2g} rad",
+            "",
+            spread <= ZERO,
+            "table-i",
+        )
+    )
     elbows = q[paper_sign, 3]
     elbow_spread = float(np.ptp(elbows)) if len(elbows) else np.nan
     claims.append(
@@ -261,7 +327,11 @@ def table_i_claims(table: Mapping) -> list[Claim]:
 
 def _by_method(runs: list[RunData]) -> dict[str, RunData]:
     """Method -> the finished (complete or violated) consistency runs (IK only) of one task."""
-    return {str(r.setting("ik", "method")): r for r in runs if r.status in ("complete", "violated") and "retime" not in r.stages}
+    return {
+        str(r.setting("ik", "method")): r
+        for r in runs
+        if r.status in ("complete", "violated") and "retime" not in r.stages
+    }
 
 
 def _deviation(metrics: Mapping[str, float]) -> str:
@@ -280,12 +350,42 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
     dq = {k: v["ik.rep_joint_deviation_max_rad"] for k, v in m.items()}
     dpsi = {k: v["ik.rep_arm_angle_deviation_max_rad"] for k, v in m.items()}
 
-    def claim(text: str, theirs: str, methods: tuple[str, ...], ours: Callable[[], str], agrees: Callable[[], bool], comparison: Callable[[], str] = lambda: "") -> Claim:
+    def claim(
+        text: str,
+        theirs: str,
+        methods: tuple[str, ...],
+        ours: Callable[[], str],
+        agrees: Callable[[], bool],
+        comparison: Callable[[], str] = lambda: "",
+    ) -> Claim:
         failed = [method for method in methods if method not in m]
         if failed:
-            made = Claim("MC-Inverse", where, text, theirs, f"not available: the {', '.join(failed)} run failed (see its manifest)", "", None, part)
-            return _needing(made, "mc-inverse", next((r for r in runs if r.setting("ik", "method") == "mc-inverse"), None)) if "mc-inverse" in failed else made
-        made = Claim("MC-Inverse", where, text, theirs, ours(), comparison(), agrees(), part, "; ".join(run_verdict(method, finished[method]) for method in methods))
+            made = Claim(
+                "MC-Inverse",
+                where,
+                text,
+                theirs,
+                f"not available: the {', '.join(failed)} run failed (see its manifest)",
+                "",
+                None,
+                part,
+            )
+            return (
+                _needing(made, "mc-inverse", next((r for r in runs if r.setting("ik", "method") == "mc-inverse"), None))
+                if "mc-inverse" in failed
+                else made
+            )
+        made = Claim(
+            "MC-Inverse",
+            where,
+            text,
+            theirs,
+            ours(),
+            comparison(),
+            agrees(),
+            part,
+            "; ".join(run_verdict(method, finished[method]) for method in methods),
+        )
         return _needing(made, "mc-inverse", finished["mc-inverse"]) if methods == ("mc-inverse",) else made
 
     claims = [
@@ -318,14 +418,25 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
                 "triangle: ikfast's arm motion changes, and its joints jump",
                 "change, jumps (drawn)",
                 ("ikfast-style", "mc-inverse"),
-                lambda: f"{_deviation(m['ikfast-style'])}; largest step {m['ikfast-style']['ik.max_joint_step_rad']:.2g} rad",
-                lambda: dq["ikfast-style"] > CHANGES_RAD and m["ikfast-style"]["ik.max_joint_step_rad"] > 10 * m["mc-inverse"]["ik.max_joint_step_rad"],
+                lambda: (
+                    f"{_deviation(m['ikfast-style'])}; largest step {m['ikfast-style']['ik.max_joint_step_rad']:.2g} rad"
+                ),
+                lambda: (
+                    dq["ikfast-style"] > CHANGES_RAD
+                    and m["ikfast-style"]["ik.max_joint_step_rad"] > 10 * m["mc-inverse"]["ik.max_joint_step_rad"]
+                ),
                 lambda: f"MC-Inverse's largest step {m['mc-inverse']['ik.max_joint_step_rad']:.2g} rad",
             ),
         ]
     if task == "circle":
         claims += [
-            claim("circle: TRAC-IK's joints change every circle", "change (drawn)", ("trac-ik",), lambda: _deviation(m["trac-ik"]), lambda: dq["trac-ik"] > CHANGES_RAD),
+            claim(
+                "circle: TRAC-IK's joints change every circle",
+                "change (drawn)",
+                ("trac-ik",),
+                lambda: _deviation(m["trac-ik"]),
+                lambda: dq["trac-ik"] > CHANGES_RAD,
+            ),
             claim(
                 "circle: ikfast is more consistent than TRAC-IK, but its arm angle still changes",
                 "changes on the 3rd circle",
@@ -440,8 +551,20 @@ def all_claims(out: Path, parts: Mapping[str, Mapping]) -> list[Claim]:
         ({"table-i"}, lambda: table_i_claims(json.loads((out / parts["table-i"]["outputs"]["table"]).read_text()))),
         ({"triangle"}, lambda: consistency_claims("triangle", runs("triangle"))),
         ({"circle"}, lambda: consistency_claims("circle", runs("circle"))),
-        ({"carry-box"}, lambda: consistency_claims("carry_box", runs("carry-box")) + carry_box_claims([r for r in runs("carry-box") if "execute" in r.stages][0])),
-        ({"bowl-grasp"}, lambda: plan_claims(pd.read_csv(out / parts["bowl-grasp"]["outputs"]["table"]), runs("bowl-grasp")[0] if parts["bowl-grasp"]["outputs"].get("runs") else None)),
+        (
+            {"carry-box"},
+            lambda: (
+                consistency_claims("carry_box", runs("carry-box"))
+                + carry_box_claims([r for r in runs("carry-box") if "execute" in r.stages][0])
+            ),
+        ),
+        (
+            {"bowl-grasp"},
+            lambda: plan_claims(
+                pd.read_csv(out / parts["bowl-grasp"]["outputs"]["table"]),
+                runs("bowl-grasp")[0] if parts["bowl-grasp"]["outputs"].get("runs") else None,
+            ),
+        ),
     ]
     claims = []
     for needed, read in readers:

@@ -67,7 +67,15 @@ def _run(task: str, ik: str, stages: tuple[str, ...] | None, out: Path, robot: P
     from dualarm.tasks import load_task
 
     chosen = resolve_stages(stages, ik)
-    command = ["dualarm", "run", f"tasks/{task}.toml", "--ik", ik, *(["--stages", ",".join(stages)] if stages else []), *robot_option(robot)]
+    command = [
+        "dualarm",
+        "run",
+        f"tasks/{task}.toml",
+        "--ik",
+        ik,
+        *(["--stages", ",".join(stages)] if stages else []),
+        *robot_option(robot),
+    ]
     run = record_run(
         load_task(TASKS / f"{task}.toml", robot=robot),
         ik,
@@ -127,7 +135,13 @@ def _consistency(task: str, methods: tuple[str, ...] | None, out: Path, robot: P
         progress(len(done) / len(methods or DEFAULT_METHODS), text)
         done.append(text)
 
-    result = run_consistency(TASKS / f"{task}.toml", methods, out / "consistency" / task, progress=step, robot=None if not robot_option(robot) else robot)
+    result = run_consistency(
+        TASKS / f"{task}.toml",
+        methods,
+        out / "consistency" / task,
+        progress=step,
+        robot=None if not robot_option(robot) else robot,
+    )
     return {"table": _relative(result.csv, out), "runs": [_relative(Path(r), out) for r in result.table["run"] if r]}
 
 
@@ -170,7 +184,7 @@ def bowl_grasp(out: Path, robot: Path, progress: Progress) -> Outputs:
     }
 
 
-def _left_arm_at_solution_1(robot: "Robot") -> str:
+def _left_arm_at_solution_1(robot: Robot) -> str:
     """Why Table I's analogue cannot run on ``robot`` ("" when it can): it needs an S-R-S left arm whose limits hold the paper's solution 1."""
     from dualarm.methods import not_srs
 
@@ -185,7 +199,7 @@ def _left_arm_at_solution_1(robot: "Robot") -> str:
     return ""
 
 
-def _srs_arms(robot: "Robot") -> str:
+def _srs_arms(robot: Robot) -> str:
     """Why the carried box's methods cannot run on ``robot`` ("" when they can): MC-Inverse and IKFast-style need both arms S-R-S."""
     from dualarm.methods import not_srs
 
@@ -193,7 +207,7 @@ def _srs_arms(robot: "Robot") -> str:
     return f"its methods (MC-Inverse, IKFast-style) need S-R-S arms: {next(iter(reasons.values()))}" if reasons else ""
 
 
-def _waist(robot: "Robot") -> str:
+def _waist(robot: Robot) -> str:
     """Why the bowl grasp cannot run on ``robot`` ("" when it can): it plans with the waist free."""
     return "" if "waist" in robot.chains else f"plans with the waist free; robot '{robot.name}' has no [chains.waist]"
 
@@ -220,15 +234,55 @@ class Part:
     run: Callable[[Path, Path, Progress], Outputs]
     seconds: float
     task: str = ""
-    needs: Callable[["Robot"], str] = lambda robot: ""
+    needs: Callable[[Robot], str] = lambda robot: ""
 
 
 PARTS = (
-    Part("ball-game-tvgdd", "TV-GDD", "ball game, TV-GDD, every stage", "dualarm run tasks/ball_game.toml --ik tvgdd", ball_game_tvgdd, 13, "ball_game"),
-    Part("ball-game-pinv", "TV-GDD", "ball game, pseudoinverse baseline", "dualarm run tasks/ball_game.toml --ik pinv --stages path,ik", ball_game_pinv, 4, "ball_game"),
-    Part("table-i", "MC-Inverse", "Table I analogue", "dualarm ik srs robots/humanoid --arm left --pose {pose} --arm-angle {psi} --frame chain", table_i, 1, needs=_left_arm_at_solution_1),
-    Part("triangle", "MC-Inverse", "triangle drawn 5 times, every IK method", "dualarm consistency tasks/triangle.toml", triangle_consistency, 28, "triangle"),
-    Part("circle", "MC-Inverse", "circle drawn 5 times, every IK method", "dualarm consistency tasks/circle.toml", circle_consistency, 18, "circle"),
+    Part(
+        "ball-game-tvgdd",
+        "TV-GDD",
+        "ball game, TV-GDD, every stage",
+        "dualarm run tasks/ball_game.toml --ik tvgdd",
+        ball_game_tvgdd,
+        13,
+        "ball_game",
+    ),
+    Part(
+        "ball-game-pinv",
+        "TV-GDD",
+        "ball game, pseudoinverse baseline",
+        "dualarm run tasks/ball_game.toml --ik pinv --stages path,ik",
+        ball_game_pinv,
+        4,
+        "ball_game",
+    ),
+    Part(
+        "table-i",
+        "MC-Inverse",
+        "Table I analogue",
+        "dualarm ik srs robots/humanoid --arm left --pose {pose} --arm-angle {psi} --frame chain",
+        table_i,
+        1,
+        needs=_left_arm_at_solution_1,
+    ),
+    Part(
+        "triangle",
+        "MC-Inverse",
+        "triangle drawn 5 times, every IK method",
+        "dualarm consistency tasks/triangle.toml",
+        triangle_consistency,
+        28,
+        "triangle",
+    ),
+    Part(
+        "circle",
+        "MC-Inverse",
+        "circle drawn 5 times, every IK method",
+        "dualarm consistency tasks/circle.toml",
+        circle_consistency,
+        18,
+        "circle",
+    ),
     Part(
         "carry-box",
         "MC-Inverse",

@@ -41,9 +41,21 @@ def _robot(index: Mapping) -> Path:
 
 
 def _claims_table(claims: list[Claim], out: Path, parts: Mapping[str, Mapping], robot: Path) -> list[str]:
-    lines = ["| where | claim | paper | ours | ours against the paper | verdict | runs' verdicts | reproduce alone |", "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| where | claim | paper | ours | ours against the paper | verdict | runs' verdicts | reproduce alone |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     cells = [
-        (c.where, c.claim, c.theirs, c.ours, c.comparison, VERDICT[c.agrees], ("**contradicted:** " if c.contradicted else "") + c.verdict, f"`{command_of(c.part, out, parts, robot)}`")
+        (
+            c.where,
+            c.claim,
+            c.theirs,
+            c.ours,
+            c.comparison,
+            VERDICT[c.agrees],
+            ("**contradicted:** " if c.contradicted else "") + c.verdict,
+            f"`{command_of(c.part, out, parts, robot)}`",
+        )
         for c in claims
     ]
     return lines + ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in cells]
@@ -59,8 +71,16 @@ def _table_i(out: Path, parts: Mapping[str, Mapping]) -> list[str]:
         "| # | θ1 | θ2 | θ3 | θ4 | θ5 | θ6 | θ7 | ours | ψ(q) [rad] | FK error [m] |",
         "|---|" + "---:|" * 7 + "---|---:|---:|",
     ]
-    lines += [f"| {i + 1} | " + " | ".join(f"{v:.5f}" for v in c["q"]) + f" | {c['reason']} | {c['arm_angle_rad']:.5f} | {c['position_error_m']:.1e} |" for i, c in enumerate(data["candidates"])]
-    lines += [f"| paper {j + 1} | " + " | ".join(f"{v:.5f}" for v in column) + " | valid | | |" for j, column in enumerate(PAPER_TABLE_I)]
+    lines += [
+        f"| {i + 1} | "
+        + " | ".join(f"{v:.5f}" for v in c["q"])
+        + f" | {c['reason']} | {c['arm_angle_rad']:.5f} | {c['position_error_m']:.1e} |"
+        for i, c in enumerate(data["candidates"])
+    ]
+    lines += [
+        f"| paper {j + 1} | " + " | ".join(f"{v:.5f}" for v in column) + " | valid | | |"
+        for j, column in enumerate(PAPER_TABLE_I)
+    ]
     return lines + [""]
 
 
@@ -68,7 +88,10 @@ def _figures(out: Path, parts: Mapping[str, Mapping]) -> list[tuple[str, str]]:
     """(caption, path relative to ``out``) of the report's figures, made or found for the completed parts."""
     made = []
     done = {n for n, p in parts.items() if p["status"] == "complete"}
-    for name, caption in (("ball-game-pinv", "pinv (TV-GDD Figs 3-4)"), ("ball-game-tvgdd", "TV-GDD (Figs 5-6, 8; eq (19) profiles as Fig. 2)")):
+    for name, caption in (
+        ("ball-game-pinv", "pinv (TV-GDD Figs 3-4)"),
+        ("ball-game-tvgdd", "TV-GDD (Figs 5-6, 8; eq (19) profiles as Fig. 2)"),
+    ):
         if name in done:
             directory = write_report(out / parts[name]["outputs"]["runs"][0], out / "figures" / name)
             for png, what in (
@@ -77,12 +100,17 @@ def _figures(out: Path, parts: Mapping[str, Mapping]) -> list[tuple[str, str]]:
                 ("hand_errors.png", "hand position errors"),
                 ("bound_profiles.png", "bound profiles of eq (19)"),
             ):
-                if (directory / png).exists() and not (name == "ball-game-pinv" and png in ("hand_errors.png", "bound_profiles.png")):
+                if (directory / png).exists() and not (
+                    name == "ball-game-pinv" and png in ("hand_errors.png", "bound_profiles.png")
+                ):
                     made.append((f"Ball game, {caption}: {what}", str((directory / png).relative_to(out))))
     for name, task in (("triangle", "triangle"), ("circle", "circle"), ("carry-box", "carry_box")):
         if name in done:
             directory = out / Path(parts[name]["outputs"]["table"]).parent
-            made += [(f"{task}: {png.stem.replace('_', ' ')} per repetition and method", str(png.relative_to(out))) for png in sorted(directory.glob("*.png"))]
+            made += [
+                (f"{task}: {png.stem.replace('_', ' ')} per repetition and method", str(png.relative_to(out)))
+                for png in sorted(directory.glob("*.png"))
+            ]
     if "bowl-grasp" in done:
         trials = pd.read_csv(out / parts["bowl-grasp"]["outputs"]["table"])
         times = trials.loc[trials["success"], "planning_time_s"].to_numpy() * 1e3
@@ -94,7 +122,12 @@ def _figures(out: Path, parts: Mapping[str, Mapping]) -> list[tuple[str, str]]:
                 out / "figures" / "planning_times.png",
                 {f"ours, mean {times.mean():.0f} ms": float(times.mean())},
             )
-            made.append(("Bowl grasp: MCIKRRT planning times (the paper's mean, 4210.88 ms, is off this scale)", str(path.relative_to(out))))
+            made.append(
+                (
+                    "Bowl grasp: MCIKRRT planning times (the paper's mean, 4210.88 ms, is off this scale)",
+                    str(path.relative_to(out)),
+                )
+            )
     return made
 
 
@@ -142,12 +175,27 @@ def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None
     lines = [
         "# dualarm: the three papers reproduced" + (f" on {name}" if robot_option(robot) else ""),
         "",
-        *([] if not robot_option(robot) else [f"Robot: `{name}` ({robot}); the tasks transfer to it as tasks/README.md describes (frame, scale, `[transfer]`).", ""]),
+        *(
+            []
+            if not robot_option(robot)
+            else [
+                f"Robot: `{name}` ({robot}); the tasks transfer to it as tasks/README.md describes (frame, scale, `[transfer]`).",
+                "",
+            ]
+        ),
         f"{sum(bool(c.agrees) for c in judged)} of {len(judged)} claims agree"
-        + (f"; {len(contradicted)} rest on a run whose verdict is not complete (marked **contradicted**)" if contradicted else "")
+        + (
+            f"; {len(contradicted)} rest on a run whose verdict is not complete (marked **contradicted**)"
+            if contradicted
+            else ""
+        )
         + f'. Every figure under "ours" is read back from the recordings in this directory; the papers\' figures are quoted from their text. '
         f"The parts ran {index['jobs']} at a time on a {index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s"
-        + (", so computing times were measured with another part running (`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)." if index["jobs"] > 1 else "."),
+        + (
+            ", so computing times were measured with another part running (`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)."
+            if index["jobs"] > 1
+            else "."
+        ),
         "",
     ]
     missing = [p for p in PARTS if p.name not in parts or parts[p.name]["status"] != "complete"]
@@ -159,7 +207,9 @@ def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None
         lines += ["", *[f"- {p.title} (`{p.name}`): {_why_absent(parts.get(p.name), name)}" for p in absent], ""]
     if parts.get("table-i", {}).get("status") == "complete":
         lines += _table_i(out, parts)
-    lines += ["## Figures", ""] + [f"{caption}:\n\n![{Path(path).stem}]({path})\n" for caption, path in _figures(out, parts)]
+    lines += ["## Figures", ""] + [
+        f"{caption}:\n\n![{Path(path).stem}]({path})\n" for caption, path in _figures(out, parts)
+    ]
     lines += ["## Runs", "", "| part | run | verdict | stages |", "|---|---|---|---|"]
     for p in index["parts"]:
         for run in p["outputs"].get("runs", []):
@@ -168,9 +218,13 @@ def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None
             except RecordingError as exc:
                 lines.append(f"| {p['name']} | {run} | unreadable: {exc} | |")
                 continue
-            verdict = run_verdict(str(recorded.setting("ik", "method") or recorded.setting("plan", "method") or "run"), recorded).replace("|", "\\|")
+            verdict = run_verdict(
+                str(recorded.setting("ik", "method") or recorded.setting("plan", "method") or "run"), recorded
+            ).replace("|", "\\|")
             lines.append(f"| {p['name']} | [{run}]({run}) | {verdict} | {', '.join(recorded.stages)} |")
     lines += ["", "## Time of each part", "", "| part | what | status | time [s] |", "|---|---|---|---:|"]
-    lines += [f"| {p['name']} | {BY_NAME[p['name']].title} | {p['status']} | {p['seconds']:.1f} |" for p in index["parts"]]
+    lines += [
+        f"| {p['name']} | {BY_NAME[p['name']].title} | {p['status']} | {p['seconds']:.1f} |" for p in index["parts"]
+    ]
     lines += [f"| all | {index['jobs']} at a time | | {index['wall_time_s']:.1f} |", ""]
     return write_whole(out / "report.md", "\n".join(lines))

@@ -121,7 +121,9 @@ def _part_task(name: str, out: Path, robot: Path, topic: str) -> PartResult:
         return PartResult(name, "failed", _unseen(worker.name, out), 0.0, {})
 
     def report(fraction: float, text: str) -> None:
-        if stop_requested():  # Terminated was swallowed by a library (CasADi turns it into a failed solve): raise it again between stages
+        if (
+            stop_requested()
+        ):  # Terminated was swallowed by a library (CasADi turns it into a failed solve): raise it again between stages
             raise Terminated()
         worker.log_event(topic, (name, fraction, text))
 
@@ -133,7 +135,9 @@ def _part_task(name: str, out: Path, robot: Path, topic: str) -> PartResult:
         return PartResult(name, "failed", f"Terminated: {exc}", time.perf_counter() - start, {})
 
 
-def _run_on_cluster(out: Path, names: Sequence[str], robot: Path, jobs: int, scheduler: str | None, on_progress: OnProgress) -> tuple[dict[str, PartResult], int]:
+def _run_on_cluster(
+    out: Path, names: Sequence[str], robot: Path, jobs: int, scheduler: str | None, on_progress: OnProgress
+) -> tuple[dict[str, PartResult], int]:
     """Run ``names`` as Dask tasks (the longest first) on the cluster at ``scheduler``, else a ``LocalCluster`` of ``jobs`` workers; returns the results and the number of workers.
 
     Ctrl-C or SIGTERM in this process stops the parts running on the workers (their runs are
@@ -152,7 +156,19 @@ def _run_on_cluster(out: Path, names: Sequence[str], robot: Path, jobs: int, sch
         topic = f"{PROGRESS_TOPIC}-{uuid.uuid4().hex}"
         messages: SimpleQueue[tuple[str, float, str]] = SimpleQueue()
         client.subscribe_topic(topic, lambda event: messages.put(event[1]))
-        futures = {client.submit(_part_task, n, out, robot, topic, priority=round(BY_NAME[n].seconds), pure=False, key=f"reproduce-{n}-{uuid.uuid4().hex}"): n for n in names}
+        futures = {
+            client.submit(
+                _part_task,
+                n,
+                out,
+                robot,
+                topic,
+                priority=round(BY_NAME[n].seconds),
+                pure=False,
+                key=f"reproduce-{n}-{uuid.uuid4().hex}",
+            ): n
+            for n in names
+        }
         submitted = time.perf_counter()
         pending = set(futures)
         try:
@@ -163,14 +179,22 @@ def _run_on_cluster(out: Path, names: Sequence[str], robot: Path, jobs: int, sch
                     done = {f for f in pending if f.done()}
                     pending -= done
                     while not messages.empty():
-                        if (message := messages.get())[0] not in results:  # a part's last messages may come after its result
+                        if (message := messages.get())[
+                            0
+                        ] not in results:  # a part's last messages may come after its result
                             on_progress(*message)
                     for future in done:
                         name = futures[future]
                         try:
                             results[name] = future.result()
                         except Exception as exc:  # its worker died ALLOWED_FAILURES times
-                            results[name] = PartResult(name, "failed", f"{type(exc).__name__}: {excerpt(str(exc), 200)}", time.perf_counter() - submitted, {})
+                            results[name] = PartResult(
+                                name,
+                                "failed",
+                                f"{type(exc).__name__}: {excerpt(str(exc), 200)}",
+                                time.perf_counter() - submitted,
+                                {},
+                            )
                         on_progress(name, 1.0, results[name].status)
         except BaseException:
             stop_tasks(client, futures)
@@ -178,7 +202,14 @@ def _run_on_cluster(out: Path, names: Sequence[str], robot: Path, jobs: int, sch
         return results, len(workers)
 
 
-def run_parts(out: Path, names: Sequence[str], jobs: int, on_progress: OnProgress, robot: Path = ROBOT, scheduler: str | None = None) -> list[PartResult]:
+def run_parts(
+    out: Path,
+    names: Sequence[str],
+    jobs: int,
+    on_progress: OnProgress,
+    robot: Path = ROBOT,
+    scheduler: str | None = None,
+) -> list[PartResult]:
     """Run the parts ``names`` on the robot directory ``robot`` into ``out`` (after :func:`prepare`) and write :data:`PARTS_FILE`.
 
     The parts run as Dask tasks, the longest first: on the cluster at ``scheduler``

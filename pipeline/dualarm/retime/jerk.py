@@ -80,7 +80,15 @@ CHECK_STEP_S = 1e-4
 #: Pieces closer than this (every joint of every sample) share one timing [rad].
 SAME_PIECE_RAD = 1e-10
 #: IPOPT's settings: a monotone barrier from 1e-3 halved the solve time against the adaptive default on the triangle.
-IPOPT = {"print_level": 0, "sb": "yes", "tol": 1e-8, "max_iter": 500, "mu_strategy": "monotone", "mu_init": 1e-3, "linear_solver": "mumps"}
+IPOPT = {
+    "print_level": 0,
+    "sb": "yes",
+    "tol": 1e-8,
+    "max_iter": 500,
+    "mu_strategy": "monotone",
+    "mu_init": 1e-3,
+    "linear_solver": "mumps",
+}
 #: IPOPT's return statuses that count as solved.
 SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
@@ -145,9 +153,18 @@ class PieceTiming:
         knots = np.unique(self.path.t)
         between = np.concatenate([knots, *(knots[:-1] + share * np.diff(knots) for share in (0.25, 0.5, 0.75))])
         passes = _passing(self, between)
-        t = np.sort(np.concatenate([np.linspace(0.0, end, max(50, int(end / CHECK_STEP_S)) + 1), *(np.clip(x + side, 0, end) for x in (nodes, passes) for side in (-1e-12, 1e-12))]))
+        t = np.sort(
+            np.concatenate(
+                [
+                    np.linspace(0.0, end, max(50, int(end / CHECK_STEP_S)) + 1),
+                    *(np.clip(x + side, 0, end) for x in (nodes, passes) for side in (-1e-12, 1e-12)),
+                ]
+            )
+        )
         _, qd, qdd, qddd = self(t)
-        worst = np.max([np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=(0, 2))
+        worst = np.max(
+            [np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=(0, 2)
+        )
         excess = np.zeros(len(self.dt))
         np.maximum.at(excess, np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(self.dt) - 1), worst)
         return excess
@@ -175,14 +192,27 @@ def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray
     solved: list[tuple[np.ndarray, PieceTiming]] = []
     for first, last, curve in cut:
         samples = q[first : last + 1]
-        same = next((timing for earlier, timing in solved if earlier.shape == samples.shape and np.abs(earlier - samples).max() <= SAME_PIECE_RAD), None)
+        same = next(
+            (
+                timing
+                for earlier, timing in solved
+                if earlier.shape == samples.shape and np.abs(earlier - samples).max() <= SAME_PIECE_RAD
+            ),
+            None,
+        )
         if same is None:
             same = _time_piece(curve, velocity, acceleration, jerk, (int(kept[first]), int(kept[last])))
             solved.append((samples, same))
         timings.append(same)
     starts = np.concatenate([[0.0], np.cumsum([p.duration_s for p in timings])])
     evaluate = _Pieces(tuple(timings), starts)
-    passes = np.concatenate([start + _passing(timing, s[first:last] - s[first]) for start, timing, (first, last, _) in zip(starts, timings, cut)] + [starts[-1:]])
+    passes = np.concatenate(
+        [
+            start + _passing(timing, s[first:last] - s[first])
+            for start, timing, (first, last, _) in zip(starts, timings, cut)
+        ]
+        + [starts[-1:]]
+    )
     return Timing(
         method="jerk-limited",
         joint_names=path.joint_names,
@@ -213,7 +243,9 @@ def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
     cosine = np.ones(len(s))
     inner = (before < index) & (index < after)
     cosine[inner] = _cosines(q[index[inner]] - q[before[inner]], q[after[inner]] - q[index[inner]])
-    runs = np.flatnonzero(np.diff(np.concatenate([[0], (cosine < TURN_COSINE).astype(int), [0]])))  # where runs of turning samples start and end
+    runs = np.flatnonzero(
+        np.diff(np.concatenate([[0], (cosine < TURN_COSINE).astype(int), [0]]))
+    )  # where runs of turning samples start and end
     turns = [start + int(np.argmin(cosine[start:end])) for start, end in zip(runs[::2], runs[1::2])]
     sharp = np.flatnonzero(_cosines(np.diff(q[:-1], axis=0), np.diff(q[1:], axis=0)) < TURN_COSINE) + 1
     cuts = np.unique(np.concatenate([[0], turns, sharp, [len(s) - 1]])).astype(int)
@@ -229,7 +261,11 @@ def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
         elif len(start) or len(end):  # hooks: cut every sample from each end to the last it misses there
             lo = max(int(start.max()), first + 1) if len(start) else first
             hi = max(lo, min(int(end.min()), last - 1)) if len(end) else last
-            todo += [(k, k + 1) for k in range(first, lo)] + ([(lo, hi)] if lo < hi else []) + [(k, k + 1) for k in range(hi, last)]
+            todo += (
+                [(k, k + 1) for k in range(first, lo)]
+                + ([(lo, hi)] if lo < hi else [])
+                + [(k, k + 1) for k in range(hi, last)]
+            )
         else:
             done.append((first, last, make_interp_spline(s[first : last + 1] - s[first], q[first : last + 1], k=5)))
     return sorted(done, key=lambda piece: piece[0])
@@ -302,7 +338,9 @@ def _passing(piece: PieceTiming, s: np.ndarray) -> np.ndarray:
     return np.where(s <= piece.s[0], 0.0, hi)
 
 
-def _time_piece(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]) -> PieceTiming:
+def _time_piece(
+    path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]
+) -> PieceTiming:
     """One piece's timing along its curve ``path`` (:func:`pieces`): programs solved on nodes refined where the check finds a limit exceeded, then stretched (module docstring); the piece's ``samples`` (first, last) name it in errors."""
     if path.k == 1:
         return _straight(path, velocity, acceleration, jerk, samples)
@@ -323,15 +361,23 @@ def _time_piece(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, j
     return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0)
 
 
-def _straight(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]) -> PieceTiming:
+def _straight(
+    path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]
+) -> PieceTiming:
     """The time-optimal timing of a straight piece (two samples): Ruckig's on s, rest to rest, within the limits of s that keep every joint within :data:`MARGIN` of its own (P' is constant, P'' and P''' are 0)."""
     direction = np.maximum(np.abs(path(0.0, 1)), 1e-300)
     inp = InputParameter(1)
     inp.current_position, inp.target_position = [0.0], [float(path.t[-1])]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = ([float(MARGIN * np.min(limit / direction))] for limit in (velocity, acceleration, jerk))
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = (
+        [float(MARGIN * np.min(limit / direction))] for limit in (velocity, acceleration, jerk)
+    )
     plan = Trajectory(1)
     if Ruckig(1).calculate(inp, plan) not in (Result.Working, Result.Finished):
-        raise StageError(f"{STAGE}: jerk-limited: Ruckig did not time the straight piece from sample {samples[0]} to {samples[1]}", stage=STAGE, sample=samples[0])
+        raise StageError(
+            f"{STAGE}: jerk-limited: Ruckig did not time the straight piece from sample {samples[0]} to {samples[1]}",
+            stage=STAGE,
+            sample=samples[0],
+        )
     profile = plan.profiles[0][0]
     used = np.flatnonzero(np.asarray(profile.t) > 0)  # Ruckig's seven phases, without those of no duration
     return _exact(path, np.asarray(profile.j)[used], np.asarray(profile.t)[used])
@@ -360,14 +406,24 @@ def _exact(path: BSpline, sddd: np.ndarray, dt: np.ndarray) -> PieceTiming:
     return PieceTiming(path, scale * s, scale * sd, scale * sdd, scale * sddd, dt)
 
 
-def _solve(path: BSpline, nodes: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int], start: PieceTiming | None) -> PieceTiming:
+def _solve(
+    path: BSpline,
+    nodes: np.ndarray,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    jerk: np.ndarray,
+    samples: tuple[int, int],
+    start: PieceTiming | None,
+) -> PieceTiming:
     """The program on ``nodes`` (K + 1,) [rad] along ``path`` solved (:func:`_program`), unstretched, from the timing ``start`` on coarser nodes (or from :func:`_first_guess`); StageError naming the piece's ``samples`` if IPOPT fails."""
     K = len(nodes) - 1
     d1, d2, d3 = (path(nodes, m) for m in (1, 2, 3))
     solver, lbg, ubg = _program(d1.shape[1], K)
     cap = MARGIN * np.min(velocity / np.maximum(np.abs(d1), 1e-12), axis=1)  # s' within every joint's velocity limit
     if start is None:
-        bends = np.min(np.cbrt(jerk / np.maximum(np.abs(d3), 1e-12)), axis=1) / 2  # s' where the path's third derivative alone asks 8 times the jerk limit
+        bends = (
+            np.min(np.cbrt(jerk / np.maximum(np.abs(d3), 1e-12)), axis=1) / 2
+        )  # s' where the path's third derivative alone asks 8 times the jerk limit
         sd0 = _first_guess(nodes, d1, d2, np.minimum(cap, bends), MARGIN * acceleration)
         dt0 = 2 * np.diff(nodes) / np.maximum(sd0[:-1] + sd0[1:], 1e-6)
         sdd0 = np.append(np.diff(sd0) / dt0, 0.0)
@@ -384,17 +440,28 @@ def _solve(path: BSpline, nodes: np.ndarray, velocity: np.ndarray, acceleration:
     ubx = np.concatenate([cap / speed, np.full(K + 1, np.inf), np.full(K, np.inf), np.full(K, np.inf)])
     for end in (0, K):  # rest at both ends
         ubx[end] = lbx[K + 1 + end] = ubx[K + 1 + end] = 0.0
-    parameters = np.concatenate([np.diff(nodes) / L, *((d * L**m).T.ravel() for m, d in ((1, d1), (2, d2), (3, d3))), 1 / (acceleration * T**2), 1 / (jerk * T**3)])
+    parameters = np.concatenate(
+        [
+            np.diff(nodes) / L,
+            *((d * L**m).T.ravel() for m, d in ((1, d1), (2, d2), (3, d3))),
+            1 / (acceleration * T**2),
+            1 / (jerk * T**3),
+        ]
+    )
     x0 = np.concatenate([sd0 / speed, sdd0 * T / speed, np.diff(sdd0) / dt0 * T**2 / speed, dt0 / T])
     result = solver(x0=x0, p=parameters, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     status = solver.stats()["return_status"]
     if status not in SOLVED:
-        raise StageError(f"{STAGE}: jerk-limited: IPOPT did not time the piece from sample {samples[0]} to {samples[1]} ({status})", stage=STAGE, sample=samples[0])
+        raise StageError(
+            f"{STAGE}: jerk-limited: IPOPT did not time the piece from sample {samples[0]} to {samples[1]} ({status})",
+            stage=STAGE,
+            sample=samples[0],
+        )
     x = np.asarray(result["x"]).ravel()
     return _exact(path, x[2 * K + 2 : 3 * K + 2] * speed / T**2, x[3 * K + 2 :] * T)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _program(n: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
     """A piece's program for ``n`` joints on ``K`` intervals (module docstring): the IPOPT solver and the bounds of its constraints.
 
@@ -419,16 +486,27 @@ def _program(n: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
     ]
     acc = (d2 * columns(sd**2) + d1 * columns(sdd)) * rows(inverse_a, K + 1)
     base = d3 * columns(sd**3) + 3 * d2 * columns(sd * sdd)
-    jerks = [(base[at, :] + d1[at, :] * columns(sddd)) * rows(inverse_j, K) for at in (slice(0, K), slice(1, K + 1))]  # each node with the jerk after it, and before it
+    jerks = [
+        (base[at, :] + d1[at, :] * columns(sddd)) * rows(inverse_j, K) for at in (slice(0, K), slice(1, K + 1))
+    ]  # each node with the jerk after it, and before it
     g = cs.vertcat(*triple, cs.vec(acc), *(cs.vec(j) for j in jerks))
     bound = np.concatenate([np.zeros(3 * K), np.full((K + 1) * n + 2 * K * n, MARGIN)])
     lower = np.concatenate([np.zeros(3 * K), -bound[3 * K :]])
-    problem = {"x": cs.vertcat(sd, sdd, sddd, dt), "p": cs.vertcat(ds, cs.vec(d1), cs.vec(d2), cs.vec(d3), inverse_a, inverse_j), "f": cs.sum1(dt), "g": g}
-    solver = cs.nlpsol("jerk_limited", "ipopt", problem, {"print_time": False, **{f"ipopt.{k}": v for k, v in IPOPT.items()}})
+    problem = {
+        "x": cs.vertcat(sd, sdd, sddd, dt),
+        "p": cs.vertcat(ds, cs.vec(d1), cs.vec(d2), cs.vec(d3), inverse_a, inverse_j),
+        "f": cs.sum1(dt),
+        "g": g,
+    }
+    solver = cs.nlpsol(
+        "jerk_limited", "ipopt", problem, {"print_time": False, **{f"ipopt.{k}": v for k, v in IPOPT.items()}}
+    )
     return solver, lower, bound
 
 
-def _first_guess(s: np.ndarray, d1: np.ndarray, d2: np.ndarray, cap: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
+def _first_guess(
+    s: np.ndarray, d1: np.ndarray, d2: np.ndarray, cap: np.ndarray, acceleration: np.ndarray
+) -> np.ndarray:
     """A starting s' (K + 1,) [rad/s] for the program: constant path acceleration between nodes within the velocity cap and the acceleration limits, backward then forward (numerical integration, as TOPP's), at 90 %."""
     ds = np.diff(s)
     moving = np.abs(d1) > 1e-12

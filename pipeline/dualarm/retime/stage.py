@@ -57,7 +57,15 @@ class Retimed:
     at_samples: np.ndarray
 
 
-def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, sample_period_s: float = 0.001, keep_timing: bool = False, jerk: np.ndarray | None = None) -> Retimed:
+def retime_path(
+    path: JointPath,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    *,
+    sample_period_s: float = 0.001,
+    keep_timing: bool = False,
+    jerk: np.ndarray | None = None,
+) -> Retimed:
     """Time a joint path within joint limits and sample it.
 
     Args:
@@ -81,7 +89,9 @@ def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray,
             TOPP-RA finds no parameterisation, or (``keep_timing``) the task's timing exceeds a limit.
     """
     if not (np.isfinite(sample_period_s) and sample_period_s > 0):
-        raise StageError(f"{STAGE}: the sample period must be a positive number of seconds, got {sample_period_s!r}", stage=STAGE)
+        raise StageError(
+            f"{STAGE}: the sample period must be a positive number of seconds, got {sample_period_s!r}", stage=STAGE
+        )
     timing = plan(path, velocity, acceleration, keep_timing=keep_timing, jerk=jerk)
     traj = timing.sample(sample_period_s)
     if keep_timing:
@@ -92,7 +102,14 @@ def retime_path(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray,
     return Retimed(traj, timing.stretch, float(np.abs(at_samples - path.q).max()), at_samples)
 
 
-def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, keep_timing: bool = False, jerk: np.ndarray | None = None) -> Timing:
+def plan(
+    path: JointPath,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    *,
+    keep_timing: bool = False,
+    jerk: np.ndarray | None = None,
+) -> Timing:
     """The continuous trajectory :func:`retime_path` samples (checks the limits and the path first).
 
     Args:
@@ -117,7 +134,9 @@ def plan(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, *, kee
     return time_optimal(path, v, a)
 
 
-def _within_limits(timing: Timing, traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray, period_s: float) -> tuple[Timing, JointTrajectory]:
+def _within_limits(
+    timing: Timing, traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray, period_s: float
+) -> tuple[Timing, JointTrajectory]:
     """Slow ``timing`` down until its samples ``traj`` are within the limits (rarely needed).
 
     Each pass slows the whole trajectory down by k = max(velocity ratio, sqrt(acceleration
@@ -137,7 +156,9 @@ def _within_limits(timing: Timing, traj: JointTrajectory, velocity: np.ndarray, 
     return timing, traj
 
 
-def check_limits(traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray | None = None) -> None:
+def check_limits(
+    traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray | None = None
+) -> None:
     """Raise a StageError naming the joint, time and ratio if ``traj`` exceeds a limit by more than :data:`dualarm.limits.LIMIT_TOLERANCE` (the ``keep_timing`` check).
 
     Args:
@@ -167,9 +188,23 @@ def check_path(path: JointPath) -> None:
     if len(bad):
         k, j = (int(x) for x in bad[0])
         joint, t_s = path.joint_names[j], float(path.t[k])
-        raise StageError(f"{STAGE}: the joint path's {joint} is {float(path.q[k, j])!r} at sample {k} (t = {t_s:.3f} s)", stage=STAGE, sample=k, t_s=t_s, joint=joint)
+        raise StageError(
+            f"{STAGE}: the joint path's {joint} is {float(path.q[k, j])!r} at sample {k} (t = {t_s:.3f} s)",
+            stage=STAGE,
+            sample=k,
+            t_s=t_s,
+            joint=joint,
+        )
 
 
-def _sample_ratios(traj: JointTrajectory, velocity: np.ndarray | Sequence[float], acceleration: np.ndarray | Sequence[float]) -> dict[str, LimitRatio]:
+def _sample_ratios(
+    traj: JointTrajectory, velocity: np.ndarray | Sequence[float], acceleration: np.ndarray | Sequence[float]
+) -> dict[str, LimitRatio]:
     """The largest velocity and acceleration limit ratios over the samples of ``traj`` (kind -> :class:`dualarm.limits.LimitRatio`)."""
-    return limit_ratios(traj.t, traj.joint_names, {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": velocity, "acceleration": acceleration}, STAGE)
+    return limit_ratios(
+        traj.t,
+        traj.joint_names,
+        {"velocity": traj.qd, "acceleration": traj.qdd},
+        {"velocity": velocity, "acceleration": acceleration},
+        STAGE,
+    )

@@ -79,11 +79,19 @@ class Timing:
         passed = np.clip(np.searchsorted(self.sample_times_s, t, side="right") - 1, 0, len(self.rep) - 1)
         if len(t) == 1:
             passed = np.array([len(self.rep) - 1])
-        return JointTrajectory(stage=STAGE, joint_names=self.joint_names, t=t, q=q, qd=qd, qdd=qdd, rep=self.rep[passed], fixed=self.fixed)
+        return JointTrajectory(
+            stage=STAGE, joint_names=self.joint_names, t=t, q=q, qd=qd, qdd=qdd, rep=self.rep[passed], fixed=self.fixed
+        )
 
     def slowed(self, k: float) -> Timing:
         """The same motion ``k`` (>= 1) times slower: q(t / k), qd / k, qdd / k^2."""
-        return replace(self, duration_s=k * self.duration_s, sample_times_s=k * self.sample_times_s, evaluate=_Slowed(self.evaluate, k), stretch=k * self.stretch)
+        return replace(
+            self,
+            duration_s=k * self.duration_s,
+            sample_times_s=k * self.sample_times_s,
+            evaluate=_Slowed(self.evaluate, k),
+            stretch=k * self.stretch,
+        )
 
 
 @dataclass(frozen=True)
@@ -135,7 +143,12 @@ def task_timing(path: JointPath) -> Timing:
     if not np.isfinite(t).all() or (np.diff(t) <= 0).any():
         k = int(np.argmax(~np.isfinite(t[1:]) | (np.diff(t) <= 0)))
         t_s = float(path.t[k + 1])
-        raise StageError(f"{STAGE}: keep_timing needs increasing sample times, but sample {k + 1} (t = {t_s:.6g} s) does not come after sample {k}", stage=STAGE, sample=k + 1, t_s=t_s)
+        raise StageError(
+            f"{STAGE}: keep_timing needs increasing sample times, but sample {k + 1} (t = {t_s:.6g} s) does not come after sample {k}",
+            stage=STAGE,
+            sample=k + 1,
+            t_s=t_s,
+        )
     spline = CubicSpline(t, path.q, bc_type="clamped")
     d1, d2 = spline.derivative(1), spline.derivative(2)
 
@@ -143,7 +156,15 @@ def task_timing(path: JointPath) -> Timing:
         ts = np.clip(np.asarray(ts, dtype=float), 0.0, t[-1])
         return spline(ts), d1(ts), d2(ts)
 
-    return Timing(method="keep_timing", joint_names=path.joint_names, duration_s=float(t[-1]), sample_times_s=t, rep=path.rep, evaluate=evaluate, fixed=path.fixed)
+    return Timing(
+        method="keep_timing",
+        joint_names=path.joint_names,
+        duration_s=float(t[-1]),
+        sample_times_s=t,
+        rep=path.rep,
+        evaluate=evaluate,
+        fixed=path.fixed,
+    )
 
 
 def still(path: JointPath, method: str = "topp-ra") -> Timing:
@@ -162,7 +183,15 @@ def still(path: JointPath, method: str = "topp-ra") -> Timing:
         m = len(np.atleast_1d(t))
         return np.tile(q0, (m, 1)), np.zeros((m, len(q0))), np.zeros((m, len(q0)))
 
-    return Timing(method=method, joint_names=path.joint_names, duration_s=0.0, sample_times_s=np.zeros(len(path)), rep=path.rep, evaluate=evaluate, fixed=path.fixed)
+    return Timing(
+        method=method,
+        joint_names=path.joint_names,
+        duration_s=0.0,
+        sample_times_s=np.zeros(len(path)),
+        rep=path.rep,
+        evaluate=evaluate,
+        fixed=path.fixed,
+    )
 
 
 def path_deviation_max_rad(timing: Timing, path: JointPath) -> float:

@@ -112,7 +112,13 @@ def time_optimal(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray
     )
 
 
-def _topp_ra(spline: toppra.SplineInterpolator, grid: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, joint_names: Sequence[str]) -> ConstAccelProfile:
+def _topp_ra(
+    spline: toppra.SplineInterpolator,
+    grid: np.ndarray,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    joint_names: Sequence[str],
+) -> ConstAccelProfile:
     """TOPP-RA, rest to rest, on ``grid`` (see the module docstring).
 
     Args:
@@ -126,7 +132,10 @@ def _topp_ra(spline: toppra.SplineInterpolator, grid: np.ndarray, velocity: np.n
         StageError: TOPP-RA finds no feasible parameterisation (``compute_trajectory`` gives None).
     """
     instance = toppra.algorithm.TOPPRA(
-        [toppra.constraint.JointVelocityConstraint(np.vstack([-velocity, velocity]).T), toppra.constraint.JointAccelerationConstraint(np.vstack([-acceleration, acceleration]).T)],
+        [
+            toppra.constraint.JointVelocityConstraint(np.vstack([-velocity, velocity]).T),
+            toppra.constraint.JointAccelerationConstraint(np.vstack([-acceleration, acceleration]).T),
+        ],
         spline,
         gridpoints=grid,
         parametrizer="ParametrizeConstAccel",
@@ -213,7 +222,10 @@ class ConstAccelProfile:
         lo, ds = self.s_grid[:-1, None], np.diff(self.s_grid)[:, None]
         s = (lo + ds * fraction).ravel()
         u = np.repeat(self.u, len(fraction)) / self.stretch**2
-        x = np.maximum((self.sd_grid[:-1, None] ** 2 + 2 * self.u[:, None] * ds * fraction).ravel(), 0.0) / self.stretch**2
+        x = (
+            np.maximum((self.sd_grid[:-1, None] ** 2 + 2 * self.u[:, None] * ds * fraction).ravel(), 0.0)
+            / self.stretch**2
+        )
         dq, ddq = self.path(s, 1), self.path(s, 2)
         rv = (np.abs(dq) * np.sqrt(x)[:, None] / velocity).max(axis=1)
         ra = (np.abs(ddq * x[:, None] + dq * u[:, None]) / acceleration).max(axis=1)

@@ -63,11 +63,16 @@ class PyBulletRobot:
 
     def collision_links(self) -> set[int]:
         """Indices of the robot's links that have collision geometry."""
-        return {i for i in self.link_index.values() if pb.getCollisionShapeData(self.body, i, physicsClientId=self.client)}
+        return {
+            i for i in self.link_index.values() if pb.getCollisionShapeData(self.body, i, physicsClientId=self.client)
+        }
 
     def solid_parents(self) -> dict[int, tuple[int, bool]]:
         """For each link with collision geometry below another such link: that nearest ancestor with geometry, and whether the way up passes through links without geometry."""
-        parent = {i: pb.getJointInfo(self.body, i, physicsClientId=self.client)[16] for i in range(pb.getNumJoints(self.body, physicsClientId=self.client))}
+        parent = {
+            i: pb.getJointInfo(self.body, i, physicsClientId=self.client)[16]
+            for i in range(pb.getNumJoints(self.body, physicsClientId=self.client))
+        }
         solid = self.collision_links()
         out = {}
         for link in solid:
@@ -83,7 +88,7 @@ class PyBulletRobot:
         if pb.isConnected(physicsClientId=self.client):
             pb.disconnect(physicsClientId=self.client)
 
-    def __enter__(self) -> "PyBulletRobot":
+    def __enter__(self) -> PyBulletRobot:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -123,7 +128,9 @@ def disable_touching_pairs(sim: PyBulletRobot, margin_m: float = 0.0) -> frozens
     skipped: set[tuple[str, str]] = set()
     for link, (up, through_bare) in sim.solid_parents().items():
         points = pb.getClosestPoints(body, body, 1.0, link, up, physicsClientId=client)
-        touching = bool(points) and min(p[8] for p in points) + 2 * margin_m < TOUCHING_M  # the distance before the margin
+        touching = (
+            bool(points) and min(p[8] for p in points) + 2 * margin_m < TOUCHING_M
+        )  # the distance before the margin
         if through_bare and not touching:
             continue
         pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
@@ -138,7 +145,11 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
     Raises:
         StageError: ``gui`` on a Linux machine without a display.
     """
-    if gui and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+    if (
+        gui
+        and sys.platform.startswith("linux")
+        and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    ):
         raise StageError("execute: --gui needs a display, and this machine has none (DISPLAY is not set)")
     with c_output_silenced():
         client = pb.connect(pb.GUI if gui else pb.DIRECT)
@@ -160,12 +171,22 @@ def add_environment(sim: PyBulletRobot, objects) -> dict[int, str]:
     bodies = {}
     for obj in objects:
         if obj.shape == "box":
-            shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[s / 2 for s in obj.size_m], physicsClientId=sim.client)
+            shape = pb.createCollisionShape(
+                pb.GEOM_BOX, halfExtents=[s / 2 for s in obj.size_m], physicsClientId=sim.client
+            )
         elif obj.shape == "cylinder":
-            shape = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=obj.radius_m, height=obj.height_m, physicsClientId=sim.client)
+            shape = pb.createCollisionShape(
+                pb.GEOM_CYLINDER, radius=obj.radius_m, height=obj.height_m, physicsClientId=sim.client
+            )
         else:
             shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=obj.radius_m, physicsClientId=sim.client)
         T = pose_matrix(obj.pose.position, obj.pose.rpy)
-        body = pb.createMultiBody(0.0, shape, basePosition=T[:3, 3].tolist(), baseOrientation=Rotation.from_matrix(T[:3, :3]).as_quat().tolist(), physicsClientId=sim.client)
+        body = pb.createMultiBody(
+            0.0,
+            shape,
+            basePosition=T[:3, 3].tolist(),
+            baseOrientation=Rotation.from_matrix(T[:3, :3]).as_quat().tolist(),
+            physicsClientId=sim.client,
+        )
         bodies[body] = obj.name
     return bodies

@@ -24,7 +24,14 @@ STAGE = "approach"
 
 
 def approach_trajectory(
-    names: tuple[str, ...], start: np.ndarray, goal: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, period_s: float, fixed: dict[str, float] | None = None
+    names: tuple[str, ...],
+    start: np.ndarray,
+    goal: np.ndarray,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    jerk: np.ndarray,
+    period_s: float,
+    fixed: dict[str, float] | None = None,
 ) -> JointTrajectory:
     """The time-optimal jerk-limited straight move from ``start`` to ``goal`` [rad], at rest at both ends, sampled every ``period_s`` [s] (its last sample at the goal).
 

@@ -73,7 +73,12 @@ class Smoothed:
         """``reference`` passed through as it is (stage ``smooth``), for a timing already within the jerk limits: its mean jerk, no deviation, no look-ahead."""
         traj = replace(reference, stage=STAGE)
         jerk, zeros = traj.mean_jerk(), np.zeros(traj.q.shape)
-        return cls(traj, frozen(jerk, jerk.shape, "jerk"), frozen(zeros, zeros.shape, "deviation_rad"), frozen(zeros, zeros.shape, "lookahead_s"))
+        return cls(
+            traj,
+            frozen(jerk, jerk.shape, "jerk"),
+            frozen(zeros, zeros.shape, "deviation_rad"),
+            frozen(zeros, zeros.shape, "lookahead_s"),
+        )
 
     @property
     def path_deviation_max_rad(self) -> float:
@@ -118,7 +123,9 @@ def smooth_trajectory(
 
     t = np.arange(len(q_out)) * dt
     q_ref, _, _, rep = reference.interpolate(t)
-    traj = JointTrajectory(stage=STAGE, joint_names=names, t=t, q=q_out, qd=qd_out, qdd=qdd_out, rep=rep, fixed=dict(reference.fixed))
+    traj = JointTrajectory(
+        stage=STAGE, joint_names=names, t=t, q=q_out, qd=qd_out, qdd=qdd_out, rep=rep, fixed=dict(reference.fixed)
+    )
     jerk_out = traj.mean_jerk()
     deviation = np.abs(q_out - q_ref)
     lookahead = ahead * dt
@@ -140,7 +147,9 @@ def _check_reference(reference: JointTrajectory) -> None:
         bad = ~np.isfinite(arr).all(axis=0)
         if bad.any():
             joint = names[int(np.argmax(bad))]
-            raise StageError(f"{STAGE}: the reference {label} of joint '{joint}' is not finite", stage=STAGE, joint=joint)
+            raise StageError(
+                f"{STAGE}: the reference {label} of joint '{joint}' is not finite", stage=STAGE, joint=joint
+            )
 
 
 def _period(period_s: float) -> float:
@@ -148,7 +157,9 @@ def _period(period_s: float) -> float:
     try:
         dt = float(period_s)
     except (TypeError, ValueError):
-        raise StageError(f"{STAGE}: the control period must be a number of seconds, got {period_s!r}", stage=STAGE) from None
+        raise StageError(
+            f"{STAGE}: the control period must be a number of seconds, got {period_s!r}", stage=STAGE
+        ) from None
     if not (math.isfinite(dt) and dt > 0):
         raise StageError(f"{STAGE}: the control period is {dt} s; it must be finite and positive", stage=STAGE)
     return dt

@@ -90,7 +90,9 @@ class Tracker:
         max_cycles: the most control cycles :meth:`run` takes before giving up.
     """
 
-    def __init__(self, names: tuple[str, ...], targets: Targets, v: np.ndarray, a: np.ndarray, j: np.ndarray, dt: float):
+    def __init__(
+        self, names: tuple[str, ...], targets: Targets, v: np.ndarray, a: np.ndarray, j: np.ndarray, dt: float
+    ):
         """Set up the Ruckig instances, at rest at the first target.
 
         Args:
@@ -101,7 +103,10 @@ class Tracker:
         """
         n = len(names)
         self.names, self.targets, self.dt, self.n = names, targets, dt, n
-        self.bounds = [(float(x) * (1 + LIMIT_SLACK), float(y) * (1 + LIMIT_SLACK), float(z) * (1 + LIMIT_SLACK)) for x, y, z in zip(v, a, j)]
+        self.bounds = [
+            (float(x) * (1 + LIMIT_SLACK), float(y) * (1 + LIMIT_SLACK), float(z) * (1 + LIMIT_SLACK))
+            for x, y, z in zip(v, a, j)
+        ]
         self.fallbacks = 0
         self.otgs = [ruckig.Ruckig(1, dt) for _ in range(n)]
         self.inps = [ruckig.InputParameter(1) for _ in range(n)]
@@ -112,7 +117,11 @@ class Tracker:
         self.probe = ruckig.Ruckig(n)
         self.probe_inp = ruckig.InputParameter(n)
         self.probe_traj = ruckig.Trajectory(n)
-        self.probe_inp.max_velocity, self.probe_inp.max_acceleration, self.probe_inp.max_jerk = list(v), list(a), list(j)
+        self.probe_inp.max_velocity, self.probe_inp.max_acceleration, self.probe_inp.max_jerk = (
+            list(v),
+            list(a),
+            list(j),
+        )
         self.probe_inp.synchronization = ruckig.Synchronization.No
         # a bound against endless loops only: the reference, then TAIL_FACTOR times a traverse of
         # its span and full stops (Ruckig's community solver can find plans slower than optimal)
@@ -152,7 +161,10 @@ class Tracker:
             ahead.append(m - 1)
             if finished and (k + m >= end).all():
                 return np.array(q), np.array(qd), np.array(qdd), np.array(ahead)
-        raise StageError(f"{STAGE}: the tracker did not come to rest at the reference's final position within {self.max_cycles * self.dt:.3f} s", stage=STAGE)
+        raise StageError(
+            f"{STAGE}: the tracker did not come to rest at the reference's final position within {self.max_cycles * self.dt:.3f} s",
+            stage=STAGE,
+        )
 
     def _step(self, i: int, k: int, m: int) -> ruckig.Result:
         """Plan joint i from t_k to the target row k + m, arriving in m periods; advance one period.
@@ -192,7 +204,13 @@ class Tracker:
                 self.fallbacks += attempt > 0
                 return result
         joint, t_s = self.names[i], k * self.dt
-        raise StageError(f"{STAGE}: no motion within the limits for joint '{joint}' at t = {t_s:.4f} s: {failure}", stage=STAGE, sample=k, t_s=t_s, joint=joint)
+        raise StageError(
+            f"{STAGE}: no motion within the limits for joint '{joint}' at t = {t_s:.4f} s: {failure}",
+            stage=STAGE,
+            sample=k,
+            t_s=t_s,
+            joint=joint,
+        )
 
     def _outside(self, i: int, profile: ruckig.Profile) -> str:
         """Why the plan ``profile`` of joint i (with its braking pre-phases) leaves a limit, or ''."""
@@ -220,7 +238,11 @@ class Tracker:
     def _durations(self, state: np.ndarray, rows: np.ndarray) -> np.ndarray | None:
         """Time-optimal duration [s] of each joint from ``state`` (3, n) to its target row ``rows`` (n,), or None if Ruckig fails."""
         inp = self.probe_inp
-        inp.current_position, inp.current_velocity, inp.current_acceleration = list(state[0]), list(state[1]), list(state[2])
+        inp.current_position, inp.current_velocity, inp.current_acceleration = (
+            list(state[0]),
+            list(state[1]),
+            list(state[2]),
+        )
         p, v, a = self.targets.rows(rows)
         inp.target_position, inp.target_velocity, inp.target_acceleration = list(p), list(v), list(a)
         try:
@@ -249,7 +271,9 @@ class Tracker:
         if rest is None:
             return m
         lo = m  # for the joints not ok: not reachable in time
-        hi = np.where(ok, m, np.maximum(np.maximum(end - k, 1) + np.ceil(rest / dt * (1 + DURATION_SLACK)).astype(int), m + 1))
+        hi = np.where(
+            ok, m, np.maximum(np.maximum(end - k, 1) + np.ceil(rest / dt * (1 + DURATION_SLACK)).astype(int), m + 1)
+        )
         # march ahead in doubling steps to the first reachable sample, then bisect: the earliest
         # meeting, where reachability may come and go, not merely some meeting
         step = np.ones(self.n, dtype=int)

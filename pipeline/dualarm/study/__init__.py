@@ -13,4 +13,13 @@ from dualarm.study.run import read_study, run_study
 from dualarm.study.spec import StudySpec, load_study
 from dualarm.study.trials import Trial, reachable_trial, trial
 
-__all__ = ["StudySpec", "Trial", "load_study", "reachable_trial", "read_study", "run_study", "trial", "write_study_report"]
+__all__ = [
+    "StudySpec",
+    "Trial",
+    "load_study",
+    "reachable_trial",
+    "read_study",
+    "run_study",
+    "trial",
+    "write_study_report",
+]

@@ -79,7 +79,15 @@ def run_trials(
 
 
 def _run_trials(
-    task: Task, planner: str, trials: int, seed: int, out_dir: Path, settings: PlanningSettings, recordings: Path, command: list[str] | None, progress: Callable[[int, int], None]
+    task: Task,
+    planner: str,
+    trials: int,
+    seed: int,
+    out_dir: Path,
+    settings: PlanningSettings,
+    recordings: Path,
+    command: list[str] | None,
+    progress: Callable[[int, int], None],
 ) -> TrialsResult:
     from dualarm.run import build_stages, record_stages
     from dualarm.stages import PlanStage

@@ -83,11 +83,15 @@ def read_trials(directory: str | Path) -> pd.DataFrame:
     """
     file = Path(directory) / RESULTS
     if not file.is_file():
-        raise RecordingError(f"{excerpt(file)}: no such file; give a study's directory (dualarm study SPEC.toml --out DIR)")
+        raise RecordingError(
+            f"{excerpt(file)}: no such file; give a study's directory (dualarm study SPEC.toml --out DIR)"
+        )
     try:
         rows = pd.read_parquet(file)
     except Exception as exc:  # pyarrow's own errors for a truncated or foreign file
-        raise RecordingError(f"{excerpt(file)}: not a readable parquet file ({type(exc).__name__}: {excerpt(str(exc), 120)})") from None
+        raise RecordingError(
+            f"{excerpt(file)}: not a readable parquet file ({type(exc).__name__}: {excerpt(str(exc), 120)})"
+        ) from None
     missing = [c for c in ("trial", "method", "status", "failed", "inconsistent") if c not in rows.columns]
     if missing:
         raise RecordingError(f"{excerpt(file)}: not a study's table (no column {', '.join(missing)})")
@@ -129,7 +133,10 @@ def method_rates(rows: pd.DataFrame) -> pd.DataFrame:
 def _quantiles(rows: pd.DataFrame) -> dict[str, float]:
     """The median and 90th percentile of :data:`DEVIATION` over the rows that have it [rad] (NaN without any)."""
     values = rows[DEVIATION].dropna() if DEVIATION in rows.columns else pd.Series(dtype=float)
-    return {"deviation_median_rad": float(values.median()) if len(values) else math.nan, "deviation_p90_rad": float(values.quantile(0.9)) if len(values) else math.nan}
+    return {
+        "deviation_median_rad": float(values.median()) if len(values) else math.nan,
+        "deviation_p90_rad": float(values.quantile(0.9)) if len(values) else math.nan,
+    }
 
 
 def _bins(values: pd.Series) -> pd.Series:
@@ -155,7 +162,11 @@ def feature_rates(rows: pd.DataFrame) -> pd.DataFrame:
         for _, part in groups:
             binned = part.assign(bin=_bins(part[feature]))
             ordered = list(binned.sort_values(feature)["bin"].drop_duplicates())
-            label = {b: f"Q{i + 1}" for i, b in enumerate(ordered)} if feature.startswith("ik.") and len(ordered) == BINS else {b: b for b in ordered}
+            label = (
+                {b: f"Q{i + 1}" for i, b in enumerate(ordered)}
+                if feature.startswith("ik.") and len(ordered) == BINS
+                else {b: b for b in ordered}
+            )
             for (method, where), group in binned.groupby(["method", "bin"], sort=False):
                 n, bad = len(group), int(group["inconsistent"].sum())
                 low, high = wilson(bad, n)
@@ -172,9 +183,17 @@ def feature_rates(rows: pd.DataFrame) -> pd.DataFrame:
                         "high": high,
                     }
                 )
-    table = pd.DataFrame(out, columns=["feature", "bin", "bin_order", "method", "trials", "inconsistent", "p_inconsistent", "low", "high"])
+    table = pd.DataFrame(
+        out,
+        columns=["feature", "bin", "bin_order", "method", "trials", "inconsistent", "p_inconsistent", "low", "high"],
+    )
     rank = {"feature": list(FEATURES).index, "method": methods.__getitem__}
-    return table.sort_values(["feature", "method", "bin_order"], key=lambda c: c.map(rank[c.name]) if c.name in rank else c, kind="stable", ignore_index=True)
+    return table.sort_values(
+        ["feature", "method", "bin_order"],
+        key=lambda c: c.map(rank[c.name]) if c.name in rank else c,
+        kind="stable",
+        ignore_index=True,
+    )
 
 
 def logistic_fit(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
@@ -185,7 +204,14 @@ def logistic_fit(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
     judged = _judged(rows)
     out, skipped = [], {}
     for method, group in judged.groupby("method", sort=False):
-        numeric = [f for f in FEATURES if f in group.columns and pd.api.types.is_numeric_dtype(group[f]) and group[f].notna().all() and group[f].std() > 0]
+        numeric = [
+            f
+            for f in FEATURES
+            if f in group.columns
+            and pd.api.types.is_numeric_dtype(group[f])
+            and group[f].notna().all()
+            and group[f].std() > 0
+        ]
         y = group["inconsistent"].astype(float)
         if y.nunique() < 2:
             skipped[str(method)] = f"all {len(y)} trials {'inconsistent' if y.iloc[0] else 'consistent'}"
@@ -193,7 +219,9 @@ def logistic_fit(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
         events = int(min(y.sum(), len(y) - y.sum()))
         if events < EVENTS_PER_FEATURE * len(numeric):
             rarer = "consistent" if y.mean() > 0.5 else "inconsistent"
-            skipped[str(method)] = f"{events} {rarer} trials are too few for {len(numeric)} features ({EVENTS_PER_FEATURE} per feature)"
+            skipped[str(method)] = (
+                f"{events} {rarer} trials are too few for {len(numeric)} features ({EVENTS_PER_FEATURE} per feature)"
+            )
             continue
         x = (group[numeric] - group[numeric].mean()) / group[numeric].std()
         try:
@@ -202,7 +230,9 @@ def logistic_fit(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
                 warnings.simplefilter("error", ConvergenceWarning)
                 fit = sm.Logit(y, sm.add_constant(x)).fit(disp=0, maxiter=200)
         except (PerfectSeparationError, PerfectSeparationWarning, ConvergenceWarning, np.linalg.LinAlgError) as exc:
-            skipped[str(method)] = f"no fit ({type(exc).__name__}: the features separate its trials (nearly) perfectly or are collinear)"
+            skipped[str(method)] = (
+                f"no fit ({type(exc).__name__}: the features separate its trials (nearly) perfectly or are collinear)"
+            )
             continue
         interval = fit.conf_int(alpha=1 - CONFIDENCE)
         for feature in numeric:
@@ -229,7 +259,9 @@ def _methods_figure(rates: pd.DataFrame, path: Path) -> None:
     y = np.arange(len(rates))
     for offset, (what, colour) in zip((-0.18, 0.18), (("p_inconsistent", "tab:red"), ("p_failed", "tab:grey"))):
         p = rates[what].to_numpy()
-        err = np.clip(np.vstack([p - rates[f"{what}_low"], rates[f"{what}_high"] - p]), 0.0, None)  # the interval's end at 0 or 1 is p up to rounding
+        err = np.clip(
+            np.vstack([p - rates[f"{what}_low"], rates[f"{what}_high"] - p]), 0.0, None
+        )  # the interval's end at 0 or 1 is p up to rounding
         ax.errorbar(p, y + offset, xerr=err, fmt="o", color=colour, capsize=3, label=what.replace("p_", "P(") + ")")
     ax.set_yticks(y, [f"{m} (n = {n})" for m, n in zip(rates["method"], rates["trials"])])
     ax.invert_yaxis()
@@ -253,7 +285,12 @@ def _deviations_figure(rows: pd.DataFrame, threshold: float | None, path: Path) 
     for method, group in _judged(rows).groupby("method", sort=False):
         values = np.sort(np.maximum(group[DEVIATION].dropna().to_numpy(), 1e-16))
         if len(values):
-            ax.step(values, np.arange(1, len(values) + 1) / len(group), where="post", label=f"{method} ({len(values)} of {len(group)})")
+            ax.step(
+                values,
+                np.arange(1, len(values) + 1) / len(group),
+                where="post",
+                label=f"{method} ({len(values)} of {len(group)})",
+            )
     if threshold is not None:
         ax.axvline(threshold, color="k", ls="--", lw=1, label=f"inconsistent above {threshold:g} rad")
     ax.set_xscale("log")
@@ -275,7 +312,9 @@ def _features_figure(features: pd.DataFrame, path: Path) -> None:
 
     names = list(dict.fromkeys(features["feature"]))
     cols = 3
-    fig, axes = plt.subplots(math.ceil(len(names) / cols), cols, figsize=(4.2 * cols, 3.2 * math.ceil(len(names) / cols)), squeeze=False)
+    fig, axes = plt.subplots(
+        math.ceil(len(names) / cols), cols, figsize=(4.2 * cols, 3.2 * math.ceil(len(names) / cols)), squeeze=False
+    )
     methods = list(dict.fromkeys(features["method"]))
     for ax, name in zip(axes.flat, names):
         table = features[features["feature"] == name]
@@ -283,7 +322,16 @@ def _features_figure(features: pd.DataFrame, path: Path) -> None:
             t = table[table["method"] == method]
             x = t["bin_order"].to_numpy() + (k - (len(methods) - 1) / 2) * 0.08
             p = t["p_inconsistent"].to_numpy()
-            ax.errorbar(x, p, yerr=np.clip(np.vstack([p - t["low"], t["high"] - p]), 0.0, None), fmt="o-", capsize=2, ms=3, lw=1, label=method)
+            ax.errorbar(
+                x,
+                p,
+                yerr=np.clip(np.vstack([p - t["low"], t["high"] - p]), 0.0, None),
+                fmt="o-",
+                capsize=2,
+                ms=3,
+                lw=1,
+                label=method,
+            )
         labels = table.drop_duplicates("bin_order").sort_values("bin_order")
         ax.set_xticks(labels["bin_order"], labels["bin"], rotation=20, fontsize="x-small", ha="right")
         ax.set_title(FEATURES[name], fontsize="small")
@@ -302,7 +350,10 @@ def _features_figure(features: pd.DataFrame, path: Path) -> None:
 def _markdown(table: pd.DataFrame, digits: int = 3) -> str:
     """A table as Markdown (numbers to ``digits`` significant digits)."""
     head = "| " + " | ".join(table.columns) + " |\n|" + "---|" * len(table.columns) + "\n"
-    cells = (" | ".join(f"{v:.{digits}g}" if isinstance(v, float) else str(v) for v in row) for row in table.itertuples(index=False))
+    cells = (
+        " | ".join(f"{v:.{digits}g}" if isinstance(v, float) else str(v) for v in row)
+        for row in table.itertuples(index=False)
+    )
     return head + "".join(f"| {line} |\n" for line in cells)
 
 
@@ -329,20 +380,49 @@ def write_study_report(directory: str | Path) -> Path:
         if drawn:
             _deviations_figure(rows, _threshold(directory), directory / "deviations.png")
         study = rows["study"].iloc[0] if len(rows) else "?"
-        shown = rates.assign(P=[f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(rates["p_inconsistent"], rates["p_inconsistent_low"], rates["p_inconsistent_high"])])
-        shown = shown.assign(P_failed=[f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(rates["p_failed"], rates["p_failed_low"], rates["p_failed_high"])])
+        shown = rates.assign(
+            P=[
+                f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
+                for p, lo, hi in zip(rates["p_inconsistent"], rates["p_inconsistent_low"], rates["p_inconsistent_high"])
+            ]
+        )
+        shown = shown.assign(
+            P_failed=[
+                f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
+                for p, lo, hi in zip(rates["p_failed"], rates["p_failed_low"], rates["p_failed_high"])
+            ]
+        )
         text = [
             f"# Study {study}: when does repeated motion become inconsistent?\n",
             f"{rows['trial'].nunique()} trials, {len(rows)} rows (trial x method); from `{RESULTS}` alone. "
             "P is the share of a method's trials, with its 95 % Wilson interval; rows with `status = error` are left out and counted.\n",
             "## Per method\n",
             _markdown(
-                shown[["method", "trials", "errors", "inconsistent", "P", "failed", "P_failed", "deviation_median_rad", "deviation_p90_rad"]].rename(
-                    columns={"P": "P(inconsistent) [95 %]", "P_failed": "P(failed) [95 %]", "deviation_median_rad": "deviation median [rad]", "deviation_p90_rad": "p90 [rad]"}
+                shown[
+                    [
+                        "method",
+                        "trials",
+                        "errors",
+                        "inconsistent",
+                        "P",
+                        "failed",
+                        "P_failed",
+                        "deviation_median_rad",
+                        "deviation_p90_rad",
+                    ]
+                ].rename(
+                    columns={
+                        "P": "P(inconsistent) [95 %]",
+                        "P_failed": "P(failed) [95 %]",
+                        "deviation_median_rad": "deviation median [rad]",
+                        "deviation_p90_rad": "p90 [rad]",
+                    }
                 )
             ),
             "\n![per method](methods.png)\n",
-            "\nHow far apart the repetitions are, per method (the largest joint deviation, `ik.rep_joint_deviation_max_rad`):\n\n![deviations](deviations.png)\n" if drawn else "",
+            "\nHow far apart the repetitions are, per method (the largest joint deviation, `ik.rep_joint_deviation_max_rad`):\n\n![deviations](deviations.png)\n"
+            if drawn
+            else "",
             f"## Against the conditions\n\nEach feature in {BINS} quantile bins (categories as they are); `features.csv` holds every bin.\n",
             "![against the conditions](features.png)\n" if len(features) else "",
             "## Logistic regression\n\nPer method, `inconsistent` on the standardised numeric features: odds ratio per standard deviation [95 %] and p-value (`logit.csv`).\n",

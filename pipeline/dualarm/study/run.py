@@ -61,7 +61,20 @@ CONSOLIDATE_S = 30.0
 #: The stages a trial's method runs, unless it is recorded ``full`` (then every stage runs).
 STUDY_STAGES = ("path", "ik")
 #: The first columns of every row, in order; the trial's features and the metrics follow.
-COLUMNS = ("study", "seed", "robot", "trial", "method", "status", "failed", "inconsistent", "error", "violations", "wall_s", "worker")
+COLUMNS = (
+    "study",
+    "seed",
+    "robot",
+    "trial",
+    "method",
+    "status",
+    "failed",
+    "inconsistent",
+    "error",
+    "violations",
+    "wall_s",
+    "worker",
+)
 #: The columns that differ from run to run of one study (times and where it ran): a comparison of two runs leaves them out.
 VARYING = ("wall_s", "worker", "ik.solve_time_mean_s", "ik.solve_time_median_s", "ik.solve_time_total_s")
 
@@ -103,7 +116,9 @@ class StudyRun:
     workers: int
 
 
-def run_trial(spec: StudySpec, base_dir: str, index: int, record: str = "metrics", runs: str | None = None) -> TrialResult:
+def run_trial(
+    spec: StudySpec, base_dir: str, index: int, record: str = "metrics", runs: str | None = None
+) -> TrialResult:
     """Trial ``index`` of ``spec`` run by each of its methods (a Dask task; also callable alone).
 
     Every method's failure is its row's (``status``, ``error``), and so is a trial whose task
@@ -127,7 +142,9 @@ def run_trial(spec: StudySpec, base_dir: str, index: int, record: str = "metrics
     return TrialResult(index, tomli_w.dumps(_task_file(drawn, base_dir)), rows)
 
 
-def _method_row(spec: StudySpec, drawn: Trial, task: Any, method: str, record: str, runs: str | None, worker: str, refused: str = "") -> dict[str, Any]:
+def _method_row(
+    spec: StudySpec, drawn: Trial, task: Any, method: str, record: str, runs: str | None, worker: str, refused: str = ""
+) -> dict[str, Any]:
     """One method's row of one trial (module docstring); ``refused``: why the trial has no task (then the row is ``failed``)."""
     from dualarm.run import build_stages, record_stages, run_stages
     from dualarm.stages import IkStage
@@ -146,7 +163,13 @@ def _method_row(spec: StudySpec, drawn: Trial, task: Any, method: str, record: s
         if record == "metrics":
             result = run_stages(task, stages)
         else:
-            result = record_stages(task, stages, out_dir=runs or RUNS, command=["dualarm", "study", spec.name, f"trial {drawn.index}", method], record=record)
+            result = record_stages(
+                task,
+                stages,
+                out_dir=runs or RUNS,
+                command=["dualarm", "study", spec.name, f"trial {drawn.index}", method],
+                record=record,
+            )
         status, metrics = str(result.verdict.status), result.metrics
         violations = tuple(v.message for v in result.verdict.violations)
     except DualarmError as exc:
@@ -155,7 +178,9 @@ def _method_row(spec: StudySpec, drawn: Trial, task: Any, method: str, record: s
         status, error = "error", f"{type(exc).__name__}: {exc}"
     failed = status in ("failed", "error") or metrics.get("ik.failed_reps", 0.0) > 0
     deviation = metrics.get("ik.rep_joint_deviation_max_rad", math.nan)
-    inconsistent = bool(deviation > spec.inconsistent.joint_deviation_rad or (failed and spec.inconsistent.failed_repetition))
+    inconsistent = bool(
+        deviation > spec.inconsistent.joint_deviation_rad or (failed and spec.inconsistent.failed_repetition)
+    )
     row = {
         **_identity(spec, drawn.index, method),
         "status": status,
@@ -182,7 +207,15 @@ def _identity(spec: StudySpec, index: int, method: str) -> dict[str, Any]:
 
 def error_rows(spec: StudySpec, index: int, error: str) -> tuple[dict[str, Any], ...]:
     """The rows of a trial that produced none (its worker died :data:`~dualarm.cluster.ALLOWED_FAILURES` times): ``status = error``, without features (its draw is not known here)."""
-    rest = {"status": "error", "failed": True, "inconsistent": spec.inconsistent.failed_repetition, "error": excerpt(error, 400), "violations": "", "wall_s": math.nan, "worker": ""}
+    rest = {
+        "status": "error",
+        "failed": True,
+        "inconsistent": spec.inconsistent.failed_repetition,
+        "error": excerpt(error, 400),
+        "violations": "",
+        "wall_s": math.nan,
+        "worker": "",
+    }
     return tuple({**_identity(spec, index, m), **rest} for m in spec.methods)
 
 
@@ -200,15 +233,21 @@ def read_study(directory: str | Path) -> pd.DataFrame:
         try:
             frames.append(pd.read_parquet(part))
         except Exception as exc:  # pyarrow raises its own errors for a truncated or foreign file
-            raise RecordingError(f"{excerpt(part)}: not a readable study part ({type(exc).__name__}: {excerpt(str(exc), 120)}); delete it to run the trial again with --resume") from None
+            raise RecordingError(
+                f"{excerpt(part)}: not a readable study part ({type(exc).__name__}: {excerpt(str(exc), 120)}); delete it to run the trial again with --resume"
+            ) from None
     return _ordered(pd.concat(frames, ignore_index=True)) if frames else pd.DataFrame(columns=list(COLUMNS))
 
 
 def _ordered(rows: pd.DataFrame) -> pd.DataFrame:
     """``rows`` sorted by trial, then method as the spec lists them, with :data:`COLUMNS` first and the metrics last, by name."""
     order = {m: i for i, m in enumerate(dict.fromkeys(rows["method"]))}
-    rows = rows.sort_values(["trial", "method"], key=lambda c: c.map(order) if c.name == "method" else c, kind="stable", ignore_index=True)
-    metrics = sorted(c for c in rows.columns if c.startswith(("path.", "ik.", "retime.", "smooth.", "approach.", "execute.")))
+    rows = rows.sort_values(
+        ["trial", "method"], key=lambda c: c.map(order) if c.name == "method" else c, kind="stable", ignore_index=True
+    )
+    metrics = sorted(
+        c for c in rows.columns if c.startswith(("path.", "ik.", "retime.", "smooth.", "approach.", "execute."))
+    )
     features = [c for c in rows.columns if c not in COLUMNS and c not in metrics]
     return rows[[*COLUMNS, *features, *metrics]]
 
@@ -224,9 +263,15 @@ def claim_study_dir(directory: Path, spec: StudySpec, resume: bool) -> Any:
         except (OSError, ValueError, KeyError, TypeError):
             raise OutputError(f"{excerpt(file)}: not a study's spec record; give another --out") from None
         if theirs != recorded["spec"]:
-            raise OutputError(f"{excerpt(directory)}: holds study '{excerpt(theirs.get('name', '?'), 40)}' of another spec; give another --out (one study per directory)", str(directory))
+            raise OutputError(
+                f"{excerpt(directory)}: holds study '{excerpt(theirs.get('name', '?'), 40)}' of another spec; give another --out (one study per directory)",
+                str(directory),
+            )
         if not resume and any((directory / PARTS).glob("trial-*.parquet")):
-            raise OutputError(f"{excerpt(directory)}: already holds trials of study '{spec.name}'; continue it with --resume, or give another --out", str(directory))
+            raise OutputError(
+                f"{excerpt(directory)}: already holds trials of study '{spec.name}'; continue it with --resume, or give another --out",
+                str(directory),
+            )
     else:
         write_whole(file, json.dumps(recorded, indent=2) + "\n")
     return claimed
@@ -268,7 +313,9 @@ def run_study(
     arms = dict.fromkeys(arm for hand in spec.hands for arm in ARMS[hand])
     for arm in arms:
         if arm not in robot.hands:
-            raise TaskFileError(f"hands: robot '{excerpt(robot.name, 40)}' has no {arm} hand (hands: {', '.join(robot.hands)})")
+            raise TaskFileError(
+                f"hands: robot '{excerpt(robot.name, 40)}' has no {arm} hand (hands: {', '.join(robot.hands)})"
+            )
     if spec.centre.reachable:
         from dualarm.ik.analytic.mc_inverse import McInverse
 
@@ -276,11 +323,17 @@ def run_study(
             try:
                 McInverse.of(robot.hand_chain(hand))
             except NotSRSError as exc:
-                raise TaskFileError(f"centre.reachable: the reach check needs S-R-S arms ({exc}); set [centre] reachable = false") from None
+                raise TaskFileError(
+                    f"centre.reachable: the reach check needs S-R-S arms ({exc}); set [centre] reachable = false"
+                ) from None
     directory = Path(out)
     claim = claim_study_dir(directory, spec, resume)
     done = read_study(directory)
-    finished = set(done.groupby("trial")["method"].nunique().loc[lambda n: n == len(spec.methods)].index) if len(done) else set()
+    finished = (
+        set(done.groupby("trial")["method"].nunique().loc[lambda n: n == len(spec.methods)].index)
+        if len(done)
+        else set()
+    )
     todo = [i for i in range(spec.trials) if i not in finished]
     rows: list[dict[str, Any]] = [{str(k): v for k, v in row.items()} for row in done.to_dict("records")]
     failed = errors = count = 0
@@ -324,7 +377,9 @@ def _write_trial(directory: Path, spec: StudySpec, result: TrialResult) -> None:
     """The trial's task file, then its part (the part last: a trial with a part is complete)."""
     if result.task_toml:
         write_whole(directory / TASKS / f"{spec.name}-{result.index:06d}.toml", result.task_toml)
-    write_whole(directory / PARTS / f"trial-{result.index:06d}.parquet", pd.DataFrame(list(result.rows)).to_parquet(index=False))
+    write_whole(
+        directory / PARTS / f"trial-{result.index:06d}.parquet", pd.DataFrame(list(result.rows)).to_parquet(index=False)
+    )
 
 
 def _consolidate(directory: Path, rows: list[dict[str, Any]]) -> pd.DataFrame:

@@ -60,8 +60,12 @@ class Shape(_Model):
     """
 
     kinds: tuple[Literal["polygon", "circle", "figure-eight"], ...] = ("polygon", "circle", "figure-eight")
-    vertices: tuple[Annotated[int, Field(strict=True), Range(3, 6)], Annotated[int, Field(strict=True), Range(3, 6)]] = (3, 6)
-    size_m: tuple[Annotated[float, FINITE, Range(*SIZE_RANGE_M, " m")], Annotated[float, FINITE, Range(*SIZE_RANGE_M, " m")]] = (0.05, 0.15)
+    vertices: tuple[
+        Annotated[int, Field(strict=True), Range(3, 6)], Annotated[int, Field(strict=True), Range(3, 6)]
+    ] = (3, 6)
+    size_m: tuple[
+        Annotated[float, FINITE, Range(*SIZE_RANGE_M, " m")], Annotated[float, FINITE, Range(*SIZE_RANGE_M, " m")]
+    ] = (0.05, 0.15)
     tilt_rad: Annotated[float, FINITE, Range(0.0, 1.6, " rad")] = 0.5
 
     @model_validator(mode="after")
@@ -177,8 +181,13 @@ class StudySpec(_Model):
     trials: Annotated[int, Field(strict=True), Range(1, MAX_TRIALS)]
     seed: Annotated[int, Field(strict=True), Range(0, 2**63 - 1)] = 0
     hands: tuple[Literal["left", "right", "both"], ...] = ("left", "right")
-    repetitions: tuple[Annotated[int, Field(strict=True), Range(*REPETITIONS_RANGE)], Annotated[int, Field(strict=True), Range(*REPETITIONS_RANGE)]] = (5, 20)
-    period_s: tuple[Annotated[float, FINITE, Range(*PERIOD_RANGE_S, " s")], Annotated[float, FINITE, Range(*PERIOD_RANGE_S, " s")]] = (3.0, 6.0)
+    repetitions: tuple[
+        Annotated[int, Field(strict=True), Range(*REPETITIONS_RANGE)],
+        Annotated[int, Field(strict=True), Range(*REPETITIONS_RANGE)],
+    ] = (5, 20)
+    period_s: tuple[
+        Annotated[float, FINITE, Range(*PERIOD_RANGE_S, " s")], Annotated[float, FINITE, Range(*PERIOD_RANGE_S, " s")]
+    ] = (3.0, 6.0)
     control_period_s: Annotated[float, FINITE, Range(*CONTROL_PERIOD_RANGE_S, " s")] = 0.01
     shape: Shape = Shape()
     centre: Centre = Centre()
@@ -192,7 +201,9 @@ class StudySpec(_Model):
             raise ValueError("methods: name at least one IK method")
         for name in self.methods:
             if name not in IK_METHODS:
-                raise ValueError(f"methods: '{excerpt(name, 40)}' is not an IK method (methods: {', '.join(IK_METHODS)})")
+                raise ValueError(
+                    f"methods: '{excerpt(name, 40)}' is not an IK method (methods: {', '.join(IK_METHODS)})"
+                )
         if len(set(self.methods)) != len(self.methods):
             raise ValueError("methods: a method is named twice")
         if not self.hands:

@@ -85,7 +85,13 @@ def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
     up = np.array([0.0, 0.0, 1.0]) - normal[2] * normal
     u = up / np.linalg.norm(up)
     v = np.cross(normal, u)
-    base = np.array(spec.carry.rpy) if hand == "both" else np.array(spec.orientation.rpy) if hand == "left" else _mirrored(spec.orientation.rpy)
+    base = (
+        np.array(spec.carry.rpy)
+        if hand == "both"
+        else np.array(spec.orientation.rpy)
+        if hand == "left"
+        else _mirrored(spec.orientation.rpy)
+    )
     cp = spec.control_period_s
 
     def steps(duration: float) -> float:  # a whole number of control periods, at least one
@@ -98,25 +104,57 @@ def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
     moves: list[dict[str, Any]]
     if kind == "polygon":
         phase = float(rng.uniform(0.0, 2 * math.pi))
-        corners = [centre + size * (math.cos(phase + 2 * math.pi * k / vertices) * u + math.sin(phase + 2 * math.pi * k / vertices) * v) for k in range(vertices)]
-        turns = rng.uniform(-spec.orientation.change_rad, spec.orientation.change_rad, (vertices, 3)) if orientation == "changing" else np.zeros((vertices, 3))
+        corners = [
+            centre
+            + size
+            * (math.cos(phase + 2 * math.pi * k / vertices) * u + math.sin(phase + 2 * math.pi * k / vertices) * v)
+            for k in range(vertices)
+        ]
+        turns = (
+            rng.uniform(-spec.orientation.change_rad, spec.orientation.change_rad, (vertices, 3))
+            if orientation == "changing"
+            else np.zeros((vertices, 3))
+        )
         waypoints = {f"V{k}": {"position": point(c), "rpy": point(base + turns[k])} for k, c in enumerate(corners)}
-        moves = [{"duration_s": steps(period / vertices), drawing: {"to": f"V{(k + 1) % vertices}"}} for k in range(vertices)]
+        moves = [
+            {"duration_s": steps(period / vertices), drawing: {"to": f"V{(k + 1) % vertices}"}} for k in range(vertices)
+        ]
         start = "V0"
     elif kind == "circle":
         waypoints = {"P0": {"position": point(centre + size * u), "rpy": point(base)}}
-        moves = [{"duration_s": steps(period), drawing: {"arc_center": point(centre), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi}}]
+        moves = [
+            {
+                "duration_s": steps(period),
+                drawing: {"arc_center": point(centre), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi},
+            }
+        ]
         start = "P0"
     else:  # figure-eight: two circles of half the size through the centre, the second the other way round
         waypoints = {"C": {"position": point(centre), "rpy": point(base)}}
         moves = [
-            {"duration_s": steps(period / 2), drawing: {"arc_center": point(centre + size / 2 * u), "arc_axis": point(normal), "arc_angle_rad": 2 * math.pi}},
-            {"duration_s": steps(period / 2), drawing: {"arc_center": point(centre - size / 2 * u), "arc_axis": point(-normal), "arc_angle_rad": 2 * math.pi}},
+            {
+                "duration_s": steps(period / 2),
+                drawing: {
+                    "arc_center": point(centre + size / 2 * u),
+                    "arc_axis": point(normal),
+                    "arc_angle_rad": 2 * math.pi,
+                },
+            },
+            {
+                "duration_s": steps(period / 2),
+                drawing: {
+                    "arc_center": point(centre - size / 2 * u),
+                    "arc_axis": point(-normal),
+                    "arc_angle_rad": 2 * math.pi,
+                },
+            },
         ]
         start = "C"
     task = {
         "name": f"{spec.name}-{index:06d}",
-        "title": f"{spec.name}, trial {index}: " + ("the left hand carries a box with the right along" if hand == "both" else f"the {hand} hand draws") + f" a {kind} {repetitions} times",
+        "title": f"{spec.name}, trial {index}: "
+        + ("the left hand carries a box with the right along" if hand == "both" else f"the {hand} hand draws")
+        + f" a {kind} {repetitions} times",
         "source": f"dualarm study {spec.name} (seed {spec.seed}), trial {index}",
         "robot": spec.robot,
         "control_period_s": cp,
@@ -236,7 +274,9 @@ def within_reach(task: Task) -> bool:
 def _mirrored(rpy: tuple[float, float, float]) -> np.ndarray:
     """The orientation (extrinsic x-y-z Euler angles [rad]) mirrored through the x-z plane, M R M with M = diag(1, -1, 1): the right hand's of the left's."""
     mirror = np.diag([1.0, -1.0, 1.0])
-    return np.asarray(Rotation.from_matrix(mirror @ Rotation.from_euler("xyz", rpy).as_matrix() @ mirror).as_euler("xyz"))
+    return np.asarray(
+        Rotation.from_matrix(mirror @ Rotation.from_euler("xyz", rpy).as_matrix() @ mirror).as_euler("xyz")
+    )
 
 
 def _turned_x(angle: float, towards: float) -> np.ndarray:

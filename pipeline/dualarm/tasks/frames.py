@@ -104,11 +104,17 @@ def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str)
 
     waypoints = {}
     for name, wp in spec.waypoints.items():
-        rpy = tuple(float(a) for a in Rotation.from_matrix(R @ pose_matrix(wp.position, wp.rpy)[:3, :3]).as_euler("xyz")) if rotated else wp.rpy
+        rpy = (
+            tuple(float(a) for a in Rotation.from_matrix(R @ pose_matrix(wp.position, wp.rpy)[:3, :3]).as_euler("xyz"))
+            if rotated
+            else wp.rpy
+        )
         try:
             waypoints[name] = Pose(position=point(wp.position), rpy=rpy)  # type: ignore[arg-type]
         except ValidationError:
-            raise TaskFileError(f"{source}:waypoints.{excerpt(name, 40)}: in the robot base frame its position {point(wp.position)} m is outside [-100, 100] m") from None
+            raise TaskFileError(
+                f"{source}:waypoints.{excerpt(name, 40)}: in the robot base frame its position {point(wp.position)} m is outside [-100, 100] m"
+            ) from None
     moves = []
     for move in spec.moves:
         update = {}
@@ -117,7 +123,9 @@ def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str)
             if m is not None and m.by is not None:
                 update[hand] = m.model_copy(update={"by": vector(m.by, s)})
             elif m is not None and m.arc_center is not None and m.arc_axis is not None:
-                update[hand] = m.model_copy(update={"arc_center": point(m.arc_center), "arc_axis": vector(m.arc_axis, 1.0)})
+                update[hand] = m.model_copy(
+                    update={"arc_center": point(m.arc_center), "arc_axis": vector(m.arc_axis, 1.0)}
+                )
         moves.append(move.model_copy(update=update))
     return spec.model_copy(update={"waypoints": waypoints, "moves": tuple(moves), "frame": None, "scale": None})
 
@@ -127,5 +135,16 @@ def _transferred(spec: TaskSpec, robot: Robot) -> TaskSpec:
     if spec.transfer is None or robot.name == spec.transfer.written_for:
         return spec
     k, period = spec.transfer.duration_scale, spec.control_period_s
-    moves = tuple(m.model_copy(update={"duration_s": round(m.duration_s * k / period) * period}) for m in spec.moves) if k != 1.0 else spec.moves
-    return spec.model_copy(update={"initial": spec.transfer.initial, "gesture": spec.transfer.gesture, "limits": spec.transfer.limits, "moves": moves})
+    moves = (
+        tuple(m.model_copy(update={"duration_s": round(m.duration_s * k / period) * period}) for m in spec.moves)
+        if k != 1.0
+        else spec.moves
+    )
+    return spec.model_copy(
+        update={
+            "initial": spec.transfer.initial,
+            "gesture": spec.transfer.gesture,
+            "limits": spec.transfer.limits,
+            "moves": moves,
+        }
+    )

@@ -50,26 +50,38 @@ def _check_structure(task: Task) -> None:
         if start is None:
             continue
         if hand not in robot.hands:
-            raise TaskFileError(f"{where('start.' + hand)}: robot '{excerpt(robot.name, 40)}' has no hand '{hand}' (hands: {listing(robot.hands)})")
+            raise TaskFileError(
+                f"{where('start.' + hand)}: robot '{excerpt(robot.name, 40)}' has no hand '{hand}' (hands: {listing(robot.hands)})"
+            )
         if start != "initial" and start not in spec.waypoints:
-            raise TaskFileError(f"{where('start.' + hand)}: no waypoint '{excerpt(start, 40)}' (waypoints: {listing(spec.waypoints)}; or \"initial\")")
+            raise TaskFileError(
+                f"{where('start.' + hand)}: no waypoint '{excerpt(start, 40)}' (waypoints: {listing(spec.waypoints)}; or \"initial\")"
+            )
     started = {h for h in ("left", "right") if getattr(spec.start, h) is not None}
     per_repetition = 0
     for i, move in enumerate(spec.moves):
         steps = move.duration_s / spec.control_period_s  # at most 8.64e8 within the schema's ranges
         if steps < 1 - 1e-6:
-            raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is shorter than one control period ({spec.control_period_s:g} s)")
+            raise TaskFileError(
+                f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is shorter than one control period ({spec.control_period_s:g} s)"
+            )
         if abs(steps - round(steps)) > 1e-6:
-            raise TaskFileError(f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is not a whole number of control periods ({spec.control_period_s:g} s)")
+            raise TaskFileError(
+                f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is not a whole number of control periods ({spec.control_period_s:g} s)"
+            )
         per_repetition += round(steps)
         for hand in ("left", "right"):
             hand_move = move.for_hand(hand)
             if hand_move is None:
                 continue
             if hand not in started:
-                raise TaskFileError(f"{where(f'moves[{i}].{hand}')}: hand '{hand}' has no start pose (add start.{hand})")
+                raise TaskFileError(
+                    f"{where(f'moves[{i}].{hand}')}: hand '{hand}' has no start pose (add start.{hand})"
+                )
             if hand_move.to is not None and hand_move.to not in spec.waypoints:
-                raise TaskFileError(f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{excerpt(hand_move.to, 40)}' (waypoints: {listing(spec.waypoints)})")
+                raise TaskFileError(
+                    f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{excerpt(hand_move.to, 40)}' (waypoints: {listing(spec.waypoints)})"
+                )
     samples = 1 + spec.repetitions * per_repetition
     if samples > MAX_SAMPLES:
         raise TaskFileError(
@@ -84,7 +96,9 @@ def _check_structure(task: Task) -> None:
             for name, value in goals.items():
                 lim = robot.limits[name]
                 if not lim.lower <= value <= lim.upper:
-                    raise TaskFileError(f"{where(f'gesture.{key}')}.{name}: {value:g} rad is outside the joint's limits [{lim.lower:g}, {lim.upper:g}]")
+                    raise TaskFileError(
+                        f"{where(f'gesture.{key}')}.{name}: {value:g} rad is outside the joint's limits [{lim.lower:g}, {lim.upper:g}]"
+                    )
         for name, lo in spec.gesture.goal_lower.items():
             hi = spec.gesture.goal_upper.get(name)
             if hi is not None and lo > hi:
@@ -94,15 +108,21 @@ def _check_structure(task: Task) -> None:
         if obj.master not in started:
             raise TaskFileError(f"{where('object.master')}: the master hand '{obj.master}' needs a start pose")
         if obj.slave in started or any(m.for_hand(obj.slave) for m in spec.moves):
-            raise TaskFileError(f"{where('object.slave')}: the slave hand '{obj.slave}' follows the master by eq (11); give it no start or moves")
+            raise TaskFileError(
+                f"{where('object.slave')}: the slave hand '{obj.slave}' follows the master by eq (11); give it no start or moves"
+            )
     for i, wta in enumerate(spec.wta):
         if wta.hand not in robot.hands:
-            raise TaskFileError(f"{where(f'wta[{i}].hand')}: robot '{excerpt(robot.name, 40)}' has no hand '{wta.hand}'")
+            raise TaskFileError(
+                f"{where(f'wta[{i}].hand')}: robot '{excerpt(robot.name, 40)}' has no hand '{wta.hand}'"
+            )
     names = set(robot.urdf.links) | {o.name for o in spec.environment} | ({spec.object.name} if spec.object else set())
     for i, pair in enumerate(spec.expected_contacts):
         for name in pair:
             if name not in names:
-                raise TaskFileError(f"{where(f'expected_contacts[{i}]')}: '{excerpt(name, 40)}' is neither a robot link nor an object of the task")
+                raise TaskFileError(
+                    f"{where(f'expected_contacts[{i}]')}: '{excerpt(name, 40)}' is neither a robot link nor an object of the task"
+                )
 
 
 def _check_environment(task: Task) -> None:
@@ -147,10 +167,20 @@ def load_task(path: str | Path, repetitions: int | None = None, robot: str | Pat
 
 def load_task_unmoved(path: str | Path, robot: str | Path | None = None) -> Task:
     """The task file at ``path`` with every hand it starts staying at the initial configuration and no moves, as :func:`load_task` loads it (errors name the file): ``dualarm task check`` loads it so when a waypoint is out of reach, to report every waypoint."""
-    return _load_file(path, None, robot, lambda data: {**data, "start": {hand: "initial" for hand in data.get("start", {})}, "moves": []})
+    return _load_file(
+        path,
+        None,
+        robot,
+        lambda data: {**data, "start": {hand: "initial" for hand in data.get("start", {})}, "moves": []},
+    )
 
 
-def _load_file(path: str | Path, repetitions: int | None, robot: str | Path | None, edit: Callable[[dict], dict] = lambda data: data) -> Task:
+def _load_file(
+    path: str | Path,
+    repetitions: int | None,
+    robot: str | Path | None,
+    edit: Callable[[dict], dict] = lambda data: data,
+) -> Task:
     """:func:`load_task`, the file's keys passed through ``edit`` before validation."""
     from dualarm.data import find_task
 
@@ -162,7 +192,14 @@ def _load_file(path: str | Path, repetitions: int | None, robot: str | Path | No
     return _resolve(spec, file, text, file.parent if robot is None else Path.cwd(), None, repetitions)
 
 
-def task_from_dict(data: Mapping[str, Any] | None = None, /, *, robot: Robot | str | Path | None = None, base_dir: str | Path = ".", **keys: Any) -> Task:
+def task_from_dict(
+    data: Mapping[str, Any] | None = None,
+    /,
+    *,
+    robot: Robot | str | Path | None = None,
+    base_dir: str | Path = ".",
+    **keys: Any,
+) -> Task:
     """A task from a plain dict and/or keyword arguments, with the keys and checks of a task file (see ``tasks/README.md``): ``task_from_dict(name="circle", control_period_s=0.01, ...)``.
 
     Args:
@@ -193,12 +230,16 @@ def _resolved(path: Path) -> Path:
         return path
 
 
-def _resolve(spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Robot | None, repetitions: int | None) -> Task:
+def _resolve(
+    spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Robot | None, repetitions: int | None
+) -> Task:
     """The validated task: the robot loaded (unless given) with the task's limits, the initial configuration resolved, and every check run."""
     source = excerpt(file) if file is not None else "<dict>"
     if repetitions is not None:
         if isinstance(repetitions, bool) or not isinstance(repetitions, int) or not 1 <= repetitions <= MAX_REPETITIONS:
-            raise TaskFileError(f"{source}:repetitions: the override must be an integer in [1, {MAX_REPETITIONS}], not {excerpt(repr(repetitions), 24)}")
+            raise TaskFileError(
+                f"{source}:repetitions: the override must be an integer in [1, {MAX_REPETITIONS}], not {excerpt(repr(repetitions), 24)}"
+            )
         spec = spec.model_copy(update={"repetitions": repetitions})
     if robot is None:
         from dualarm.data import find_robot

@@ -57,7 +57,9 @@ def _validation_message(file: object, exc: ValidationError, data: object) -> str
     else:
         message = first["msg"].removeprefix("Value error, ")
     others = len({k for k, _ in errors}) - 1
-    return f"{excerpt(file)}:{key}: {message}" + (f" (and {others} more problem{'s' if others > 1 else ''})" if others else "")
+    return f"{excerpt(file)}:{key}: {message}" + (
+        f" (and {others} more problem{'s' if others > 1 else ''})" if others else ""
+    )
 
 
 def _read(file: Path) -> tuple[str, dict]:
@@ -68,7 +70,9 @@ def _read(file: Path) -> tuple[str, dict]:
     except tomllib.TOMLDecodeError as exc:
         raise TaskFileError(f"{excerpt(file)}: not valid TOML: {exc}") from None
     except (RecursionError, ValueError) as exc:  # nesting beyond Python's stack, an integer beyond int()'s digits
-        raise TaskFileError(f"{excerpt(file)}: not valid TOML: {excerpt(exc) if isinstance(exc, ValueError) else 'tables or arrays nested too deeply'}") from None
+        raise TaskFileError(
+            f"{excerpt(file)}: not valid TOML: {excerpt(exc) if isinstance(exc, ValueError) else 'tables or arrays nested too deeply'}"
+        ) from None
 
 
 def _validate(where: str, data: object) -> TaskSpec:

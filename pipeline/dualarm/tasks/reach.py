@@ -20,7 +20,12 @@ REACH_MARGIN_M = 1e-3
 def _check_margin(task: Task) -> None:
     """Refuse an ``arm_angle.margin_rad`` of half the narrowest position range of a driven arm's joints or more: no configuration keeps it from both limits of that joint."""
     robot, margin = task.robot, task.spec.arm_angle.margin_rad
-    ranges = {name: robot.limits[name].upper - robot.limits[name].lower for hand in task.spec.hands if hand in robot.hands for name in robot.hand_chain(hand).joint_names}
+    ranges = {
+        name: robot.limits[name].upper - robot.limits[name].lower
+        for hand in task.spec.hands
+        if hand in robot.hands
+        for name in robot.hand_chain(hand).joint_names
+    }
     if not ranges:
         return
     joint = min(ranges, key=lambda n: ranges[n])
@@ -130,7 +135,9 @@ class NumericReach:
             return kinematics.jacobians(q)[0][:, free]
 
         x0 = np.clip(start, self.lower, self.upper)
-        result = least_squares(residual, x0, jac=jacobian, bounds=(self.lower, self.upper), method="dogbox", max_nfev=50)
+        result = least_squares(
+            residual, x0, jac=jacobian, bounds=(self.lower, self.upper), method="dogbox", max_nfev=50
+        )
         r = residual(result.x)
         return result.x, float(np.linalg.norm(r[:3])), float(np.linalg.norm(r[3:]))
 
@@ -147,7 +154,9 @@ class NumericReach:
     def within(self, T: np.ndarray) -> np.ndarray:
         """Which of the hand poses T (N, 4, 4) pass; (N,) bool. Poses equal to 1e-9 (a repeated path's) are solved once, in order, each from the previous one's solution."""
         T = np.asarray(T, dtype=float)
-        _, first, inverse = np.unique(np.round(T.reshape(len(T), 16), 9), axis=0, return_index=True, return_inverse=True)
+        _, first, inverse = np.unique(
+            np.round(T.reshape(len(T), 16), 9), axis=0, return_index=True, return_inverse=True
+        )
         ok = np.zeros(len(first), bool)
         warm = None
         for u in np.argsort(first):  # in path order, so each solve starts from its neighbour's
@@ -188,7 +197,7 @@ def numeric_reach(task: Task, hand: str) -> NumericReach:
     return NumericReach(hand=hand, chain=chain, free=free, q_initial=initial, lower=lower, upper=upper, seeds=seeds)
 
 
-def arm_reach(task: Task, hand: str) -> "ArmReach | NumericReach":
+def arm_reach(task: Task, hand: str) -> ArmReach | NumericReach:
     """The reach test of ``hand`` for ``task`` (waist at its initial configuration, or free): :class:`ArmReach` in closed form for an S-R-S arm, else :class:`NumericReach`."""
     robot = task.robot
     arm = robot.hand_chain(hand)
@@ -205,7 +214,9 @@ def arm_reach(task: Task, hand: str) -> "ArmReach | NumericReach":
             if joint.movable:
                 break
         centre = frame[:3, 3]
-    return ArmReach(hand=hand, geometry=geometry, shoulder=shoulder_position(robot, hand, task.initial_q), waist_centre=centre)
+    return ArmReach(
+        hand=hand, geometry=geometry, shoulder=shoulder_position(robot, hand, task.initial_q), waist_centre=centre
+    )
 
 
 def _check_reach(task: Task) -> None:

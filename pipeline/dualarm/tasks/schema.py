@@ -18,7 +18,15 @@ import math
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, GetCoreSchemaHandler, GetJsonSchemaHandler, StrictBool, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    GetCoreSchemaHandler,
+    GetJsonSchemaHandler,
+    StrictBool,
+    model_validator,
+)
 from pydantic_core import core_schema
 
 from dualarm.errors import excerpt
@@ -96,7 +104,9 @@ class Range:
     def __get_pydantic_core_schema__(self, source: Any, handler: GetCoreSchemaHandler) -> core_schema.CoreSchema:
         return core_schema.no_info_after_validator_function(self.check, handler(source))
 
-    def __get_pydantic_json_schema__(self, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler) -> dict[str, Any]:
+    def __get_pydantic_json_schema__(
+        self, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler
+    ) -> dict[str, Any]:
         json = handler(schema)
         json["exclusiveMinimum" if self.low_open else "minimum"] = self.low
         json["maximum"] = self.high
@@ -142,7 +152,9 @@ def unit_vector(v: tuple[float, float, float]) -> tuple[float, float, float]:
 
 def _check_direction(v: tuple[float, float, float], key: str) -> None:
     if math.hypot(*v) < MIN_DIRECTION_LENGTH:
-        raise ValueError(f"{key} must have a length of at least {MIN_DIRECTION_LENGTH:g} (a direction; it is normalised)")
+        raise ValueError(
+            f"{key} must have a length of at least {MIN_DIRECTION_LENGTH:g} (a direction; it is normalised)"
+        )
 
 
 class _Model(BaseModel):
@@ -176,7 +188,7 @@ class HandMove(_Model):
     hold: StrictBool | None = None
 
     @model_validator(mode="after")
-    def _one_kind(self) -> "HandMove":
+    def _one_kind(self) -> HandMove:
         arc = (self.arc_center, self.arc_axis, self.arc_angle_rad)
         if any(v is not None for v in arc) and not all(v is not None for v in arc):
             raise ValueError("an arc needs arc_center, arc_axis and arc_angle_rad")
@@ -296,11 +308,13 @@ class Gesture(_Model):
     goal_upper: JointValues
 
     @model_validator(mode="after")
-    def _bounds_do_not_cross(self) -> "Gesture":
+    def _bounds_do_not_cross(self) -> Gesture:
         # with the feedforward the band of eq (19) may shrink at most at the relative rate nu;
         # it shrinks at up to 1 / c_tuning
         if self.bound_feedforward and self.nu * self.c_tuning <= 1:
-            raise ValueError(f"bound_feedforward needs nu * c_tuning > 1 (here {self.nu * self.c_tuning:g}), or the lower and upper bounds cross")
+            raise ValueError(
+                f"bound_feedforward needs nu * c_tuning > 1 (here {self.nu * self.c_tuning:g}), or the lower and upper bounds cross"
+            )
         return self
 
 
@@ -342,7 +356,7 @@ class ArmAngle(_Model):
     range_rad: tuple[Float, Float] = (-math.pi, math.pi)
 
     @model_validator(mode="after")
-    def _complete(self) -> "ArmAngle":
+    def _complete(self) -> ArmAngle:
         low, high = self.range_rad
         if not -math.pi <= low < high <= math.pi:
             raise ValueError(f"range_rad must be an interval within [-pi, pi] (here [{low:g}, {high:g}])")
@@ -374,7 +388,7 @@ class CarriedObject(_Model):
     slave_to_object: Pose
 
     @model_validator(mode="after")
-    def _two_hands(self) -> "CarriedObject":
+    def _two_hands(self) -> CarriedObject:
         if self.master == self.slave:
             raise ValueError("master and slave must be different hands")
         return self
@@ -396,7 +410,7 @@ class EnvironmentObject(_Model):
     height_m: Size | None = None
 
     @model_validator(mode="after")
-    def _dimensions(self) -> "EnvironmentObject":
+    def _dimensions(self) -> EnvironmentObject:
         needed = {"box": ("size_m",), "cylinder": ("radius_m", "height_m"), "sphere": ("radius_m",)}[self.shape]
         for key in needed:
             if getattr(self, key) is None:
@@ -431,7 +445,7 @@ class WorkspaceTargetArea(_Model):
     weight: Weight = 1.0
 
     @model_validator(mode="after")
-    def _ordered(self) -> "WorkspaceTargetArea":
+    def _ordered(self) -> WorkspaceTargetArea:
         for row, (lo, hi) in zip(("x", "y", "z", "roll", "pitch", "yaw"), self.bounds):
             if lo > hi:
                 raise ValueError(f"bounds row {row}: lower {lo:g} above upper {hi:g}")

@@ -44,7 +44,16 @@ from dualarm.ik.analytic.mc_inverse import (
     McInverse,
     McSolution,
 )
-from dualarm.ik.analytic.subproblems import REACH_SLACK, elbow, euler, into_limits, rotate, rotation, subproblem2, zero_axes
+from dualarm.ik.analytic.subproblems import (
+    REACH_SLACK,
+    elbow,
+    euler,
+    into_limits,
+    rotate,
+    rotation,
+    subproblem2,
+    zero_axes,
+)
 from dualarm.model.robot import Chain
 from dualarm.model.srs import SrsKinematics
 from dualarm.numerics.batched import BatchedCandidates
@@ -67,7 +76,9 @@ def _free_grid(lower: float, upper: float, resolution: float) -> np.ndarray:
     return np.linspace(lo, hi, int(math.ceil((hi - lo) / resolution - 1e-9)) + 1)
 
 
-def _candidates(kin: SrsKinematics, k: list[np.ndarray], tip0: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> cs.Function:
+def _candidates(
+    kin: SrsKinematics, k: list[np.ndarray], tip0: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> cs.Function:
     """The CasADi Function ``(T (4x4) [m], theta3 [rad]) -> (Q (7x8) [rad], reason (1x8))``."""
     S, E0, W0 = (np.asarray(x).ravel() for x in kin.points(np.zeros(7)))
 
@@ -97,11 +108,31 @@ def _candidates(kin: SrsKinematics, k: list[np.ndarray], tip0: np.ndarray, lower
             singular = cs.logic_or(cs.logic_or(singular_elbow, singular_shoulder), s_wrist < SINGULAR_SINE)
             for t5, t6, t7 in wrists:
                 solved = (t1, t2, theta3, theta4, t5, t6, t7)
-                q = cs.vertcat(*[a if i == FREE_JOINT else into_limits(a, lo, hi) for i, (a, lo, hi) in enumerate(zip(solved, lower, upper))])
+                q = cs.vertcat(
+                    *[
+                        a if i == FREE_JOINT else into_limits(a, lo, hi)
+                        for i, (a, lo, hi) in enumerate(zip(solved, lower, upper))
+                    ]
+                )
                 outside = cs.logic_or(cs.mmax(q - upper) > 0, cs.mmax(lower - q) > 0)
-                reasons.append(cs.if_else(out_of_reach, OUT_OF_REACH, cs.if_else(singular, SINGULAR, cs.if_else(outside, OUTSIDE_LIMITS, VALID))))
+                reasons.append(
+                    cs.if_else(
+                        out_of_reach,
+                        OUT_OF_REACH,
+                        cs.if_else(singular, SINGULAR, cs.if_else(outside, OUTSIDE_LIMITS, VALID)),
+                    )
+                )
                 columns.append(q)
-    return compiled(cs.Function("ikfast_style", [T, theta3], [cs.horzcat(*columns), cs.horzcat(*reasons)], ["T", "theta3"], ["Q", "reason"], {"cse": True}))
+    return compiled(
+        cs.Function(
+            "ikfast_style",
+            [T, theta3],
+            [cs.horzcat(*columns), cs.horzcat(*reasons)],
+            ["T", "theta3"],
+            ["Q", "reason"],
+            {"cse": True},
+        )
+    )
 
 
 @dataclass(frozen=True)
@@ -136,7 +167,7 @@ class IkfastStyle:
         return float(self.free_values[1] - self.free_values[0]) if len(self.free_values) > 1 else 0.0
 
     @classmethod
-    def of(cls, chain: Chain, resolution_rad: float = DEFAULT_RESOLUTION_RAD) -> "IkfastStyle":
+    def of(cls, chain: Chain, resolution_rad: float = DEFAULT_RESOLUTION_RAD) -> IkfastStyle:
         """The solver for ``chain`` with theta_3 discretised at ``resolution_rad`` [rad]; derived once per chain and resolution in a process, then kept.
 
         Raises:
@@ -148,7 +179,7 @@ class IkfastStyle:
         return _solver(chain, float(resolution_rad))
 
     @classmethod
-    def _derive(cls, chain: Chain, resolution_rad: float) -> "IkfastStyle":
+    def _derive(cls, chain: Chain, resolution_rad: float) -> IkfastStyle:
         """Derive the solver (see :meth:`of`)."""
         mc = McInverse.of(chain)  # validates the chain
         k, tip0 = zero_axes(chain)
@@ -181,11 +212,15 @@ class IkfastStyle:
             value each was solved at (M,) [rad].
         """
         F = len(self.free_values)
-        q, reason = self._batched.candidates(np.broadcast_to(np.asarray(pose, dtype=float), (F, 4, 4)), self.free_values)
+        q, reason = self._batched.candidates(
+            np.broadcast_to(np.asarray(pose, dtype=float), (F, 4, 4)), self.free_values
+        )
         valid = (reason == VALID).ravel()
         return q.reshape(-1, 7)[valid], np.repeat(self.free_values, CANDIDATES)[valid]
 
-    def nearest(self, pose: np.ndarray, previous: np.ndarray, candidates: tuple[np.ndarray, np.ndarray] | None = None) -> "IkfastResult":
+    def nearest(
+        self, pose: np.ndarray, previous: np.ndarray, candidates: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> IkfastResult:
         """The valid candidate over all free values nearest ``previous`` (7,) [rad] (Euclidean joint distance, the first of equals) for one hand pose (4x4, chain base frame) [m].
 
         ``candidates``: the pose's :meth:`valid_candidates`, if known (they do not depend on ``previous``).

@@ -93,7 +93,7 @@ class McInverse:
         return self.kinematics.geometry.chain
 
     @classmethod
-    def of(cls, chain: Chain, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> "McInverse":
+    def of(cls, chain: Chain, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> McInverse:
         """The solver for ``chain``; ``vertical`` is V of eq (1) in the chain base frame. Derived once per chain and vertical in a process, then kept (a study's worker derives it once, not per trial).
 
         Raises:
@@ -102,7 +102,7 @@ class McInverse:
         return _solver(chain, (float(vertical[0]), float(vertical[1]), float(vertical[2])))
 
     @classmethod
-    def _derive(cls, chain: Chain, vertical: tuple[float, float, float]) -> "McInverse":
+    def _derive(cls, chain: Chain, vertical: tuple[float, float, float]) -> McInverse:
         """Derive the solver (see :meth:`of`)."""
         kin = SrsKinematics.of(chain, vertical)
         geo = kin.geometry
@@ -110,7 +110,10 @@ class McInverse:
         k, tip0 = zero_axes(chain)  # axes and tip rotation at q = 0
         for a, b in ((0, 1), (1, 2), (4, 5), (5, 6)):
             if abs(k[a] @ k[b]) > PERPENDICULAR_COSINE:
-                raise NotSRSError(f"chain '{chain.name}': the axes of {movable[a].name} and {movable[b].name} are not perpendicular, which MC-Inverse needs", chain=chain.name)
+                raise NotSRSError(
+                    f"chain '{chain.name}': the axes of {movable[a].name} and {movable[b].name} are not perpendicular, which MC-Inverse needs",
+                    chain=chain.name,
+                )
         S, E0, W0 = (np.asarray(x).ravel() for x in kin.points(np.zeros(7)))
         lower = np.array([j.lower for j in movable])
         upper = np.array([j.upper for j in movable])
@@ -143,9 +146,17 @@ class McInverse:
             singular = cs.logic_or(singular_elbow, cs.fmin(s_shoulder, s_wrist) < SINGULAR_SINE)
             for t1, t2, t3 in shoulders:
                 for t5, t6, t7 in wrists:
-                    q = cs.vertcat(*[into_limits(a, lo, hi) for a, lo, hi in zip((t1, t2, t3, theta4, t5, t6, t7), lower, upper)])
+                    q = cs.vertcat(
+                        *[into_limits(a, lo, hi) for a, lo, hi in zip((t1, t2, t3, theta4, t5, t6, t7), lower, upper)]
+                    )
                     outside = cs.logic_or(cs.mmax(q - upper) > 0, cs.mmax(lower - q) > 0)
-                    reasons.append(cs.if_else(out_of_reach, OUT_OF_REACH, cs.if_else(singular, SINGULAR, cs.if_else(outside, OUTSIDE_LIMITS, VALID))))
+                    reasons.append(
+                        cs.if_else(
+                            out_of_reach,
+                            OUT_OF_REACH,
+                            cs.if_else(singular, SINGULAR, cs.if_else(outside, OUTSIDE_LIMITS, VALID)),
+                        )
+                    )
                     columns.append(q)
         outputs = [cs.horzcat(*columns), cs.horzcat(*reasons)]
         candidates = cs.Function("mc_inverse", [T, psi], outputs, ["T", "psi"], ["Q", "reason"], {"cse": True})
@@ -154,13 +165,37 @@ class McInverse:
         orthogonal = cs.mmax(cs.fabs(R.T @ R - np.eye(3))) <= RIGID_TOLERANCE
         row = cs.mmax(cs.fabs(T[3, :] - cs.DM([[0, 0, 0, 1]]))) <= RIGID_TOLERANCE
         accepted = cs.logic_and(cs.logic_and(finite, orthogonal), cs.logic_and(row, cs.det(R) >= 0))
-        checked = cs.Function("mc_inverse_checked", [T, psi], [*outputs, accepted], ["T", "psi"], ["Q", "reason", "accepted"], {"cse": True})
+        checked = cs.Function(
+            "mc_inverse_checked",
+            [T, psi],
+            [*outputs, accepted],
+            ["T", "psi"],
+            ["Q", "reason", "accepted"],
+            {"cse": True},
+        )
         # each valid candidate's distance to its nearest joint limit, for the arm-angle search (mc_path._auto)
-        margins = [cs.if_else(r == VALID, cs.mmin(cs.fmin(q - cs.DM(lower), cs.DM(upper) - q)), -cs.inf) for q, r in zip(columns, reasons)]
-        with_margins = cs.Function("mc_inverse_margins", [T, psi], [outputs[0], cs.horzcat(*margins)], ["T", "psi"], ["Q", "margin"], {"cse": True})
-        return cls(kinematics=kin, lower=lower, upper=upper, candidates=compiled(candidates), checked=compiled(checked), with_margins=compiled(with_margins))
+        margins = [
+            cs.if_else(r == VALID, cs.mmin(cs.fmin(q - cs.DM(lower), cs.DM(upper) - q)), -cs.inf)
+            for q, r in zip(columns, reasons)
+        ]
+        with_margins = cs.Function(
+            "mc_inverse_margins",
+            [T, psi],
+            [outputs[0], cs.horzcat(*margins)],
+            ["T", "psi"],
+            ["Q", "margin"],
+            {"cse": True},
+        )
+        return cls(
+            kinematics=kin,
+            lower=lower,
+            upper=upper,
+            candidates=compiled(candidates),
+            checked=compiled(checked),
+            with_margins=compiled(with_margins),
+        )
 
-    def solve(self, pose: np.ndarray, psi: float) -> "McSolution":
+    def solve(self, pose: np.ndarray, psi: float) -> McSolution:
         """All 8 candidates for one hand pose (4x4, chain base frame) [m] at arm angle ``psi`` [rad].
 
         One compiled call that also checks the inputs; only inputs it does not accept go through
@@ -174,9 +209,13 @@ class McInverse:
             T, psi = rigid_transforms(pose, "pose"), float(finite_array(psi, "psi", ()))
         out = self._one(T, psi)  # Q (7x8, column-major: candidate by candidate), reason (8), accepted
         if not out[-1]:
-            rigid_transforms(T, "pose")  # raise, naming the fault (where numpy accepts at the tolerance's edge, the result stands)
+            rigid_transforms(
+                T, "pose"
+            )  # raise, naming the fault (where numpy accepts at the tolerance's edge, the result stands)
             finite_array(psi, "psi", ())
-        return McSolution(q=out[:-9].reshape(CANDIDATES, -1), reason=out[-9:-1].astype(int), joint_names=self.chain.joint_names)
+        return McSolution(
+            q=out[:-9].reshape(CANDIDATES, -1), reason=out[-9:-1].astype(int), joint_names=self.chain.joint_names
+        )
 
     def solve_many(self, poses: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Candidates for N poses (N, 4, 4) [m] at arm angles (N,) [rad], in mapped calls.
@@ -194,7 +233,9 @@ class McInverse:
         psi = np.asarray(psi, dtype=float).ravel()
         G = len(psi)
         if G not in self._grids:  # with_margins mapped over the grid, the pose shared (not mapped)
-            self._grids[G] = Batched(self.with_margins.map(f"mc_inverse_margins_{G}", "serial", G, [0], []), chunk=GRID_CHUNK)
+            self._grids[G] = Batched(
+                self.with_margins.map(f"mc_inverse_margins_{G}", "serial", G, [0], []), chunk=GRID_CHUNK
+            )
         q, margin = self._grids[G](np.asarray(poses, dtype=float).reshape(-1, 4, 4), psi[None])
         return q.transpose(0, 2, 1).reshape(len(q), G, CANDIDATES, -1), margin.reshape(len(q), G, CANDIDATES)
 
@@ -249,7 +290,10 @@ class McSolution:
             seed = joint_vector(seed, self.joint_names, "seed")
         index = nearest_candidate(self.q, self.reason, finite_array(seed, "seed", (self.q.shape[1],)))
         if index is None:
-            raise NoSolutionFound(f"MC-Inverse: no valid candidate ({', '.join(sorted({REASONS[int(r)] for r in self.reason}))})", stage="ik")
+            raise NoSolutionFound(
+                f"MC-Inverse: no valid candidate ({', '.join(sorted({REASONS[int(r)] for r in self.reason}))})",
+                stage="ik",
+            )
         return self.q[index].copy()
 
 
@@ -266,7 +310,14 @@ def _solver(chain: Chain, vertical: tuple[float, float, float]) -> McInverse:
     return McInverse._derive(chain, vertical)
 
 
-def mc_inverse(robot: Robot, hand: str, pose: np.ndarray, psi: float, q: Mapping[str, float] | str | None = None, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> McSolution:
+def mc_inverse(
+    robot: Robot,
+    hand: str,
+    pose: np.ndarray,
+    psi: float,
+    q: Mapping[str, float] | str | None = None,
+    vertical: tuple[float, float, float] = (0.0, 0.0, 1.0),
+) -> McSolution:
     """MC-Inverse for one hand pose: the 8 candidates of ``hand``'s S-R-S arm at arm angle ``psi``.
 
     Args:
@@ -298,7 +349,13 @@ def mc_inverse(robot: Robot, hand: str, pose: np.ndarray, psi: float, q: Mapping
     return _solver(chain, unit).solve(target, psi)
 
 
-def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0), frame: "PoseFrame | None" = None) -> dict:
+def candidate_table(
+    chain: Chain,
+    pose: tuple[float, ...],
+    psi: float,
+    vertical: tuple[float, float, float] = (0.0, 0.0, 1.0),
+    frame: PoseFrame | None = None,
+) -> dict:
     """The paper's Table I for one hand pose: the 8 candidates at arm angle ``psi`` [rad].
 
     Args:
@@ -326,10 +383,23 @@ def candidate_table(chain: Chain, pose: tuple[float, ...], psi: float, vertical:
     position_error, orientation_error = pose_errors(reached, np.repeat(target[None], len(reached), axis=0))
     angles = solver.kinematics.arm_angles(solution.q)
     candidates = [
-        {"q": q.tolist(), "valid": bool(r == VALID), "reason": REASONS[int(r)], "position_error_m": float(p), "orientation_error_rad": float(o), "arm_angle_rad": float(a)}
+        {
+            "q": q.tolist(),
+            "valid": bool(r == VALID),
+            "reason": REASONS[int(r)],
+            "position_error_m": float(p),
+            "orientation_error_rad": float(o),
+            "arm_angle_rad": float(a),
+        }
         for q, r, p, o, a in zip(solution.q, solution.reason, position_error, orientation_error, angles)
     ]
-    return {"chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)}, "frame": frame.record(), "pose": list(pose), "arm_angle": psi, "candidates": candidates}
+    return {
+        "chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)},
+        "frame": frame.record(),
+        "pose": list(pose),
+        "arm_angle": psi,
+        "candidates": candidates,
+    }
 
 
 #: Default grid step of :func:`sweep_arm_angle` [rad] (1 degree).
@@ -444,12 +514,12 @@ class PoseFrame:
     chain_in_frame: np.ndarray
 
     @classmethod
-    def chain_base(cls, chain: Chain) -> "PoseFrame":
+    def chain_base(cls, chain: Chain) -> PoseFrame:
         """The chain's own base frame."""
         return cls("chain", chain.base, np.eye(4))
 
     @classmethod
-    def robot_base(cls, robot: Robot, chain: Chain) -> "PoseFrame":
+    def robot_base(cls, robot: Robot, chain: Chain) -> PoseFrame:
         """The robot's base frame (its URDF's root link), the joints between it and the chain (a waist) at 0."""
         from dualarm.model.kinematics import ChainKinematics
 

@@ -49,7 +49,7 @@ START_STRIDE = 2
 START_WEIGHT = 0.1
 
 
-def settings_for(task: "Task", **overrides: object) -> ArmAngle:
+def settings_for(task: Task, **overrides: object) -> ArmAngle:
     """MC-Inverse's settings for a task: its ``[arm_angle]`` table, with ``overrides``."""
     return with_overrides(task.spec.arm_angle, overrides)
 
@@ -69,7 +69,12 @@ def arm_angles(spec: ArmAngle, hand: str, reference: CartesianReference, initial
     return np.interp(time_in_repetition(reference.t, reference.rep), times, values)
 
 
-def solve_mc_inverse(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: ArmAngle = ArmAngle()) -> JointPath:
+def solve_mc_inverse(
+    robot: Robot,
+    reference: CartesianReference,
+    q0: Mapping[str, float] | str | None = None,
+    settings: ArmAngle = ArmAngle(),
+) -> JointPath:
     """Joint path of every hand of ``reference`` by MC-Inverse, each arm an S-R-S chain.
 
     Args:
@@ -99,11 +104,17 @@ def solve_mc_inverse(robot: Robot, reference: CartesianReference, q0: Mapping[st
         candidates, reasons = solver.solve_many(arm.targets, psi)
         elapsed = time.perf_counter() - start
         q = _kept_branch(arm.hand, solver, arm.q0, reference, psi, candidates, reasons, spec.max_joint_step_rad, branch)
-        solutions.append(ArmSolution(q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))))
+        solutions.append(
+            ArmSolution(
+                q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))
+            )
+        )
     return joint_path("mc-inverse", reference, [arm for arm, _, _ in arms], solutions, q0)
 
 
-def arm_solvers(robot: Robot, reference: CartesianReference, q0: Mapping[str, float], spec: ArmAngle) -> list[tuple[ArmProblem, McInverse, float]]:
+def arm_solvers(
+    robot: Robot, reference: CartesianReference, q0: Mapping[str, float], spec: ArmAngle
+) -> list[tuple[ArmProblem, McInverse, float]]:
     """Each arm of ``reference`` (:func:`~dualarm.ik.arms.arm_problems` at the configuration ``q0``), its MC-Inverse solver with ``spec.vertical`` as the arm angle's reference direction, and its initial configuration's arm angle [rad]."""
     vertical = tuple(np.asarray(spec.vertical) / np.linalg.norm(spec.vertical))
     arms = []
@@ -114,7 +125,15 @@ def arm_solvers(robot: Robot, reference: CartesianReference, q0: Mapping[str, fl
 
 
 def _kept_branch(
-    hand: str, solver: McInverse, q0: np.ndarray, reference: CartesianReference, psi: np.ndarray, candidates: np.ndarray, reasons: np.ndarray, max_step: float, branch: int | None = None
+    hand: str,
+    solver: McInverse,
+    q0: np.ndarray,
+    reference: CartesianReference,
+    psi: np.ndarray,
+    candidates: np.ndarray,
+    reasons: np.ndarray,
+    max_step: float,
+    branch: int | None = None,
 ) -> np.ndarray:
     """The candidate ``branch`` (by default the one nearest ``q0`` [rad] at sample 0), checked along the path; ``psi`` (N,) [rad] the arm angle per sample."""
     names = solver.chain.joint_names
@@ -182,7 +201,15 @@ def _wrap(angle):
     return np.angle(np.exp(1j * np.asarray(angle)))
 
 
-def _auto(solver: McInverse, targets: np.ndarray, reference: CartesianReference, preferred: float, q0: np.ndarray, spec: ArmAngle, hand: str) -> tuple[np.ndarray, int]:
+def _auto(
+    solver: McInverse,
+    targets: np.ndarray,
+    reference: CartesianReference,
+    preferred: float,
+    q0: np.ndarray,
+    spec: ArmAngle,
+    hand: str,
+) -> tuple[np.ndarray, int]:
     """The arm angle per sample (N,) [rad] and the branch (0-7) for the ``auto`` mode.
 
     A shortest path over the grid of (sample, arm angle) of the first repetition, per branch:
@@ -203,9 +230,13 @@ def _auto(solver: McInverse, targets: np.ndarray, reference: CartesianReference,
     grid = _wrap(preferred + AUTO_GRID)
     candidates, margins = solver.margins_on_grid(targets[first], grid)  # (n, G, 8, 7), (n, G, 8)
     in_range = (grid > spec.range_rad[0]) & (grid < spec.range_rad[1])
-    nodes = np.where((margins >= 0) & in_range[None, :, None], np.maximum(0.0, spec.margin_rad - margins), np.inf)  # (n, G, 8)
+    nodes = np.where(
+        (margins >= 0) & in_range[None, :, None], np.maximum(0.0, spec.margin_rad - margins), np.inf
+    )  # (n, G, 8)
     with np.errstate(invalid="ignore"):
-        starts = nodes[0] + START_WEIGHT * (np.abs(_wrap(grid - preferred))[:, None] + np.abs(candidates[0] - q0).max(axis=-1))  # (G, 8)
+        starts = nodes[0] + START_WEIGHT * (
+            np.abs(_wrap(grid - preferred))[:, None] + np.abs(candidates[0] - q0).max(axis=-1)
+        )  # (G, 8)
     closed = bool(np.abs(targets[first[0]] - targets[first[-1]]).max() < 1e-9)
     best, reached = None, 0
     for branch in range(8):
@@ -241,17 +272,31 @@ STEP_CHUNK = 32
 def _step_costs(q: np.ndarray, max_step: float) -> np.ndarray:
     """The cost of the step into grid cell g at sample k from cell g - d at k - 1, d = -W..W: |change of psi| + the largest joint change [rad], inf where a joint moves more than ``max_step``: q (n, G, 7) [rad] -> (n - 1, G, 2 W + 1)."""
     W, G = AUTO_MAX_CELLS, q.shape[1]
-    joints = np.ascontiguousarray(np.moveaxis(q, -1, 0))  # (7, n, G): the largest change is a maximum over 7 arrays, not a reduction over a short axis
+    joints = np.ascontiguousarray(
+        np.moveaxis(q, -1, 0)
+    )  # (7, n, G): the largest change is a maximum over 7 arrays, not a reduction over a short axis
     costs = np.empty((len(SHIFTS), len(q) - 1, G))
     with np.errstate(invalid="ignore"):
         for a in range(0, len(q) - 1, STEP_CHUNK):
             b = min(a + STEP_CHUNK, len(q) - 1)
-            previous = np.concatenate([joints[:, a:b, G - W :], joints[:, a:b], joints[:, a:b, :W]], axis=-1)  # wrapped around the grid
+            previous = np.concatenate(
+                [joints[:, a:b, G - W :], joints[:, a:b], joints[:, a:b, :W]], axis=-1
+            )  # wrapped around the grid
             change, joint = costs[:, a:b], np.empty((b - a, G))
             for j, d in enumerate(SHIFTS):
-                np.abs(np.subtract(joints[0, a + 1 : b + 1], previous[0, :, W - d : W - d + G], out=change[j]), out=change[j])
+                np.abs(
+                    np.subtract(joints[0, a + 1 : b + 1], previous[0, :, W - d : W - d + G], out=change[j]),
+                    out=change[j],
+                )
                 for i in range(1, len(joints)):
-                    np.maximum(change[j], np.abs(np.subtract(joints[i, a + 1 : b + 1], previous[i, :, W - d : W - d + G], out=joint), out=joint), out=change[j])
+                    np.maximum(
+                        change[j],
+                        np.abs(
+                            np.subtract(joints[i, a + 1 : b + 1], previous[i, :, W - d : W - d + G], out=joint),
+                            out=joint,
+                        ),
+                        out=change[j],
+                    )
             change[~(change <= max_step)] = np.inf
     return np.moveaxis(costs, 0, -1) + np.abs(SHIFTS) * (2 * np.pi / G)
 
@@ -305,12 +350,18 @@ def _cheapest_profile(node: np.ndarray, step_cost: np.ndarray, start: np.ndarray
     for k in range(m - 1, 0, -1):
         into = step_cost[k - 1] + (node[k] + to_end)[:, None]  # (G, 2W+1): into cell g by shift d
         wrapped = np.concatenate([into[G - W :], into, into[:W]])
-        to_end = np.min([wrapped[W + d : W + d + G, j] for j, d in enumerate(SHIFTS)], axis=0)  # from cell g by shift d into g + d
+        to_end = np.min(
+            [wrapped[W + d : W + d + G, j] for j, d in enumerate(SHIFTS)], axis=0
+        )  # from cell g by shift d into g + d
     bound = start[starts] + to_end[starts]
     totals = np.full(starts.size, np.inf)
     for batch in np.array_split(np.argsort(bound, kind="stable"), max(1, -(-starts.size // START_BATCH))):
         least = totals.min()
-        batch = batch[bound[batch] <= least + 1e-9 * max(1.0, abs(least))] if np.isfinite(least) else batch[np.isfinite(bound[batch])]
+        batch = (
+            batch[bound[batch] <= least + 1e-9 * max(1.0, abs(least))]
+            if np.isfinite(least)
+            else batch[np.isfinite(bound[batch])]
+        )
         if batch.size == 0:
             break
         initial = np.full((batch.size, G), np.inf)
@@ -361,11 +412,19 @@ class ArmAngleProfile:
 
     def metrics(self) -> dict[str, float]:
         """``ik.arm_angle_branch.<hand>`` (1-8), ``ik.arm_angle_min_rad.<hand>`` and ``ik.arm_angle_max_rad.<hand>``."""
-        return {f"ik.arm_angle_branch.{self.hand}": float(self.branch + 1), f"ik.arm_angle_min_rad.{self.hand}": self.psi_min_rad, f"ik.arm_angle_max_rad.{self.hand}": self.psi_max_rad}
+        return {
+            f"ik.arm_angle_branch.{self.hand}": float(self.branch + 1),
+            f"ik.arm_angle_min_rad.{self.hand}": self.psi_min_rad,
+            f"ik.arm_angle_max_rad.{self.hand}": self.psi_max_rad,
+        }
 
     def line(self) -> str:
         """One line for the command line: ``MC-Inverse, left arm: psi auto in [-1.2000, -0.8000] rad, branch 3 (elbow 0, shoulder 1, wrist 0)``."""
-        psi = f"held at {self.psi_min_rad:.4f} rad" if self.constant else f"in [{self.psi_min_rad:.4f}, {self.psi_max_rad:.4f}] rad"
+        psi = (
+            f"held at {self.psi_min_rad:.4f} rad"
+            if self.constant
+            else f"in [{self.psi_min_rad:.4f}, {self.psi_max_rad:.4f}] rad"
+        )
         return f"MC-Inverse, {self.hand} arm: psi {self.mode} {psi}, branch {branch_label(self.branch)}"
 
 
@@ -390,5 +449,9 @@ def arm_angle_profiles(path: JointPath, robot: Robot, settings: ArmAngle) -> tup
         psi = np.unwrap(solver.kinematics.arm_angles(q))
         candidates = solver.solve(ChainKinematics.of(chain).pose(q[0]), float(psi[0])).q
         branch = int(np.argmin(np.abs(candidates - q[0]).max(axis=1)))
-        profiles.append(ArmAngleProfile(hand=hand, mode=settings.mode, branch=branch, psi_min_rad=float(psi.min()), psi_max_rad=float(psi.max())))
+        profiles.append(
+            ArmAngleProfile(
+                hand=hand, mode=settings.mode, branch=branch, psi_min_rad=float(psi.min()), psi_max_rad=float(psi.max())
+            )
+        )
     return tuple(profiles)

@@ -131,10 +131,12 @@ class SewAngle:
     singular: tuple[float, float, float] | None = None
 
     @classmethod
-    def stereographic(cls, vertical: "np.ndarray | tuple[float, float, float]") -> "SewAngle":
+    def stereographic(cls, vertical: np.ndarray | tuple[float, float, float]) -> SewAngle:
         """The stereographic SEW angle with e_r the unit ``vertical`` and the singular half-line from the shoulder along -e_r (into the base, out of reach)."""
         v = np.asarray(vertical, dtype=float) / np.linalg.norm(vertical)
-        return cls(reference=(float(v[0]), float(v[1]), float(v[2])), singular=(float(-v[0]), float(-v[1]), float(-v[2])))
+        return cls(
+            reference=(float(v[0]), float(v[1]), float(v[2])), singular=(float(-v[0]), float(-v[1]), float(-v[2]))
+        )
 
     def reference_direction(self, e_sw):
         """e_x: the unit direction of psi = 0, normal to the unit shoulder-wrist direction ``e_sw`` (CasADi, 3x1)."""
@@ -154,10 +156,12 @@ class SewAngle:
     def angle(self, S: np.ndarray, E: np.ndarray, W: np.ndarray) -> np.ndarray:
         """The angle psi [rad] in (-pi, pi] of points S, E, W (..., 3) (:meth:`symbolic`, in mapped calls)."""
         S, E, W = np.broadcast_arrays(*(np.asarray(p, dtype=float) for p in (S, E, W)))
-        return _angle_function(self)(S.reshape(-1, 3), E.reshape(-1, 3), W.reshape(-1, 3))[0][:, 0].reshape(S.shape[:-1])
+        return _angle_function(self)(S.reshape(-1, 3), E.reshape(-1, 3), W.reshape(-1, 3))[0][:, 0].reshape(
+            S.shape[:-1]
+        )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _angle_function(sew: SewAngle) -> Batched:
     S, E, W = (cs.SX.sym(name, 3) for name in "SEW")
     return Batched(compiled(cs.Function("sew_angle", [S, E, W], [sew.symbolic(S, E, W)])))
@@ -222,7 +226,9 @@ def _upper_arm_search(arm: SewChain, goal: cs.SX, x: cs.SX) -> tuple[list, list,
         t56s, m56 = sp2(P5, _turn(h[6], t7, d) - P7, -h[4], h[5])
         for t5, t6 in t56s:
             margins.append(cs.if_else(m7 < 0, m7, m56))
-            errors.append(cs.dot(h[3], P4) - cs.dot(h[3], _turn(h[4], t5, _turn(h[5], t6, local7))))  # vectors turned: fewer operations on the grid
+            errors.append(
+                cs.dot(h[3], P4) - cs.dot(h[3], _turn(h[4], t5, _turn(h[5], t6, local7)))
+            )  # vectors turned: fewer operations on the grid
             R47 = _rot(h[4], t5) @ _rot(h[5], t6) @ _rot(h[6], t7)
             q4 = turn(-h[3], P4, R47 @ local)
             R03 = R07 @ R47.T @ _rot(h[3], q4).T
@@ -251,7 +257,9 @@ def _first_joint_search(arm: SewChain, goal: cs.SX, x: cs.SX) -> tuple[list, lis
         t23s, m23 = sp2(u, v, -h[1], h[2])
         for t2, t3 in t23s:
             margins.append(cs.if_else(m4 < 0, m4, m23))
-            errors.append(cs.dot(n, C + _turn(h[0], x, _turn(h[1], t2, _turn(h[2], t3, arm.elbow - arm.crossing))) - arm.shoulder))
+            errors.append(
+                cs.dot(n, C + _turn(h[0], x, _turn(h[1], t2, _turn(h[2], t3, arm.elbow - arm.crossing))) - arm.shoulder)
+            )
             R03 = _rot(h[0], x) @ _rot(h[1], t2) @ _rot(h[2], t3)
             R47 = (R03 @ _rot(h[3], t4)).T @ R07
             rows = []
@@ -294,18 +302,35 @@ class _Solver:
     equations: Batched
 
     @classmethod
-    def of(cls, arm: SewChain, sew: SewAngle, samples: int) -> "_Solver":
+    def of(cls, arm: SewChain, sew: SewAngle, samples: int) -> _Solver:
         span, search = SEARCHES[arm.family]
-        T, psi, g, x, q = cs.SX.sym("T", 4, 4), cs.SX.sym("psi"), cs.SX.sym("g", GOAL_SIZE), cs.SX.sym("x"), cs.SX.sym("q", 7)
+        T, psi, g, x, q = (
+            cs.SX.sym("T", 4, 4),
+            cs.SX.sym("psi"),
+            cs.SX.sym("g", GOAL_SIZE),
+            cs.SX.sym("x"),
+            cs.SX.sym("q", 7),
+        )
         goal = compiled(cs.Function("sew_goal", [T, psi], [_goal(arm, sew, T, psi)], {"cse": True}))
         errors, margins, configurations = search(arm, g, x)
         e = compiled(cs.Function("sew_errors", [g, x], [cs.vertcat(*errors), cs.vertcat(*margins)], {"cse": True}))
-        on_branch = tuple(Batched(compiled(cs.Function(f"sew_errors_{b}", [g, x], [errors[b], margins[b]], {"cse": True}))) for b in range(len(errors)))
-        Q = compiled(cs.Function("sew_configurations", [g, x], [cs.horzcat(*(c for rows in configurations for c in rows))], {"cse": True}))
+        on_branch = tuple(
+            Batched(compiled(cs.Function(f"sew_errors_{b}", [g, x], [errors[b], margins[b]], {"cse": True})))
+            for b in range(len(errors))
+        )
+        Q = compiled(
+            cs.Function(
+                "sew_configurations", [g, x], [cs.horzcat(*(c for rows in configurations for c in rows))], {"cse": True}
+            )
+        )
         E, W, got = arm.symbolic(q)
         D = T[:3, :3].T @ got[:3, :3]
         angle = sew.symbolic(cs.DM(arm.shoulder), E, W) - psi
-        F = cs.vertcat(got[:3, 3] - T[:3, 3], 0.5 * cs.vertcat(D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]), cs.atan2(cs.sin(angle), cs.cos(angle)))
+        F = cs.vertcat(
+            got[:3, 3] - T[:3, 3],
+            0.5 * cs.vertcat(D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]),
+            cs.atan2(cs.sin(angle), cs.cos(angle)),
+        )
         equations = compiled(cs.Function("sew_equations", [T, psi, q], [F, cs.jacobian(F, q)], {"cse": True}))
         gm = cs.MX.sym("g", GOAL_SIZE)
         grid = cs.Function("sew_grid", [gm], e.map(samples)(gm, cs.DM(np.linspace(*span, samples)).T))
@@ -339,10 +364,28 @@ def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray,
     """
     grid = np.linspace(*solver.span, samples)
     found: tuple[list[np.ndarray], ...] = ([], [], [], [])  # goals, branches, lows, highs
-    edges: tuple[list[np.ndarray], ...] = ([], [], [], [], [], [])  # goals, branches, x outside the domain, x inside, e there, e one sample further in
-    turns: tuple[list[np.ndarray], ...] = ([], [], [], [], [])  # goals, branches, the interval of the turn, sign of e there
+    edges: tuple[list[np.ndarray], ...] = (
+        [],
+        [],
+        [],
+        [],
+        [],
+        [],
+    )  # goals, branches, x outside the domain, x inside, e there, e one sample further in
+    turns: tuple[list[np.ndarray], ...] = (
+        [],
+        [],
+        [],
+        [],
+        [],
+    )  # goals, branches, the interval of the turn, sign of e there
     narrow: tuple[list[np.ndarray], ...] = ([], [], [])  # goals, branches, grid index before the margin's peak
-    pinched: tuple[list[np.ndarray], ...] = ([], [], [], [])  # goals, branches, grid index before the margin's dip, e at the 4 samples around
+    pinched: tuple[list[np.ndarray], ...] = (
+        [],
+        [],
+        [],
+        [],
+    )  # goals, branches, grid index before the margin's dip, e at the 4 samples around
 
     def add(to, *values):
         for column, value in zip(to, values):
@@ -360,32 +403,76 @@ def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray,
         g, k, b = np.nonzero(finite[:, :-1] != finite[:, 1:])
         inside = np.where(finite[g, k, b], k, k + 1)
         further = np.clip(np.where(finite[g, k, b], k - 1, k + 2), 0, samples - 1)
-        add(edges, block[g], b, grid[np.where(finite[g, k, b], k + 1, k)], grid[inside], e[g, inside, b], np.where(further == inside, np.nan, e[g, further, b]))
+        add(
+            edges,
+            block[g],
+            b,
+            grid[np.where(finite[g, k, b], k + 1, k)],
+            grid[inside],
+            e[g, inside, b],
+            np.where(further == inside, np.nan, e[g, further, b]),
+        )
         # two roots closer than the samples: a branch turning back towards zero between samples of one sign
         before, here, after = e[:, :-2], e[:, 1:-1], e[:, 2:]
         same = (np.sign(before) == np.sign(here)) & (np.sign(here) == np.sign(after))
-        g, k, b = np.nonzero(finite[:, :-2] & finite[:, 1:-1] & finite[:, 2:] & same & (np.abs(here) <= np.minimum(np.abs(before), np.abs(after))))
+        g, k, b = np.nonzero(
+            finite[:, :-2]
+            & finite[:, 1:-1]
+            & finite[:, 2:]
+            & same
+            & (np.abs(here) <= np.minimum(np.abs(before), np.abs(after)))
+        )
         add(turns, block[g], b, grid[k], grid[k + 2], np.sign(e[g, k + 1, b]))
         # a branch whose whole domain lies between samples: its margin peaks below zero on the grid
         outside = ~finite[:, :-2] & ~finite[:, 1:-1] & ~finite[:, 2:]
         g, k, b = np.nonzero(outside & (m[:, 1:-1] >= m[:, :-2]) & (m[:, 1:-1] >= m[:, 2:]))
         add(narrow, block[g], b, k)
         # a gap in a branch's domain between samples (where two branches meet and part): its margin dips
-        g, k, b = np.nonzero(finite[:, :-2] & finite[:, 1:-1] & finite[:, 2:] & (m[:, 1:-1] <= m[:, :-2]) & (m[:, 1:-1] <= m[:, 2:]))
+        g, k, b = np.nonzero(
+            finite[:, :-2] & finite[:, 1:-1] & finite[:, 2:] & (m[:, 1:-1] <= m[:, :-2]) & (m[:, 1:-1] <= m[:, 2:])
+        )
         around = k[:, None] + np.array([-1, 0, 2, 3])
-        add(pinched, block[g], b, k, np.where((around >= 0) & (around < samples), e[g[:, None], np.clip(around, 0, samples - 1), b[:, None]], np.nan))
+        add(
+            pinched,
+            block[g],
+            b,
+            k,
+            np.where(
+                (around >= 0) & (around < samples), e[g[:, None], np.clip(around, 0, samples - 1), b[:, None]], np.nan
+            ),
+        )
     # the narrow domains: where the margin peaks, and if that is inside, both its ends are edges
     g, b, k = (np.concatenate(column) for column in narrow)
-    peak = _maximise(lambda x: solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2), margin=True), grid[k], grid[k + 2])
+    peak = _maximise(
+        lambda x: solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2), margin=True), grid[k], grid[k + 2]
+    )
     e_peak = solver.on_branch(G[g], peak, b)
     g, b, k, peak, e_peak = (v[np.isfinite(e_peak)] for v in (g, b, k, peak, e_peak))
-    add(edges, np.tile(g, 2), np.tile(b, 2), np.concatenate([grid[k], grid[k + 2]]), np.tile(peak, 2), np.tile(e_peak, 2), np.full(2 * len(g), np.nan))
+    add(
+        edges,
+        np.tile(g, 2),
+        np.tile(b, 2),
+        np.concatenate([grid[k], grid[k + 2]]),
+        np.tile(peak, 2),
+        np.tile(e_peak, 2),
+        np.full(2 * len(g), np.nan),
+    )
     # the gaps: where the margin dips, and if that is outside, the samples either side have an edge there
     g, b, k = (np.concatenate(column) for column in pinched[:3])
-    dip = _maximise(lambda x: -solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2), margin=True), grid[k], grid[k + 2])
-    g, b, k, dip, e_around = (v[~np.isfinite(solver.on_branch(G[g], dip, b))] for v in (g, b, k, dip, np.concatenate(pinched[3])))
+    dip = _maximise(
+        lambda x: -solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2), margin=True), grid[k], grid[k + 2]
+    )
+    g, b, k, dip, e_around = (
+        v[~np.isfinite(solver.on_branch(G[g], dip, b))] for v in (g, b, k, dip, np.concatenate(pinched[3]))
+    )
     add(
-        edges, np.tile(g, 2), np.tile(b, 2), np.tile(dip, 2), np.concatenate([grid[k], grid[k + 2]]), np.concatenate([e_around[:, 1], e_around[:, 2]]), np.concatenate([e_around[:, 0], e_around[:, 3]])
+        edges,
+        np.tile(g, 2),
+        np.tile(b, 2),
+        np.tile(dip, 2),
+        np.concatenate([grid[k], grid[k + 2]]),
+        np.concatenate([e_around[:, 1], e_around[:, 2]]),
+        np.concatenate([e_around[:, 0], e_around[:, 3]]),
     )
     # the ends, by bisection on where e is defined: a root between an end and the point inside
     # has no sign change on the grid
@@ -395,7 +482,10 @@ def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray,
         mid = 0.5 * (out + edge)
         active = np.flatnonzero((mid != out) & (mid != edge))  # not yet at rounding
         defined = np.isfinite(solver.on_branch(G[g[active]], mid[active], b[active]))
-        out[active], edge[active] = np.where(defined, out[active], mid[active]), np.where(defined, mid[active], edge[active])
+        out[active], edge[active] = (
+            np.where(defined, out[active], mid[active]),
+            np.where(defined, mid[active], edge[active]),
+        )
     e_edge = solver.on_branch(G[g], edge, b)
     crossed = np.isfinite(e_edge) & (np.sign(e_edge) != np.sign(e_inside))
     add(found, g[crossed], b[crossed], np.minimum(edge, inside)[crossed], np.maximum(edge, inside)[crossed])
@@ -406,13 +496,17 @@ def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray,
     # a turn towards zero between the end and the sample further in than the one inside (as e
     # bends near an end, two roots may lie there)
     sign = np.sign(e_inside)
-    turn = ~crossed & ~at_end & (np.sign(e_edge) == sign) & (np.sign(e_further) != -sign)  # not a sign change already found
+    turn = (
+        ~crossed & ~at_end & (np.sign(e_edge) == sign) & (np.sign(e_further) != -sign)
+    )  # not a sign change already found
     further = np.where(np.isfinite(e_further), inside + np.sign(inside - edge) * (grid[1] - grid[0]), inside)
     add(turns, g[turn], b[turn], np.minimum(further, edge)[turn], np.maximum(further, edge)[turn], sign[turn])
     # the turning points split the pairs
     g, b, lo, hi, sign = (np.concatenate(column) for column in turns)
     toward = -sign
-    turning = _maximise(lambda x: np.tile(toward, 2) * solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2)), lo, hi)
+    turning = _maximise(
+        lambda x: np.tile(toward, 2) * solver.on_branch(np.tile(G[g], (2, 1)), x, np.tile(b, 2)), lo, hi
+    )
     e_turning = toward * solver.on_branch(G[g], turning, b)
     crossed = e_turning > 0
     add(found, g[crossed], b[crossed], lo[crossed], turning[crossed])
@@ -425,7 +519,9 @@ def _brackets(solver: _Solver, G: np.ndarray, samples: int) -> tuple[np.ndarray,
     return goal.astype(int), branch.astype(int), lo, hi
 
 
-def solve_many(arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = SewAngle(), samples: int = SEARCH_SAMPLES) -> list[SewSolutions]:
+def solve_many(
+    arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = SewAngle(), samples: int = SEARCH_SAMPLES
+) -> list[SewSolutions]:
     """Every solution of each hand pose ``T`` (N, 4, 4, chain base frame) at its SEW angle ``psi`` (N,) [rad] (module docstring), limits not applied; one :class:`SewSolutions` per pose."""
     T = np.asarray(T, dtype=float).reshape(-1, 4, 4)
     psi = np.broadcast_to(np.asarray(psi, dtype=float), len(T))
@@ -440,10 +536,21 @@ def solve_many(arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = Se
         e_mid = solver.on_branch(G[goal[active]], mid, branch[active])
         with_lo = np.isfinite(e_mid) & (np.sign(e_mid) == np.sign(e_lo[active]))
         with_hi = np.isfinite(e_mid) & ~with_lo
-        lo[active], e_lo[active], hi[active] = np.where(with_lo, mid, lo[active]), np.where(with_lo, e_mid, e_lo[active]), np.where(with_hi, mid, hi[active])
+        lo[active], e_lo[active], hi[active] = (
+            np.where(with_lo, mid, lo[active]),
+            np.where(with_lo, e_mid, e_lo[active]),
+            np.where(with_hi, mid, hi[active]),
+        )
     x = 0.5 * (lo + hi)
-    Q = solver.configurations(G[goal], x)[0].transpose(0, 2, 1)[np.arange(len(x))[:, None], 2 * branch[:, None] + np.arange(2)]  # (M, 2, 7)
-    Q, goal, x, branch = Q.reshape(-1, 7), np.repeat(goal, 2), np.repeat(x, 2), (2 * branch[:, None] + np.arange(2)).ravel()
+    Q = solver.configurations(G[goal], x)[0].transpose(0, 2, 1)[
+        np.arange(len(x))[:, None], 2 * branch[:, None] + np.arange(2)
+    ]  # (M, 2, 7)
+    Q, goal, x, branch = (
+        Q.reshape(-1, 7),
+        np.repeat(goal, 2),
+        np.repeat(x, 2),
+        (2 * branch[:, None] + np.arange(2)).ravel(),
+    )
     ok = np.all(np.isfinite(Q), axis=1)
     Q, goal, x, branch = Q[ok], goal[ok], x[ok], branch[ok]
     T_goal, psi_goal = T[goal], psi[goal]
@@ -460,12 +567,16 @@ def solve_many(arm: SewChain, T: np.ndarray, psi: np.ndarray, sew: SewAngle = Se
         mine = keep & (goal == n)
         q = Q[mine]
         apart = np.abs(np.angle(np.exp(1j * (q[:, None] - q[None])))).max(axis=-1) > SAME_SOLUTION_RAD
-        unique = np.array([i for i in range(len(q)) if apart[i, :i].all()], dtype=int)  # a root bracketed twice (at a sample, or polished onto another) once
+        unique = np.array(
+            [i for i in range(len(q)) if apart[i, :i].all()], dtype=int
+        )  # a root bracketed twice (at a sample, or polished onto another) once
         out.append(SewSolutions(q[unique], x[mine][unique], branch[mine][unique], residual[mine][unique]))
     return out
 
 
-def solve(arm: SewChain, T: np.ndarray, psi: float, sew: SewAngle = SewAngle(), samples: int = SEARCH_SAMPLES) -> SewSolutions:
+def solve(
+    arm: SewChain, T: np.ndarray, psi: float, sew: SewAngle = SewAngle(), samples: int = SEARCH_SAMPLES
+) -> SewSolutions:
     """Every solution of the hand pose ``T`` (4, 4, chain base frame) at SEW angle ``psi`` [rad] (module docstring), limits not applied."""
     return solve_many(arm, T[None], np.array([psi]), sew, samples)[0]
 
@@ -494,7 +605,11 @@ def candidate_table(robot: Robot, chain: Chain, T: np.ndarray, psi: float, sew: 
     rows = []
     for i, q in enumerate(Q):
         outside = [j for j in range(7) if not lower[j] <= q[j] <= upper[j]]
-        reason = "valid" if not outside else f"outside limits: {chain.joint_names[outside[0]]} at {q[outside[0]]:.4f} [{lower[outside[0]]:.4f}, {upper[outside[0]]:.4f}]"
+        reason = (
+            "valid"
+            if not outside
+            else f"outside limits: {chain.joint_names[outside[0]]} at {q[outside[0]]:.4f} [{lower[outside[0]]:.4f}, {upper[outside[0]]:.4f}]"
+        )
         rows.append(
             {
                 "q": q.tolist(),

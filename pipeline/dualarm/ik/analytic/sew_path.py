@@ -55,7 +55,12 @@ def sew_angle_of(spec: ArmAngle) -> SewAngle:
     return SewAngle.stereographic(spec.vertical)
 
 
-def solve_sew(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: ArmAngle = ArmAngle(mode="initial")) -> JointPath:
+def solve_sew(
+    robot: Robot,
+    reference: CartesianReference,
+    q0: Mapping[str, float] | str | None = None,
+    settings: ArmAngle = ArmAngle(mode="initial"),
+) -> JointPath:
     """Joint path of every hand of ``reference`` by SEW IK (module docstring), each arm a 7R chain of a family :mod:`dualarm.ik.analytic.sew` solves.
 
     Raises:
@@ -82,14 +87,34 @@ def solve_sew(robot: Robot, reference: CartesianReference, q0: Mapping[str, floa
             psi = mc_path.arm_angles(spec, problem.hand, reference, initial)
         rest = [k for k in range(len(reference)) if k not in found]
         found.update(zip(rest, solve_many(arm, problem.targets[rest], psi[rest], sew)))
-        q = _followed(problem.hand, problem.chain.joint_names, [found[k] for k in range(len(reference))], problem.q0, lower, upper, reference, psi, spec.max_joint_step_rad)
+        q = _followed(
+            problem.hand,
+            problem.chain.joint_names,
+            [found[k] for k in range(len(reference))],
+            problem.q0,
+            lower,
+            upper,
+            reference,
+            psi,
+            spec.max_joint_step_rad,
+        )
         elapsed = time.perf_counter() - start
-        solutions.append(ArmSolution(q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))))
+        solutions.append(
+            ArmSolution(
+                q=q, ok=np.ones(len(reference), bool), solve_time_s=np.full(len(reference), elapsed / len(reference))
+            )
+        )
     return joint_path("sew", reference, problems, solutions, q0)
 
 
 def _auto(
-    arm: SewChain, sew: SewAngle, problem: ArmProblem, reference: CartesianReference, initial: float, limits: tuple[np.ndarray, np.ndarray, np.ndarray], spec: ArmAngle
+    arm: SewChain,
+    sew: SewAngle,
+    problem: ArmProblem,
+    reference: CartesianReference,
+    initial: float,
+    limits: tuple[np.ndarray, np.ndarray, np.ndarray],
+    spec: ArmAngle,
 ) -> tuple[np.ndarray, dict[int, SewSolutions]]:
     """``auto``: the SEW angle per sample (N,) [rad] and the solutions there of the first repetition's samples (by sample), a profile of least travel that keeps a solution inside the limits (MC-Inverse's ``auto`` for an arm without fixed branches).
 
@@ -116,14 +141,30 @@ def _auto(
     for _ in range(AUTO_ROUNDS):
         new = sorted(planned - solutions.keys())
         if new:
-            found = solve_many(arm, np.repeat(problem.targets[new], AUTO_ANGLES, axis=0), np.tile(np.angle(np.exp(1j * angles)), len(new)), sew)
+            found = solve_many(
+                arm,
+                np.repeat(problem.targets[new], AUTO_ANGLES, axis=0),
+                np.tile(np.angle(np.exp(1j * angles)), len(new)),
+                sew,
+            )
             for i, k in enumerate(new):
                 solutions[k] = _inside(found[i * AUTO_ANGLES : (i + 1) * AUTO_ANGLES], lower, upper)
         picked = np.array(sorted(planned))
         cells, nodes = _plan(solutions, picked, angles, problem, initial, limits, closed, reference, spec)
         profile = np.interp(first, picked, np.unwrap(angles[cells]))
         found = solve_many(arm, problem.targets[first], profile, sew)
-        q, failure = _follow(problem.hand, problem.chain.joint_names, found, problem.q0, lower, upper, reference, profile, spec.max_joint_step_rad, speed)
+        q, failure = _follow(
+            problem.hand,
+            problem.chain.joint_names,
+            found,
+            problem.q0,
+            lower,
+            upper,
+            reference,
+            profile,
+            spec.max_joint_step_rad,
+            speed,
+        )
         end = len(first) if failure is None else _where(failure)
         with np.errstate(invalid="ignore"):
             apart = np.abs(np.angle(np.exp(1j * (q[picked] - nodes)))).max(axis=1) > SAME_SOLUTION_RAD
@@ -135,13 +176,18 @@ def _auto(
             planned.add(int(picked[i - 1] + picked[i]) // 2)
         elif failure is not None:  # the planned solution ends between planned samples: plan around the failure
             k = _where(failure)
-            before, after = int(picked[int(np.searchsorted(picked, k)) - 1]), int(picked[min(int(np.searchsorted(picked, k, "right")), len(picked) - 1)])
+            before, after = (
+                int(picked[int(np.searchsorted(picked, k)) - 1]),
+                int(picked[min(int(np.searchsorted(picked, k, "right")), len(picked) - 1)]),
+            )
             more = {k, max(k - 1, 0), (before + k) // 2, (k + after) // 2} - planned
             if not more:
                 raise failure
             planned |= more
         else:
-            return profile[first_repetition_index(reference.t, reference.rep, reference.period_s)], dict(zip(first.tolist(), found))
+            return profile[first_repetition_index(reference.t, reference.rep, reference.period_s)], dict(
+                zip(first.tolist(), found)
+            )
     raise failure or _no_profile(problem.hand, reference, int(first[-1]), spec.max_joint_step_rad)
 
 
@@ -191,13 +237,21 @@ def _plan(
     lower, upper, speed = limits
     G = len(angles)
     M = max(solutions[k].shape[1] for k in picked)
-    Q = np.stack([np.pad(solutions[k], ((0, 0), (0, M - solutions[k].shape[1]), (0, 0)), constant_values=np.nan) for k in picked])  # (K, G, M, 7)
+    Q = np.stack(
+        [np.pad(solutions[k], ((0, 0), (0, M - solutions[k].shape[1]), (0, 0)), constant_values=np.nan) for k in picked]
+    )  # (K, G, M, 7)
     with np.errstate(invalid="ignore"):
-        node = np.where(np.isnan(Q[..., 0]), np.inf, np.maximum(0.0, spec.margin_rad - np.minimum(Q - lower, upper - Q).min(axis=-1)))
+        node = np.where(
+            np.isnan(Q[..., 0]),
+            np.inf,
+            np.maximum(0.0, spec.margin_rad - np.minimum(Q - lower, upper - Q).min(axis=-1)),
+        )
     with np.errstate(invalid="ignore"):
         away = np.nan_to_num(np.abs(np.angle(np.exp(1j * (Q[0] - problem.q0)))).max(axis=-1), nan=np.inf)  # (G, M)
     m_start = away.argmin(axis=1)  # at each angle, the solution the path takes from the initial configuration
-    start = node[0, np.arange(G), m_start] + START_WEIGHT * (np.abs(np.angle(np.exp(1j * (angles - initial)))) + away[np.arange(G), m_start])
+    start = node[0, np.arange(G), m_start] + START_WEIGHT * (
+        np.abs(np.angle(np.exp(1j * (angles - initial)))) + away[np.arange(G), m_start]
+    )
     g0 = np.argsort(start)  # cheapest first: a tie goes to the cheaper start
     g0 = g0[np.isfinite(start[g0])]
     if not g0.size:
@@ -208,16 +262,23 @@ def _plan(
     cost[np.arange(g0.size), g0, m0] = start[g0]
     back = np.zeros((len(picked), g0.size, G, M, 2), int)  # (shift index, solution) each node is reached from
     for k in range(1, len(picked)):
-        limit = np.minimum(spec.max_joint_step_rad * (picked[k] - picked[k - 1]), speed * (reference.t[picked[k]] - reference.t[picked[k - 1]]))
+        limit = np.minimum(
+            spec.max_joint_step_rad * (picked[k] - picked[k - 1]),
+            speed * (reference.t[picked[k]] - reference.t[picked[k - 1]]),
+        )
         best = np.full(cost.shape, np.inf)
         for j, d in enumerate(shifts):
             with np.errstate(invalid="ignore"):
-                change = np.abs(np.angle(np.exp(1j * (Q[k][:, :, None] - np.roll(Q[k - 1], d, axis=0)[:, None]))))  # (G, M now, M before, 7): from cell g - d
+                change = np.abs(
+                    np.angle(np.exp(1j * (Q[k][:, :, None] - np.roll(Q[k - 1], d, axis=0)[:, None])))
+                )  # (G, M now, M before, 7): from cell g - d
             largest = np.nan_to_num(change.max(axis=-1), nan=np.inf)
             nearest = largest.argmin(axis=1)  # (G, M before): the solution the path goes on to, as _follow chooses it
             step = np.take_along_axis(largest, nearest[:, None], 1)[:, 0]
             within = np.all(np.take_along_axis(change, nearest[:, None, :, None], 1)[:, 0] <= limit, axis=-1)
-            option = np.roll(cost, d, axis=1) + np.where(within, step, np.inf)[None] + abs(d) * 2 * np.pi / G  # (starts, G, M before)
+            option = (
+                np.roll(cost, d, axis=1) + np.where(within, step, np.inf)[None] + abs(d) * 2 * np.pi / G
+            )  # (starts, G, M before)
             for before in range(M):
                 to = nearest[:, before]
                 better = option[:, np.arange(G), before] < best[:, np.arange(G), to]
@@ -277,14 +338,21 @@ def _followed(hand, names, found, q0, lower, upper, reference, psi, max_step) ->
     return q
 
 
-def _follow(hand, names, found, q0, lower, upper, reference, psi, max_step, speed=None) -> tuple[np.ndarray, StageError | None]:
+def _follow(
+    hand, names, found, q0, lower, upper, reference, psi, max_step, speed=None
+) -> tuple[np.ndarray, StageError | None]:
     """:func:`_followed`'s path (N, 7) [rad], filled up to the sample where it fails, and the failure (None when it does not): a sample without a solution inside the limits, a joint step above ``max_step``, or, given velocity limits ``speed`` (7,) [rad/s], a step faster (the error's ``sample``, ``t_s`` and ``joint`` say where)."""
     q = np.full((len(found), 7), np.nan)
     previous = q0
     for k, solutions in enumerate(found):
         where = f"sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]})"
         if not len(solutions.q):
-            return q, NoSolutionFound(f"sew, {hand} arm: {where} has no solution at SEW angle {psi[k]:.4f} rad", stage="ik", sample=k, t_s=float(reference.t[k]))
+            return q, NoSolutionFound(
+                f"sew, {hand} arm: {where} has no solution at SEW angle {psi[k]:.4f} rad",
+                stage="ik",
+                sample=k,
+                t_s=float(reference.t[k]),
+            )
         near = _nearest_turns(solutions.q, previous)
         inside = np.all((near >= lower) & (near <= upper), axis=1)
         if not inside.any():
@@ -309,6 +377,12 @@ def _follow(hand, names, found, q0, lower, upper, reference, psi, max_step, spee
             )
         if k and speed is not None and np.any(steps[best] > speed * (reference.t[k] - reference.t[k - 1])):
             j = int(np.argmax(steps[best] / speed))
-            return q, StageError(f"sew, {hand} arm: {names[j]} moves faster than its velocity limit at {where}", stage="ik", sample=k, t_s=float(reference.t[k]), joint=names[j])
+            return q, StageError(
+                f"sew, {hand} arm: {names[j]} moves faster than its velocity limit at {where}",
+                stage="ik",
+                sample=k,
+                t_s=float(reference.t[k]),
+                joint=names[j],
+            )
         q[k] = previous = near[best]
     return q, None

@@ -213,7 +213,7 @@ class TracIkSolver:
         timeout_s: float = 0.005,
         epsilon: float = 1e-9,
         solve_type: str = "Speed",
-    ) -> "TracIkSolver":
+    ) -> TracIkSolver:
         """Build TRAC-IK for the chain from link ``base`` to link ``tip``.
 
         Args:
@@ -240,7 +240,9 @@ class TracIkSolver:
             solver = pytracik.TRAC_IK(base, tip, _xml_for_kdl(robot), float(timeout_s), float(epsilon), kind)
             dof = pytracik.get_num_joints(solver)
         if dof != chain.dof:
-            raise RobotModelError(f"{robot.urdf.path}: TRAC-IK found {dof} joints from '{base}' to '{tip}', the URDF has {chain.dof}")
+            raise RobotModelError(
+                f"{robot.urdf.path}: TRAC-IK found {dof} joints from '{base}' to '{tip}', the URDF has {chain.dof}"
+            )
         lower, upper = robot.lower_upper(chain.joint_names)
         # pytracik parsed the limits in single precision; continuous joints keep TRAC-IK's own.
         lower = np.where(np.isfinite(lower), lower, pytracik.get_joint_lower_bounds(solver))
@@ -349,7 +351,7 @@ class PyBulletIkSolver:
         joint_damping: float = 1e-6,
         position_tolerance_m: float = 1e-9,
         orientation_tolerance_rad: float = 1e-6,
-    ) -> "PyBulletIkSolver":
+    ) -> PyBulletIkSolver:
         """Load the robot into a new PyBullet client and prepare IK for the chain ``base`` -> ``tip``.
 
         Args:
@@ -378,10 +380,16 @@ class PyBulletIkSolver:
             if name not in robot.limits:
                 raise RobotModelError(f"locked.{name}: no movable joint of that name in {robot.urdf.path}")
             if name in chain.joint_names:
-                raise RobotModelError(f"locked.{name}: the joint belongs to the chain {chain.name} and cannot be locked")
+                raise RobotModelError(
+                    f"locked.{name}: the joint belongs to the chain {chain.name} and cannot be locked"
+                )
         world = load_pybullet_robot(robot.urdf.path)
         try:
-            dofs = tuple(name for name, index in sorted(world.joint_index.items(), key=lambda item: item[1]) if pb.getJointInfo(world.body, index, physicsClientId=world.client)[2] != pb.JOINT_FIXED)
+            dofs = tuple(
+                name
+                for name, index in sorted(world.joint_index.items(), key=lambda item: item[1])
+                if pb.getJointInfo(world.body, index, physicsClientId=world.client)[2] != pb.JOINT_FIXED
+            )
             if set(dofs) != set(robot.limits):
                 raise RobotModelError(f"{robot.urdf.path}: PyBullet's movable joints differ from the URDF's")
             rest = np.array([np.clip(locked.get(n, 0.0), robot.limits[n].lower, robot.limits[n].upper) for n in dofs])
@@ -475,7 +483,9 @@ class PyBulletIkSolver:
         return np.clip(q, self.lower, self.upper)
 
     @classmethod
-    def shared(cls, robot: Robot, base: str, tip: str, *, locked: Mapping[str, float] | None = None, **settings: Any) -> "PyBulletIkSolver":
+    def shared(
+        cls, robot: Robot, base: str, tip: str, *, locked: Mapping[str, float] | None = None, **settings: Any
+    ) -> PyBulletIkSolver:
         """:meth:`of`'s solver, built once per robot, chain, locked joints and settings in a process and kept open (a study's worker loads the robot into PyBullet once, not per trial); the least recently used beyond :data:`SHARED_PYBULLET_SOLVERS` are closed. Not to be closed by the caller.
 
         Every answer is :meth:`of`'s: :meth:`solve` sets the chain's joints to its seed, and nothing changes the others.
@@ -491,7 +501,7 @@ class PyBulletIkSolver:
         """Disconnect the PyBullet client."""
         self.world.close()
 
-    def __enter__(self) -> "PyBulletIkSolver":
+    def __enter__(self) -> PyBulletIkSolver:
         return self
 
     def __exit__(self, *exc: object) -> None:

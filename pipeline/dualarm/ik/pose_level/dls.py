@@ -104,7 +104,13 @@ class DlsSettings:
     stall_step_rad: float = 1e-15
 
     def __post_init__(self) -> None:
-        for name in ("position_tolerance_m", "orientation_tolerance_rad", "singular_region", "max_damping", "max_step_rad"):
+        for name in (
+            "position_tolerance_m",
+            "orientation_tolerance_rad",
+            "singular_region",
+            "max_damping",
+            "max_step_rad",
+        ):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise StageError(f"DlsSettings.{name}: must be a positive number, got {value!r}")
@@ -219,7 +225,7 @@ class DlsSolver:
     evaluate: cs.Function
 
     @classmethod
-    def of(cls, robot: Robot, base: str, tips: Sequence[str], settings: DlsSettings = DlsSettings()) -> "DlsSolver":
+    def of(cls, robot: Robot, base: str, tips: Sequence[str], settings: DlsSettings = DlsSettings()) -> DlsSolver:
         """The solver for ``tips`` of ``robot`` in the frame of link ``base``; built once per robot, base, tips and settings in a process, then kept (a study's worker builds it once, not per trial).
 
         Args:
@@ -235,7 +241,7 @@ class DlsSolver:
         return _solver(robot, base, tuple(tips), settings)
 
     @classmethod
-    def _build(cls, robot: Robot, base: str, tips: tuple[str, ...], settings: DlsSettings) -> "DlsSolver":
+    def _build(cls, robot: Robot, base: str, tips: tuple[str, ...], settings: DlsSettings) -> DlsSolver:
         """Build the solver (see :meth:`of`)."""
         if not tips:
             raise StageError("DLS solver: no tips given (give at least one tip link, e.g. 'left_hand')")
@@ -296,7 +302,9 @@ class DlsSolver:
 
     def _pack_targets(self, targets: Sequence[np.ndarray]) -> np.ndarray:
         if len(targets) != len(self.tips):
-            raise StageError(f"DLS solver: {len(targets)} target poses for {len(self.tips)} tips ({', '.join(self.tips)})")
+            raise StageError(
+                f"DLS solver: {len(targets)} target poses for {len(self.tips)} tips ({', '.join(self.tips)})"
+            )
         packed = []
         for tip, T in zip(self.tips, targets):
             T = np.asarray(T, dtype=float)
@@ -308,7 +316,9 @@ class DlsSolver:
     def _seed(self, seed: np.ndarray) -> np.ndarray:
         seed = np.asarray(seed, dtype=float)
         if seed.shape != (self.n,) or not np.all(np.isfinite(seed)):
-            raise StageError(f"DLS solver: the seed must be {self.n} finite joint values ({', '.join(self.joint_names)}), got shape {seed.shape}")
+            raise StageError(
+                f"DLS solver: the seed must be {self.n} finite joint values ({', '.join(self.joint_names)}), got shape {seed.shape}"
+            )
         return np.clip(seed, self.lower, self.upper)
 
     def _evaluator(self, targets: Sequence[np.ndarray]):
@@ -372,7 +382,10 @@ class DlsSolver:
         reason = ""
         iterations = 0
         while True:
-            if errors[:h].max() <= settings.position_tolerance_m and errors[h:].max() <= settings.orientation_tolerance_rad:
+            if (
+                errors[:h].max() <= settings.position_tolerance_m
+                and errors[h:].max() <= settings.orientation_tolerance_rad
+            ):
                 break
             if iterations == settings.max_iterations:
                 reason = f"no convergence in {iterations} iterations"

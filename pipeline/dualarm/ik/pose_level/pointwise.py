@@ -143,7 +143,12 @@ def _pair(result: Any) -> tuple[np.ndarray, bool]:
 
 
 #: Each method's settings class.
-SETTINGS: Mapping[str, type] = {"trac-ik": TracIkSettings, "pybullet": PyBulletIkSettings, "dls-svd": DlsSettings, "ikfast-style": IkfastStyleSettings}
+SETTINGS: Mapping[str, type] = {
+    "trac-ik": TracIkSettings,
+    "pybullet": PyBulletIkSettings,
+    "dls-svd": DlsSettings,
+    "ikfast-style": IkfastStyleSettings,
+}
 
 
 def solve_pointwise(
@@ -165,7 +170,9 @@ def solve_pointwise(
         progress: called with (samples done, total) as samples are solved.
     """
     if method not in POINTWISE_METHODS:
-        raise InvalidArgumentError("method", f"unknown pose-level IK method '{method}' (methods: {', '.join(POINTWISE_METHODS)})")
+        raise InvalidArgumentError(
+            "method", f"unknown pose-level IK method '{method}' (methods: {', '.join(POINTWISE_METHODS)})"
+        )
     kind = SETTINGS[method]
     settings = kind() if settings is None else settings
     if not isinstance(settings, kind):
@@ -191,7 +198,9 @@ def solve_pointwise(
 
 
 def _solver_of(method: str) -> Callable[..., JointPath]:
-    def solve(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: Any = None) -> JointPath:
+    def solve(
+        robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: Any = None
+    ) -> JointPath:
         return solve_pointwise(method, robot, reference, q0, settings)
 
     solve.__name__ = f"solve_{method.replace('-', '_')}"

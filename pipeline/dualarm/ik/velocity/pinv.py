@@ -49,19 +49,33 @@ class PinvSettings:
 
     def __post_init__(self) -> None:
         check_task_space(self.task_space)
-        if isinstance(self.feedback_gain, bool) or not isinstance(self.feedback_gain, (int, float)) or not (np.isfinite(self.feedback_gain) and self.feedback_gain > 0):
+        if (
+            isinstance(self.feedback_gain, bool)
+            or not isinstance(self.feedback_gain, (int, float))
+            or not (np.isfinite(self.feedback_gain) and self.feedback_gain > 0)
+        ):
             raise InvalidArgumentError("feedback_gain", f"must be a positive number, not {self.feedback_gain!r}")
 
 
-def settings_for(task: "Task", **overrides: object) -> PinvSettings:
+def settings_for(task: Task, **overrides: object) -> PinvSettings:
     """The baseline's settings for a task: TV-GDD's gain, bands and task space from its ``[gesture]`` and ``[ik]`` tables."""
     from dualarm.ik.velocity.tvgdd import settings_for as tvgdd_settings
 
     bands = tvgdd_settings(task)
-    return with_overrides(PinvSettings(feedback_gain=bands.feedback_gain, free_waist=bands.free_waist, bands=bands, task_space=bands.task_space), overrides)
+    return with_overrides(
+        PinvSettings(
+            feedback_gain=bands.feedback_gain, free_waist=bands.free_waist, bands=bands, task_space=bands.task_space
+        ),
+        overrides,
+    )
 
 
-def solve_pinv(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: PinvSettings = PinvSettings()) -> JointPath:
+def solve_pinv(
+    robot: Robot,
+    reference: CartesianReference,
+    q0: Mapping[str, float] | str | None = None,
+    settings: PinvSettings = PinvSettings(),
+) -> JointPath:
     """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps at the reference's period; the hands' positions, and in ``pose`` task space their orientations, as TV-GDD.
 
     Nothing bounds the joints; the path's extras hold the bands TV-GDD would impose
@@ -77,7 +91,9 @@ def solve_pinv(robot: Robot, reference: CartesianReference, q0: Mapping[str, flo
     tau = reference.period_s
     r, rdot = stack.target, cs.SX.sym("rdot", stack.m)
     J = stack.jacobian
-    rhs = rdot + settings.feedback_gain * stack.error  # eqs (2)-(3): rdot + K (r - f(theta)), and (pose) omega_d + K log(R_d R^T) under it
+    rhs = (
+        rdot + settings.feedback_gain * stack.error
+    )  # eqs (2)-(3): rdot + K (r - f(theta)), and (pose) omega_d + K log(R_d R^T) under it
     velocity = J.T @ cs.solve(J @ J.T, rhs)  # J^+ rhs for a full-row-rank J, eqs (2)-(3) with w = 0
     step = cs.Function("pinv_step", [stack.theta, r, rdot], [velocity], ["theta", "r", "rdot"], ["thetadot"])
     R, V = stacked_reference(stack, reference)

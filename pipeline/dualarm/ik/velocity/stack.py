@@ -75,7 +75,10 @@ class HandStack:
     def start_solver(self) -> cs.Function:
         """IPOPT's problem of :func:`start_configuration`, built once per stack: min |theta - initial|^2 s.t. e(theta, p) = 0, the first reference sample p its parameter."""
         nlp = {"x": self.theta, "p": self.target, "f": cs.sumsqr(self.theta - self.initial), "g": self.error}
-        options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "constr_viol_tol": 1e-12}}
+        options = {
+            "print_time": False,
+            "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "constr_viol_tol": 1e-12},
+        }
         return cs.nlpsol("start_configuration", "ipopt", nlp, options)
 
     @property
@@ -109,7 +112,15 @@ def active_joints(robot: Robot, hands: Sequence[str], frame: str, free_waist: bo
 KEPT_STACKS = 32
 
 
-def hand_stack(robot: Robot, hands: Sequence[str], q0: Mapping[str, float], *, frame: str | None = None, free_waist: bool = False, task_space: str = "position") -> HandStack:
+def hand_stack(
+    robot: Robot,
+    hands: Sequence[str],
+    q0: Mapping[str, float],
+    *,
+    frame: str | None = None,
+    free_waist: bool = False,
+    task_space: str = "position",
+) -> HandStack:
     """The stacked kinematics of ``hands`` in ``frame`` (default the robot's root link), the joints that are not active at their values in ``q0`` [rad], with the task rows of ``task_space`` (``position`` or ``pose``).
 
     Built once per robot and arguments in a process, then kept (a study's worker builds it once, not per trial).
@@ -122,7 +133,14 @@ def hand_stack(robot: Robot, hands: Sequence[str], q0: Mapping[str, float], *, f
 
 
 @functools.lru_cache(maxsize=KEPT_STACKS)
-def _stack(robot: Robot, hands: tuple[str, ...], q0_items: tuple[tuple[str, float], ...], frame: str, free_waist: bool, task_space: str) -> HandStack:
+def _stack(
+    robot: Robot,
+    hands: tuple[str, ...],
+    q0_items: tuple[tuple[str, float], ...],
+    frame: str,
+    free_waist: bool,
+    task_space: str,
+) -> HandStack:
     """Build :func:`hand_stack`'s stack."""
     q0 = dict(q0_items)
     names = active_joints(robot, hands, frame, free_waist)
@@ -164,9 +182,22 @@ def _stack(robot: Robot, hands: tuple[str, ...], q0_items: tuple[tuple[str, floa
     )
 
 
-def reference_stack(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None, free_waist: bool, task_space: str = "position") -> HandStack:
+def reference_stack(
+    robot: Robot,
+    reference: CartesianReference,
+    q0: Mapping[str, float] | str | None,
+    free_waist: bool,
+    task_space: str = "position",
+) -> HandStack:
     """The stack of the reference's hands in its frame, ``q0`` resolved by :meth:`Robot.configuration`, with the task rows of ``task_space``."""
-    return hand_stack(robot, tuple(reference.hands), robot.configuration(q0, "q0"), frame=reference.frame_in(robot), free_waist=free_waist, task_space=task_space)
+    return hand_stack(
+        robot,
+        tuple(reference.hands),
+        robot.configuration(q0, "q0"),
+        frame=reference.frame_in(robot),
+        free_waist=free_waist,
+        task_space=task_space,
+    )
 
 
 def stacked_reference(stack: HandStack, reference: CartesianReference) -> tuple[np.ndarray, np.ndarray]:
@@ -191,7 +222,9 @@ START_TOLERANCE_M = 1e-9
 START_TOLERANCE_RAD = 1e-9
 
 
-def start_configuration(stack: HandStack, reference: CartesianReference, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+def start_configuration(
+    stack: HandStack, reference: CartesianReference, lower: np.ndarray, upper: np.ndarray
+) -> np.ndarray:
     """Where a velocity-level method starts [rad], (n,): the task's initial values if they put the hands on the reference's first sample (within :data:`START_TOLERANCE_M`, and :data:`START_TOLERANCE_RAD` in pose task space), otherwise the configuration nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares problem min |theta - initial|^2 s.t. e(theta) = 0 (the stack's task error at the first sample) solved by IPOPT through CasADi.
 
     Raises:
@@ -207,7 +240,12 @@ def start_configuration(stack: HandStack, reference: CartesianReference, lower: 
         p = 3 * len(stack.hands)
         gap = f"gap {e[:p].max():.3g} m" + (f", {e[p:].max():.3g} rad" if len(e) > p else "")
         what = "the hands on the path start" + (" in position and orientation" if stack.task_space == "pose" else "")
-        raise StageError(f"no configuration within the joint limits puts {what} (IPOPT: {solver.stats()['return_status']}, {gap})", stage="ik", sample=0, t_s=0.0)
+        raise StageError(
+            f"no configuration within the joint limits puts {what} (IPOPT: {solver.stats()['return_status']}, {gap})",
+            stage="ik",
+            sample=0,
+            t_s=0.0,
+        )
     return frozen(theta, (stack.n,), "start")
 
 
@@ -218,7 +256,15 @@ def _on_start(stack: HandStack, theta: np.ndarray, target: np.ndarray) -> bool:
     return bool(e[:p].max() <= START_TOLERANCE_M and e[p:].max(initial=0.0) <= START_TOLERANCE_RAD)
 
 
-def stack_joint_path(method: str, stack: HandStack, reference: CartesianReference, q: np.ndarray, qd: np.ndarray, solve_time_s: np.ndarray, extras=None):
+def stack_joint_path(
+    method: str,
+    stack: HandStack,
+    reference: CartesianReference,
+    q: np.ndarray,
+    qd: np.ndarray,
+    solve_time_s: np.ndarray,
+    extras=None,
+):
     """The JointPath of a velocity-level method on ``stack``: hand errors |r - f(q)| [m] and orientation errors (:func:`~dualarm.ik.orientation.orientation_errors`, [rad]) from q (N, n) by the stack's forward kinematics."""
     N, h = len(reference), len(stack.hands)
     asked = np.hstack([reference.hands[hand].position for hand in stack.hands])

@@ -36,7 +36,13 @@ from dualarm.contracts.joint_path import JointPath, check_task_space
 from dualarm.contracts.reference import CartesianReference
 from dualarm.errors import InvalidArgumentError, StageError
 from dualarm.ik.velocity.gesture import position_bounds, velocity_bounds
-from dualarm.ik.velocity.stack import HandStack, reference_stack, stack_joint_path, stacked_reference, start_configuration
+from dualarm.ik.velocity.stack import (
+    HandStack,
+    reference_stack,
+    stack_joint_path,
+    stacked_reference,
+    start_configuration,
+)
 from dualarm.model.robot import Robot
 from dualarm.settings import with_overrides
 
@@ -100,9 +106,13 @@ class TvgddSettings:
     def __post_init__(self) -> None:
         check_task_space(self.task_space)
         if self.scheme not in SCHEMES:
-            raise InvalidArgumentError("scheme", f"unknown TV-GDD scheme '{self.scheme}' (schemes: {', '.join(SCHEMES)})")
+            raise InvalidArgumentError(
+                "scheme", f"unknown TV-GDD scheme '{self.scheme}' (schemes: {', '.join(SCHEMES)})"
+            )
         if self.backend not in BACKENDS:
-            raise InvalidArgumentError("backend", f"unknown QP backend '{self.backend}' (backends: {', '.join(BACKENDS)})")
+            raise InvalidArgumentError(
+                "backend", f"unknown QP backend '{self.backend}' (backends: {', '.join(BACKENDS)})"
+            )
         for name in ("feedback_gain", "nu", "t_sp_s", "c_tuning", "rmp_lambda", "lvi_tolerance"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not (np.isfinite(value) and value > 0):
@@ -197,7 +207,9 @@ def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings, period_s: flo
     """theta_new-+(t) of eq (19) and zeta_new-+(t) of eqs (21)-(22), with the bounds' rate over the step [t, t + tau] (tau = ``period_s``) as feedforward when ``settings.bound_feedforward``."""
 
     def at(time):
-        return position_bounds(time, bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning)
+        return position_bounds(
+            time, bounds.lower, bounds.upper, bounds.goal_lower, bounds.goal_upper, settings.t_sp_s, settings.c_tuning
+        )
 
     lower_t, upper_t = at(t)
     rates = (0.0, 0.0)
@@ -208,7 +220,14 @@ def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings, period_s: flo
     return lower_t, upper_t, zeta_lo, zeta_hi
 
 
-def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings, period_s: float, urdf_xml: str = "", all_joints: tuple[str, ...] = ()) -> TvgddProblem:
+def build_problem(
+    stack: HandStack,
+    bounds: JointBounds,
+    settings: TvgddSettings,
+    period_s: float,
+    urdf_xml: str = "",
+    all_joints: tuple[str, ...] = (),
+) -> TvgddProblem:
     """Formulate the TV-GDD QP for ``stack`` with Euler step ``period_s`` [s] (``urdf_xml`` and ``all_joints`` are needed for MKE); the task rows of (24) are the stack's (its ``task_space``)."""
     n, m, size = stack.n, stack.m, stack.reference_size
     theta = stack.theta
@@ -222,7 +241,9 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
         M = cs.SX.eye(n)
     b = settings.rmp_lambda * (theta - theta0) if settings.scheme == "rmp" else cs.SX.zeros(n)
     J = stack.jacobian
-    rhs = rdot + settings.feedback_gain * stack.error  # eq (16)/(24): K (r - f(theta)), and (pose) K log(R_d R^T) under it
+    rhs = (
+        rdot + settings.feedback_gain * stack.error
+    )  # eq (16)/(24): K (r - f(theta)), and (pose) K log(R_d R^T) under it
     lower_t, upper_t, zeta_lo, zeta_hi = _bands(theta, t, bounds, settings, period_s)
     inputs, names = [theta, t, r, rdot, theta0], ["theta", "t", "r", "rdot", "theta0"]
     data = cs.Function(
@@ -233,7 +254,12 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
         ["M", "b", "J", "rhs", "zeta_lo", "zeta_hi", "lower_t", "upper_t"],
     )
     try:
-        qp = cs.conic("tvgdd_qp", settings.qp_plugin, {"h": cs.Sparsity.dense(n, n), "a": cs.Sparsity.dense(m, n)}, _plugin_options(settings.qp_plugin))
+        qp = cs.conic(
+            "tvgdd_qp",
+            settings.qp_plugin,
+            {"h": cs.Sparsity.dense(n, n), "a": cs.Sparsity.dense(m, n)},
+            _plugin_options(settings.qp_plugin),
+        )
     except RuntimeError as exc:
         reason = str(exc).strip().splitlines()[-1]
         raise StageError(f"CasADi conic plugin '{settings.qp_plugin}' cannot take the TV-GDD QP: {reason}") from None
@@ -247,7 +273,9 @@ def build_problem(stack: HandStack, bounds: JointBounds, settings: TvgddSettings
     packed = cs.MX.sym("inputs", 2 * n + 1 + size + m)
     pieces = cs.vertsplit(packed, [0, n, n + 1, n + 1 + size, n + 1 + size + m, 2 * n + 1 + size + m])
     packed_step = cs.Function("tvgdd_packed_step", [packed], step(*pieces), ["inputs"], ["thetadot", "violation"])
-    return TvgddProblem(stack=stack, settings=settings, period_s=period_s, data=data, step=step, packed_step=packed_step)
+    return TvgddProblem(
+        stack=stack, settings=settings, period_s=period_s, data=data, step=step, packed_step=packed_step
+    )
 
 
 #: Quiet, tight options per conic plugin.
@@ -270,7 +298,9 @@ def _plugin_options(plugin: str) -> dict[str, Any]:
     return {**PLUGIN_OPTIONS.get(plugin, {}), "error_on_fail": False}
 
 
-def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: float = LVI_TOLERANCE, max_iter: int = 1_000_000):
+def lvi_solve(
+    M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: float = LVI_TOLERANCE, max_iter: int = 1_000_000
+):
     """Solve the QP (23)-(25) by the paper's LVI projection method, eqs (26)-(27).
 
     u = [thetadot; lambda] solves Phi_Omega(u - (Gamma u + q)) - u = 0 with
@@ -286,7 +316,9 @@ def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: f
         is reached.
     """
     single = np.ndim(M) == 2
-    M, b, J, rhs, lo, hi = (np.asarray(x, dtype=float)[None] if single else np.asarray(x, dtype=float) for x in (M, b, J, rhs, lo, hi))
+    M, b, J, rhs, lo, hi = (
+        np.asarray(x, dtype=float)[None] if single else np.asarray(x, dtype=float) for x in (M, b, J, rhs, lo, hi)
+    )
     B, m, n = J.shape
     Gamma = np.block([[M, -J.transpose(0, 2, 1)], [J, np.zeros((B, m, m))]])
     q = np.concatenate([b, -rhs], axis=1)
@@ -307,7 +339,9 @@ def lvi_solve(M, b, J, rhs, lo, hi, u0=None, *, omega: float = LVI_OMEGA, tol: f
             if not keep.any():
                 thetadot = solution[:, :n]
                 return (thetadot[0], solution[0], int(iterations[0])) if single else (thetadot, solution, iterations)
-            active, Gamma, A, q, u_lo, u_hi, u, eps, e2 = (x[keep] for x in (active, Gamma, A, q, u_lo, u_hi, u, eps, e2))
+            active, Gamma, A, q, u_lo, u_hi, u, eps, e2 = (
+                x[keep] for x in (active, Gamma, A, q, u_lo, u_hi, u, eps, e2)
+            )
         sigma = (A @ eps[..., None])[..., 0]
         u = u - (e2 / np.einsum("bi,bi->b", sigma, sigma))[:, None] * sigma  # eq (27)
     raise StageError(f"LVI solver did not reach ||eps|| <= {tol} in {max_iter} iterations")
@@ -334,13 +368,21 @@ def joint_bounds(robot: Robot, stack: HandStack, settings: TvgddSettings) -> Joi
     )
 
 
-def settings_for(task: "Task", **overrides: object) -> TvgddSettings:
+def settings_for(task: Task, **overrides: object) -> TvgddSettings:
     """TV-GDD settings from a task's ``[gesture]`` table, ``waist`` and ``[ik] task_space`` (defaults where it has none), with ``overrides`` (fields of :class:`TvgddSettings`) on top."""
     g = task.spec.gesture
     base = TvgddSettings()
     values: dict[str, object] = {"free_waist": task.spec.waist == "free", "task_space": task.spec.ik.task_space}
     if g is not None:
-        values.update(feedback_gain=g.feedback_gain, nu=g.nu, t_sp_s=g.t_sp_s, c_tuning=g.c_tuning, bound_feedforward=g.bound_feedforward, goal_lower=g.goal_lower, goal_upper=g.goal_upper)
+        values.update(
+            feedback_gain=g.feedback_gain,
+            nu=g.nu,
+            t_sp_s=g.t_sp_s,
+            c_tuning=g.c_tuning,
+            bound_feedforward=g.bound_feedforward,
+            goal_lower=g.goal_lower,
+            goal_upper=g.goal_upper,
+        )
     return with_overrides(base, {**values, **overrides})
 
 
@@ -354,11 +396,22 @@ def _infeasible(problem: TvgddProblem, args, k: int, t: float) -> StageError:
         why = "the velocity bounds of " + ", ".join(collapsed) + " collapsed (zeta- > zeta+)"
     else:
         rows = f"{problem.stack.m} task rows ({problem.stack.task_space}) on {len(names)} joints"
-        why = f"no joint velocity within the bounds (25) meets the hand-velocity equality (24) ({rows}); " + _nearest(J, rhs, lo, hi, np.asarray(args[0], float), lower_t, upper_t, names)
+        why = f"no joint velocity within the bounds (25) meets the hand-velocity equality (24) ({rows}); " + _nearest(
+            J, rhs, lo, hi, np.asarray(args[0], float), lower_t, upper_t, names
+        )
     return StageError(f"TV-GDD step {k} (t = {t:.3f} s) is infeasible: {why}", stage="ik", sample=k, t_s=t)
 
 
-def _nearest(J: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray, theta: np.ndarray, lower_t: np.ndarray, upper_t: np.ndarray, names: tuple[str, ...]) -> str:
+def _nearest(
+    J: np.ndarray,
+    rhs: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    theta: np.ndarray,
+    lower_t: np.ndarray,
+    upper_t: np.ndarray,
+    names: tuple[str, ...],
+) -> str:
     """What holds back the joint velocity within [lo, hi] nearest to J thetadot = rhs (bounded least squares, scipy's ``lsq_linear``): its miss and the joints at a bound, each with its distance to theta_new-+(t) [rad]."""
     from scipy.optimize import lsq_linear
 
@@ -368,14 +421,25 @@ def _nearest(J: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray, the
         x[free] = lsq_linear(J[:, free], rhs - J[:, ~free] @ x[~free], bounds=(lo[free], hi[free]), tol=1e-12).x
     held = []
     for i in np.flatnonzero((x <= lo + FEASIBILITY_TOLERANCE) | (x >= hi - FEASIBILITY_TOLERANCE)):
-        side, bound, gap = ("zeta-", lo[i], theta[i] - lower_t[i]) if x[i] <= lo[i] + FEASIBILITY_TOLERANCE else ("zeta+", hi[i], upper_t[i] - theta[i])
+        side, bound, gap = (
+            ("zeta-", lo[i], theta[i] - lower_t[i])
+            if x[i] <= lo[i] + FEASIBILITY_TOLERANCE
+            else ("zeta+", hi[i], upper_t[i] - theta[i])
+        )
         held.append(f"{names[i]} at {side} = {bound:.3g} rad/s ({gap:.3g} rad from theta_new{side[-1]})")
     miss = float(np.abs(J @ x - rhs).max())
-    sigma = float(np.linalg.svd(J, compute_uv=False).min())  # near 0: a singular configuration, where no bound is needed to miss
+    sigma = float(
+        np.linalg.svd(J, compute_uv=False).min()
+    )  # near 0: a singular configuration, where no bound is needed to miss
     return f"the nearest velocity within them misses it by {miss:.3g} m/s or rad/s, held by {', '.join(held) if held else 'no bound'} (smallest singular value of J {sigma:.3g})"
 
 
-def solve_tvgdd(robot: Robot, reference: CartesianReference, q0: Mapping[str, float] | str | None = None, settings: TvgddSettings = TvgddSettings()) -> JointPath:
+def solve_tvgdd(
+    robot: Robot,
+    reference: CartesianReference,
+    q0: Mapping[str, float] | str | None = None,
+    settings: TvgddSettings = TvgddSettings(),
+) -> JointPath:
     """Run TV-GDD along ``reference``: one QP per sample, Euler integration at the reference's period.
 
     In ``position`` task space TV-GDD solves for the hands' positions only (the paper's eq 24) and
@@ -416,7 +480,17 @@ def solve_tvgdd(robot: Robot, reference: CartesianReference, q0: Mapping[str, fl
             try:
                 if np.any(lo > hi):  # the projection onto Omega would be undefined
                     raise StageError("collapsed bounds")
-                velocity, u, _ = lvi_solve(M, b.ravel(), J, rhs.ravel(), lo.ravel(), hi.ravel(), u0=u, tol=settings.lvi_tolerance, max_iter=LVI_MAX_ITERATIONS)
+                velocity, u, _ = lvi_solve(
+                    M,
+                    b.ravel(),
+                    J,
+                    rhs.ravel(),
+                    lo.ravel(),
+                    hi.ravel(),
+                    u0=u,
+                    tol=settings.lvi_tolerance,
+                    max_iter=LVI_MAX_ITERATIONS,
+                )
                 violation = 0.0
             except StageError:  # an infeasible QP has no LVI solution: the iteration runs out
                 violation = np.inf
@@ -425,10 +499,14 @@ def solve_tvgdd(robot: Robot, reference: CartesianReference, q0: Mapping[str, fl
             raise _infeasible(problem, args, k, float(reference.t[k]))
         qd[k] = velocity
         theta = theta + reference.period_s * velocity  # Euler
-    return stack_joint_path("tvgdd", stack, reference, q, qd, solve_time, gesture_band(bounds, settings, reference.period_s, reference.t, q))
+    return stack_joint_path(
+        "tvgdd", stack, reference, q, qd, solve_time, gesture_band(bounds, settings, reference.period_s, reference.t, q)
+    )
 
 
-def gesture_band(bounds: JointBounds, settings: TvgddSettings, period_s: float, t: np.ndarray, q: np.ndarray) -> dict[str, np.ndarray]:
+def gesture_band(
+    bounds: JointBounds, settings: TvgddSettings, period_s: float, t: np.ndarray, q: np.ndarray
+) -> dict[str, np.ndarray]:
     """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path: t (N,) [s], q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``, ``zeta_upper`` [rad/s], each (N, n)."""
     lower_t, upper_t, zeta_lo, zeta_hi = _bands(q, t[:, None], bounds, settings, period_s)
     return {"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi}
