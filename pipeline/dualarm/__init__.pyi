@@ -38,8 +38,8 @@ from .ik.velocity.pinv import PinvSettings as PinvSettings
 from .ik.velocity.pinv import solve_pinv as solve_pinv
 from .ik.velocity.tvgdd import TvgddSettings as TvgddSettings
 from .ik.velocity.tvgdd import solve_tvgdd as solve_tvgdd
+from .method import Method as Method
 from .methods import METHODS as METHODS
-from .methods import Method as Method
 from .model.kinematics import hand_pose as hand_pose
 from .model.kinematics import to_arm_frame as to_arm_frame
 from .model.robot import Chain as Chain

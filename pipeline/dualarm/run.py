@@ -286,9 +286,8 @@ def record_stages(
         raise
     try:
         recorder = _recorder(task, run, stages, record, progress)
-    except (
-        BaseException
-    ) as exc:  # stopped (Ctrl-C, SIGTERM) before any stage ran: kept as failed, without the recorder's unfinished files
+    except BaseException as exc:
+        # stopped (Ctrl-C, SIGTERM) before any stage ran: kept as failed, without the recorder's unfinished files
         _close(stages)
         for unfinished in run.staging.iterdir():
             unfinished.unlink()
@@ -312,7 +311,7 @@ def record_stages(
         if isinstance(exc, StageError):
             exc.run_directory = directory
         raise
-    run.manifest["settings"] = _settings(stages)  # with what the stages chose while running (MC-Inverse's arm angles)
+    run.manifest["settings"] = _settings(stages, result)  # with what the IK method chose (MC-Inverse's arm angles)
     run.conclude(result.verdict)
     recorder.close(run.manifest)
     return replace(result, directory=run.finish(result.metrics), stage_seconds=recorder.stage_seconds)
@@ -349,9 +348,15 @@ def _attachments(task: Task) -> dict[str, str]:
     return attachments
 
 
-def _settings(stages: Sequence[Stage[Any, Any]]) -> dict[str, object]:
-    """Each stage's settings record, in pipeline order."""
-    return {s.name: s.settings_record() for s in sorted(stages, key=lambda s: ALL_STAGES.index(s.name))}
+def _settings(stages: Sequence[Stage[Any, Any]], result: RunResult | None = None) -> dict[str, dict[str, Any]]:
+    """Each stage's settings by name, in pipeline order; with ``result``, the IK stage's also what its method chose.
+
+    What the method chose while running is its joint path's ``chosen`` (MC-Inverse's arm angles).
+    """
+    records = {s.name: s.settings_record() for s in sorted(stages, key=lambda s: ALL_STAGES.index(s.name))}
+    if result is not None and result.joint_path is not None and "ik" in records:
+        records["ik"] = {**records["ik"], **result.joint_path.chosen}
+    return records
 
 
 def _manifest(

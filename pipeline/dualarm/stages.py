@@ -24,7 +24,8 @@ from dualarm.contracts.trajectory import JointTrajectory
 from dualarm.contracts.verdict import Checks, Violation
 from dualarm.errors import StageError
 from dualarm.limits import limit_ratios
-from dualarm.methods import Method, refuse_unsuited
+from dualarm.method import Method
+from dualarm.methods import refuse_unsuited
 from dualarm.record.sink import Sink
 from dualarm.settings import as_record
 from dualarm.tasks.schema import Retime
@@ -122,26 +123,22 @@ class IkStage:
     """An IK method of the registry along the reference, from the task's initial configuration."""
 
     task: Task
-    method: Method
+    method: Method[Any]
     settings: Any
     checks: Checks = field(default_factory=Checks)
     retimed: bool = True
     name: ClassVar[str] = "ik"
-    #: MC-Inverse's arm-angle profile per hand (see :meth:`settings_record`), filled by the call.
-    arm_angle_profile: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        """Refuse a method that needs S-R-S arms on a task whose arm is not one (:func:`dualarm.methods.refuse_unsuited`), before anything runs."""
+        """Refuse a method whose arm the task's robot does not have (:func:`dualarm.methods.refuse_unsuited`)."""
         refuse_unsuited(self.method, self.task.robot, self.task.spec.hands)
 
     def settings_record(self) -> dict[str, Any]:
-        """The IK method's name and settings; for MC-Inverse also ``arm_angle_profile``: per hand the mode, the psi held or its range, and the kept branch (1-8), once the stage has run (the recorded run writes its manifest's settings again at its end)."""
-        chosen = {"arm_angle_profile": self.arm_angle_profile} if self.method.name == "mc-inverse" else {}
-        return {"method": self.method.name, **as_record(self.settings), **chosen}
+        """The IK method's name and settings (what it chose while running is the joint path's ``chosen``)."""
+        return {"method": self.method.name, **as_record(self.settings)}
 
     def __call__(self, reference: CartesianReference, sink: Sink) -> tuple[JointPath, dict[str, float]]:
         """Solve the reference from the task's initial configuration: CartesianReference -> JointPath."""
-        from dualarm.ik.analytic.mc_path import arm_angle_profiles
         from dualarm.ik.metrics import arm_angles, condition_metrics, consistency_metrics, ik_metrics
 
         sink.begin(self.name)
@@ -149,14 +146,14 @@ class IkStage:
         path = self.method.solve(robot, reference, self.task.initial_q, self.settings)
         angles = arm_angles(path, robot, self.task.spec.arm_angle.vertical)
         sink.joint_path(path, robot.limit_array("velocity", path.joint_names), angles)
-        profiles = arm_angle_profiles(path, robot, self.settings) if self.method.name == "mc-inverse" else ()
-        self.arm_angle_profile.update({p.hand: p.record() for p in profiles})
-        return path, {
+        recorded = self.method.record(path, robot, self.settings)
+        metrics = {
             **ik_metrics(path, robot),
             **condition_metrics(path, robot),
             **consistency_metrics(path, reference, angles),
-            **{k: v for p in profiles for k, v in p.metrics().items()},
+            **recorded.metrics,
         }
+        return replace(path, chosen=recorded.settings), metrics
 
     def violations(self, path: JointPath) -> list[Violation]:
         """Failed samples, hands off the asked pose (the orientation when the method solved it), position limits; velocity limits when no retime stage follows (``retimed`` False)."""

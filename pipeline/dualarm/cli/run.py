@@ -22,6 +22,7 @@ from dualarm.cli.options import (
     _within,
 )
 from dualarm.errors import DualarmError, excerpt
+from dualarm.methods import IK_METHODS
 
 
 @app.command()
@@ -128,10 +129,10 @@ def run(
     loaded = load_task(task, reps, robot_dir)
     method = default_method(loaded, ik or planner, chosen)
     settings = None
-    if method == "tvgdd":
-        settings = _method(method).settings_for(loaded, scheme=scheme, backend=qp_backend, lvi_tolerance=lvi_tolerance)
-    elif method is not None and _method(method).kind == "planner":
-        settings = _method(method).settings_for(loaded).with_timeout(timeout)
+    if method is not None:  # each method takes the options it has (TV-GDD its scheme and backend, planners --timeout)
+        m = _method(method)
+        options = {"scheme": scheme, "qp_backend": qp_backend, "lvi_tolerance": lvi_tolerance, "timeout": timeout}
+        settings = m.with_options(m.settings_for(loaded), options)
     retime = with_overrides(loaded.spec.retime, {"timing": timing}) if timing is not None else None
     with err.status(f"running {task} ...") as status:
         result = record_run(
@@ -147,7 +148,7 @@ def run(
             progress=lambda stage: _update(status, f"running {task}: {stage} ..."),
             record=record,
         )
-    _print_arm_angles(result)
+    _print_choices(result)
     for line in result.verdict.lines():
         err.print(line, markup=False, soft_wrap=True)
     out.print(str(result.directory), markup=False, soft_wrap=True)
@@ -155,14 +156,13 @@ def run(
         raise typer.Exit(result.verdict.exit_code)
 
 
-def _print_arm_angles(result) -> None:
-    """MC-Inverse's arm-angle profile of a run, one line per hand on stderr (as its manifest records it)."""
-    from dualarm.ik.analytic.mc_path import arm_angle_profiles, settings_for
-
+def _print_choices(result) -> None:
+    """What the IK method chose along the path (MC-Inverse's arm-angle profile), one line per hand on stderr."""
     path = result.joint_path
-    if path is not None and path.method == "mc-inverse":
-        for profile in arm_angle_profiles(path, result.task.robot, settings_for(result.task)):
-            err.print(profile.line(), markup=False, soft_wrap=True)
+    if path is not None and path.method in IK_METHODS:
+        m = _method(path.method)
+        for line in m.record(path, result.task.robot, m.settings_for(result.task)).lines:
+            err.print(line, markup=False, soft_wrap=True)
 
 
 @app.command()

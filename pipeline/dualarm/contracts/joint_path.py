@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +52,8 @@ class JointPath:
             ``position`` (positions only; the orientation error is measured, not asked for).
         fixed: values of the robot's locked joints [rad].
         extras: method-specific per-sample arrays (N, n), e.g. TV-GDD bounds.
+        chosen: what the method chose along the path beyond the joints, JSON-ready (MC-Inverse's
+            ``arm_angle_profile``); a run's manifest records it with the method's settings.
     """
 
     method: str
@@ -67,6 +70,7 @@ class JointPath:
     task_space: str = "pose"
     fixed: Mapping[str, float] = field(default_factory=dict)
     extras: Mapping[str, np.ndarray] = field(default_factory=dict)
+    chosen: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         N, n = len(self.t), len(self.joint_names)
@@ -86,10 +90,11 @@ class JointPath:
             object.__setattr__(self, name, frozen(getattr(self, name), shape, name, dtype))
         object.__setattr__(self, "extras", MappingProxyType({k: frozen(v, (N, n), k) for k, v in self.extras.items()}))
         object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
+        object.__setattr__(self, "chosen", MappingProxyType(dict(self.chosen)))
 
     def __len__(self) -> int:
         return len(self.t)
 
     def configuration(self, k: int) -> dict[str, float]:
         """Every robot joint at sample ``k`` (active and locked) [rad]."""
-        return {**self.fixed, **dict(zip(self.joint_names, self.q[k].tolist()))}
+        return {**self.fixed, **dict(zip(self.joint_names, self.q[k].tolist(), strict=True))}

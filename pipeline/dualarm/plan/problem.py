@@ -9,11 +9,14 @@ task's fixed objects and allows its expected contacts.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from dualarm.errors import StageError
+from dualarm.method import Method
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.poses import invert
 from dualarm.plan.collision import CollisionChecker
@@ -179,3 +182,32 @@ def plan_task(task: Task, planner: str, settings: PlanningSettings = PlanningSet
     """
     with PlanningProblem(task, settings) as problem:
         return problem.solve(planner, seed)
+
+
+def _options(settings: PlanningSettings, options: Mapping[str, Any]) -> PlanningSettings:
+    """The run command's ``--timeout`` [s] on a planner's settings (unchanged without one)."""
+    return settings.with_timeout(options.get("timeout"))
+
+
+#: The planners in the registry (:data:`dualarm.methods.METHODS`).
+METHODS: Mapping[str, Method[PlanningSettings]] = {
+    m.name: m
+    for m in (
+        Method(
+            "mcikrrt",
+            "planner",
+            "MCIKRRT: bidirectional RRT to Workspace Target Areas (Li, Liang)",
+            plan_task,
+            PlanningSettings,
+            options=_options,
+        ),
+        Method(
+            "ompl-rrtconnect",
+            "planner",
+            "OMPL's RRTConnect, same checker and goals",
+            plan_task,
+            PlanningSettings,
+            options=_options,
+        ),
+    )
+}

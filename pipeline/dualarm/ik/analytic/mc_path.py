@@ -31,6 +31,7 @@ from dualarm.contracts.reference import CartesianReference, first_repetition_ind
 from dualarm.errors import NoSolutionFound, StageError
 from dualarm.ik.analytic.mc_inverse import OUTSIDE_LIMITS, REASONS, VALID, McInverse, branch_label, nearest_candidate
 from dualarm.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
+from dualarm.method import Method, Recorded
 from dualarm.model.robot import Robot
 from dualarm.settings import with_overrides
 from dualarm.tasks.schema import ArmAngle
@@ -455,3 +456,28 @@ def arm_angle_profiles(path: JointPath, robot: Robot, settings: ArmAngle) -> tup
             )
         )
     return tuple(profiles)
+
+
+def recorded(path: JointPath, robot: Robot, settings: ArmAngle) -> Recorded:
+    """MC-Inverse's arm-angle profile of each arm: recorded as ``arm_angle_profile``, its metrics, a line per hand."""
+    profiles = arm_angle_profiles(path, robot, settings)
+    return Recorded(
+        settings={"arm_angle_profile": {p.hand: p.record() for p in profiles}},
+        metrics={k: v for p in profiles for k, v in p.metrics().items()},
+        lines=tuple(p.line() for p in profiles),
+    )
+
+
+#: MC-Inverse in the registry (:data:`dualarm.methods.METHODS`).
+METHODS: Mapping[str, Method[ArmAngle]] = {
+    "mc-inverse": Method(
+        "mc-inverse",
+        "ik",
+        "MC-Inverse: closed-form S-R-S IK at a chosen arm angle, one branch kept (Zou, Min, Xu)",
+        solve_mc_inverse,
+        ArmAngle,
+        settings_for,
+        arm="srs",
+        recorded=recorded,
+    )
+}

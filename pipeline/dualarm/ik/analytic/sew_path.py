@@ -32,6 +32,7 @@ from dualarm.ik.analytic import mc_path
 from dualarm.ik.analytic.mc_path import START_WEIGHT, settings_for
 from dualarm.ik.analytic.sew import SewAngle, SewSolutions, into_limits, solve_many
 from dualarm.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
+from dualarm.method import Method
 from dualarm.model.robot import Robot
 from dualarm.model.sew import SewChain, sew_chain
 from dualarm.tasks.schema import ArmAngle
@@ -386,3 +387,19 @@ def _follow(
             )
         q[k] = previous = near[best]
     return q, None
+
+
+#: SEW IK in the registry (:data:`dualarm.methods.METHODS`).
+METHODS: Mapping[str, Method[ArmAngle]] = {
+    "sew": Method(
+        "sew",
+        "ik",
+        "SEW angle (Elias, Wen): every solution at the SEW angle by a 1-D search, the one continuing the path kept; "
+        "7R arms with a spherical wrist and two meeting shoulder axes (S-R-S, offset humanoid shoulders) or a spherical "
+        "shoulder and two meeting wrist axes (the Panda)",
+        solve_sew,
+        ArmAngle,
+        settings_for,
+        arm="sew",
+    )
+}

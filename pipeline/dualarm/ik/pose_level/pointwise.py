@@ -32,6 +32,7 @@ from dualarm.contracts.reference import CartesianReference
 from dualarm.errors import InvalidArgumentError
 from dualarm.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
 from dualarm.ik.pose_level.dls import DlsSettings as DlsSettings  # DLS-SVD's settings, with the others here
+from dualarm.method import Method
 from dualarm.model.robot import Robot
 from dualarm.settings import as_record
 
@@ -213,3 +214,24 @@ solve_trac_ik = _solver_of("trac-ik")
 solve_pybullet = _solver_of("pybullet")
 solve_dls_svd = _solver_of("dls-svd")
 solve_ikfast_style = _solver_of("ikfast-style")
+
+
+#: The pose-level methods in the registry (:data:`dualarm.methods.METHODS`).
+METHODS: Mapping[str, Method[Any]] = {
+    m.name: m
+    for m in (
+        Method("trac-ik", "ik", "TRAC-IK (pytracik) pose by pose, seeded with the previous answer", solve_trac_ik, TracIkSettings),
+        Method("pybullet", "ik", "pybullet.calculateInverseKinematics pose by pose", solve_pybullet, PyBulletIkSettings),
+        Method(
+            "dls-svd", "ik", "damped least squares through the SVD, pose by pose (Li, Liang, eqs 12-20)", solve_dls_svd, DlsSettings
+        ),
+        Method(
+            "ikfast-style",
+            "ik",
+            "theta_3 discretised, the other six joints in closed form, nearest candidate",
+            solve_ikfast_style,
+            IkfastStyleSettings,
+            arm="srs",
+        ),
+    )
+}

@@ -22,6 +22,7 @@ from dualarm.contracts.reference import CartesianReference
 from dualarm.errors import InvalidArgumentError
 from dualarm.ik.velocity.stack import reference_stack, stack_joint_path, stacked_reference, start_configuration
 from dualarm.ik.velocity.tvgdd import TvgddSettings, gesture_band, joint_bounds
+from dualarm.method import Method
 from dualarm.model.robot import Robot
 from dualarm.settings import with_overrides
 
@@ -108,3 +109,17 @@ def solve_pinv(
         theta = theta + tau * qd[k]
     bands = gesture_band(joint_bounds(robot, stack, settings.bands), settings.bands, tau, reference.t, q)
     return stack_joint_path("pinv", stack, reference, q, qd, solve_time, bands)
+
+
+#: The pseudoinverse baseline in the registry (:data:`dualarm.methods.METHODS`).
+METHODS: Mapping[str, Method[PinvSettings]] = {
+    "pinv": Method(
+        "pinv",
+        "ik",
+        "pseudoinverse baseline of TV-GDD eqs (2)-(3), no bounds",
+        solve_pinv,
+        PinvSettings,
+        settings_for,
+        orientation=False,
+    )
+}

@@ -43,6 +43,7 @@ from dualarm.ik.velocity.stack import (
     stacked_reference,
     start_configuration,
 )
+from dualarm.method import Method
 from dualarm.model.robot import Robot
 from dualarm.settings import with_overrides
 
@@ -510,3 +511,24 @@ def gesture_band(
     """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path: t (N,) [s], q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``, ``zeta_upper`` [rad/s], each (N, n)."""
     lower_t, upper_t, zeta_lo, zeta_hi = _bands(q, t[:, None], bounds, settings, period_s)
     return {"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi}
+
+
+def _options(settings: TvgddSettings, options: Mapping[str, Any]) -> TvgddSettings:
+    """The run command's ``--scheme``, ``--qp-backend`` and ``--lvi-tolerance`` on TV-GDD's settings."""
+    chosen = {"scheme": "scheme", "qp_backend": "backend", "lvi_tolerance": "lvi_tolerance"}
+    return with_overrides(settings, {field: options[option] for option, field in chosen.items() if option in options})
+
+
+#: TV-GDD in the registry (:data:`dualarm.methods.METHODS`).
+METHODS: Mapping[str, Method[TvgddSettings]] = {
+    "tvgdd": Method(
+        "tvgdd",
+        "ik",
+        "TV-GDD: velocity-level QP with time-varying gesture bounds (Zhang, Kong, Niu, eqs 15-27)",
+        solve_tvgdd,
+        TvgddSettings,
+        settings_for,
+        orientation=False,
+        options=_options,
+    )
+}
