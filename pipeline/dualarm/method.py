@@ -1,4 +1,6 @@
-"""``Method``: one IK method or planner as the pipeline runs it, exported by the module that implements it.
+"""``Method``: one IK method or planner as the pipeline runs it.
+
+Each is exported by the module that implements it.
 
 A method says everything the pipeline and the command line ask of it: its solve function, its
 settings class and their defaults for a task, what the arm must be, whether it solves the
@@ -85,7 +87,7 @@ class Method(Generic[S]):
         return self.arm == "sew"
 
     def settings_for(self, task: Task | None = None, **overrides: Any) -> S:
-        """The method's settings: from ``task``'s tables when given, else the class defaults, with ``overrides``.
+        """The method's settings: from ``task``'s tables if given, else the class defaults, with ``overrides``.
 
         ``overrides`` are fields of the settings class, on top.
 

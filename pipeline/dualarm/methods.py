@@ -92,21 +92,30 @@ def _failing(robot: Robot, hands: Sequence[str], check: Callable[[Any], object])
 
 
 def not_srs(robot: Robot, hands: Sequence[str]) -> dict[str, NotSRSError]:
-    """The arms of ``hands`` (``left``/``right``) that are not S-R-S: hand -> why not (the chain and the joints whose axes miss, as :func:`dualarm.model.srs.srs_geometry` says)."""
+    """The arms of ``hands`` (``left``/``right``) that are not S-R-S: hand -> why not.
+
+    Why not: the chain and the joints whose axes miss, as :func:`dualarm.model.srs.srs_geometry` says.
+    """
     from dualarm.model.srs import srs_geometry
 
     return _failing(robot, hands, srs_geometry)
 
 
 def not_sew(robot: Robot, hands: Sequence[str]) -> dict[str, NotSRSError]:
-    """The arms of ``hands`` that are not of the family :mod:`dualarm.ik.analytic.sew` solves: hand -> why not."""
+    """The arms of ``hands`` that are not of the family the SEW solver solves: hand -> why not.
+
+    The SEW solver is :mod:`dualarm.ik.analytic.sew`.
+    """
     from dualarm.model.sew import sew_chain
 
     return _failing(robot, hands, sew_chain)
 
 
 def suited_methods(robot: Robot, hands: Sequence[str], kind: Literal["ik", "planner"] = "ik") -> tuple[str, ...]:
-    """The methods of ``kind`` that run on ``robot``'s arms of ``hands``: those whose needs (S-R-S arms, the SEW solver's family) every arm meets."""
+    """The methods of ``kind`` that run on ``robot``'s arms of ``hands``.
+
+    Those whose needs (S-R-S arms, the SEW solver's family) every arm meets.
+    """
     names = IK_METHODS if kind == "ik" else PLANNERS
     srs = not not_srs(robot, hands)
     sew = not not_sew(robot, hands)
@@ -114,7 +123,10 @@ def suited_methods(robot: Robot, hands: Sequence[str], kind: Literal["ik", "plan
 
 
 def refuse_unsuited(m: Method[Any], robot: Robot, hands: Sequence[str]) -> None:
-    """Refuse method ``m`` when it needs S-R-S arms (``needs_srs``) and an arm of ``hands`` is not one, or the SEW solver's family (``needs_sew``) and an arm is not of it.
+    """Refuse method ``m`` when an arm of ``hands`` is not what it needs.
+
+    That is, when it needs S-R-S arms (``needs_srs``) and an arm of ``hands`` is not one, or the SEW
+    solver's family (``needs_sew``) and an arm is not of it.
 
     Raises:
         NotSRSError: one line naming the method, the robot, the chain and the joints whose axes
@@ -126,7 +138,8 @@ def refuse_unsuited(m: Method[Any], robot: Robot, hands: Sequence[str]) -> None:
             hand, reason = next(iter(sew_reasons.items()))
             usable = ", ".join(suited_methods(robot, hands, m.kind))
             raise NotSRSError(
-                f"{m.name} does not run on the {hand} arm of robot '{excerpt(robot.name, 40)}': {reason}; methods that run on it: {usable}",
+                f"{m.name} does not run on the {hand} arm of robot '{excerpt(robot.name, 40)}': {reason}; "
+                f"methods that run on it: {usable}",
                 chain=robot.hand_chain(hand).name,
             )
     if not m.needs_srs:
@@ -137,6 +150,7 @@ def refuse_unsuited(m: Method[Any], robot: Robot, hands: Sequence[str]) -> None:
         chain = robot.hand_chain(hand).name
         usable = ", ".join(suited_methods(robot, hands, m.kind))
         raise NotSRSError(
-            f"{m.name} needs S-R-S arms, and the {hand} arm of robot '{excerpt(robot.name, 40)}' is not: {reason}; methods that run on it: {usable}",
+            f"{m.name} needs S-R-S arms, and the {hand} arm of robot '{excerpt(robot.name, 40)}' is not: "
+            f"{reason}; methods that run on it: {usable}",
             chain=chain,
         )

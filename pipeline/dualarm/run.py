@@ -178,7 +178,9 @@ def build_stages(
 def run_stages(
     task: Task, stages: Sequence[Stage[Any, Any]], sink: Sink | None = None, violations: list[Violation] | None = None
 ) -> RunResult:
-    """Run ``stages`` in order on ``task``, handing every product to ``sink`` (default :class:`~dualarm.record.sink.NullSink`), then the metrics; judge each product (the verdict).
+    """Run ``stages`` in order on ``task``, handing every product to ``sink``, then the metrics.
+
+    ``sink`` is by default a :class:`~dualarm.record.sink.NullSink`. Each product is judged (the verdict).
 
     Stages holding resources (the plan stage's PyBullet client) are closed afterwards, whatever
     happens. ``violations``, when given, receives each stage's violations as they are found, so a
@@ -216,7 +218,9 @@ def run_task(
     seed: int = 0,
     sink: Sink | None = None,
 ) -> RunResult:
-    """Run ``task`` (a :class:`Task`, a task file or a shipped task's name) through the pipeline in memory; with ``sink`` the products go to it too (see :func:`record_run` for files).
+    """Run ``task`` through the pipeline in memory; with ``sink`` the products go to it too.
+
+    ``task`` is a :class:`Task`, a task file or a shipped task's name. See :func:`record_run` for files.
 
     The arguments are those of :func:`build_stages`; the result holds every product and the metrics.
     """
@@ -238,7 +242,10 @@ def record_run(
     record: str = "full",
     **options: Any,
 ) -> RunResult:
-    """Run ``task`` as :func:`run_task` does (``options``: its keyword arguments) and record it in ``out_dir/<task>/<run-id>/`` (run.mcap, run.rrd, manifest.json, metrics.json); the result's ``directory`` is the run directory.
+    """Run ``task`` as :func:`run_task` does and record it in ``out_dir/<task>/<run-id>/``.
+
+    ``options`` are :func:`run_task`'s keyword arguments. The files are run.mcap, run.rrd, manifest.json
+    and metrics.json; the result's ``directory`` is the run directory.
 
     ``command`` is recorded in the manifest (default ``sys.argv``); ``progress`` is told each
     stage's name as it starts, and ``record`` when the files are being closed. ``record`` is how
@@ -277,7 +284,10 @@ def record_stages(
     progress: Callable[[str], None] | None = None,
     record: str = "full",
 ) -> RunResult:
-    """Run ``stages`` on ``task`` into a new recorded run, at recording level ``record`` (see :func:`record_run`)."""
+    """Run ``stages`` on ``task`` into a new recorded run, at recording level ``record``.
+
+    See :func:`record_run`.
+    """
     try:
         record_level(record)
         run = RunDirectory.create(Path(out_dir), task.name, _manifest(task, stages, seed, command or sys.argv, record))
@@ -324,7 +334,11 @@ def _recorder(
     record: str,
     progress: Callable[[str], None] | None,
 ) -> NullSink:
-    """The sink that writes the run's files at level ``record``: a Recorder of the recorded stages (it drops the others' products), or (``metrics``) a sink that writes nothing."""
+    """The sink that writes the run's files at level ``record``.
+
+    A Recorder of the recorded stages (it drops the others' products), or (``metrics``) a sink that
+    writes nothing.
+    """
     kept = recorded_stages(record, [s.name for s in stages])
     if record == "metrics":
         return NullSink(on_begin=progress)
@@ -349,7 +363,9 @@ def _attachments(task: Task) -> dict[str, str]:
 
 
 def _settings(stages: Sequence[Stage[Any, Any]], result: RunResult | None = None) -> dict[str, dict[str, Any]]:
-    """Each stage's settings by name, in pipeline order; with ``result``, the IK stage's also what its method chose.
+    """Each stage's settings by name, in pipeline order.
+
+    With ``result``, the IK stage's also hold what its method chose.
 
     What the method chose while running is its joint path's ``chosen`` (MC-Inverse's arm angles).
     """

@@ -1,4 +1,7 @@
-"""Settings objects: frozen dataclasses (or frozen pydantic models), one per method and stage, changed only by making a copy with some fields replaced."""
+"""Settings objects: frozen dataclasses (or frozen pydantic models), one per method and stage.
+
+They are changed only by making a copy with some fields replaced.
+"""
 
 from __future__ import annotations
 

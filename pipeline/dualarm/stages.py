@@ -1,4 +1,6 @@
-"""The pipeline's stages, each of one shape: built from a task and its settings, called on the previous stage's product and a sink, returning its own product and its metrics.
+"""The pipeline's stages, each of one shape: built from a task and its settings.
+
+Each is called on the previous stage's product and a sink, returning its own product and its metrics.
 
     task -> [path] -> CartesianReference -> [ik | plan] -> JointPath -> [retime] -> JointTrajectory
          -> [smooth] -> JointTrajectory -> [execute] -> ExecutionLog
@@ -73,7 +75,10 @@ def hand_positions(task: Task, traj: JointTrajectory, q: np.ndarray | None = Non
 
 
 def _distance_max(hands: dict[str, np.ndarray], reference: dict[str, np.ndarray]) -> float:
-    """The largest distance between each hand's positions (M, 3) [m] and its reference's, over the hands (0 without hands) [m]."""
+    """The largest distance between each hand's positions (M, 3) [m] and its reference's [m].
+
+    Over the hands (0 without hands).
+    """
     return max((float(np.linalg.norm(hands[h] - reference[h], axis=1).max()) for h in hands), default=0.0)
 
 
@@ -106,7 +111,10 @@ class PathStage:
 
 
 def path_metrics(ref: CartesianReference) -> dict[str, float]:
-    """``path.*`` metrics of a reference: samples, duration [s], repetitions, the longest hand path [m] and the highest hand speed [m/s]."""
+    """``path.*`` metrics of a reference.
+
+    Samples, duration [s], repetitions, the longest hand path [m] and the highest hand speed [m/s].
+    """
     lengths = [float(np.linalg.norm(np.diff(h.position, axis=0), axis=1).sum()) for h in ref.hands.values()]
     speeds = [float(np.linalg.norm(h.linear_velocity, axis=1).max()) for h in ref.hands.values()]
     return {
@@ -156,13 +164,19 @@ class IkStage:
         return replace(path, chosen=recorded.settings), metrics
 
     def violations(self, path: JointPath) -> list[Violation]:
-        """Failed samples, hands off the asked pose (the orientation when the method solved it), position limits; velocity limits when no retime stage follows (``retimed`` False)."""
+        """Failed samples, hands off the asked pose, position limits; velocity limits without a retime stage.
+
+        Hands off the asked pose: the orientation too when the method solved it. Velocity limits when no
+        retime stage follows (``retimed`` False).
+        """
         return ik_violations(path, self.task.robot, self.checks, retimed=self.retimed)
 
 
 @dataclass(frozen=True)
 class PlanStage:
-    """A planner of the registry from the task's initial configuration to its WTAs (the reference is not used).
+    """A planner of the registry from the task's initial configuration to its WTAs.
+
+    The reference is not used.
 
     ``planned`` is a plan already made for the problem (``dualarm plan`` records its first
     successful trial so). The problem (and its PyBullet checker) is released by :meth:`close`.
@@ -201,7 +215,9 @@ class PlanStage:
 
 @dataclass(frozen=True)
 class RetimeStage:
-    """Time the joint path (jerk-limited, TOPP-RA, or the task's own timing), sampled every :data:`CONTROL_PERIOD_S`.
+    """Time the joint path (jerk-limited, TOPP-RA, or the task's own timing).
+
+    The trajectory is sampled every :data:`CONTROL_PERIOD_S`.
 
     The jerk-limited timing (the default) uses the full velocity, acceleration and jerk limits;
     TOPP-RA (``optimal``) uses ``settings.velocity_fraction`` and ``acceleration_fraction`` of the
@@ -260,13 +276,18 @@ class RetimeStage:
         }
 
     def violations(self, traj: JointTrajectory) -> list[Violation]:
-        """Position, velocity and acceleration limits, and the jerk's but for TOPP-RA (whose jerk is the smooth stage's to bound)."""
+        """Position, velocity and acceleration limits, and the jerk's but for TOPP-RA.
+
+        TOPP-RA's jerk is the smooth stage's to bound.
+        """
         return trajectory_violations(traj, self.task.robot, jerk=self.settings.timing != "optimal")
 
 
 @dataclass(frozen=True)
 class SmoothStage:
-    """Track a TOPP-RA trajectory with jerk-limited motion (Ruckig, every :data:`CONTROL_PERIOD_S`); pass any other through.
+    """Track a TOPP-RA trajectory with jerk-limited motion; pass any other through.
+
+    The tracking is Ruckig's, every :data:`CONTROL_PERIOD_S`.
 
     Only the ``optimal`` timing (TOPP-RA) leaves the jerk unbounded; the ``jerk-limited`` and
     ``task`` timings are already checked within the jerk limits by the retime stage, so their
@@ -294,7 +315,10 @@ class SmoothStage:
         }
 
     def __call__(self, retimed: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
-        """Track the retimed trajectory, or pass it through: JointTrajectory -> JointTrajectory (stage ``smooth``)."""
+        """Track the retimed trajectory, or pass it through: JointTrajectory -> JointTrajectory.
+
+        Stage ``smooth``.
+        """
         from dualarm.smooth import Smoothed, smooth_trajectory
 
         sink.begin(self.name)
@@ -336,7 +360,9 @@ class SmoothStage:
 
 @dataclass(frozen=True)
 class ApproachStage:
-    """The move from the task's initial configuration to the trajectory's start (:mod:`dualarm.smooth.approach`), jerk-limited within the task's full limits.
+    """The move from the task's initial configuration to the trajectory's start.
+
+    It is jerk-limited within the task's full limits (:mod:`dualarm.smooth.approach`).
 
     Its product is the trajectory it was given, carrying the approach (``approach``) that the
     execute stage plays first; the approach is recorded on its own clock (``/approach``).
@@ -348,7 +374,10 @@ class ApproachStage:
     def settings_record(self) -> dict[str, Any]:
         """The method, the limits it uses and its sample period [s]."""
         return {
-            "method": "straight line in joint space, jerk-limited timing (ruckig on the path parameter), time-optimal, rest to rest",
+            "method": (
+                "straight line in joint space, jerk-limited timing (ruckig on the path parameter), "
+                "time-optimal, rest to rest"
+            ),
             "limits": "the task's full limits",
             "sample_period_s": CONTROL_PERIOD_S,
         }
@@ -414,7 +443,8 @@ class ExecuteStage:
         if found and not self.settings.execute_anyway:
             more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
             raise StageError(
-                f"execute: refused to play the trajectory: {found[0].message}{more}; --execute-anyway plays it for diagnosis",
+                f"execute: refused to play the trajectory: {found[0].message}{more}; "
+                "--execute-anyway plays it for diagnosis",
                 stage=self.name,
                 t_s=found[0].t_s,
                 violations=tuple(found),
@@ -442,13 +472,19 @@ class ExecuteStage:
         }
 
     def violations(self, log: ExecutionLog) -> list[Violation]:
-        """What the preflight found (a trajectory played anyway), unexpected contacts and hands beyond the tracking bound."""
+        """What the preflight found, unexpected contacts and hands beyond the tracking bound.
+
+        The preflight's findings are there for a trajectory played anyway.
+        """
         approach = execution_violations(log.approach, self.checks, "approach") if log.approach is not None else []
         return [*log.preflight, *approach, *execution_violations(log, self.checks)]
 
 
 def hand_errors(task: Task, log: ExecutionLog) -> dict[str, np.ndarray]:
-    """Each hand's distance between its measured position and the forward kinematics of the commanded joints (K,) [m]."""
+    """Each hand's distance between its measured position and the commanded joints' forward kinematics [m].
+
+    One distance per sample, (K,), for each hand.
+    """
     if not len(log.t):  # nothing was played (a trajectory, or an approach, of no duration)
         return {hand: np.zeros(0) for hand in log.hand_poses}
     command = task.hand_poses(log.joint_names, log.q_command, log.fixed)
@@ -474,5 +510,8 @@ if TYPE_CHECKING:
         Stage[JointTrajectory, JointTrajectory],
         Stage[JointTrajectory, ExecutionLog],
     ]:
-        """Each stage is a :class:`Stage` of the products it takes and makes (checked by mypy; never defined at run time)."""
+        """Each stage is a :class:`Stage` of the products it takes and makes.
+
+        Checked by mypy; never defined at run time.
+        """
         return path, ik, plan, retime, smooth, approach, execute

@@ -1,4 +1,6 @@
-"""``dualarm task check``: a task validated without running it, and every waypoint's reach within the joint limits.
+"""``dualarm task check``: a task validated without running it, and every waypoint's reach.
+
+Every waypoint's reach within the joint limits.
 
 The task is loaded as a run loads it (schema, robot, structure, objects; :func:`dualarm.tasks.load_task`).
 Then each waypoint a hand goes to (its start and every ``to``) is tested within the joint limits,
@@ -74,7 +76,11 @@ class TaskCheck:
 
 
 def _load(file: Path, robot: Path | None) -> tuple[Task, dict]:
-    """The task (``robot`` replacing its robot) and its raw keys; a task whose waypoints the loader's reach test refuses is loaded again without its moves, so that every waypoint is reported."""
+    """The task (``robot`` replacing its robot) and its raw keys.
+
+    A task whose waypoints the loader's reach test refuses is loaded again without its moves, so that every
+    waypoint is reported.
+    """
     try:
         task = load_task(file, robot=robot)
     except UnreachablePoseError:
@@ -93,7 +99,9 @@ def _targets(task: Task, data: dict) -> list[tuple[str, str]]:
 
 
 def check_task(path: str | Path, robot: str | Path | None = None, step_rad: float = SWEEP_STEP_RAD) -> TaskCheck:
-    """Validate the task file ``path`` (a shipped task's name too) without running it, on its robot or ``robot``, and test every waypoint's reach (module docstring).
+    """Validate the task file ``path`` (a shipped task's name too) without running it.
+
+    On its robot or ``robot``, and test every waypoint's reach (module docstring).
 
     Raises:
         TaskFileError: the task is malformed or names what its robot lacks (one line naming the key).
@@ -126,10 +134,16 @@ def check_task(path: str | Path, robot: str | Path | None = None, step_rad: floa
 
 
 def report_lines(check: TaskCheck) -> list[str]:
-    """One line per waypoint: the hand, the pose, and what reaches it (branches numbered 1-8 and their psi intervals, or the numeric test)."""
+    """One line per waypoint: the hand, the pose, and what reaches it.
+
+    What reaches it: branches numbered 1-8 and their psi intervals, or the numeric test.
+    """
     lines = []
     for w in check.waypoints:
-        pose = f"position [{', '.join(f'{v:.3f}' for v in w.position_m)}] m, rpy [{', '.join(f'{v:.3f}' for v in w.rpy_rad)}] rad"
+        pose = (
+            f"position [{', '.join(f'{v:.3f}' for v in w.position_m)}] m, "
+            f"rpy [{', '.join(f'{v:.3f}' for v in w.rpy_rad)}] rad"
+        )
         if w.branches:
             spans = "; ".join(
                 f"branch {b + 1}: "

@@ -1,4 +1,7 @@
-"""A run's verdict: ``complete`` (every check passed), ``violated`` (the run finished, but a check failed) or ``failed`` (a stage could not produce its output).
+"""A run's verdict: ``complete``, ``violated`` or ``failed``.
+
+``complete`` (every check passed), ``violated`` (the run finished, but a check failed) or ``failed`` (a stage
+could not produce its output).
 
 The checks, each naming where and when it failed (a :class:`Violation`):
 
@@ -42,7 +45,10 @@ def _at(t: float, rep: int | None = None) -> str:
 def position_limit_violations(
     stage: str, t: np.ndarray, names: Sequence[str], q: np.ndarray, robot: Robot
 ) -> list[Violation]:
-    """The first sample of ``q`` (M, n) [rad] outside a joint's position limits (by more than :data:`LIMIT_TOLERANCE` of its range), if any."""
+    """The first sample of ``q`` (M, n) [rad] outside a joint's position limits, if any.
+
+    Outside by more than :data:`LIMIT_TOLERANCE` of its range.
+    """
     lower, upper = robot.lower_upper(tuple(names))
     slack = LIMIT_TOLERANCE * (upper - lower)
     outside = (q < lower - slack) | (q > upper + slack)
@@ -54,7 +60,8 @@ def position_limit_violations(
         Violation(
             "limit",
             stage,
-            f"{stage}: position of {names[j]} {beyond:.3g} rad beyond its limits [{lower[j]:.4g}, {upper[j]:.4g}] at {_at(t[k])}",
+            f"{stage}: position of {names[j]} {beyond:.3g} rad beyond its limits [{lower[j]:.4g}, {upper[j]:.4g}] "
+            f"at {_at(t[k])}",
             float(t[k]),
         )
     ]
@@ -63,7 +70,10 @@ def position_limit_violations(
 def ratio_violations(
     stage: str, t: np.ndarray, names: Sequence[str], samples: Mapping[str, np.ndarray], limits: Mapping[str, np.ndarray]
 ) -> list[Violation]:
-    """A violation for each kind (velocity, acceleration, jerk) whose largest limit ratio exceeds 1 + :data:`LIMIT_TOLERANCE`."""
+    """A violation for each kind whose largest limit ratio exceeds 1 + :data:`LIMIT_TOLERANCE`.
+
+    The kinds: velocity, acceleration, jerk.
+    """
     ratios = limit_ratios(t, names, samples, limits, stage)
     return [
         Violation("limit", stage, f"{stage}: {r.kind} of {r.joint} at {r.ratio:.4g}x its limit at {_at(r.t_s)}", r.t_s)
@@ -73,7 +83,10 @@ def ratio_violations(
 
 
 def trajectory_violations(traj: JointTrajectory, robot: Robot, *, jerk: bool) -> list[Violation]:
-    """Position, velocity, acceleration and (with ``jerk``: the mean jerk over each sample period) jerk limits of a trajectory."""
+    """Position, velocity, acceleration and (with ``jerk``) jerk limits of a trajectory.
+
+    The jerk is the mean jerk over each sample period.
+    """
     names = traj.joint_names
     samples = {
         "velocity": traj.qd,
@@ -87,7 +100,10 @@ def trajectory_violations(traj: JointTrajectory, robot: Robot, *, jerk: bool) ->
 
 
 def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: bool) -> list[Violation]:
-    """The IK checks of the module docstring on a joint path; its orientation error counts when the method solved the pose (``task_space`` ``pose``) and measured it."""
+    """The IK checks of the module docstring on a joint path.
+
+    Its orientation error counts when the method solved the pose (``task_space`` ``pose``) and measured it.
+    """
     stage = "ik"
     out = []
     failed = np.flatnonzero(path.status != 0)
@@ -97,7 +113,8 @@ def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: boo
             Violation(
                 "ik",
                 stage,
-                f"ik ({path.method}): {len(failed)} of {len(path)} samples failed, the first at {_at(path.t[k], int(path.rep[k]))}",
+                f"ik ({path.method}): {len(failed)} of {len(path)} samples failed, "
+                f"the first at {_at(path.t[k], int(path.rep[k]))}",
                 float(path.t[k]),
             )
         )
@@ -114,8 +131,10 @@ def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: boo
                 Violation(
                     "ik",
                     stage,
-                    f"ik ({path.method}): {path.hands[h]} hand {error[k, h] * scale:.3g} {unit} off the asked {what} at {_at(path.t[k], int(path.rep[k]))} "
-                    f"(tolerance {tolerance * scale:.3g} {unit}; worst {worst * scale:.3g} {unit}; {int(beyond.any(axis=1).sum())} samples)",
+                    f"ik ({path.method}): {path.hands[h]} hand {error[k, h] * scale:.3g} {unit} off the asked {what} "
+                    f"at {_at(path.t[k], int(path.rep[k]))} "
+                    f"(tolerance {tolerance * scale:.3g} {unit}; worst {worst * scale:.3g} {unit}; "
+                    f"{int(beyond.any(axis=1).sum())} samples)",
                     float(path.t[k]),
                 )
             )
@@ -134,7 +153,11 @@ def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: boo
 
 
 def execution_violations(log: ExecutionLog, checks: Checks, part: str = "execute") -> list[Violation]:
-    """Unexpected contacts (each pair: its first time, its deepest penetration, its steps) and hands beyond the tracking bound; ``part`` names what was played (``execute``, or ``approach`` for the approach's log)."""
+    """Unexpected contacts and hands beyond the tracking bound.
+
+    Each contact pair: its first time, its deepest penetration, its steps. ``part`` names what was played
+    (``execute``, or ``approach`` for the approach's log).
+    """
     out = []
     for c in log.contacts:
         if not c.expected:
@@ -142,7 +165,8 @@ def execution_violations(log: ExecutionLog, checks: Checks, part: str = "execute
                 Violation(
                     "contact",
                     part,
-                    f"{part}: {c.first} touched {c.second} at {_at(c.first_t_s)}, {c.depth_max_m * 1e3:.3g} mm deep at most, in {c.steps} steps",
+                    f"{part}: {c.first} touched {c.second} at {_at(c.first_t_s)}, "
+                    f"{c.depth_max_m * 1e3:.3g} mm deep at most, in {c.steps} steps",
                     c.first_t_s,
                 )
             )
@@ -155,7 +179,8 @@ def execution_violations(log: ExecutionLog, checks: Checks, part: str = "execute
                     "tracking",
                     part,
                     f"{part}: {hand} hand {error[k] * 1e3:.3g} mm from its command at {_at(log.t[k], int(log.rep[k]))} "
-                    f"(bound {checks.tracking_bound_m * 1e3:.3g} mm; worst {error.max() * 1e3:.3g} mm; {len(beyond)} steps)",
+                    f"(bound {checks.tracking_bound_m * 1e3:.3g} mm; worst {error.max() * 1e3:.3g} mm; "
+                    f"{len(beyond)} steps)",
                     float(log.t[k]),
                 )
             )

@@ -19,7 +19,10 @@ MAX_TRIALS, MAX_POSES, MAX_SAMPLES, MAX_REPEATS = 100_000, 1_000_000, 1_000_000,
 
 
 def _out_path(text: str, option: str) -> Path:
-    """``text``, given as ``option``, as an output path; an empty one (which ``Path`` would read as the working directory) is refused."""
+    """``text``, given as ``option``, as an output path; an empty one is refused.
+
+    ``Path`` would read an empty one as the working directory.
+    """
     if not text.strip():
         raise DualarmError(f"{option} '{excerpt(text)}': an empty path; give a directory or file name")
     if "\0" in text:
@@ -35,7 +38,10 @@ def _seed(seed: int, option: str = "--seed") -> int:
 
 
 def _within(value: float, option: str, low: float, high: float = math.inf, *, above_low: bool = False) -> float:
-    """``value``, given as ``option``, if it is finite and in [low, high] ((low, high] with ``above_low``); a DualarmError with the range otherwise."""
+    """``value``, given as ``option``, if it is finite and in [low, high] ((low, high] with ``above_low``).
+
+    A DualarmError with the range otherwise.
+    """
     if math.isfinite(value) and (value > low if above_low else value >= low) and value <= high:
         return value
     bounds = (
@@ -69,14 +75,19 @@ def _record(level: str) -> str:
 
 #: Help of ``--record``, with the sizes measured on ``dualarm run triangle --ik mc-inverse --reps 5``.
 RECORD_HELP = (
-    "How much to record: full (run.mcap and run.rrd hold every stage; 74 MB), ik (they hold the path and ik/plan stages only; 4.9 MB) "
-    "or metrics (no run.mcap, no run.rrd: manifest.json and metrics.json only; 9 kB). Every stage runs and is judged whatever the level "
+    "How much to record: full (run.mcap and run.rrd hold every stage; 74 MB), "
+    "ik (they hold the path and ik/plan stages only; 4.9 MB) "
+    "or metrics (no run.mcap, no run.rrd: manifest.json and metrics.json only; 9 kB). "
+    "Every stage runs and is judged whatever the level "
     "(sizes of dualarm run triangle --ik mc-inverse --reps 5)."
 )
 
 
 def _method(name: str, kind=None, option: str = "method"):
-    """The registered method ``name`` (of ``kind``; a DualarmError naming ``option`` and listing the methods otherwise)."""
+    """The registered method ``name`` (of ``kind``).
+
+    A DualarmError naming ``option`` and listing the methods otherwise.
+    """
     from dualarm.methods import method
 
     return method(name, kind, option)

@@ -34,7 +34,11 @@ def run(
     stages: Annotated[
         str | None,
         typer.Option(
-            help="Comma-separated stages to run: path, ik or plan, retime, smooth, approach (from the task's initial configuration to the motion's start), execute (default: all of them when --ik or --planner is given, else path)."
+            help=(
+                "Comma-separated stages to run: path, ik or plan, retime, smooth, approach (from the task's "
+                "initial configuration to the motion's start), execute (default: all of them when --ik or "
+                "--planner is given, else path)."
+            )
         ),
     ] = None,
     ik: Annotated[
@@ -59,14 +63,20 @@ def run(
     lvi_tolerance: Annotated[
         float,
         typer.Option(
-            help="Stop of the lvi backend on ||eps(u)||_2 (the paper's 1e-5; its velocity error can be ~35x this, see docs)."
+            help=(
+                "Stop of the lvi backend on ||eps(u)||_2 (the paper's 1e-5; its velocity error can be ~35x this, "
+                "see docs)."
+            )
         ),
     ] = 1e-5,
     out_text: Annotated[
         str,
         typer.Option(
             "--out",
-            help="Directory that receives <task>/<run-id>/ (a recordings directory: runs are added, nothing in it is deleted or overwritten).",
+            help=(
+                "Directory that receives <task>/<run-id>/ (a recordings directory: runs are added, nothing in it "
+                "is deleted or overwritten)."
+            ),
         ),
     ] = "recordings",
     seed: Annotated[int, typer.Option(help="Random seed (an integer >= 0), recorded in the manifest.")] = 0,
@@ -74,7 +84,11 @@ def run(
     timing: Annotated[
         str | None,
         typer.Option(
-            help="Retime: jerk-limited (on the path, within the velocity, acceleration and jerk limits), optimal (TOPP-RA, then Ruckig tracking) or task (the task's own timing, checked against the limits); default: the task file's retime.timing."
+            help=(
+                "Retime: jerk-limited (on the path, within the velocity, acceleration and jerk limits), "
+                "optimal (TOPP-RA, then Ruckig tracking) or task (the task's own timing, checked against "
+                "the limits); default: the task file's retime.timing."
+            )
         ),
     ] = None,
     gui: Annotated[
@@ -84,13 +98,19 @@ def run(
         bool,
         typer.Option(
             "--execute-anyway",
-            help="Play a trajectory that fails its validation (limits, collisions) for diagnosis; the run is then at best 'violated'.",
+            help=(
+                "Play a trajectory that fails its validation (limits, collisions) for diagnosis; the run is "
+                "then at best 'violated'."
+            ),
         ),
     ] = False,
     planner: Annotated[
         str | None,
         typer.Option(
-            help="Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no --ik: mcikrrt)."
+            help=(
+                "Planner of the plan stage: mcikrrt or ompl-rrtconnect (default for a task with [[wta]] and no "
+                "--ik: mcikrrt)."
+            )
         ),
     ] = None,
     timeout: Annotated[float | None, typer.Option(help="Planning timeout [s] (default 5).")] = None,
@@ -157,7 +177,10 @@ def run(
 
 
 def _print_choices(result) -> None:
-    """What the IK method chose along the path (MC-Inverse's arm-angle profile), one line per hand on stderr."""
+    """What the IK method chose along the path, one line per hand on stderr.
+
+    For MC-Inverse, its arm-angle profile.
+    """
     path = result.joint_path
     if path is not None and path.method in IK_METHODS:
         m = _method(path.method)
@@ -193,7 +216,11 @@ def plan(
         ),
     ] = None,
 ) -> None:
-    """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan retimed, smoothed, executed and recorded as a run; exits 1 when no trial succeeded, else with the verdict of that run (0 complete, 3 violated, 1 failed)."""
+    """Plan a task repeatedly: per-trial CSV, summary JSON, and the first successful plan as a run.
+
+    The first successful plan is retimed, smoothed, executed and recorded as a run; exits 1 when no
+    trial succeeded, else with the verdict of that run (0 complete, 3 violated, 1 failed).
+    """
     from dualarm.plan.problem import PlanningSettings
     from dualarm.study.planning import run_trials
 
@@ -223,7 +250,11 @@ def plan(
         )
     s = result.summary
     out.print(
-        f"{planner} on {task}: {s['success_rate'] * 100:.0f} % of {s['trials']} trials; planning time median {s['planning_time_median_s'] * 1e3:.1f} ms, p95 {s['planning_time_p95_s'] * 1e3:.1f} ms (paper: {s['paper_planning_time_mean_s'] * 1e3:.2f} ms mean); {s['collision_check_time_mean_s'] * 1e6:.1f} µs per collision check",
+        f"{planner} on {task}: {s['success_rate'] * 100:.0f} % of {s['trials']} trials; "
+        f"planning time median {s['planning_time_median_s'] * 1e3:.1f} ms, "
+        f"p95 {s['planning_time_p95_s'] * 1e3:.1f} ms "
+        f"(paper: {s['paper_planning_time_mean_s'] * 1e3:.2f} ms mean); "
+        f"{s['collision_check_time_mean_s'] * 1e6:.1f} µs per collision check",
         markup=False,
         soft_wrap=True,
     )

@@ -1,1 +1,4 @@
-"""A robot's description as dualarm reads it: ``dualarm robot init`` (:mod:`.init`) and ``dualarm robot check`` (:mod:`.check`)."""
+"""A robot's description as dualarm reads it.
+
+``dualarm robot init`` (:mod:`.init`) and ``dualarm robot check`` (:mod:`.check`).
+"""

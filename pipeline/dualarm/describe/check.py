@@ -70,7 +70,10 @@ class ChainCheck:
 
 
 def require_limits(robot: Robot) -> None:
-    """Refuse a robot described by a robot.toml whose chain joints lack a finite velocity, acceleration or jerk limit (retiming needs all three; a missing one is ``inf`` in :class:`~dualarm.model.robot.JointLimits`).
+    """Refuse a robot whose chain joints lack a finite velocity, acceleration or jerk limit.
+
+    A robot described by a robot.toml; retiming needs all three; a missing one is ``inf`` in
+    :class:`~dualarm.model.robot.JointLimits`.
 
     A bare URDF (``--urdf``, no robot.toml) is not refused: it has no place for them.
 
@@ -85,12 +88,17 @@ def require_limits(robot: Robot) -> None:
                 if not np.isfinite(getattr(robot.limits[joint], kind)):
                     where = "the URDF's <limit velocity> or " if kind == "velocity" else ""
                     raise RobotModelError(
-                        f"{excerpt(robot.directory / 'robot.toml')}: joint '{excerpt(joint, 40)}' of chain '{excerpt(chain.name, 40)}' has no {kind} limit: add it to {where}[limits.{kind}] [{unit}]"
+                        f"{excerpt(robot.directory / 'robot.toml')}: joint '{excerpt(joint, 40)}' "
+                        f"of chain '{excerpt(chain.name, 40)}' has no {kind} limit: "
+                        f"add it to {where}[limits.{kind}] [{unit}]"
                     )
 
 
 def _adam_xml(xml: str) -> str:
-    """``xml`` with an explicit identity ``<origin>`` in every ``<inertial>`` that has none (URDF makes it optional; adam-robotics needs it)."""
+    """``xml`` with an explicit identity ``<origin>`` in every ``<inertial>`` that has none.
+
+    URDF makes it optional; adam-robotics needs it.
+    """
     import xml.etree.ElementTree as ET
 
     root = ET.fromstring(xml)
@@ -125,7 +133,10 @@ def pybullet_poses(robot: Robot, chain: Chain, Q: np.ndarray) -> np.ndarray:
 
 
 def finite_difference_jacobians(kin: ChainKinematics, Q: np.ndarray, h: float = FD_STEP) -> np.ndarray:
-    """Central-difference geometric Jacobians (N, 6, n): linear rows from positions, angular rows from the rotation vector of R(q + h e_i) R(q - h e_i)^T."""
+    """Central-difference geometric Jacobians (N, 6, n).
+
+    Linear rows from positions, angular rows from the rotation vector of R(q + h e_i) R(q - h e_i)^T.
+    """
     N, n = Q.shape
     J = np.empty((N, 6, n))
     for i in range(n):

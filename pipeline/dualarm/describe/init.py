@@ -1,4 +1,6 @@
-"""``dualarm robot init`` and ``dualarm robot poses``: a robot directory written from any URDF, and the hands' poses at its home poses.
+"""``dualarm robot init`` and ``dualarm robot poses``.
+
+A robot directory written from any URDF, and the hands' poses at its home poses.
 
 :func:`init_robot` reads a URDF and writes a robot directory: a copy of the URDF whose mesh paths
 point into the directory's own ``meshes/`` folder (so the directory is self-contained: it works
@@ -103,7 +105,9 @@ def init_robot(
     jerk: float | None = None,
     name: str | None = None,
 ) -> RobotInit:
-    """Write a robot directory ``out`` (robot.toml, the URDF and its meshes) for ``urdf_path``; see the module docstring for every choice.
+    """Write a robot directory ``out`` (robot.toml, the URDF and its meshes) for ``urdf_path``.
+
+    See the module docstring for every choice.
 
     Args:
         urdf_path: the URDF.
@@ -111,7 +115,8 @@ def init_robot(
         left_tip, right_tip: the arms' tip links (None: proposed from the tree).
         left_base, right_base: the arms' base links (None: the torso).
         torso: the link the arms hang from (None: their common root).
-        acceleration: every chain joint's acceleration limit [rad/s^2] (None: :data:`DEFAULT_ACCELERATION_RAD_S2`, assumed).
+        acceleration: every chain joint's acceleration limit [rad/s^2] (None:
+            :data:`DEFAULT_ACCELERATION_RAD_S2`, assumed).
         jerk: every chain joint's jerk limit [rad/s^3] (None: :data:`DEFAULT_JERK_RAD_S3`, assumed).
         name: the robot's name (None: the directory's name).
 
@@ -146,7 +151,8 @@ def _write(
     notes = list(layout.notes)
     copy = copy_urdf(source, out)
     notes.append(
-        f"URDF copied to {copy} with its meshes under {out / 'meshes'} (the directory is self-contained: it works when moved or shipped)"
+        f"URDF copied to {copy} with its meshes under {out / 'meshes'} "
+        "(the directory is self-contained: it works when moved or shipped)"
     )
     urdf = load_urdf(copy)
     srs = {hand: _srs_verdict(urdf, f"{hand}_arm", base, tip) for hand, base, tip in layout.arms}
@@ -159,7 +165,8 @@ def _write(
         notes.append(f"chain waist: {layout.waist[0]} -> {layout.waist[1]}")
     for j in layout.locked:
         notes.append(
-            f"locked: {j.name} = {lock_value(j):g} rad (between the torso and an arm's base; name a base above it to move it)"
+            f"locked: {j.name} = {lock_value(j):g} rad "
+            "(between the torso and an arm's base; name a base above it to move it)"
         )
     chain_joints = [j.name for hand, base, tip in layout.arms for j in urdf.chain(base, tip) if j.movable]
     if layout.waist:
@@ -180,7 +187,9 @@ def _write(
         assumed = [j for j, (_, a) in limits[kind_].items() if a]
         if assumed:
             notes.append(
-                f"assumed {kind_} limit {default:g} {unit} for {len(assumed)} joints ({'the URDF gives none' if kind_ == 'velocity' else f'give --{kind_}'}); marked '# assumed' in robot.toml"
+                f"assumed {kind_} limit {default:g} {unit} for {len(assumed)} joints "
+                f"({'the URDF gives none' if kind_ == 'velocity' else f'give --{kind_}'}); "
+                "marked '# assumed' in robot.toml"
             )
     homes: dict[str, Mapping[str, float]] = {"zero": {j.name: lock_value(j) for j in layout.locked}}
     (out / "robot.toml").write_text(robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, frozenset()))
@@ -191,20 +200,24 @@ def _write(
         for joint, value in held.items():
             if value != lock_value(urdf.joint(joint)):
                 notes.append(
-                    f"held: {joint} = {value:g} (in no chain; at {lock_value(urdf.joint(joint)):g} its links touch another link)"
+                    f"held: {joint} = {value:g} "
+                    f"(in no chain; at {lock_value(urdf.joint(joint)):g} its links touch another link)"
                 )
         everywhere = always_in_contact(robot, sim, held)
         if everywhere:
             a, b = sorted(everywhere)[0]
             raise RobotModelError(
-                f"{excerpt(copy)}: links '{excerpt(a, 40)}' and '{excerpt(b, 40)}' collide at every sampled configuration and do not touch by construction (dualarm checks them): fix their collision shapes"
+                f"{excerpt(copy)}: links '{excerpt(a, 40)}' and '{excerpt(b, 40)}' collide at every sampled "
+                "configuration and do not touch by construction (dualarm checks them): fix their collision shapes"
             )
         ready = ready_pose(robot, sim, held)
     homes["zero"] = {k: v for k, v in held.items() if v != 0.0 or k in homes["zero"]}
     homes["ready"] = {k: v for k, v in ready.items() if v != 0.0 or k in homes["zero"]}
     notes.append("home ready: " + ", ".join(f"{k} = {v:g}" for k, v in homes["ready"].items()))
     notes.append(
-        f"collision: {len(touching)} link pairs touch by construction and are skipped by dualarm itself (execute.world.disable_touching_pairs); no other pair is in contact at all {SAMPLES} sampled configurations, so robot.toml needs no key for them"
+        f"collision: {len(touching)} link pairs touch by construction and are skipped by dualarm itself "
+        "(execute.world.disable_touching_pairs); "
+        f"no other pair is in contact at all {SAMPLES} sampled configurations, so robot.toml needs no key for them"
     )
     (out / "robot.toml").write_text(robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, touching))
     robot = load_robot(out)

@@ -61,7 +61,8 @@ def _layout(
         root = _common_root(urdf, a, b)
         if root in (a, b):
             raise RobotModelError(
-                f"tips '{excerpt(a, 40)}' and '{excerpt(b, 40)}' are not on separate branches below a common root (one is above the other)"
+                f"tips '{excerpt(a, 40)}' and '{excerpt(b, 40)}' are not on separate branches below a common root "
+                "(one is above the other)"
             )
     else:
         root = _first_movable(urdf, urdf.root, given[hands[0]]).parent
@@ -85,7 +86,8 @@ def _layout(
         }
         if shared:
             raise RobotModelError(
-                f"the arms share joint '{excerpt(sorted(shared)[0], 40)}': give --torso at or below their common root '{excerpt(root, 40)}'"
+                f"the arms share joint '{excerpt(sorted(shared)[0], 40)}': "
+                f"give --torso at or below their common root '{excerpt(root, 40)}'"
             )
     waist_joints = [j for j in urdf.chain(urdf.root, torso_link) if j.movable]
     waist = (waist_joints[0].parent, torso_link) if waist_joints else None

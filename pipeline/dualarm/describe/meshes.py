@@ -1,4 +1,7 @@
-"""The meshes a URDF names, found (``package://``, relative and absolute paths) and copied into a robot directory."""
+"""The meshes a URDF names, found and copied into a robot directory.
+
+Found through ``package://``, relative and absolute paths.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +15,10 @@ from dualarm.files import REGULAR_FILE, kind
 
 
 def _package_candidates(package: str, rest: str, urdf: Path) -> list[Path]:
-    """Where ``package://package/rest`` may be: under each ``ROS_PACKAGE_PATH`` entry, then under the URDF's own folders."""
+    """Where ``package://package/rest`` may be.
+
+    Under each ``ROS_PACKAGE_PATH`` entry, then under the URDF's own folders.
+    """
     out = []
     for entry in filter(None, os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep)):
         root = Path(entry)
@@ -24,7 +30,10 @@ def _package_candidates(package: str, rest: str, urdf: Path) -> list[Path]:
 
 
 def resolve_mesh(filename: str, urdf: Path) -> Path:
-    """The file a URDF's ``<mesh filename>`` names: ``package://PKG/path`` (through ``ROS_PACKAGE_PATH``, then the URDF's own folders, each as PKG or holding PKG), ``file://``, absolute, or relative to the URDF.
+    """The file a URDF's ``<mesh filename>`` names.
+
+    ``package://PKG/path`` (through ``ROS_PACKAGE_PATH``, then the URDF's own folders, each as PKG or holding PKG),
+    ``file://``, absolute, or relative to the URDF.
 
     Raises:
         RobotModelError: no such file (one line naming the URDF and the path).
@@ -60,7 +69,9 @@ def _companions(mesh: Path) -> list[Path]:
 
 
 def copy_urdf(urdf: Path, directory: Path) -> Path:
-    """Write ``urdf`` into ``directory`` with every mesh copied under ``directory/meshes/`` (relative layout kept) and its path rewritten relative; comments (a licence) are kept. Returns the copy.
+    """Write ``urdf`` into ``directory`` with every mesh copied under ``directory/meshes/``.
+
+    Relative layout kept, and its path rewritten relative; comments (a licence) are kept. Returns the copy.
 
     Raises:
         RobotModelError: a mesh that cannot be found (see :func:`resolve_mesh`).

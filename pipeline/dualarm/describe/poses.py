@@ -20,7 +20,8 @@ class HandPose:
         hand: the hand.
         position_m: position in the robot base frame (the URDF's root link) [m], (3,).
         rpy_rad: extrinsic x-y-z roll, pitch, yaw in that frame [rad] (as task files), (3,).
-        arm_angle_rad: the arm angle psi of MC-Inverse eq (1) (V = +z of the arm's base frame) [rad], None where the arm is not S-R-S or psi is undefined (shoulder-wrist line vertical or elbow straight).
+        arm_angle_rad: the arm angle psi of MC-Inverse eq (1) (V = +z of the arm's base frame) [rad], None
+            where the arm is not S-R-S or psi is undefined (shoulder-wrist line vertical or elbow straight).
     """
 
     home: str
@@ -30,12 +31,16 @@ class HandPose:
     arm_angle_rad: float | None
 
 
-#: Below this sine between the shoulder-wrist line and the vertical (or between upper arm and forearm) the arm angle is undefined.
+#: Below this sine between the shoulder-wrist line and the vertical (or between upper arm and forearm) the
+#: arm angle is undefined.
 SINGULAR_SINE = 1e-6
 
 
 def _arm_angle(srs_kinematics, chain: Chain, q: np.ndarray) -> float | None:
-    """Psi of eq (1) at ``q`` [rad]; None when ``chain`` is not S-R-S, or its shoulder-wrist line is vertical or its elbow straight (psi undefined)."""
+    """Psi of eq (1) at ``q`` [rad]; None when psi is undefined.
+
+    None when ``chain`` is not S-R-S, or its shoulder-wrist line is vertical or its elbow straight (psi undefined).
+    """
     try:
         kin = srs_kinematics.of(chain)
     except NotSRSError:

@@ -18,15 +18,19 @@ SAMPLES = 400
 SEED = 0
 #: ``ready`` keeps this fraction of each joint's range from either limit.
 READY_LIMIT_MARGIN = 0.05
-#: ``ready`` puts each hand at least this fraction of its arm's length in front of the arm's first joint (+x of the root link).
+#: ``ready`` puts each hand at least this fraction of its arm's length in front of the arm's first joint (+x
+#: of the root link).
 READY_FORWARD = 0.25
 #: ``ready`` keeps each hand at least this high above the root link's origin (a fixed base on the floor) [m].
 READY_MIN_HEIGHT_M = 0.1
-#: ``ready`` keeps each hand's distance from its arm's first joint within these fractions of the arm's length: elbow bent, room to move every way.
+#: ``ready`` keeps each hand's distance from its arm's first joint within these fractions of the arm's
+#: length: elbow bent, room to move every way.
 READY_REACH = (0.4, 0.8)
-#: ``ready`` keeps each hand at most this fraction of its arm's length further out sideways (away from the root's x-z plane) than its arm's first joint.
+#: ``ready`` keeps each hand at most this fraction of its arm's length further out sideways (away from the
+#: root's x-z plane) than its arm's first joint.
 READY_OUTWARD = 0.25
-#: ``ready`` prefers the hand nearest this point, in arm lengths from the arm's first joint (forward, sideways, up): in front and a little below, as a person holds a tool.
+#: ``ready`` prefers the hand nearest this point, in arm lengths from the arm's first joint (forward,
+#: sideways, up): in front and a little below, as a person holds a tool.
 READY_TARGET = (0.55, 0.0, -0.25)
 
 
@@ -39,7 +43,10 @@ def _collision_world(robot: Robot):
 
 
 def contact_pairs(sim, q: Mapping[str, float]) -> set[tuple[str, str]]:
-    """Link pairs of ``sim``'s robot (sorted names) that penetrate at ``q`` [rad] (the pairs PyBullet checks)."""
+    """Link pairs of ``sim``'s robot (sorted names) that penetrate at ``q`` [rad].
+
+    The pairs PyBullet checks.
+    """
     from dualarm.sim.world import pb
 
     sim.set_positions(list(q), list(q.values()))
@@ -61,7 +68,11 @@ def _samples(robot: Robot, joints: Sequence[str], n: int, seed: int, margin: flo
 
 
 def held_values(robot: Robot, sim, chain_joints: Sequence[str]) -> dict[str, float]:
-    """The value every movable joint in no chain is held at [rad]: :func:`lock_value`, or else (when the links below it touch another link at the zero pose, as a Panda's closed fingers do) its upper limit, lower limit or middle, the first at which they do not."""
+    """The value every movable joint in no chain is held at [rad].
+
+    :func:`lock_value`, or else (when the links below it touch another link at the zero pose, as a Panda's closed
+    fingers do) its upper limit, lower limit or middle, the first at which they do not.
+    """
     urdf = robot.urdf
     held = {j.name: lock_value(j) for j in urdf.joints if j.movable and j.name not in chain_joints}
     for joint in list(held):
@@ -81,11 +92,14 @@ def held_values(robot: Robot, sim, chain_joints: Sequence[str]) -> dict[str, flo
 def always_in_contact(
     robot: Robot, sim, base: Mapping[str, float], samples: int = SAMPLES, seed: int = SEED
 ) -> set[tuple[str, str]]:
-    """Link pairs PyBullet finds penetrating at every one of ``samples`` random configurations of the chains' joints (the others at ``base``), after dualarm's touching pairs are skipped."""
+    """Link pairs PyBullet finds penetrating at every one of ``samples`` random configurations.
+
+    Configurations of the chains' joints (the others at ``base``), after dualarm's touching pairs are skipped.
+    """
     joints = sorted({n for c in robot.chains.values() for n in c.joint_names})
     always: set[tuple[str, str]] | None = None
     for q in _samples(robot, joints, samples, seed):
-        pairs = contact_pairs(sim, {**base, **dict(zip(joints, q))})
+        pairs = contact_pairs(sim, {**base, **dict(zip(joints, q, strict=True))})
         always = pairs if always is None else always & pairs
         if not always:
             break
@@ -95,7 +109,13 @@ def always_in_contact(
 def ready_pose(
     robot: Robot, sim, base: Mapping[str, float], samples: int = SAMPLES * 10, seed: int = SEED
 ) -> dict[str, float]:
-    """A ``ready`` home pose [rad] by joint: for each arm, random configurations within the limits (:data:`READY_LIMIT_MARGIN` in from each) whose hand is :data:`READY_FORWARD` of the arm's length in front of its first joint, :data:`READY_MIN_HEIGHT_M` above the root, at :data:`READY_REACH` of the arm's length from its first joint and at most :data:`READY_OUTWARD` of it further out sideways, the hand nearest :data:`READY_TARGET` first; the first combination of the arms clear of self-collision in PyBullet.
+    """A ``ready`` home pose [rad] by joint.
+
+    For each arm, random configurations within the limits (:data:`READY_LIMIT_MARGIN` in from each) whose hand is
+    :data:`READY_FORWARD` of the arm's length in front of its first joint, :data:`READY_MIN_HEIGHT_M` above the
+    root, at :data:`READY_REACH` of the arm's length from its first joint and at most :data:`READY_OUTWARD` of it
+    further out sideways, the hand nearest :data:`READY_TARGET` first; the first combination of the arms clear of
+    self-collision in PyBullet.
 
     Raises:
         RobotModelError: no such configuration among the samples (naming the arm).
@@ -133,14 +153,15 @@ def ready_pose(
         order = [i for i in np.argsort(score, kind="stable") if ok[i]]
         free = []
         for i in order:
-            q = dict(zip(arm.joint_names, Q[i]))
+            q = dict(zip(arm.joint_names, Q[i], strict=True))
             if not contact_pairs(sim, {**base, **q}):
                 free.append(q)
             if len(free) == 8:
                 break
         if not free:
             raise RobotModelError(
-                f"robot init: no configuration of '{arm.name}' among {samples} samples has the hand in front and is clear of self-collision; write [home.ready] by hand"
+                f"robot init: no configuration of '{arm.name}' among {samples} samples has the hand in front "
+                "and is clear of self-collision; write [home.ready] by hand"
             )
         candidates.append(free)
     for combination in sorted(product(*candidates), key=lambda qs: sum(np.linalg.norm(list(q.values())) for q in qs)):

@@ -1,4 +1,7 @@
-"""``robot.toml`` written from a layout: chains, limits (assumed ones marked), home poses and collision pairs."""
+"""``robot.toml`` written from a layout.
+
+Chains, limits (assumed ones marked), home poses and collision pairs.
+"""
 
 from __future__ import annotations
 
@@ -45,15 +48,30 @@ def robot_toml(
     homes: Mapping[str, Mapping[str, float]],
     touching: frozenset[tuple[str, str]],
 ) -> str:
-    """The text of robot.toml: ``limits`` is kind -> joint -> (value, assumed), ``homes`` name -> joint -> value [rad]."""
+    """The text of robot.toml.
+
+    ``limits`` is kind -> joint -> (value, assumed), ``homes`` name -> joint -> value [rad].
+    """
     lines = [
-        f"# {name}: written by `dualarm robot init` from {excerpt(source.name, 60)}; robots/README.md documents every key.",
-        f"# Units: rad, rad/s, rad/s^2, rad/s^3. The robot base frame is the URDF's root link '{urdf.root}' (x forward, y left, z up).",
-        "# Position and velocity limits live in the URDF (<limit>) unless [limits.velocity] replaces them; acceleration and jerk live here.",
+        (
+            f"# {name}: written by `dualarm robot init` from {excerpt(source.name, 60)}; "
+            "robots/README.md documents every key."
+        ),
+        (
+            "# Units: rad, rad/s, rad/s^2, rad/s^3. "
+            f"The robot base frame is the URDF's root link '{urdf.root}' (x forward, y left, z up)."
+        ),
+        (
+            "# Position and velocity limits live in the URDF (<limit>) unless [limits.velocity] replaces them; "
+            "acceleration and jerk live here."
+        ),
         "",
         f"name = {_string(name)}",
         f"urdf = {_string(urdf_file)}",
-        f'description = """\nMade by dualarm robot init from {excerpt(source.name, 60)} ({len([j for j in urdf.joints if j.movable])} movable joints)."""',
+        (
+            f'description = """\nMade by dualarm robot init from {excerpt(source.name, 60)} '
+            f'({len([j for j in urdf.joints if j.movable])} movable joints)."""'
+        ),
         "",
         "# A chain is the joints from `base` down to `tip`. `hand` names the hand a task drives with it.",
     ]
@@ -75,7 +93,10 @@ def robot_toml(
         ]
     if layout.locked:
         lines += [
-            f"# Locked: {', '.join(f'{j.name} = {lock_value(j):g}' for j in layout.locked)} (between the torso and an arm's base, in no chain; every home pose holds them)",
+            (
+                f"# Locked: {', '.join(f'{j.name} = {lock_value(j):g}' for j in layout.locked)} "
+                "(between the torso and an arm's base, in no chain; every home pose holds them)"
+            ),
             "",
         ]
     for kind_, unit in (("velocity", "rad/s"), ("acceleration", "rad/s^2"), ("jerk", "rad/s^3")):
@@ -101,7 +122,8 @@ def robot_toml(
         lines.append("")
     if touching:
         lines.append(
-            "# Link pairs dualarm never checks for collision (touching by construction, see dualarm.sim.world.disable_touching_pairs; no key needed):"
+            "# Link pairs dualarm never checks for collision "
+            "(touching by construction, see dualarm.sim.world.disable_touching_pairs; no key needed):"
         )
         lines += [f"#   {a} - {b}" for a, b in sorted(touching)]
     return "\n".join(lines).rstrip() + "\n"

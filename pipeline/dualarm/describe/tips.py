@@ -60,7 +60,10 @@ def _zero_position(urdf: UrdfModel, link: str) -> np.ndarray:
 
 
 def arm_tips(urdf: UrdfModel) -> list[str]:
-    """Candidate arm tips: per leaf link, the link below the last revolute joint above it, followed down through fixed joints while the branch does not split."""
+    """Candidate arm tips: per leaf link, the link below the last revolute joint above it.
+
+    Followed down through fixed joints while the branch does not split.
+    """
     children = _children(urdf)
     tips: list[str] = []
     for leaf in (link for link in urdf.links if not children.get(link)):
@@ -82,7 +85,10 @@ def _common_root(urdf: UrdfModel, a: str, b: str) -> str:
 
 
 def propose_tips(urdf: UrdfModel) -> tuple[dict[str, str], str]:
-    """The arms' tips by hand (``{"left": ..., "right": ...}`` or ``{"left": ...}``) proposed from the tree, and why (a line to print)."""
+    """The arms' tips by hand proposed from the tree, and why (a line to print).
+
+    By hand: ``{"left": ..., "right": ...}`` or ``{"left": ...}``.
+    """
     tips = arm_tips(urdf)
     if not tips:
         raise RobotModelError(f"{excerpt(urdf.path)}: has no revolute joint, so no arm")
@@ -99,12 +105,16 @@ def propose_tips(urdf: UrdfModel) -> tuple[dict[str, str], str]:
         ya, yb = (_zero_position(urdf, _first_movable(urdf, root, t).child)[1] for t in (a, b))
         left, right = (a, b) if ya >= yb else (b, a)
         return {"left": left, "right": right}, (
-            f"arms proposed from the tree: the two branches below '{root}' with the most revolute joints; left = the one further along +y at the zero pose (give --left-tip/--right-tip to choose)"
+            f"arms proposed from the tree: the two branches below '{root}' with the most revolute joints; "
+            "left = the one further along +y at the zero pose (give --left-tip/--right-tip to choose)"
         )
     tip = max(tips, key=lambda t: _revolute_count(urdf.chain(urdf.root, t)))
     return (
         {"left": tip},
-        f"one arm proposed from the tree (no two branches with {MIN_ARM_DOF}+ revolute joints each): tip '{tip}', driving hand 'left' (give --left-tip to choose)",
+        (
+            f"one arm proposed from the tree (no two branches with {MIN_ARM_DOF}+ revolute joints each): "
+            f"tip '{tip}', driving hand 'left' (give --left-tip to choose)"
+        ),
     )
 
 

@@ -1,4 +1,6 @@
-"""Validation of a trajectory before it is executed, as MoveIt validates a trajectory before handing it to the controllers.
+"""Validation of a trajectory before it is executed.
+
+As MoveIt validates a trajectory before handing it to the controllers.
 
 The trajectory is checked against every joint's position, velocity, acceleration and jerk limits
 (:func:`~dualarm.violations.trajectory_violations`) and for collisions with the planners' checker
@@ -26,7 +28,10 @@ RESOLUTION_RAD = 0.02
 
 
 def checked_samples(q: np.ndarray, resolution_rad: float) -> np.ndarray:
-    """Indices of the samples of ``q`` (M, n) to check: the first, the last, and the next sample wherever some joint has moved ``resolution_rad`` [rad] since the last one kept.
+    """Indices of the samples of ``q`` (M, n) to check.
+
+    The first, the last, and the next sample wherever some joint has moved ``resolution_rad`` [rad] since the last
+    one kept.
 
     A trajectory sampled densely (each step below ``resolution_rad``) is so checked at configurations
     no more than ``2 resolution_rad`` apart, each a configuration it passes through.
@@ -46,7 +51,10 @@ def checked_samples(q: np.ndarray, resolution_rad: float) -> np.ndarray:
 def collision_violations(
     checker: CollisionChecker, traj: JointTrajectory, resolution_rad: float = RESOLUTION_RAD
 ) -> list[Violation]:
-    """Each pair of bodies ``checker`` finds in collision along ``traj``, with the first time and the deepest overlap found."""
+    """Each pair of bodies ``checker`` finds in collision along ``traj``.
+
+    With the first time and the deepest overlap found.
+    """
     first: dict[tuple[str, str], tuple[float, float, int]] = {}
     for k in checked_samples(traj.q, resolution_rad):
         for c in checker.contacts(traj.q[k]):
@@ -56,7 +64,8 @@ def collision_violations(
         Violation(
             "contact",
             traj.stage,
-            f"{traj.stage}: {a} collides with {b} at t = {t:.3f} s, {depth * 1e3:.3g} mm deep at most, at {count} checked configurations",
+            f"{traj.stage}: {a} collides with {b} at t = {t:.3f} s, {depth * 1e3:.3g} mm deep at most, "
+            f"at {count} checked configurations",
             t,
         )
         for (a, b), (t, depth, count) in sorted(first.items(), key=lambda item: item[1][0])
@@ -64,7 +73,9 @@ def collision_violations(
 
 
 def preflight(traj: JointTrajectory, task: Task, resolution_rad: float = RESOLUTION_RAD) -> list[Violation]:
-    """Every limit (jerk included) and collision (no margin) ``traj`` breaks, its ``approach``'s first when it has one; earliest first within each kind.
+    """Every limit (jerk included) and collision (no margin) ``traj`` breaks.
+
+    Its ``approach``'s first when it has one; earliest first within each kind.
 
     One checker serves both: the approach and the trajectory move the same joints.
     """

@@ -73,7 +73,9 @@ def execute_trajectory(
     expected_contacts: Sequence[tuple[str, str]] = (),
     settings: ExecutionSettings = ExecutionSettings(),
 ) -> ExecutionLog:
-    """Play ``trajectory`` (after its ``approach``, when it has one) on ``robot`` in PyBullet and measure it each step.
+    """Play ``trajectory`` on ``robot`` in PyBullet and measure it each step.
+
+    After its ``approach``, when it has one.
 
     Args:
         trajectory: what the joints are to do (``fixed`` joints are held).
@@ -125,7 +127,10 @@ class _Player:
     settings: ExecutionSettings
 
     def play(self, trajectory: JointTrajectory) -> ExecutionLog:
-        """Drive the joints along ``trajectory`` from where they are, step by step; its log: the state it starts from at t = 0, then the state at the end of each step."""
+        """Drive the joints along ``trajectory`` from where they are, step by step; its log.
+
+        The log: the state it starts from at t = 0, then the state at the end of each step.
+        """
         sim, settings, client, body = self.sim, self.settings, self.sim.client, self.sim.body
         names = list(trajectory.joint_names) + list(trajectory.fixed)
         index = [sim.joint_index[n] for n in names]

@@ -56,7 +56,11 @@ class ArmSolution:
 
 
 def arm_problems(robot: Robot, reference: CartesianReference, q0: Mapping[str, float]) -> list[ArmProblem]:
-    """Every hand of ``reference`` as an :class:`ArmProblem`: its targets in its arm chain's base frame, the joints between the reference's frame and the arm held at ``q0`` [rad]."""
+    """Every hand of ``reference`` as an :class:`ArmProblem`.
+
+    Its targets in its arm chain's base frame, the joints between the reference's frame and the arm held at ``q0``
+    [rad].
+    """
     frame = reference.frame_in(robot)
     problems = []
     for hand in reference.hands:
@@ -75,12 +79,16 @@ def joint_path(
     solutions: Sequence[ArmSolution],
     q0: Mapping[str, float],
 ) -> JointPath:
-    """The stage output of per-arm solutions: velocities by central differences [rad/s], status failed where any arm failed, solve times summed over the arms, hand position [m] and orientation [rad] errors by the chains' FK, every other joint fixed at ``q0`` [rad]."""
+    """The stage output of per-arm solutions.
+
+    Velocities by central differences [rad/s], status failed where any arm failed, solve times summed over the arms,
+    hand position [m] and orientation [rad] errors by the chains' FK, every other joint fixed at ``q0`` [rad].
+    """
     q = np.hstack([s.q for s in solutions])
     names = tuple(n for p in problems for n in p.chain.joint_names)
-    reached = [ChainKinematics.of(p.chain).poses(s.q) for p, s in zip(problems, solutions)]
-    errors = [np.linalg.norm(T[:, :3, 3] - p.targets[:, :3, 3], axis=1) for p, T in zip(problems, reached)]
-    angles = [orientation_errors(p.targets[:, :3, :3], T[:, :3, :3]) for p, T in zip(problems, reached)]
+    reached = [ChainKinematics.of(p.chain).poses(s.q) for p, s in zip(problems, solutions, strict=True)]
+    errors = [np.linalg.norm(T[:, :3, 3] - p.targets[:, :3, 3], axis=1) for p, T in zip(problems, reached, strict=True)]
+    angles = [orientation_errors(p.targets[:, :3, :3], T[:, :3, :3]) for p, T in zip(problems, reached, strict=True)]
     ok = np.logical_and.reduce([s.ok for s in solutions])
     return JointPath(
         method=method,

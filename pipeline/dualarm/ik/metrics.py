@@ -18,7 +18,10 @@ CLOSED_TOLERANCE_M = 1e-9
 
 
 def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
-    """Hand position errors (norms over samples and hands), limit violations against the robot's position and velocity limits (a task's overrides applied), the largest joint step, solve times, failures.
+    """Hand position errors, limit violations, the largest joint step, solve times, failures.
+
+    Hand position errors: norms over samples and hands; limit violations against the robot's position and velocity
+    limits (a task's overrides applied).
 
     A violation is one (sample, joint) pair outside its limit by more than
     :data:`VIOLATION_TOLERANCE`. Orientation (when the path measured it, which every IK method's
@@ -49,7 +52,14 @@ def ik_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
 
 
 def condition_metrics(path: JointPath, robot: Robot) -> dict[str, float]:
-    """Where along the path the arms are: ``ik.joint_limit_margin_min_rad``, the least distance of a joint to its nearer position limit over the samples and joints (negative beyond a limit; joints without limits left out), and ``ik.manipulability_min``, the least Yoshikawa manipulability sqrt(det(J J^T)), the product of J's singular values, over the samples and the hands whose arm joints are all in the path (J the arm chain's 6 x n geometric Jacobian, rows [v; w]: m^3 per rad^3 of the linear rows). A study's report bins P(inconsistent) by both."""
+    """Where along the path the arms are: the least joint-limit margin and the least manipulability.
+
+    ``ik.joint_limit_margin_min_rad``, the least distance of a joint to its nearer position limit over the samples
+    and joints (negative beyond a limit; joints without limits left out), and ``ik.manipulability_min``, the least
+    Yoshikawa manipulability sqrt(det(J J^T)), the product of J's singular values, over the samples and the hands
+    whose arm joints are all in the path (J the arm chain's 6 x n geometric Jacobian, rows [v; w]: m^3 per rad^3
+    of the linear rows). A study's report bins P(inconsistent) by both.
+    """
     from dualarm.model.kinematics import ChainKinematics
 
     lower, upper = robot.lower_upper(path.joint_names)
@@ -85,7 +95,13 @@ def _orientation_metrics(path: JointPath) -> dict[str, float]:
 def arm_angles(
     path: JointPath, robot: Robot, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)
 ) -> dict[str, np.ndarray]:
-    """The arm angle per hand of the path along it (N,) [rad]: psi of eq (1) of MC-Inverse, with V = ``vertical`` in each arm's base frame, on an S-R-S arm; on another arm of a SEW family the stereographic SEW angle that ``--ik sew`` holds or schedules (:func:`dualarm.ik.analytic.sew.SewAngle.stereographic` of ``vertical``). Hands whose arm joints are not all in the path, or whose arm has neither, are left out."""
+    """The arm angle per hand of the path along it (N,) [rad].
+
+    psi of eq (1) of MC-Inverse, with V = ``vertical`` in each arm's base frame, on an S-R-S arm; on another arm of
+    a SEW family the stereographic SEW angle that ``--ik sew`` holds or schedules
+    (:func:`dualarm.ik.analytic.sew.SewAngle.stereographic` of ``vertical``). Hands whose arm joints are not all in
+    the path, or whose arm has neither, are left out.
+    """
     from dualarm.ik.analytic.sew import SewAngle
     from dualarm.model.sew import sew_chain
 
@@ -109,7 +125,9 @@ def arm_angles(
 def consistency_metrics(
     path: JointPath, reference: CartesianReference, angles: dict[str, np.ndarray]
 ) -> dict[str, float]:
-    """``ik.*`` consistency across repetitions (DESIGN.md; rep 0 is the reference), for a path of two or more repetitions, with the hands' arm angles ``angles`` (see :func:`arm_angles`) [rad].
+    """``ik.*`` consistency across repetitions (DESIGN.md; rep 0 is the reference).
+
+    For a path of two or more repetitions, with the hands' arm angles ``angles`` (see :func:`arm_angles`) [rad].
 
     - ``failed_reps``: repetitions with a failed sample.
     - ``rep_joint_deviation_max_rad``: largest |q_r - q_0| between samples at the same place of

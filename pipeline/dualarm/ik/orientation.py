@@ -1,4 +1,4 @@
-"""Hand orientation: the error fed back by the velocity-level methods and the error every IK run reports.
+"""Hand orientation: the error the velocity-level methods feed back and the error every IK run reports.
 
 - :func:`rotation_vector`: the rotation vector of a rotation matrix as a CasADi expression, the
   orientation error e_o = log(R_d R^T) that TV-GDD and pinv feed back in pose mode.
@@ -39,7 +39,7 @@ def _quaternion(E) -> cs.SX:
         cs.vertcat(a[1], s[0], squares[2], s[2]),  # 4 y * (w, x, y, z)
         cs.vertcat(a[2], s[1], s[2], squares[3]),  # 4 z * (w, x, y, z)
     ]
-    candidates = [p / (2 * cs.sqrt(cs.fmax(sq, _SMALL))) for p, sq in zip(products, squares)]
+    candidates = [p / (2 * cs.sqrt(cs.fmax(sq, _SMALL))) for p, sq in zip(products, squares, strict=True)]
     largest = [
         cs.logic_and(cs.logic_and(sq >= squares[(i + 1) % 4], sq >= squares[(i + 2) % 4]), sq >= squares[(i + 3) % 4])
         for i, sq in enumerate(squares)
@@ -53,7 +53,9 @@ def _quaternion(E) -> cs.SX:
 
 
 def rotation_vector(E):
-    """The rotation vector (3,) [rad] of a rotation matrix ``E`` (3x3 CasADi SX, MX or DM): axis times angle, angle in [0, pi].
+    """The rotation vector (3,) [rad] of a rotation matrix ``E`` (3x3 CasADi SX, MX or DM).
+
+    Axis times angle, angle in [0, pi].
 
     At an angle of exactly pi the axis's sign is arbitrary, as for every rotation vector.
     """
@@ -67,12 +69,17 @@ def rotation_vector(E):
 
 
 def orientation_error(R_desired, R):
-    """e_o = log(R_d R^T) (3,) [rad]: the rotation that takes ``R`` to ``R_desired``, in their common frame (3x3 each)."""
+    """e_o = log(R_d R^T) (3,) [rad]: the rotation that takes ``R`` to ``R_desired``.
+
+    In their common frame (3x3 each).
+    """
     return rotation_vector(R_desired @ R.T)
 
 
 def angular_jacobian(R: cs.SX, theta: cs.SX) -> cs.SX:
-    """J_omega (3 x n) of a rotation matrix ``R`` (3x3 SX) depending on ``theta`` (n): omega = J_omega thetadot in R's frame.
+    """J_omega (3 x n) of a rotation matrix ``R`` (3x3 SX) depending on ``theta`` (n).
+
+    omega = J_omega thetadot in R's frame.
 
     With r_k the columns of R, rdot_k = omega x r_k, so sum_k r_k x rdot_k = 2 omega and
     J_omega = 1/2 sum_k skew(r_k) d r_k / d theta.

@@ -1,1 +1,5 @@
-"""The robot model: URDF and robot.toml (:mod:`.robot`), CasADi kinematics (:mod:`.kinematics`), S-R-S geometry (:mod:`.srs`), poses and the kinematics check."""
+"""The robot model.
+
+URDF and robot.toml (:mod:`.robot`), CasADi kinematics (:mod:`.kinematics`), S-R-S geometry (:mod:`.srs`),
+poses and the kinematics check.
+"""

@@ -78,7 +78,10 @@ def chain_frames(chain: Chain) -> ChainFrames:
 
 
 def link_frames(joints: tuple[JointSpec, ...], root: str, q: Mapping[str, cs.SX | float]) -> dict[str, cs.SX]:
-    """Every link's frame in the ``root`` link's frame (4x4 SX), each joint of the tree ``joints`` at ``q[name]`` (a symbol or a value [rad or m]; joints not named at 0)."""
+    """Every link's frame in the ``root`` link's frame (4x4 SX).
+
+    Each joint of the tree ``joints`` at ``q[name]`` (a symbol or a value [rad or m]; joints not named at 0).
+    """
     frames = {root: cs.SX.eye(4)}
     children: dict[str, list[JointSpec]] = {}
     for joint in joints:
@@ -94,11 +97,14 @@ def link_frames(joints: tuple[JointSpec, ...], root: str, q: Mapping[str, cs.SX 
 
 
 def geometric_jacobian(frames: ChainFrames, chain: Chain) -> cs.SX:
-    """6 x n geometric Jacobian of the tip origin: rows [linear velocity; angular velocity] in the base frame."""
+    """6 x n geometric Jacobian of the tip origin.
+
+    Rows [linear velocity; angular velocity] in the base frame.
+    """
     p_tip = frames.tip[:3, 3]
     columns = []
     movable = [j for j in chain.joints if j.movable]
-    for joint, T in zip(movable, frames.before):
+    for joint, T in zip(movable, frames.before, strict=True):
         z = T[:3, :3] @ np.asarray(joint.axis)
         if joint.type == "prismatic":
             columns.append(cs.vertcat(z, cs.SX.zeros(3)))
@@ -171,7 +177,10 @@ def _values(robot: Robot, chain: Chain, q: Mapping[str, float] | str | None) -> 
 
 
 def hand_pose(robot: Robot, hand: str, q: Mapping[str, float] | str | None = None) -> np.ndarray:
-    """The pose of ``hand``'s frame in the robot's base frame (its root link) [m], 4x4, at configuration ``q``: a home pose's name, a mapping joint -> value [rad] (others at 0), or None (all at 0).
+    """The pose of ``hand``'s frame in the robot's base frame [m], 4x4, at configuration ``q``.
+
+    The robot's base frame is its root link. ``q``: a home pose's name, a mapping joint -> value [rad] (others at
+    0), or None (all at 0).
 
     Task poses are given in this frame.
     """
@@ -180,13 +189,20 @@ def hand_pose(robot: Robot, hand: str, q: Mapping[str, float] | str | None = Non
 
 
 def arm_base_pose(robot: Robot, hand: str, q: Mapping[str, float] | str | None = None) -> np.ndarray:
-    """The pose of the base frame of ``hand``'s arm chain (the torso, for the humanoid) in the robot's base frame [m], 4x4, with the joints between them (a waist) at ``q`` (as :func:`hand_pose`)."""
+    """The pose of the base frame of ``hand``'s arm chain in the robot's base frame [m], 4x4.
+
+    The arm chain's base is the torso, for the humanoid; the joints between them (a waist) at ``q`` (as
+    :func:`hand_pose`).
+    """
     chain = robot.chain_between(robot.urdf.root, robot.hand_chain(hand).base)
     return ChainKinematics.of(chain).pose(_values(robot, chain, q))
 
 
 def to_arm_frame(robot: Robot, hand: str, pose: np.ndarray, q: Mapping[str, float] | str | None = None) -> np.ndarray:
-    """A hand pose (4x4, or (N, 4, 4)) [m] given in the robot's base frame, expressed in the base frame of ``hand``'s arm chain, the frame analytic arm solvers work in (``dualarm ik srs`` takes poses in it); the waist at ``q`` (as :func:`hand_pose`).
+    """A hand pose (4x4, or (N, 4, 4)) [m] given in the robot's base frame, in the arm's base frame.
+
+    Expressed in the base frame of ``hand``'s arm chain, the frame analytic arm solvers work in (``dualarm ik srs``
+    takes poses in it); the waist at ``q`` (as :func:`hand_pose`).
 
     Raises:
         InvalidArgumentError: ``pose`` is not a rigid transform.
@@ -197,7 +213,10 @@ def to_arm_frame(robot: Robot, hand: str, pose: np.ndarray, q: Mapping[str, floa
 
 
 def motion_matrix(joint: JointSpec, q: float | np.ndarray) -> np.ndarray:
-    """Homogeneous transforms (numpy) of a joint's motion by ``q`` [rad or m], a number or (K,) values -> (4, 4) or (K, 4, 4); identity if fixed."""
+    """Homogeneous transforms (numpy) of a joint's motion by ``q`` [rad or m].
+
+    A number or (K,) values -> (4, 4) or (K, 4, 4); identity if fixed.
+    """
     q = np.asarray(q, dtype=float)
     T = np.broadcast_to(np.eye(4), (*q.shape, 4, 4)).copy()
     if joint.type == "prismatic":
@@ -214,7 +233,9 @@ def motion_matrix(joint: JointSpec, q: float | np.ndarray) -> np.ndarray:
 def joint_transforms(
     joints: tuple[JointSpec, ...], q: Mapping[str, float | np.ndarray]
 ) -> list[tuple[str, str, np.ndarray]]:
-    """(parent link, child link, child-in-parent transform) of every joint at configuration ``q`` (joint name -> a value, or (K,) values for K configurations; joints not named are at 0).
+    """(parent link, child link, child-in-parent transform) of every joint at configuration ``q``.
+
+    ``q``: joint name -> a value, or (K,) values for K configurations; joints not named are at 0.
 
     The transforms are (4, 4), or (K, 4, 4) when any value is an array of K.
     """

@@ -135,7 +135,8 @@ class Robot:
         """Home pose ``name`` as joint -> value [rad]."""
         if name not in self.homes:
             raise RobotModelError(
-                f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(name, 40)}' (homes: {listing(self.homes)})"
+                f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(name, 40)}' "
+                f"(homes: {listing(self.homes)})"
             )
         return self.homes[name]
 
@@ -147,11 +148,17 @@ class Robot:
         )
 
     def limit_array(self, kind: str, joint_names: tuple[str, ...]) -> np.ndarray:
-        """The ``kind`` limits (``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3], ``effort`` [N m]) of ``joint_names``, (n,)."""
+        """The ``kind`` limits of ``joint_names``, (n,).
+
+        Kinds: ``velocity`` [rad/s], ``acceleration`` [rad/s^2], ``jerk`` [rad/s^3], ``effort`` [N m].
+        """
         return np.array([getattr(self.limits[n], kind) for n in joint_names], dtype=float)
 
     def with_limits(self, **overrides: float | Mapping[str, float] | None) -> Robot:
-        """The same robot with some limits replaced: ``kind=value`` for every joint, or ``kind={joint: value}`` for some (kinds ``velocity``, ``acceleration``, ``jerk``; None keeps the robot's).
+        """The same robot with some limits replaced.
+
+        ``kind=value`` for every joint, or ``kind={joint: value}`` for some (kinds ``velocity``, ``acceleration``,
+        ``jerk``; None keeps the robot's).
 
         A task's ``[limits]`` table is applied so. With nothing to replace (every override None) it is
         this robot itself, so that what a process builds for it once is found again.
@@ -181,7 +188,9 @@ class Robot:
         return replace(self, limits=MappingProxyType(limits))
 
     def configuration(self, q: Mapping[str, float] | str | None = None, name: str = "q") -> Mapping[str, float]:
-        """Every movable joint's value [rad]: a home pose's name, or a mapping joint -> value (joints not named at 0), or None (all at 0).
+        """Every movable joint's value [rad].
+
+        ``q`` is a home pose's name, or a mapping joint -> value (joints not named at 0), or None (all at 0).
 
         Raises:
             InvalidArgumentError: an unknown home or joint, a value that is not finite or is
@@ -193,7 +202,8 @@ class Robot:
             if q not in self.homes:
                 raise InvalidArgumentError(
                     name,
-                    f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(q, 40)}' (homes: {listing(self.homes)})",
+                    f"robot '{excerpt(self.name, 40)}' has no home pose '{excerpt(q, 40)}' "
+                    f"(homes: {listing(self.homes)})",
                 )
             return self.homes[q]
         if not isinstance(q, Mapping):
@@ -230,7 +240,11 @@ def _limits_from_urdf(
     jerk: Mapping[str, float],
     velocity: Mapping[str, float] | None = None,
 ) -> dict[str, JointLimits]:
-    """Every movable joint's limits: position and effort from the URDF, velocity from ``velocity`` or else the URDF, acceleration and jerk from the maps (inf where absent)."""
+    """Every movable joint's limits.
+
+    Position and effort from the URDF, velocity from ``velocity`` or else the URDF, acceleration and jerk from the
+    maps (inf where absent).
+    """
     velocity = velocity or {}
     return {
         j.name: JointLimits(
@@ -286,7 +300,8 @@ def _unknown(data: dict, allowed: set[str], where: str) -> None:
     extra = sorted(set(data) - allowed)
     if extra:
         raise RobotModelError(
-            f"{where}{'' if where.endswith(':') else '.'}{excerpt(extra[0], 40)}: unknown key (allowed: {', '.join(sorted(allowed))})"
+            f"{where}{'' if where.endswith(':') else '.'}{excerpt(extra[0], 40)}: unknown key "
+            f"(allowed: {', '.join(sorted(allowed))})"
         )
 
 
@@ -303,7 +318,10 @@ def _joint_values(data: object, where: str, joints: tuple[str, ...]) -> dict[str
 
 
 def _finite_float(value: object) -> float | None:
-    """``value`` as a float if it is a finite number (a TOML integer too large for a float is not), else None."""
+    """``value`` as a float if it is a finite number, else None.
+
+    A TOML integer too large for a float is not.
+    """
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return None
     try:
@@ -334,7 +352,9 @@ def _robot_toml(directory: Path) -> tuple[Path, dict]:
 
 
 def load_robot(directory: str | Path) -> Robot:
-    """Load ``directory/robot.toml`` and the URDF it names; a bare name that is no directory here (``humanoid``) is a shipped robot (see :mod:`dualarm.data`).
+    """Load ``directory/robot.toml`` and the URDF it names.
+
+    A bare name that is no directory here (``humanoid``) is a shipped robot (see :mod:`dualarm.data`).
 
     robot.toml's keys: ``name``, ``urdf`` (a file name relative to the directory), ``description``,
     ``[chains.<name>]`` (``base``, ``tip`` links, optional ``hand``), ``[limits.velocity]`` (replacing
@@ -412,7 +432,10 @@ def load_robot(directory: str | Path) -> Robot:
 
 
 def random_configurations(robot: Robot, chain: Chain, n: int, seed: int) -> np.ndarray:
-    """``n`` configurations of ``chain`` drawn uniformly within its limits (+-pi where unlimited); (n, dof)."""
+    """``n`` configurations of ``chain`` drawn uniformly within its limits; (n, dof).
+
+    +-pi where unlimited.
+    """
     lower, upper = robot.lower_upper(chain.joint_names)
     lower = np.where(np.isfinite(lower), lower, -np.pi)
     upper = np.where(np.isfinite(upper), upper, np.pi)

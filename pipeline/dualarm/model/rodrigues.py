@@ -1,4 +1,7 @@
-"""Rotations about a constant unit axis as CasADi expressions (Rodrigues' formula), given the angle's cosine and sine."""
+"""Rotations about a constant unit axis as CasADi expressions (Rodrigues' formula).
+
+Given the angle's cosine and sine.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""The geometry of a 7R arm for the SEW angle (Elias and Wen): which family it is, its axes at q = 0, and S, E, W.
+"""The geometry of a 7R arm for the SEW angle (Elias and Wen).
+
+Which family it is, its axes at q = 0, and S, E, W.
 
 :func:`sew_chain` takes the first family that fits (``R-2R-R-3R``, then ``3R-R-2R-R``); the
 solutions at one SEW angle are :mod:`dualarm.ik.analytic.sew`.
@@ -74,9 +76,12 @@ class SewChain:
     _functions: dict = field(default_factory=dict, repr=False, compare=False)
 
     def transforms(self, q) -> list[tuple]:
-        """(R_0i (3x3), t_0i (3x1) [m]) of T_0i = exp([xi_1] q_1) ... exp([xi_i] q_i), i = 1..7, for q (CasADi, 7x1): a point fixed in link i at x (q = 0) is at R_0i x + t_0i."""
+        """(R_0i (3x3), t_0i (3x1) [m]) of T_0i = exp([xi_1] q_1) ... exp([xi_i] q_i), i = 1..7.
+
+        For q (CasADi, 7x1): a point fixed in link i at x (q = 0) is at R_0i x + t_0i.
+        """
         R, t, frames = cs.SX.eye(3), cs.SX.zeros(3), []
-        for i, (h, p) in enumerate(zip(self.axes, self.axis_points)):
+        for i, (h, p) in enumerate(zip(self.axes, self.axis_points, strict=True)):
             R_i = _rot(h, q[i])
             t = t + R @ (p - R_i @ p)  # exp([xi] q) x = R x + (I - R) p for the line through p
             R = R @ R_i
@@ -99,7 +104,10 @@ class SewChain:
         return self._functions[name]
 
     def points_and_poses(self, Q: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
-        """(S, E, W), each (N, 3) [m], and the tip poses (N, 4, 4) at configurations Q (N, 7) (:meth:`symbolic`, in mapped calls)."""
+        """(S, E, W), each (N, 3) [m], and the tip poses (N, 4, 4) at configurations Q (N, 7).
+
+        By :meth:`symbolic`, in mapped calls.
+        """
 
         def build() -> Batched:
             q = cs.SX.sym("q", 7)
@@ -125,7 +133,9 @@ def _foot(point: np.ndarray, line: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
 
 @functools.cache
 def sew_chain(chain: Chain) -> SewChain:
-    """The geometry of ``chain`` in the first family it belongs to, R-2R-R-3R then 3R-R-2R-R (once per chain).
+    """The geometry of ``chain`` in the first family it belongs to, R-2R-R-3R then 3R-R-2R-R.
+
+    Once per chain.
 
     Raises:
         NotSewError: one line naming the chain and what it lacks: 7 revolute joints, or the
@@ -156,7 +166,8 @@ def sew_chain(chain: Chain) -> SewChain:
             return f"{', '.join(names[i] for i in idx)} (miss {miss[idx]:.3g} m)"
 
         raise NotSewError(
-            f"chain '{chain.name}' is of no family the SEW solver handles: R-2R-R-3R needs the axes of {axes((1, 2))} and of {axes((4, 5, 6))} "
+            f"chain '{chain.name}' is of no family the SEW solver handles: "
+            f"R-2R-R-3R needs the axes of {axes((1, 2))} and of {axes((4, 5, 6))} "
             f"to meet, 3R-R-2R-R (the Franka Panda) those of {axes((0, 1, 2))} and of {axes((4, 5))}",
             chain.name,
         )

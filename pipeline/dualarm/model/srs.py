@@ -75,7 +75,9 @@ def _axis_lines(chain: Chain, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarra
     frames = chain_frames(chain)
     f = cs.Function("axes", [frames.q], list(frames.before))
     movable = [j for j in chain.joints if j.movable]
-    return [(T[:3, 3], T[:3, :3] @ np.asarray(j.axis)) for T, j in zip((np.asarray(M) for M in f(q)), movable)]
+    return [
+        (T[:3, 3], T[:3, :3] @ np.asarray(j.axis)) for T, j in zip((np.asarray(M) for M in f(q)), movable, strict=True)
+    ]
 
 
 def _meeting_point(lines: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, float]:
@@ -93,7 +95,9 @@ def _meeting_point(lines: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarr
 
 @functools.cache
 def srs_geometry(chain: Chain, *, seed: int = 7) -> SrsGeometry:
-    """Derive the S-R-S geometry of ``chain`` from its joints (once per chain and seed, kept: the task loader, reach tests and solvers all ask for it).
+    """Derive the S-R-S geometry of ``chain`` from its joints.
+
+    Once per chain and seed, kept: the task loader, reach tests and solvers all ask for it.
 
     The axes are taken at a random configuration (fixed ``seed``), so that no coincidence of the
     zero pose hides a missing intersection.
@@ -117,7 +121,8 @@ def srs_geometry(chain: Chain, *, seed: int = 7) -> SrsGeometry:
     elbow = p4 + d4 * np.dot(shoulder - p4, d4)  # the point of the elbow axis nearest S
     if abs(np.dot(wrist - elbow, d4)) > INTERSECTION_TOLERANCE_M:
         raise NotSRSError(
-            f"chain '{chain.name}': shoulder, elbow axis ({names[3]}) and wrist are not coplanar, the elbow axis must be normal to S-E-W"
+            f"chain '{chain.name}': shoulder, elbow axis ({names[3]}) and wrist are not coplanar, "
+            "the elbow axis must be normal to S-E-W"
         )
 
     frames = chain_frames(chain)
@@ -183,7 +188,10 @@ class SrsKinematics:
 
     @classmethod
     def of(cls, chain: Chain, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> SrsKinematics:
-        """The Functions for ``chain`` (raises NotSRSError if it is not S-R-S); built once per chain and vertical in a process, then kept."""
+        """The Functions for ``chain`` (raises NotSRSError if it is not S-R-S).
+
+        Built once per chain and vertical in a process, then kept.
+        """
         return _srs_kinematics(chain, (float(vertical[0]), float(vertical[1]), float(vertical[2])))
 
     @classmethod

@@ -124,7 +124,10 @@ def _finite(value: float | None, default: float) -> float:
 
 
 def _parse(path: Path, text: str) -> tuple[URDF, str]:
-    """The URDF of ``text`` and its XML without <collision> elements; RobotModelError naming ``path`` for anything urdf_parser_py or the XML parser refuse."""
+    """The URDF of ``text`` and its XML without <collision> elements.
+
+    RobotModelError naming ``path`` for anything urdf_parser_py or the XML parser refuse.
+    """
     try:
         root = ET.fromstring(text)
         if root.tag != "robot":
@@ -217,7 +220,10 @@ def load_urdf(path: str | Path) -> UrdfModel:
 
 
 def viewer_urdf(text: str) -> str:
-    """The URDF ``text`` as URDF 1.0 viewers read it: each ``<capsule>`` (a PyBullet and Gazebo extension, which Foxglove's URDF parser refuses) as a cylinder and a sphere at each end.
+    """The URDF ``text`` as URDF 1.0 viewers read it.
+
+    Each ``<capsule>`` (a PyBullet and Gazebo extension, which Foxglove's URDF parser refuses) as a cylinder and a
+    sphere at each end.
 
     The capsule's axis is the z axis of its ``<origin>``; the three shapes keep its tag (visual or
     collision), its origin's orientation and its material. Everything else is left as it is.

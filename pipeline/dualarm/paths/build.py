@@ -94,7 +94,10 @@ def _check_closed(task: Task, hand: str, ref: HandReference) -> None:
 
 
 def build_reference(task: Task) -> CartesianReference:
-    """Sample the task's hand motions at its control period: the moves once, then again for each further repetition, the same samples bit for bit (a method that moves differently in one repetition does so on the very same targets).
+    """Sample the task's hand motions at its control period.
+
+    The moves once, then again for each further repetition, the same samples bit for bit (a method that moves
+    differently in one repetition does so on the very same targets).
 
     Raises:
         TaskFileError: a repeated path does not close on itself.
@@ -118,7 +121,7 @@ def build_reference(task: Task) -> CartesianReference:
         segment.append(np.full(steps, i))
     reps = spec.repetitions
     hands = {
-        h: HandReference(*(np.concatenate([start, *(moves * reps)]) for start, *moves in zip(*pieces[h])))
+        h: HandReference(*(np.concatenate([start, *(moves * reps)]) for start, *moves in zip(*pieces[h], strict=True)))
         for h in driven
     }
     if spec.object is not None:
@@ -136,7 +139,8 @@ def build_reference(task: Task) -> CartesianReference:
         if not ok.all():
             k = int(np.argmin(ok))
             raise UnreachablePoseError(
-                f"{task.where(f'moves[{seg_index[k]}]')}: at t = {k * period:.3f} s (repetition {rep_index[k]}) {reach.explain(ref.poses[k])}"
+                f"{task.where(f'moves[{seg_index[k]}]')}: at t = {k * period:.3f} s (repetition {rep_index[k]}) "
+                f"{reach.explain(ref.poses[k])}"
             )
     return CartesianReference(
         task=task.name,

@@ -101,7 +101,8 @@ class PlanningProblem:
             worst = contacts[0]
             self.close()
             raise StageError(
-                f"{task.file}: the start configuration is in collision: {worst.a} with {worst.b} ({worst.depth_m * 1e3:.1f} mm deep, the {settings.margin_m * 1e3:g} mm safety margin included)"
+                f"{task.file}: the start configuration is in collision: {worst.a} with {worst.b} "
+                f"({worst.depth_m * 1e3:.1f} mm deep, the {settings.margin_m * 1e3:g} mm safety margin included)"
             )
 
     def goal_sampler(self, seed: int) -> WtaGoalSampler:
@@ -175,7 +176,10 @@ class PlanningProblem:
 
 
 def plan_task(task: Task, planner: str, settings: PlanningSettings = PlanningSettings(), seed: int = 0) -> PlanResult:
-    """One planning query of ``task`` (its WTAs, scene and initial configuration) with ``planner`` (``mcikrrt`` or ``ompl-rrtconnect``) from ``seed``.
+    """One planning query of ``task`` with ``planner`` from ``seed``.
+
+    The query is of the task's WTAs, scene and initial configuration; ``planner`` is ``mcikrrt`` or
+    ``ompl-rrtconnect``.
 
     Raises:
         StageError: the task has no WTA, its start is in collision, or the planner is unknown.

@@ -1,4 +1,6 @@
-"""Jerk-limited, near time-optimal timing that stays on the joint path (``[retime] timing = "jerk-limited"``, the default).
+"""Jerk-limited, near time-optimal timing that stays on the joint path.
+
+``[retime] timing = "jerk-limited"``, the default.
 
 All active joints (both arms) follow ONE path parameter s, the cumulative joint-space chord length
 [rad] (:func:`dualarm.retime.topp.chord_parameter`), and q(t) = P(s(t)) exactly: the trajectory
@@ -66,20 +68,24 @@ from dualarm.retime.topp import chord_parameter
 TURN_COSINE = 0.9
 #: ... between chords at least this long before and after a sample [rad].
 TURN_CHORD_RAD = 1e-4
-#: The path's spline P passes within this of every sample [rad] (half the 1e-6 rad the path may deviate).
+#: The path's spline P passes within this of every sample [rad] (half the 1e-6 rad the path may
+#: deviate).
 FIT_RAD = 5e-7
 #: Intervals of a piece's first program ...
 NODES = 40
-#: ... and of its last: intervals exceeding a limit by more than REFINE_ABOVE (a share) are halved up to this.
+#: ... and of its last: intervals exceeding a limit by more than REFINE_ABOVE (a share) are halved up to
+#: this.
 MAX_NODES = 400
 REFINE_ABOVE = 1e-2
-#: Share of each limit a program may use at its nodes (the check takes up the rest), and a straight piece everywhere.
+#: Share of each limit a program may use at its nodes (the check takes up the rest), and a straight piece
+#: everywhere.
 MARGIN = 1 - 2e-3
 #: Time step of the analytic check of each piece's limits [s].
 CHECK_STEP_S = 1e-4
 #: Pieces closer than this (every joint of every sample) share one timing [rad].
 SAME_PIECE_RAD = 1e-10
-#: IPOPT's settings: a monotone barrier from 1e-3 halved the solve time against the adaptive default on the triangle.
+#: IPOPT's settings: a monotone barrier from 1e-3 halved the solve time against the adaptive default on the
+#: triangle.
 IPOPT = {
     "print_level": 0,
     "sb": "yes",
@@ -95,7 +101,9 @@ SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
 @dataclass(frozen=True)
 class PieceTiming:
-    """The timing of one piece: s(t) piecewise cubic (constant path jerk per interval), run ``stretch`` times slower.
+    """The timing of one piece: s(t) piecewise cubic, run ``stretch`` times slower.
+
+    Piecewise cubic: a constant path jerk per interval.
 
     Attributes:
         path: P(s) [rad], (n,) per s.
@@ -125,7 +133,10 @@ class PieceTiming:
         return self.stretch * float(self.dt.sum())
 
     def path_state(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The path state at times ``t`` (M,) [s] of the stretched piece: s [rad], s' [rad/s], s'' [rad/s^2], s''' [rad/s^3]."""
+        """The path state at times ``t`` (M,) [s] of the stretched piece.
+
+        s [rad], s' [rad/s], s'' [rad/s^2], s''' [rad/s^3].
+        """
         starts, k = self.starts_s, self.stretch
         tau = np.clip(np.asarray(t, dtype=float) / k, 0.0, starts[-1])
         i = np.clip(np.searchsorted(starts, tau, side="right") - 1, 0, len(self.dt) - 1)
@@ -136,7 +147,10 @@ class PieceTiming:
         return np.clip(s, self.s[0], self.s[-1]), sd / k, sdd / k**2, self.sddd[i] / k**3
 
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The joints at times ``t`` (M,) [s]: q [rad], qd [rad/s], qdd [rad/s^2] and the jerk [rad/s^3], each (M, n)."""
+        """The joints at times ``t`` (M,) [s].
+
+        q [rad], qd [rad/s], qdd [rad/s^2] and the jerk [rad/s^3], each (M, n).
+        """
         s, sd, sdd, sddd = self.path_state(t)
         d1, d2, d3 = (self.path(s, m) for m in (1, 2, 3))
         return (
@@ -147,7 +161,12 @@ class PieceTiming:
         )
 
     def excess(self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> np.ndarray:
-        """Each interval's slow-down to meet the limits, max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) (K,), checked every :data:`CHECK_STEP_S`, on both sides of every node, and where s passes each knot of P and the points a quarter, half and three quarters between them."""
+        """Each interval's slow-down to meet the limits (K,).
+
+        max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)), checked every :data:`CHECK_STEP_S`, on both
+        sides of every node, and where s passes each knot of P and the points a quarter, half and three quarters
+        between them.
+        """
         end = self.duration_s
         nodes = self.stretch * self.starts_s
         knots = np.unique(self.path.t)
@@ -209,7 +228,7 @@ def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray
     passes = np.concatenate(
         [
             start + _passing(timing, s[first:last] - s[first])
-            for start, timing, (first, last, _) in zip(starts, timings, cut)
+            for start, timing, (first, last, _) in zip(starts, timings, cut, strict=False)
         ]
         + [starts[-1:]]
     )
@@ -226,7 +245,9 @@ def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray
 
 
 def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
-    """The pieces of the distinct samples ``q`` (K, n) at chord lengths ``s`` (K,) [rad], in order: each one's first and last sample and its curve P over s - s[first] (module docstring).
+    """The pieces of the distinct samples ``q`` (K, n) at chord lengths ``s`` (K,) [rad], in order.
+
+    Each one's first and last sample and its curve P over s - s[first] (module docstring).
 
     The path is cut at both ends and at its turns: at each sample whose step in and step out turn
     more than acos(:data:`TURN_COSINE`), and once in each run of samples whose chords in and out turn
@@ -246,11 +267,11 @@ def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
     runs = np.flatnonzero(
         np.diff(np.concatenate([[0], (cosine < TURN_COSINE).astype(int), [0]]))
     )  # where runs of turning samples start and end
-    turns = [start + int(np.argmin(cosine[start:end])) for start, end in zip(runs[::2], runs[1::2])]
+    turns = [start + int(np.argmin(cosine[start:end])) for start, end in zip(runs[::2], runs[1::2], strict=True)]
     sharp = np.flatnonzero(_cosines(np.diff(q[:-1], axis=0), np.diff(q[1:], axis=0)) < TURN_COSINE) + 1
     cuts = np.unique(np.concatenate([[0], turns, sharp, [len(s) - 1]])).astype(int)
     done: list[tuple[int, int, BSpline]] = []
-    todo = list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
+    todo = list(zip(cuts[:-1].tolist(), cuts[1:].tolist(), strict=True))
     while todo:
         first, last = todo.pop()
         spline, miss = fit(s[first : last + 1] - s[first], q[first : last + 1])
@@ -272,7 +293,10 @@ def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
 
 
 def fit(s: np.ndarray, q: np.ndarray) -> tuple[BSpline | None, np.ndarray]:
-    """A piece's curve P: a quintic least-squares B-spline of the samples ``q`` (m, n) over ``s`` (m,) [rad] through both end samples and within :data:`FIT_RAD` of each, and how far it misses each sample (m,) [rad].
+    """A piece's curve P, and how far it misses each sample (m,) [rad].
+
+    P is a quintic least-squares B-spline of the samples ``q`` (m, n) over ``s`` (m,) [rad] through both end samples
+    and within :data:`FIT_RAD` of each.
 
     Its interior knots are equally spaced in (s / s[-1] + i / (m - 1)) / 2, i the sample's index (so
     denser where the samples are: where the task moves slowly, as it does where the path bends
@@ -304,7 +328,11 @@ def fit(s: np.ndarray, q: np.ndarray) -> tuple[BSpline | None, np.ndarray]:
 
 
 def _cosines(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The cosine of the angle between each row of ``a`` and of ``b`` (M, n); 1 where one is zero (a chord back to where the path was: the turn is a sharp one between those samples, cut there)."""
+    """The cosine of the angle between each row of ``a`` and of ``b`` (M, n).
+
+    1 where one is zero (a chord back to where the path was: the turn is a sharp one between those samples, cut
+    there).
+    """
     lengths = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
     return np.divide(np.einsum("ij,ij->i", a, b), lengths, out=np.ones(len(a)), where=lengths > 0)
 
@@ -329,7 +357,10 @@ class _Pieces:
 
 
 def _passing(piece: PieceTiming, s: np.ndarray) -> np.ndarray:
-    """When the piece passes the path parameters ``s`` (M,) [s]: s(t) does not decrease at the nodes, so bisection on each."""
+    """When the piece passes the path parameters ``s`` (M,) [s].
+
+    s(t) does not decrease at the nodes, so bisection on each.
+    """
     lo, hi = np.zeros(len(s)), np.full(len(s), piece.duration_s)
     for _ in range(60):
         mid = 0.5 * (lo + hi)
@@ -341,7 +372,11 @@ def _passing(piece: PieceTiming, s: np.ndarray) -> np.ndarray:
 def _time_piece(
     path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]
 ) -> PieceTiming:
-    """One piece's timing along its curve ``path`` (:func:`pieces`): programs solved on nodes refined where the check finds a limit exceeded, then stretched (module docstring); the piece's ``samples`` (first, last) name it in errors."""
+    """One piece's timing along its curve ``path`` (:func:`pieces`).
+
+    Programs solved on nodes refined where the check finds a limit exceeded, then stretched (module docstring); the
+    piece's ``samples`` (first, last) name it in errors.
+    """
     if path.k == 1:
         return _straight(path, velocity, acceleration, jerk, samples)
     nodes = path.t[-1] * (1 - np.cos(np.linspace(0.0, np.pi, NODES + 1))) / 2  # denser at both rest ends
@@ -364,7 +399,11 @@ def _time_piece(
 def _straight(
     path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]
 ) -> PieceTiming:
-    """The time-optimal timing of a straight piece (two samples): Ruckig's on s, rest to rest, within the limits of s that keep every joint within :data:`MARGIN` of its own (P' is constant, P'' and P''' are 0)."""
+    """The time-optimal timing of a straight piece (two samples).
+
+    Ruckig's on s, rest to rest, within the limits of s that keep every joint within :data:`MARGIN` of its own (P'
+    is constant, P'' and P''' are 0).
+    """
     direction = np.maximum(np.abs(path(0.0, 1)), 1e-300)
     inp = InputParameter(1)
     inp.current_position, inp.target_position = [0.0], [float(path.t[-1])]
@@ -384,7 +423,9 @@ def _straight(
 
 
 def _exact(path: BSpline, sddd: np.ndarray, dt: np.ndarray) -> PieceTiming:
-    """The timing that starts at rest at s = 0 and applies the path jerks ``sddd`` (K,) [rad/s^3] for ``dt`` (K,) [s], made exact.
+    """The timing that starts at rest at s = 0 and applies the path jerks ``sddd`` for ``dt``, made exact.
+
+    ``sddd`` (K,) [rad/s^3], ``dt`` (K,) [s].
 
     The solver meets its constraints to its tolerance (~1e-8); integrated as they are, the jerks
     would end the piece with s' and s'' of that order. So they are first changed by the least
@@ -398,7 +439,7 @@ def _exact(path: BSpline, sddd: np.ndarray, dt: np.ndarray) -> PieceTiming:
     effect = np.stack([dt * (dt / 2 + remaining), dt])  # d(s', s'' at the end) / d(each jerk)
     sddd = sddd - effect.T @ np.linalg.solve(effect @ effect.T, effect @ sddd)
     s, sd, sdd = np.zeros(len(dt) + 1), np.zeros(len(dt) + 1), np.zeros(len(dt) + 1)
-    for i, (j, h) in enumerate(zip(sddd, dt)):
+    for i, (j, h) in enumerate(zip(sddd, dt, strict=True)):
         s[i + 1] = s[i] + sd[i] * h + sdd[i] * h**2 / 2 + j * h**3 / 6
         sd[i + 1] = sd[i] + sdd[i] * h + j * h**2 / 2
         sdd[i + 1] = sdd[i] + j * h
@@ -415,7 +456,11 @@ def _solve(
     samples: tuple[int, int],
     start: PieceTiming | None,
 ) -> PieceTiming:
-    """The program on ``nodes`` (K + 1,) [rad] along ``path`` solved (:func:`_program`), unstretched, from the timing ``start`` on coarser nodes (or from :func:`_first_guess`); StageError naming the piece's ``samples`` if IPOPT fails."""
+    """The program on ``nodes`` (K + 1,) [rad] along ``path`` solved (:func:`_program`), unstretched.
+
+    From the timing ``start`` on coarser nodes (or from :func:`_first_guess`); StageError naming the piece's
+    ``samples`` if IPOPT fails.
+    """
     K = len(nodes) - 1
     d1, d2, d3 = (path(nodes, m) for m in (1, 2, 3))
     solver, lbg, ubg = _program(d1.shape[1], K)
@@ -463,7 +508,9 @@ def _solve(
 
 @functools.cache
 def _program(n: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
-    """A piece's program for ``n`` joints on ``K`` intervals (module docstring): the IPOPT solver and the bounds of its constraints.
+    """A piece's program for ``n`` joints on ``K`` intervals (module docstring).
+
+    The IPOPT solver and the bounds of its constraints.
 
     Variables: s' (K + 1), s'' (K + 1), s''' (K), dt (K). Parameters: the nodes' spacing (K), P', P'',
     P''' at the nodes ((K + 1) x n each, column-major), 1 / the acceleration and 1 / the jerk limits (n each).
@@ -507,7 +554,11 @@ def _program(n: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
 def _first_guess(
     s: np.ndarray, d1: np.ndarray, d2: np.ndarray, cap: np.ndarray, acceleration: np.ndarray
 ) -> np.ndarray:
-    """A starting s' (K + 1,) [rad/s] for the program: constant path acceleration between nodes within the velocity cap and the acceleration limits, backward then forward (numerical integration, as TOPP's), at 90 %."""
+    """A starting s' (K + 1,) [rad/s] for the program.
+
+    Constant path acceleration between nodes within the velocity cap and the acceleration limits, backward then
+    forward (numerical integration, as TOPP's), at 90 %.
+    """
     ds = np.diff(s)
     moving = np.abs(d1) > 1e-12
 

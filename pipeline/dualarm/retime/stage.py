@@ -1,4 +1,4 @@
-"""Retime a joint path: a timed, sampled joint trajectory within joint velocity and acceleration limits.
+"""Retime a joint path: a timed, sampled trajectory within joint velocity and acceleration limits.
 
 The IK stage gives joint positions sample by sample (a :class:`JointPath`). This stage turns them
 into a trajectory over time, q(t), qd(t), qdd(t), sampled at a fixed period, that passes through
@@ -159,7 +159,9 @@ def _within_limits(
 def check_limits(
     traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray | None = None
 ) -> None:
-    """Raise a StageError naming the joint, time and ratio if ``traj`` exceeds a limit by more than :data:`dualarm.limits.LIMIT_TOLERANCE` (the ``keep_timing`` check).
+    """Raise a StageError naming the joint, time and ratio if ``traj`` exceeds a limit.
+
+    The ``keep_timing`` check: a limit exceeded by more than :data:`dualarm.limits.LIMIT_TOLERANCE`.
 
     Args:
         traj: the sampled trajectory (its ``qd`` [rad/s], ``qdd`` [rad/s^2] and mean jerk per sample period [rad/s^3]).
@@ -173,7 +175,8 @@ def check_limits(
     worst = max(ratios.values(), key=lambda r: (r.ratio, r.kind, r.joint, r.t_s))
     if worst.exceeded:
         raise StageError(
-            f"{STAGE}: keep_timing: {worst.joint} reaches {worst.ratio:.3g}x its {worst.kind} limit at t = {worst.t_s:.3f} s (the task's timing is too fast for the joint limits)",
+            f"{STAGE}: keep_timing: {worst.joint} reaches {worst.ratio:.3g}x its {worst.kind} limit "
+            f"at t = {worst.t_s:.3f} s (the task's timing is too fast for the joint limits)",
             stage=STAGE,
             t_s=worst.t_s,
             joint=worst.joint,
@@ -200,7 +203,10 @@ def check_path(path: JointPath) -> None:
 def _sample_ratios(
     traj: JointTrajectory, velocity: np.ndarray | Sequence[float], acceleration: np.ndarray | Sequence[float]
 ) -> dict[str, LimitRatio]:
-    """The largest velocity and acceleration limit ratios over the samples of ``traj`` (kind -> :class:`dualarm.limits.LimitRatio`)."""
+    """The largest velocity and acceleration limit ratios over the samples of ``traj``.
+
+    kind -> :class:`dualarm.limits.LimitRatio`.
+    """
     return limit_ratios(
         traj.t,
         traj.joint_names,

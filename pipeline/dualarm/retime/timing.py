@@ -144,7 +144,8 @@ def task_timing(path: JointPath) -> Timing:
         k = int(np.argmax(~np.isfinite(t[1:]) | (np.diff(t) <= 0)))
         t_s = float(path.t[k + 1])
         raise StageError(
-            f"{STAGE}: keep_timing needs increasing sample times, but sample {k + 1} (t = {t_s:.6g} s) does not come after sample {k}",
+            f"{STAGE}: keep_timing needs increasing sample times, "
+            f"but sample {k + 1} (t = {t_s:.6g} s) does not come after sample {k}",
             stage=STAGE,
             sample=k + 1,
             t_s=t_s,

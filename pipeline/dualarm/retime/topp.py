@@ -146,7 +146,8 @@ def _topp_ra(
         code = instance.problem_data.return_code
         raise StageError(
             f"{STAGE}: TOPP-RA found no feasible time parameterisation ({code}) of the {len(joint_names)}-joint path "
-            f"(length {grid[-1]:.4g} rad, {len(spline.ss_waypoints)} distinct samples, {len(grid)} gridpoints; joint limits: velocity "
+            f"(length {grid[-1]:.4g} rad, {len(spline.ss_waypoints)} distinct samples, {len(grid)} gridpoints; "
+            "joint limits: velocity "
             f"{_listing(velocity)} rad/s, acceleration {_listing(acceleration)} rad/s^2)",
             stage=STAGE,
         )
@@ -177,7 +178,10 @@ class ConstAccelProfile:
 
     @classmethod
     def of(cls, path: toppra.SplineInterpolator, s_grid: np.ndarray, sd_grid: np.ndarray) -> ConstAccelProfile:
-        """The profile of TOPP-RA's path velocities ``sd_grid`` [rad/s] at ``s_grid`` [rad] (as ``ParametrizeConstAccel``)."""
+        """The profile of TOPP-RA's path velocities ``sd_grid`` [rad/s] at ``s_grid`` [rad].
+
+        As ``ParametrizeConstAccel``.
+        """
         ds = np.diff(s_grid)
         t_grid = np.concatenate([[0.0], np.cumsum(2 * ds / (sd_grid[:-1] + sd_grid[1:]))])
         u = (sd_grid[1:] ** 2 - sd_grid[:-1] ** 2) / (2 * ds)

@@ -1,4 +1,6 @@
-"""The approach: the move from the task's initial configuration to the start of the trajectory, jerk-limited, at rest at both ends.
+"""The approach: the move from the task's initial configuration to the start of the trajectory.
+
+Jerk-limited, at rest at both ends.
 
 A task starts at its ``initial`` configuration, while the joint path (IK or plan) starts where
 its first sample puts the arms; the approach joins them the way the retime stage times a path
@@ -33,7 +35,9 @@ def approach_trajectory(
     period_s: float,
     fixed: dict[str, float] | None = None,
 ) -> JointTrajectory:
-    """The time-optimal jerk-limited straight move from ``start`` to ``goal`` [rad], at rest at both ends, sampled every ``period_s`` [s] (its last sample at the goal).
+    """The time-optimal jerk-limited straight move from ``start`` to ``goal`` [rad], at rest at both ends.
+
+    Sampled every ``period_s`` [s] (its last sample at the goal).
 
     Args:
         names: the joints.

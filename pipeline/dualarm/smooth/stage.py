@@ -70,7 +70,10 @@ class Smoothed:
 
     @classmethod
     def unchanged(cls, reference: JointTrajectory) -> Smoothed:
-        """``reference`` passed through as it is (stage ``smooth``), for a timing already within the jerk limits: its mean jerk, no deviation, no look-ahead."""
+        """``reference`` passed through as it is (stage ``smooth``).
+
+        For a timing already within the jerk limits: its mean jerk, no deviation, no look-ahead.
+        """
         traj = replace(reference, stage=STAGE)
         jerk, zeros = traj.mean_jerk(), np.zeros(traj.q.shape)
         return cls(
@@ -139,7 +142,10 @@ def smooth_trajectory(
 
 
 def _check_reference(reference: JointTrajectory) -> None:
-    """StageError if ``reference`` has no samples, or a non-finite position, velocity or acceleration (naming the joint)."""
+    """StageError if ``reference`` has no samples, or a non-finite position, velocity or acceleration.
+
+    The error names the joint.
+    """
     names = reference.joint_names
     if len(reference) == 0:
         raise StageError(f"{STAGE}: the reference trajectory has no samples", stage=STAGE)

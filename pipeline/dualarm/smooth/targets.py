@@ -1,4 +1,6 @@
-"""The targets the smooth stage's tracker steers to: the reference resampled at the control times, clamped into the limits.
+"""The targets the smooth stage's tracker steers to.
+
+The reference resampled at the control times, clamped into the limits.
 
 Resampling. The reference is resampled at the control times ``t_k = k * period_s`` (linear
 interpolation of q, qd and qdd between its samples) and held at its final position, at rest,
@@ -73,12 +75,18 @@ class Targets:
         return cls(p, v, acc, end)
 
     def rows(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Position [rad], velocity [rad/s] and acceleration [rad/s^2] targets (n,), joint i's from row ``index[i]`` (clipped to ``end``)."""
+        """Position [rad], velocity [rad/s] and acceleration [rad/s^2] targets (n,).
+
+        Joint i's from row ``index[i]`` (clipped to ``end``).
+        """
         rows = np.minimum(index, self.end)
         cols = np.arange(self.p.shape[1])
         return self.p[rows, cols], self.v[rows, cols], self.a[rows, cols]
 
     def joint(self, index: int, i: int) -> tuple[float, float, float]:
-        """Position [rad], velocity [rad/s] and acceleration [rad/s^2] target of joint ``i`` at row ``index`` (clipped to ``end``)."""
+        """Position [rad], velocity [rad/s] and acceleration [rad/s^2] target of joint ``i`` at row ``index``.
+
+        ``index`` clipped to ``end``.
+        """
         r = min(int(index), self.end)
         return self.p[r, i], self.v[r, i], self.a[r, i]

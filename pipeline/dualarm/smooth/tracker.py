@@ -105,7 +105,7 @@ class Tracker:
         self.names, self.targets, self.dt, self.n = names, targets, dt, n
         self.bounds = [
             (float(x) * (1 + LIMIT_SLACK), float(y) * (1 + LIMIT_SLACK), float(z) * (1 + LIMIT_SLACK))
-            for x, y, z in zip(v, a, j)
+            for x, y, z in zip(v, a, j, strict=True)
         ]
         self.fallbacks = 0
         self.otgs = [ruckig.Ruckig(1, dt) for _ in range(n)]
@@ -162,7 +162,8 @@ class Tracker:
             if finished and (k + m >= end).all():
                 return np.array(q), np.array(qd), np.array(qdd), np.array(ahead)
         raise StageError(
-            f"{STAGE}: the tracker did not come to rest at the reference's final position within {self.max_cycles * self.dt:.3f} s",
+            f"{STAGE}: the tracker did not come to rest at the reference's final position "
+            f"within {self.max_cycles * self.dt:.3f} s",
             stage=STAGE,
         )
 
@@ -236,7 +237,10 @@ class Tracker:
         return ""
 
     def _durations(self, state: np.ndarray, rows: np.ndarray) -> np.ndarray | None:
-        """Time-optimal duration [s] of each joint from ``state`` (3, n) to its target row ``rows`` (n,), or None if Ruckig fails."""
+        """Time-optimal duration [s] of each joint from ``state`` (3, n) to its target row ``rows`` (n,).
+
+        None if Ruckig fails.
+        """
         inp = self.probe_inp
         inp.current_position, inp.current_velocity, inp.current_acceleration = (
             list(state[0]),
@@ -254,7 +258,10 @@ class Tracker:
         return np.array(self.probe_traj.independent_min_durations)
 
     def _leads(self, k: int, state: np.ndarray, m_prev: np.ndarray) -> np.ndarray:
-        """Periods ahead (>= 1) each joint aims at in the cycle from t_k: ``m_prev - 1`` while it is still reachable in time, else the earliest reachable sample (marching ahead in doubling steps, then bisecting).
+        """Periods ahead (>= 1) each joint aims at in the cycle from t_k.
+
+        ``m_prev - 1`` while it is still reachable in time, else the earliest reachable sample (marching ahead in
+        doubling steps, then bisecting).
 
         A probe that Ruckig fails on leaves the current choice.
         """

@@ -1,4 +1,7 @@
-"""The frames a task's poses are given in (the robot's base, a link, the shoulders' centre) and its ``scale``."""
+"""The frames a task's poses are given in, and its ``scale``.
+
+The frames: the robot's base, a link, the shoulders' centre.
+"""
 
 from __future__ import annotations
 
@@ -17,10 +20,12 @@ from dualarm.tasks.schema import FRAME_ROLES, REFERENCE_ARM_M, Pose, TaskSpec
 
 
 def frame_pose(robot: Robot, name: str, q: Mapping[str, float]) -> np.ndarray:
-    """The pose (4, 4) [m] of frame ``name`` in the robot base frame at configuration ``q`` [rad]: a role of :data:`~dualarm.tasks.schema.FRAME_ROLES` (checked first) or a URDF link.
+    """The pose (4, 4) [m] of frame ``name`` in the robot base frame at configuration ``q`` [rad].
 
-    ``left.shoulder`` / ``right.shoulder``: that hand's shoulder centre S (:func:`shoulder_position`); ``shoulders``: the
-    midpoint of the two; both with the robot base frame's axes (so a role only moves the origin).
+    ``name`` is a role of :data:`~dualarm.tasks.schema.FRAME_ROLES` (checked first) or a URDF link.
+
+    ``left.shoulder`` / ``right.shoulder``: that hand's shoulder centre S (:func:`shoulder_position`);
+    ``shoulders``: the midpoint of the two; both with the robot base frame's axes (so a role only moves the origin).
     A link: its frame, the joints between the root and it at ``q``.
 
     Raises:
@@ -38,7 +43,11 @@ def frame_pose(robot: Robot, name: str, q: Mapping[str, float]) -> np.ndarray:
 
 
 def shoulder_position(robot: Robot, hand: str, q: Mapping[str, float]) -> np.ndarray:
-    """The shoulder centre S of ``hand``'s arm in the robot base frame at configuration ``q`` [m], (3,): where an S-R-S arm's joints 1-3 meet, else the SEW angle's S on joint 1's axis (:mod:`dualarm.ik.analytic.sew`: where joints 1-3 meet, or the point of joint 1's axis nearest where joints 2 and 3 meet).
+    """The shoulder centre S of ``hand``'s arm in the robot base frame at configuration ``q`` [m], (3,).
+
+    Where an S-R-S arm's joints 1-3 meet, else the SEW angle's S on joint 1's axis
+    (:mod:`dualarm.ik.analytic.sew`: where joints 1-3 meet, or the point of joint 1's axis nearest where joints 2
+    and 3 meet).
 
     Raises:
         NotSRSError: the arm is neither S-R-S nor of a SEW family (the SEW solver's one line).
@@ -50,12 +59,19 @@ def shoulder_position(robot: Robot, hand: str, q: Mapping[str, float]) -> np.nda
 
 
 def arm_scale(robot: Robot, hands: Sequence[str]) -> float:
-    """``scale = "arm"``'s factor: the mean arm length of ``hands``' arms (S-R-S: upper arm + forearm, L2 + L3; else |SE| + |EW| at q = 0 of the SEW angle's points) over :data:`~dualarm.tasks.schema.REFERENCE_ARM_M` (the humanoid's)."""
+    """``scale = "arm"``'s factor: the mean arm length of ``hands``' arms over the reference arm's.
+
+    Arm length: S-R-S: upper arm + forearm, L2 + L3; else |SE| + |EW| at q = 0 of the SEW angle's points. Over
+    :data:`~dualarm.tasks.schema.REFERENCE_ARM_M` (the humanoid's).
+    """
     return float(np.mean([_shoulder_and_length(robot.hand_chain(hand))[1] for hand in hands])) / REFERENCE_ARM_M
 
 
 def _shoulder_and_length(arm: Chain) -> tuple[np.ndarray, float]:
-    """The shoulder centre S [m] (3,) in the arm's base frame and the arm's length [m]: an S-R-S arm's S and L2 + L3; else those of the SEW angle's points at q = 0 (S, and |SE| + |EW|), which on an S-R-S arm are the same.
+    """The shoulder centre S [m] (3,) in the arm's base frame and the arm's length [m].
+
+    An S-R-S arm's S and L2 + L3; else those of the SEW angle's points at q = 0 (S, and |SE| + |EW|), which on an
+    S-R-S arm are the same.
 
     Raises:
         NotSRSError: the arm is neither S-R-S nor of a SEW family (the SEW solver's one line).
@@ -71,7 +87,9 @@ def _shoulder_and_length(arm: Chain) -> tuple[np.ndarray, float]:
 
 
 def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str) -> TaskSpec:
-    """``spec`` with its waypoints, ``by`` displacements and arcs taken from its ``frame`` (and ``scale``) into the robot base frame, at configuration ``q``; ``frame`` and ``scale`` then None.
+    """``spec`` with its waypoints, ``by`` displacements and arcs taken into the robot base frame.
+
+    Taken from its ``frame`` (and ``scale``), at configuration ``q``; ``frame`` and ``scale`` then None.
 
     A pose (p, R) in the frame F becomes F (s p, R): the position scaled by s, then both moved by F.
     A role frame has the base frame's axes, so a waypoint's rpy is kept as written (bit for bit).
@@ -88,7 +106,8 @@ def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str)
         ends = dict.fromkeys(link for chain in robot.chains.values() for link in (chain.base, chain.tip))
         raise TaskFileError(
             f"{source}:frame: robot '{excerpt(robot.name, 40)}' has no frame '{excerpt(spec.frame, 40)}' "
-            f"(roles: {listing(FRAME_ROLES)}; or a link: the chains' {listing(ends, 6)}, or another of its {len(robot.urdf.links)} links)"
+            f"(roles: {listing(FRAME_ROLES)}; or a link: the chains' {listing(ends, 6)}, "
+            f"or another of its {len(robot.urdf.links)} links)"
         ) from None
     except (NotSRSError, RobotModelError) as exc:
         key = "scale" if spec.frame is None or spec.frame not in FRAME_ROLES else "frame"
@@ -113,7 +132,8 @@ def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str)
             waypoints[name] = Pose(position=point(wp.position), rpy=rpy)  # type: ignore[arg-type]
         except ValidationError:
             raise TaskFileError(
-                f"{source}:waypoints.{excerpt(name, 40)}: in the robot base frame its position {point(wp.position)} m is outside [-100, 100] m"
+                f"{source}:waypoints.{excerpt(name, 40)}: in the robot base frame its position {point(wp.position)} m "
+                "is outside [-100, 100] m"
             ) from None
     moves = []
     for move in spec.moves:
@@ -131,7 +151,12 @@ def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str)
 
 
 def _transferred(spec: TaskSpec, robot: Robot) -> TaskSpec:
-    """``spec`` with ``transfer.initial``, ``transfer.gesture`` and ``transfer.limits`` in place of ``initial``, ``gesture`` and ``limits``, and its moves' durations times ``transfer.duration_scale``, when ``robot`` is not the one ``transfer.written_for`` names (by robot.toml's ``name``)."""
+    """``spec`` transferred to ``robot``, when it is not the one ``transfer.written_for`` names.
+
+    ``transfer.initial``, ``transfer.gesture`` and ``transfer.limits`` in place of ``initial``, ``gesture`` and
+    ``limits``, and its moves' durations times ``transfer.duration_scale``, when ``robot`` is not the one
+    ``transfer.written_for`` names (by robot.toml's ``name``).
+    """
     if spec.transfer is None or robot.name == spec.transfer.written_for:
         return spec
     k, period = spec.transfer.duration_scale, spec.control_period_s

@@ -36,7 +36,10 @@ def _check_joint_names(location: str, names, robot: Robot) -> None:
 
 
 def _initial_configuration(source: str, spec: TaskSpec, robot: Robot) -> Mapping[str, float]:
-    """The task's ``initial`` as every joint's value (:meth:`Robot.configuration`), its errors as the task file's."""
+    """The task's ``initial`` as every joint's value (:meth:`Robot.configuration`).
+
+    Its errors are the task file's.
+    """
     try:
         return robot.configuration(spec.initial, f"{source}:initial")
     except InvalidArgumentError as exc:
@@ -51,11 +54,13 @@ def _check_structure(task: Task) -> None:
             continue
         if hand not in robot.hands:
             raise TaskFileError(
-                f"{where('start.' + hand)}: robot '{excerpt(robot.name, 40)}' has no hand '{hand}' (hands: {listing(robot.hands)})"
+                f"{where('start.' + hand)}: robot '{excerpt(robot.name, 40)}' has no hand '{hand}' "
+                f"(hands: {listing(robot.hands)})"
             )
         if start != "initial" and start not in spec.waypoints:
             raise TaskFileError(
-                f"{where('start.' + hand)}: no waypoint '{excerpt(start, 40)}' (waypoints: {listing(spec.waypoints)}; or \"initial\")"
+                f"{where('start.' + hand)}: no waypoint '{excerpt(start, 40)}' "
+                f'(waypoints: {listing(spec.waypoints)}; or "initial")'
             )
     started = {h for h in ("left", "right") if getattr(spec.start, h) is not None}
     per_repetition = 0
@@ -63,11 +68,13 @@ def _check_structure(task: Task) -> None:
         steps = move.duration_s / spec.control_period_s  # at most 8.64e8 within the schema's ranges
         if steps < 1 - 1e-6:
             raise TaskFileError(
-                f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is shorter than one control period ({spec.control_period_s:g} s)"
+                f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is shorter than one control period "
+                f"({spec.control_period_s:g} s)"
             )
         if abs(steps - round(steps)) > 1e-6:
             raise TaskFileError(
-                f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is not a whole number of control periods ({spec.control_period_s:g} s)"
+                f"{where(f'moves[{i}].duration_s')}: {move.duration_s:g} s is not a whole number of control periods "
+                f"({spec.control_period_s:g} s)"
             )
         per_repetition += round(steps)
         for hand in ("left", "right"):
@@ -80,12 +87,14 @@ def _check_structure(task: Task) -> None:
                 )
             if hand_move.to is not None and hand_move.to not in spec.waypoints:
                 raise TaskFileError(
-                    f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{excerpt(hand_move.to, 40)}' (waypoints: {listing(spec.waypoints)})"
+                    f"{where(f'moves[{i}].{hand}.to')}: no waypoint '{excerpt(hand_move.to, 40)}' "
+                    f"(waypoints: {listing(spec.waypoints)})"
                 )
     samples = 1 + spec.repetitions * per_repetition
     if samples > MAX_SAMPLES:
         raise TaskFileError(
-            f"{where('moves')}: the path has {samples:,} samples ({spec.repetitions} repetitions of {per_repetition:,} control periods of {spec.control_period_s:g} s), "
+            f"{where('moves')}: the path has {samples:,} samples ({spec.repetitions} repetitions of "
+            f"{per_repetition:,} control periods of {spec.control_period_s:g} s), "
             f"more than the {MAX_SAMPLES:,} allowed; use a longer control_period_s, shorter moves or fewer repetitions"
         )
     _check_margin(task)
@@ -97,7 +106,8 @@ def _check_structure(task: Task) -> None:
                 lim = robot.limits[name]
                 if not lim.lower <= value <= lim.upper:
                     raise TaskFileError(
-                        f"{where(f'gesture.{key}')}.{name}: {value:g} rad is outside the joint's limits [{lim.lower:g}, {lim.upper:g}]"
+                        f"{where(f'gesture.{key}')}.{name}: {value:g} rad is outside the joint's limits "
+                        f"[{lim.lower:g}, {lim.upper:g}]"
                     )
         for name, lo in spec.gesture.goal_lower.items():
             hi = spec.gesture.goal_upper.get(name)
@@ -109,7 +119,8 @@ def _check_structure(task: Task) -> None:
             raise TaskFileError(f"{where('object.master')}: the master hand '{obj.master}' needs a start pose")
         if obj.slave in started or any(m.for_hand(obj.slave) for m in spec.moves):
             raise TaskFileError(
-                f"{where('object.slave')}: the slave hand '{obj.slave}' follows the master by eq (11); give it no start or moves"
+                f"{where('object.slave')}: the slave hand '{obj.slave}' follows the master by eq (11); "
+                "give it no start or moves"
             )
     for i, wta in enumerate(spec.wta):
         if wta.hand not in robot.hands:
@@ -121,12 +132,16 @@ def _check_structure(task: Task) -> None:
         for name in pair:
             if name not in names:
                 raise TaskFileError(
-                    f"{where(f'expected_contacts[{i}]')}: '{excerpt(name, 40)}' is neither a robot link nor an object of the task"
+                    f"{where(f'expected_contacts[{i}]')}: '{excerpt(name, 40)}' is neither a robot link "
+                    "nor an object of the task"
                 )
 
 
 def _check_environment(task: Task) -> None:
-    """Refuse a fixed object that overlaps a link of the robot's base (a link no joint moves), by PyBullet's closest points (imported only for tasks with objects)."""
+    """Refuse a fixed object that overlaps a link of the robot's base (a link no joint moves).
+
+    By PyBullet's closest points (imported only for tasks with objects).
+    """
     if not task.spec.environment:
         return
     from dualarm.sim.world import add_environment, load_pybullet_robot, pb
@@ -145,12 +160,15 @@ def _check_environment(task: Task) -> None:
                 if points:
                     depth = -min(p[8] for p in points)
                     raise TaskFileError(
-                        f"{task.where(f'environment[{index}]')}: '{excerpt(obj, 40)}' overlaps the robot's base link '{name[link]}' ({depth * 1e3:.1f} mm deep); move it away from the robot"
+                        f"{task.where(f'environment[{index}]')}: '{excerpt(obj, 40)}' overlaps the robot's base link "
+                        f"'{name[link]}' ({depth * 1e3:.1f} mm deep); move it away from the robot"
                     )
 
 
 def load_task(path: str | Path, repetitions: int | None = None, robot: str | Path | None = None) -> Task:
-    """Read, validate and resolve a task file; ``repetitions`` overrides the file's, ``robot`` (a robot directory or shipped robot's name) the robot it names.
+    """Read, validate and resolve a task file.
+
+    ``repetitions`` overrides the file's, ``robot`` (a robot directory or shipped robot's name) the robot it names.
 
     A ``path`` that does not exist but is a bare name (``triangle``) is a shipped task, and the
     file's ``robot`` a directory relative to it or a shipped robot's name (see :mod:`dualarm.data`).
@@ -166,7 +184,11 @@ def load_task(path: str | Path, repetitions: int | None = None, robot: str | Pat
 
 
 def load_task_unmoved(path: str | Path, robot: str | Path | None = None) -> Task:
-    """The task file at ``path`` with every hand it starts staying at the initial configuration and no moves, as :func:`load_task` loads it (errors name the file): ``dualarm task check`` loads it so when a waypoint is out of reach, to report every waypoint."""
+    """The task file at ``path`` with no moves: every hand it starts stays at the initial configuration.
+
+    As :func:`load_task` loads it (errors name the file): ``dualarm task check`` loads it so when a waypoint is
+    out of reach, to report every waypoint.
+    """
     return _load_file(
         path,
         None,
@@ -200,7 +222,9 @@ def task_from_dict(
     base_dir: str | Path = ".",
     **keys: Any,
 ) -> Task:
-    """A task from a plain dict and/or keyword arguments, with the keys and checks of a task file (see ``tasks/README.md``): ``task_from_dict(name="circle", control_period_s=0.01, ...)``.
+    """A task from a plain dict and/or keyword arguments, with the keys and checks of a task file.
+
+    See ``tasks/README.md``: ``task_from_dict(name="circle", control_period_s=0.01, ...)``.
 
     Args:
         data: the task's keys, as a TOML file would give them (optional).
@@ -223,7 +247,10 @@ def task_from_dict(
 
 
 def _resolved(path: Path) -> Path:
-    """``path`` made absolute with symbolic links resolved, or as given when the OS cannot (loading it then says why)."""
+    """``path`` made absolute with symbolic links resolved, or as given when the OS cannot.
+
+    Loading it then says why.
+    """
     try:
         return path.resolve()
     except (OSError, ValueError, RuntimeError):  # RuntimeError: a symlink loop, before Python 3.13
@@ -233,12 +260,17 @@ def _resolved(path: Path) -> Path:
 def _resolve(
     spec: TaskSpec, file: Path | None, text: str, base: Path, robot: Robot | None, repetitions: int | None
 ) -> Task:
-    """The validated task: the robot loaded (unless given) with the task's limits, the initial configuration resolved, and every check run."""
+    """The validated task.
+
+    The robot loaded (unless given) with the task's limits, the initial configuration resolved, and every check
+    run.
+    """
     source = excerpt(file) if file is not None else "<dict>"
     if repetitions is not None:
         if isinstance(repetitions, bool) or not isinstance(repetitions, int) or not 1 <= repetitions <= MAX_REPETITIONS:
             raise TaskFileError(
-                f"{source}:repetitions: the override must be an integer in [1, {MAX_REPETITIONS}], not {excerpt(repr(repetitions), 24)}"
+                f"{source}:repetitions: the override must be an integer in [1, {MAX_REPETITIONS}], "
+                f"not {excerpt(repr(repetitions), 24)}"
             )
         spec = spec.model_copy(update={"repetitions": repetitions})
     if robot is None:

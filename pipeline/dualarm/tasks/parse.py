@@ -34,7 +34,10 @@ def _key_path(error: ErrorDetails, data: object) -> str:
 
 
 def _quoted(value: object) -> str:
-    """``repr(value)``, quoted with :func:`~dualarm.errors.excerpt` (a value nested too deeply for repr is described)."""
+    """``repr(value)``, quoted with :func:`~dualarm.errors.excerpt`.
+
+    A value nested too deeply for repr is described.
+    """
     try:
         return excerpt(repr(value))
     except RecursionError:
@@ -53,7 +56,10 @@ def _validation_message(file: object, exc: ValidationError, data: object) -> str
     elif len(alternatives) > 1 and len(fitting) == 1:  # a union, and the value has the type of one member
         message = fitting[0]["msg"].removeprefix("Value error, ")
     elif len(alternatives) > 1:  # a union: say what each alternative wanted
-        message = f"wrong type or value {_quoted(first['input'])} ({'; or '.join(e['msg'].removeprefix('Value error, ') for e in alternatives)})"
+        message = (
+            f"wrong type or value {_quoted(first['input'])} "
+            f"({'; or '.join(e['msg'].removeprefix('Value error, ') for e in alternatives)})"
+        )
     else:
         message = first["msg"].removeprefix("Value error, ")
     others = len({k for k, _ in errors}) - 1
@@ -63,7 +69,10 @@ def _validation_message(file: object, exc: ValidationError, data: object) -> str
 
 
 def _read(file: Path) -> tuple[str, dict]:
-    """The text of a task file and its TOML; one-line TaskFileError naming the file and the cause otherwise (see :func:`dualarm.files.read_text`)."""
+    """The text of a task file and its TOML.
+
+    One-line TaskFileError naming the file and the cause otherwise (see :func:`dualarm.files.read_text`).
+    """
     text = read_text(file, "task file", TaskFileError)
     try:
         return text, tomllib.loads(text)
@@ -71,7 +80,8 @@ def _read(file: Path) -> tuple[str, dict]:
         raise TaskFileError(f"{excerpt(file)}: not valid TOML: {exc}") from None
     except (RecursionError, ValueError) as exc:  # nesting beyond Python's stack, an integer beyond int()'s digits
         raise TaskFileError(
-            f"{excerpt(file)}: not valid TOML: {excerpt(exc) if isinstance(exc, ValueError) else 'tables or arrays nested too deeply'}"
+            f"{excerpt(file)}: not valid TOML: "
+            f"{excerpt(exc) if isinstance(exc, ValueError) else 'tables or arrays nested too deeply'}"
         ) from None
 
 

@@ -1,4 +1,7 @@
-"""Whether each hand's poses are within its arm's reach: the analytic S-R-S bound, else a numeric IK check."""
+"""Whether each hand's poses are within its arm's reach.
+
+The analytic S-R-S bound, else a numeric IK check.
+"""
 
 from __future__ import annotations
 
@@ -18,7 +21,11 @@ REACH_MARGIN_M = 1e-3
 
 
 def _check_margin(task: Task) -> None:
-    """Refuse an ``arm_angle.margin_rad`` of half the narrowest position range of a driven arm's joints or more: no configuration keeps it from both limits of that joint."""
+    """Refuse an ``arm_angle.margin_rad`` too large for a driven arm's joints.
+
+    Half the narrowest position range of a driven arm's joints or more: no configuration keeps it from both limits
+    of that joint.
+    """
     robot, margin = task.robot, task.spec.arm_angle.margin_rad
     ranges = {
         name: robot.limits[name].upper - robot.limits[name].lower
@@ -32,13 +39,17 @@ def _check_margin(task: Task) -> None:
     half = ranges[joint] / 2
     if not margin < half:
         raise TaskFileError(
-            f"{task.where('arm_angle.margin_rad')}: {margin:g} rad is outside the allowed range [0, {half:.4g}) rad (below half the range of joint '{excerpt(joint, 40)}', the narrowest of the driven arms)"
+            f"{task.where('arm_angle.margin_rad')}: {margin:g} rad is outside the allowed range [0, {half:.4g}) rad "
+            f"(below half the range of joint '{excerpt(joint, 40)}', the narrowest of the driven arms)"
         )
 
 
 @dataclass(frozen=True)
 class ArmReach:
-    """The workspace test of one hand of an S-R-S arm, in closed form: the wrist centre W of a hand pose must lie within [|L2 - L3|, L2 + L3] of the shoulder S (less :data:`REACH_MARGIN_M`).
+    """The workspace test of one hand of an S-R-S arm, in closed form.
+
+    The wrist centre W of a hand pose must lie within [|L2 - L3|, L2 + L3] of the shoulder S (less
+    :data:`REACH_MARGIN_M`).
 
     With the waist free, S may move on a sphere about the waist centre, and the test becomes the
     necessary condition | |W - centre| - |S - centre| | <= L2 + L3.
@@ -74,12 +85,17 @@ class ArmReach:
         d = float(self.distances(T[None])[0])
         p = ", ".join(f"{v:.3f}" for v in T[:3, 3])
         origin = "the waist's reach" if self.waist_centre is not None else "the shoulder"
-        return f"the {self.hand} hand cannot reach [{p}] with this orientation: its wrist centre is {d:.3f} m from {origin}, the arm spans {self.geometry.min_reach:.3f}-{self.geometry.reach:.3f} m"
+        return (
+            f"the {self.hand} hand cannot reach [{p}] with this orientation: its wrist centre is {d:.3f} m "
+            f"from {origin}, the arm spans {self.geometry.min_reach:.3f}-{self.geometry.reach:.3f} m"
+        )
 
 
 @dataclass(frozen=True)
 class NumericReach:
-    """The workspace test of one hand of any arm: a pose is within reach when a numeric IK solve inside the joint limits reaches it.
+    """The workspace test of one hand of any arm.
+
+    A pose is within reach when a numeric IK solve inside the joint limits reaches it.
 
     Why numeric IK, not a sampled workspace: a hand pose has six dimensions, which no affordable
     sampling of a 7-DOF arm's configurations covers densely enough to decide one given pose (a
@@ -114,7 +130,10 @@ class NumericReach:
     seeds: np.ndarray
 
     def _solve(self, T: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, float, float]:
-        """One bounded solve for pose T (4, 4) from ``start`` (k,): (free joints [rad], position error [m], orientation error [rad])."""
+        """One bounded solve for pose T (4, 4) from ``start`` (k,).
+
+        Returns (free joints [rad], position error [m], orientation error [rad]).
+        """
         from scipy.optimize import least_squares
         from scipy.spatial.transform import Rotation
 
@@ -142,7 +161,10 @@ class NumericReach:
         return result.x, float(np.linalg.norm(r[:3])), float(np.linalg.norm(r[3:]))
 
     def solve(self, T: np.ndarray, warm: np.ndarray | None = None) -> tuple[np.ndarray | None, float, float]:
-        """The free joints [rad] reaching pose T (4, 4) within the limits, from ``warm`` then every seed, or None; with the smallest position [m] and orientation [rad] errors met."""
+        """The free joints [rad] reaching pose T (4, 4) within the limits, or None.
+
+        From ``warm`` then every seed; with the smallest position [m] and orientation [rad] errors met.
+        """
         best = (np.inf, np.inf)
         for start in ([warm] if warm is not None else []) + list(self.seeds):
             x, position, orientation = self._solve(T, start)
@@ -152,7 +174,10 @@ class NumericReach:
         return None, *best
 
     def within(self, T: np.ndarray) -> np.ndarray:
-        """Which of the hand poses T (N, 4, 4) pass; (N,) bool. Poses equal to 1e-9 (a repeated path's) are solved once, in order, each from the previous one's solution."""
+        """Which of the hand poses T (N, 4, 4) pass; (N,) bool.
+
+        Poses equal to 1e-9 (a repeated path's) are solved once, in order, each from the previous one's solution.
+        """
         T = np.asarray(T, dtype=float)
         _, first, inverse = np.unique(
             np.round(T.reshape(len(T), 16), 9), axis=0, return_index=True, return_inverse=True
@@ -170,12 +195,15 @@ class NumericReach:
         _, position, orientation = self.solve(T)
         p = ", ".join(f"{v:.3f}" for v in T[:3, 3])
         return (
-            f"the {self.hand} hand cannot reach [{p}] with this orientation within the joint limits: numeric IK from {len(self.seeds)} starts "
-            f"came no closer than {position:.3g} m and {orientation:.3g} rad (this arm is not S-R-S, so reach is decided by IK)"
+            f"the {self.hand} hand cannot reach [{p}] with this orientation within the joint limits: "
+            f"numeric IK from {len(self.seeds)} starts "
+            f"came no closer than {position:.3g} m and {orientation:.3g} rad "
+            "(this arm is not S-R-S, so reach is decided by IK)"
         )
 
 
-#: Numeric reach (:class:`NumericReach`): random starts besides the initial configuration, their seed, and the errors that count as reached [m], [rad].
+#: Numeric reach (:class:`NumericReach`): random starts besides the initial configuration, their seed, and
+#: the errors that count as reached [m], [rad].
 REACH_SEEDS = 8
 REACH_SEED = 0
 REACH_POSITION_TOLERANCE_M = 1e-4
@@ -183,7 +211,10 @@ REACH_ORIENTATION_TOLERANCE_RAD = 1e-3
 
 
 def numeric_reach(task: Task, hand: str) -> NumericReach:
-    """The numeric reach test of ``hand`` for ``task``: the arm's joints free (and the waist's when the task frees it), the rest at the initial configuration."""
+    """The numeric reach test of ``hand`` for ``task``.
+
+    The arm's joints free (and the waist's when the task frees it), the rest at the initial configuration.
+    """
     robot = task.robot
     chain = task.hand_chain_from_root(hand)
     arm = set(robot.hand_chain(hand).joint_names)
@@ -198,7 +229,10 @@ def numeric_reach(task: Task, hand: str) -> NumericReach:
 
 
 def arm_reach(task: Task, hand: str) -> ArmReach | NumericReach:
-    """The reach test of ``hand`` for ``task`` (waist at its initial configuration, or free): :class:`ArmReach` in closed form for an S-R-S arm, else :class:`NumericReach`."""
+    """The reach test of ``hand`` for ``task`` (waist at its initial configuration, or free).
+
+    :class:`ArmReach` in closed form for an S-R-S arm, else :class:`NumericReach`.
+    """
     robot = task.robot
     arm = robot.hand_chain(hand)
     try:

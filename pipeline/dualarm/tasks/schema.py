@@ -50,7 +50,8 @@ MAX_TIME_S = 86_400.0
 MAX_REPETITIONS = 1_000
 #: Most moves, environment objects, WTAs and expected contacts of a task.
 MAX_MOVES, MAX_OBJECTS, MAX_CONTACT_PAIRS = 10_000, 100, 1_000
-#: Largest |component| of a direction (arc_axis, vertical) and its shortest length; any length between is normalised.
+#: Largest |component| of a direction (arc_axis, vertical) and its shortest length; any length between is
+#: normalised.
 MAX_DIRECTION, MIN_DIRECTION_LENGTH = 1e6, 1e-6
 #: Range of a task's velocity limits [rad/s] and acceleration limits [rad/s^2]: the lowest keeps a
 #: time-optimal motion's duration bounded, the highest is beyond any actuator.
@@ -76,7 +77,9 @@ FRAME_ROLES = ("left.shoulder", "right.shoulder", "shoulders")
 
 @dataclass(frozen=True)
 class Range:
-    """The range a number must lie in: [low, high], or (low, high] when ``low_open``; ``unit`` (" m", " s", ...) is for messages.
+    """The range a number must lie in: [low, high], or (low, high] when ``low_open``.
+
+    ``unit`` (" m", " s", ...) is for messages.
 
     As pydantic metadata (``Annotated[float, FINITE, Range(0, 1)]``) it refuses a number outside
     with the range in the message (``1e+300 m is outside the allowed range [-100, 100] m``) and
@@ -162,7 +165,11 @@ class _Model(BaseModel):
 
 
 class Pose(_Model):
-    """A pose: ``position`` [m], each coordinate within +-:data:`MAX_COORDINATE_M`, and ``rpy`` [rad] (R = Rz(yaw) Ry(pitch) Rx(roll)), each within +-:data:`MAX_ANGLE_RAD`."""
+    """A pose: ``position`` [m] and ``rpy`` [rad] (R = Rz(yaw) Ry(pitch) Rx(roll)).
+
+    Each coordinate of ``position`` within +-:data:`MAX_COORDINATE_M`, each angle of ``rpy`` within
+    +-:data:`MAX_ANGLE_RAD`.
+    """
 
     position: Position
     rpy: Rpy = (0.0, 0.0, 0.0)
@@ -216,9 +223,10 @@ class HandMove(_Model):
 
 
 class Move(_Model):
-    """One segment of the path: every driven hand moves for ``duration_s`` (in (0, :data:`MAX_TIME_S`] s, a whole number of control periods) with a smooth time scaling (zero velocity and acceleration at both ends).
+    """One segment of the path: every driven hand moves for ``duration_s`` with a smooth time scaling.
 
-    A driven hand not named holds still.
+    ``duration_s`` is in (0, :data:`MAX_TIME_S`] s, a whole number of control periods; the time
+    scaling has zero velocity and acceleration at both ends. A driven hand not named holds still.
     """
 
     duration_s: Duration
@@ -231,14 +239,19 @@ class Move(_Model):
 
 
 class Start(_Model):
-    """Start pose of each driven hand: a waypoint name, or ``"initial"`` for the pose the hand has at the task's initial configuration."""
+    """Start pose of each driven hand: a waypoint name, or ``"initial"``.
+
+    ``"initial"`` is the pose the hand has at the task's initial configuration.
+    """
 
     left: str | None = None
     right: str | None = None
 
 
 class Limits(_Model):
-    """Task-specific joint limits that replace the robot's: a number for every joint, or a table joint -> value.
+    """Task-specific joint limits that replace the robot's.
+
+    Each is a number for every joint, or a table joint -> value.
 
     Attributes:
         velocity: [rad/s], within :data:`VELOCITY_RANGE`.
@@ -313,7 +326,8 @@ class Gesture(_Model):
         # it shrinks at up to 1 / c_tuning
         if self.bound_feedforward and self.nu * self.c_tuning <= 1:
             raise ValueError(
-                f"bound_feedforward needs nu * c_tuning > 1 (here {self.nu * self.c_tuning:g}), or the lower and upper bounds cross"
+                f"bound_feedforward needs nu * c_tuning > 1 (here {self.nu * self.c_tuning:g}), "
+                "or the lower and upper bounds cross"
             )
         return self
 
@@ -324,13 +338,13 @@ class ArmAngle(_Model):
     Attributes:
         mode: ``auto`` (the default, the mode that finds a profile when one exists):
             see below; ``initial``: psi of the initial configuration, held (the branch nearest the
-            initial configuration, which may leave the joint limits along the path); ``constant``: ``value_rad``;
-            ``schedule``: ``schedule`` interpolated linearly in the time since the repetition
-            began; ``auto``: the branch and psi profile of least joint and arm-angle travel that
-            stays inside the joint limits (``margin_rad`` from them where it can) and within
-            ``range_rad``, the same in every repetition (see ``mc_path._auto``). Each is a function of
-            the pose and its place in the repetition, not of the history, so repeated passes
-            give the same joints.
+            initial configuration, which may leave the joint limits along the path); ``constant``:
+            ``value_rad``; ``schedule``: ``schedule`` interpolated linearly in the time since the
+            repetition began; ``auto``: the branch and psi profile of least joint and arm-angle
+            travel that stays inside the joint limits (``margin_rad`` from them where it can) and
+            within ``range_rad``, the same in every repetition (see ``mc_path._auto``). Each is a
+            function of the pose and its place in the repetition, not of the history, so repeated
+            passes give the same joints.
         value_rad: psi per hand for ``constant`` [rad], within +-:data:`MAX_ANGLE_RAD`.
         schedule: per hand, (time within a repetition [s], in [0, :data:`MAX_TIME_S`], psi [rad],
             within +-:data:`MAX_ANGLE_RAD`) pairs, times increasing.
@@ -367,7 +381,7 @@ class ArmAngle(_Model):
                 raise ValueError("mode 'schedule' needs schedule = { left = [[t, psi], ...] }")
             for hand, points in self.schedule.items():
                 times = [t for t, _ in points]
-                if not points or any(b <= a for a, b in zip(times, times[1:])):
+                if not points or any(b <= a for a, b in zip(times, times[1:], strict=False)):
                     raise ValueError(f"schedule.{hand}: times must increase")
         _check_direction(self.vertical, "vertical")
         return self
@@ -446,18 +460,22 @@ class WorkspaceTargetArea(_Model):
 
     @model_validator(mode="after")
     def _ordered(self) -> WorkspaceTargetArea:
-        for row, (lo, hi) in zip(("x", "y", "z", "roll", "pitch", "yaw"), self.bounds):
+        for row, (lo, hi) in zip(("x", "y", "z", "roll", "pitch", "yaw"), self.bounds, strict=True):
             if lo > hi:
                 raise ValueError(f"bounds row {row}: lower {lo:g} above upper {hi:g}")
         return self
 
 
 class Transfer(_Model):
-    """What a task uses on a robot other than the one its ``initial`` and ``[gesture]`` are written for (run on another with ``--robot``).
+    """What a task uses on a robot other than the one its ``initial`` and ``[gesture]`` are written for.
+
+    The task runs on another robot with ``--robot``.
 
     Attributes:
-        written_for: the ``name`` (in its robot.toml) of the robot ``initial`` and ``[gesture]`` are written for.
-        initial: the initial configuration there: a home pose of that robot's ``robot.toml`` (``"ready"``) or joint -> value [rad].
+        written_for: the ``name`` (in its robot.toml) of the robot ``initial`` and ``[gesture]`` are
+            written for.
+        initial: the initial configuration there: a home pose of that robot's ``robot.toml``
+            (``"ready"``) or joint -> value [rad].
         gesture: TV-GDD's bounds there (``[gesture]`` names the first robot's joints); default none.
         limits: the limits there in place of ``[limits]`` (a paper's robot's limits are not
             another robot's); default none: that robot's own.

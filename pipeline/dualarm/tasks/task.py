@@ -64,7 +64,10 @@ class Task:
     def hand_poses(
         self, joint_names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]
     ) -> dict[str, np.ndarray]:
-        """Each driven hand's pose (N, 4, 4) [m] at configurations ``q`` (N, n) [rad] of ``joint_names``, the other joints at ``fixed`` or else at their initial values."""
+        """Each driven hand's pose (N, 4, 4) [m] at configurations ``q`` (N, n) [rad] of ``joint_names``.
+
+        The other joints at ``fixed`` or else at their initial values.
+        """
         return hand_poses_at(self.robot, self.spec.hands, joint_names, q, {**self.initial_q, **fixed})
 
     def waypoint_pose(self, name: str) -> np.ndarray:
@@ -81,7 +84,10 @@ class Task:
 def hand_poses_at(
     robot: Robot, hands: Sequence[str], joint_names: Sequence[str], q: np.ndarray, others: Mapping[str, float]
 ) -> dict[str, np.ndarray]:
-    """Each of ``hands``' pose (N, 4, 4) [m] in the robot base frame at configurations ``q`` (N, n) [rad] of ``joint_names``, every other joint at its value in ``others`` [rad]."""
+    """Each of ``hands``' pose (N, 4, 4) [m] in the robot base frame at configurations ``q`` (N, n) [rad].
+
+    ``q`` of ``joint_names``, every other joint at its value in ``others`` [rad].
+    """
     q = np.asarray(q, dtype=float).reshape(-1, len(joint_names))
     columns = {n: q[:, i] for i, n in enumerate(joint_names)}
     poses = {}

@@ -1,1 +1,4 @@
-"""Analytic IK: IK-Geo's subproblems, MC-Inverse (one pose, along a path), ikfast-style, and SEW IK (one pose, along a path)."""
+"""Analytic IK: IK-Geo's subproblems, MC-Inverse, ikfast-style, and SEW IK.
+
+MC-Inverse and SEW IK each for one pose and along a path.
+"""

@@ -68,7 +68,10 @@ DEFAULT_RESOLUTION_RAD = 0.01
 
 
 def _free_grid(lower: float, upper: float, resolution: float) -> np.ndarray:
-    """Values of the free joint from ``lower`` to ``upper`` [rad], both included, evenly spaced at most ``resolution`` [rad] apart (+-pi for an unlimited joint)."""
+    """Values of the free joint from ``lower`` to ``upper`` [rad], both included.
+
+    Evenly spaced at most ``resolution`` [rad] apart (+-pi for an unlimited joint).
+    """
     lo = lower if np.isfinite(lower) else -np.pi
     hi = upper if np.isfinite(upper) else np.pi
     if hi <= lo:
@@ -111,7 +114,7 @@ def _candidates(
                 q = cs.vertcat(
                     *[
                         a if i == FREE_JOINT else into_limits(a, lo, hi)
-                        for i, (a, lo, hi) in enumerate(zip(solved, lower, upper))
+                        for i, (a, lo, hi) in enumerate(zip(solved, lower, upper, strict=True))
                     ]
                 )
                 outside = cs.logic_or(cs.mmax(q - upper) > 0, cs.mmax(lower - q) > 0)
@@ -168,7 +171,9 @@ class IkfastStyle:
 
     @classmethod
     def of(cls, chain: Chain, resolution_rad: float = DEFAULT_RESOLUTION_RAD) -> IkfastStyle:
-        """The solver for ``chain`` with theta_3 discretised at ``resolution_rad`` [rad]; derived once per chain and resolution in a process, then kept.
+        """The solver for ``chain`` with theta_3 discretised at ``resolution_rad`` [rad].
+
+        Derived once per chain and resolution in a process, then kept.
 
         Raises:
             NotSRSError: the chain is not S-R-S, or consecutive shoulder or wrist axes are not
@@ -205,7 +210,9 @@ class IkfastStyle:
         return self._batched.candidates(poses, theta3)
 
     def valid_candidates(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The valid candidates of one hand pose (4x4, chain base frame) [m] over all free values, in one mapped call over the F x 8 candidates.
+        """The valid candidates of one hand pose (4x4, chain base frame) [m] over all free values.
+
+        In one mapped call over the F x 8 candidates.
 
         Returns:
             q (M, 7) [rad], in the order of the free values, then of the candidates, and the free
@@ -221,7 +228,9 @@ class IkfastStyle:
     def nearest(
         self, pose: np.ndarray, previous: np.ndarray, candidates: tuple[np.ndarray, np.ndarray] | None = None
     ) -> IkfastResult:
-        """The valid candidate over all free values nearest ``previous`` (7,) [rad] (Euclidean joint distance, the first of equals) for one hand pose (4x4, chain base frame) [m].
+        """The valid candidate over all free values nearest ``previous`` (7,) [rad] for one hand pose.
+
+        Nearest by Euclidean joint distance, the first of equals; the hand pose is 4x4, chain base frame [m].
 
         ``candidates``: the pose's :meth:`valid_candidates`, if known (they do not depend on ``previous``).
         """

@@ -94,10 +94,14 @@ class McInverse:
 
     @classmethod
     def of(cls, chain: Chain, vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> McInverse:
-        """The solver for ``chain``; ``vertical`` is V of eq (1) in the chain base frame. Derived once per chain and vertical in a process, then kept (a study's worker derives it once, not per trial).
+        """The solver for ``chain``; ``vertical`` is V of eq (1) in the chain base frame.
+
+        Derived once per chain and vertical in a process, then kept (a study's worker derives it once, not per
+        trial).
 
         Raises:
-            NotSRSError: the chain is not S-R-S, or consecutive shoulder or wrist axes are not perpendicular.
+            NotSRSError: the chain is not S-R-S, or consecutive shoulder or wrist axes are not
+                perpendicular.
         """
         return _solver(chain, (float(vertical[0]), float(vertical[1]), float(vertical[2])))
 
@@ -111,7 +115,8 @@ class McInverse:
         for a, b in ((0, 1), (1, 2), (4, 5), (5, 6)):
             if abs(k[a] @ k[b]) > PERPENDICULAR_COSINE:
                 raise NotSRSError(
-                    f"chain '{chain.name}': the axes of {movable[a].name} and {movable[b].name} are not perpendicular, which MC-Inverse needs",
+                    f"chain '{chain.name}': the axes of {movable[a].name} and {movable[b].name} are not perpendicular, "
+                    "which MC-Inverse needs",
                     chain=chain.name,
                 )
         S, E0, W0 = (np.asarray(x).ravel() for x in kin.points(np.zeros(7)))
@@ -147,7 +152,10 @@ class McInverse:
             for t1, t2, t3 in shoulders:
                 for t5, t6, t7 in wrists:
                     q = cs.vertcat(
-                        *[into_limits(a, lo, hi) for a, lo, hi in zip((t1, t2, t3, theta4, t5, t6, t7), lower, upper)]
+                        *[
+                            into_limits(a, lo, hi)
+                            for a, lo, hi in zip((t1, t2, t3, theta4, t5, t6, t7), lower, upper, strict=True)
+                        ]
                     )
                     outside = cs.logic_or(cs.mmax(q - upper) > 0, cs.mmax(lower - q) > 0)
                     reasons.append(
@@ -176,7 +184,7 @@ class McInverse:
         # each valid candidate's distance to its nearest joint limit, for the arm-angle search (mc_path._auto)
         margins = [
             cs.if_else(r == VALID, cs.mmin(cs.fmin(q - cs.DM(lower), cs.DM(upper) - q)), -cs.inf)
-            for q, r in zip(columns, reasons)
+            for q, r in zip(columns, reasons, strict=True)
         ]
         with_margins = cs.Function(
             "mc_inverse_margins",
@@ -226,7 +234,10 @@ class McInverse:
         return self._batched.candidates(poses, psi)
 
     def margins_on_grid(self, poses: np.ndarray, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidates for N poses (N, 4, 4) [m], each at every arm angle of a grid (G,) [rad], with each candidate's distance to its nearest joint limit, -inf where it is not valid: q (N, G, 8, 7) [rad], margin (N, G, 8) [rad].
+        """Candidates for N poses (N, 4, 4) [m], each at every arm angle of a grid (G,) [rad].
+
+        With each candidate's distance to its nearest joint limit, -inf where it is not valid: q (N, G, 8, 7) [rad],
+        margin (N, G, 8) [rad].
 
         One mapped call per chunk of poses, each pose passed once for its G angles.
         """
@@ -277,7 +288,9 @@ class McSolution:
         return self.reason == VALID
 
     def nearest(self, seed: np.ndarray | Mapping[str, float]) -> np.ndarray:
-        """The valid candidate nearest ``seed`` (largest joint difference), (7,) [rad]: the branch MC-Inverse keeps along a path when ``seed`` is the initial configuration.
+        """The valid candidate nearest ``seed`` (largest joint difference), (7,) [rad].
+
+        The branch MC-Inverse keeps along a path when ``seed`` is the initial configuration.
 
         Args:
             seed: the arm's joints (7,) [rad], or a configuration joint name -> value holding them.
@@ -298,7 +311,10 @@ class McSolution:
 
 
 def nearest_candidate(q: np.ndarray, reason: np.ndarray, seed: np.ndarray) -> int | None:
-    """Index of the valid candidate of ``q`` (8, 7) [rad] (``reason`` (8,)) nearest ``seed`` (7,) [rad] by the largest joint difference, or None if none is valid."""
+    """Index of the valid candidate of ``q`` (8, 7) [rad] (``reason`` (8,)) nearest ``seed`` (7,) [rad].
+
+    Nearest by the largest joint difference, or None if none is valid.
+    """
     valid = np.flatnonzero(reason == VALID)
     if valid.size == 0:
         return None
@@ -391,7 +407,7 @@ def candidate_table(
             "orientation_error_rad": float(o),
             "arm_angle_rad": float(a),
         }
-        for q, r, p, o, a in zip(solution.q, solution.reason, position_error, orientation_error, angles)
+        for q, r, p, o, a in zip(solution.q, solution.reason, position_error, orientation_error, angles, strict=True)
     ]
     return {
         "chain": {"base": chain.base, "tip": chain.tip, "joints": list(chain.joint_names)},
@@ -410,7 +426,9 @@ SWEEP_STEP_RANGE_RAD = (np.pi / 18000, np.pi / 6)
 
 @dataclass(frozen=True)
 class ArmAngleSweep:
-    """Every candidate of one hand pose over a grid of arm angles: which psi each branch reaches within the joint limits.
+    """Every candidate of one hand pose over a grid of arm angles.
+
+    Which psi each branch reaches within the joint limits.
 
     Attributes:
         psi_rad: the grid, (G,) [rad], from -pi in steps of ``step_rad``.
@@ -459,10 +477,13 @@ class ArmAngleSweep:
 
 
 def sweep_arm_angle(solver: McInverse, pose: np.ndarray, step_rad: float = SWEEP_STEP_RAD) -> ArmAngleSweep:
-    """The 8 candidates of one hand pose (4x4, chain base frame) [m] at every arm angle of a grid from -pi in steps of ``step_rad`` [rad], in one mapped call.
+    """The 8 candidates of one hand pose (4x4, chain base frame) [m] at every arm angle of a grid.
+
+    The grid runs from -pi in steps of ``step_rad`` [rad]; in one mapped call.
 
     Raises:
-        InvalidArgumentError: ``pose`` is not a 4x4 rigid transform, or ``step_rad`` is outside :data:`SWEEP_STEP_RANGE_RAD`.
+        InvalidArgumentError: ``pose`` is not a 4x4 rigid transform, or ``step_rad`` is outside
+            :data:`SWEEP_STEP_RANGE_RAD`.
     """
     T = rigid_transforms(pose, "pose")
     step = float(finite_array(step_rad, "step_rad", ()))
@@ -475,12 +496,18 @@ def sweep_arm_angle(solver: McInverse, pose: np.ndarray, step_rad: float = SWEEP
 
 
 def branch_label(branch: int) -> str:
-    """``branch`` (0-7) as the command line and messages name it: ``3 (elbow 0, shoulder 1, wrist 0)``, numbered from 1."""
+    """``branch`` (0-7) as the command line and messages name it, numbered from 1.
+
+    For example ``3 (elbow 0, shoulder 1, wrist 0)``.
+    """
     return f"{branch + 1} (elbow {branch // 4}, shoulder {branch // 2 % 2}, wrist {branch % 2})"
 
 
 def sweep_table(sweep: ArmAngleSweep) -> list[dict]:
-    """Per branch (numbered 1-8) its feasible arm-angle intervals [rad] and, when it has none, the most frequent reason; JSON-ready."""
+    """Per branch (numbered 1-8) its feasible arm-angle intervals [rad]; JSON-ready.
+
+    When it has none, the most frequent reason.
+    """
     rows = []
     for b in range(CANDIDATES):
         intervals = sweep.intervals(b)
@@ -527,11 +554,17 @@ class PoseFrame:
         return cls("robot", robot.urdf.root, ChainKinematics.of(between).pose(np.zeros(between.dof)))
 
     def to_chain(self, pose: tuple[float, ...]) -> np.ndarray:
-        """A pose X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z) in this frame as a 4x4 transform in the chain base frame [m]."""
+        """A pose X Y Z [m] ROLL PITCH YAW [rad] (extrinsic x-y-z) in this frame as a 4x4 transform.
+
+        The transform is in the chain base frame [m].
+        """
         from dualarm.model.poses import invert, pose_matrix
 
         return invert(self.chain_in_frame) @ pose_matrix(pose[:3], pose[3:])
 
     def record(self) -> dict:
-        """JSON-ready: ``kind``, ``link`` and, for the robot frame, that the joints between it and the chain are at 0."""
+        """JSON-ready: ``kind`` and ``link``.
+
+        And, for the robot frame, that the joints between it and the chain are at 0.
+        """
         return {"kind": self.kind, "link": self.link, **({"joints_between_at": 0.0} if self.kind == "robot" else {})}

@@ -6,11 +6,11 @@ throughout, then every repetition of a path gives the same joints. Here psi foll
 ``[arm_angle]`` table (``auto``, the default: the least-travel profile within the limits found
 over the first repetition, see :func:`_auto`; the initial configuration's psi held; a constant; or
 a schedule over the time within a repetition). :func:`arm_angle_profiles` reads back the profile
-and branch a path follows (the run's manifest and metrics hold them). The branch (elbow, shoulder and wrist root of the 8
-candidates) is the one nearest the initial configuration at the first sample (``auto`` picks it
-with the profile), and it is kept. A sample where
-that branch is invalid, or where a joint moves more than ``max_joint_step_rad`` between samples,
-fails the stage with the sample, the time and the joint named; nothing is silently swapped.
+and branch a path follows (the run's manifest and metrics hold them). The branch (elbow, shoulder
+and wrist root of the 8 candidates) is the one nearest the initial configuration at the first
+sample (``auto`` picks it with the profile), and it is kept. A sample where that branch is
+invalid, or where a joint moves more than ``max_joint_step_rad`` between samples, fails the stage
+with the sample, the time and the joint named; nothing is silently swapped.
 
 Each arm is solved in its chain base frame (the torso); a free waist is held at its initial
 value, because MC-Inverse solves 7-DOF arms (see :mod:`dualarm.ik.arms`). One pose alone:
@@ -56,7 +56,11 @@ def settings_for(task: Task, **overrides: object) -> ArmAngle:
 
 
 def arm_angles(spec: ArmAngle, hand: str, reference: CartesianReference, initial: float) -> np.ndarray:
-    """Psi per sample (N,) [rad] for ``hand`` by the ``[arm_angle]`` settings ``spec``; ``initial`` is the arm's initial configuration's psi [rad] (``auto`` gives it too, the preferred one; see :func:`_auto`). SEW IK's angle follows the same modes (:mod:`dualarm.ik.analytic.sew_path`)."""
+    """Psi per sample (N,) [rad] for ``hand`` by the ``[arm_angle]`` settings ``spec``.
+
+    ``initial`` is the arm's initial configuration's psi [rad] (``auto`` gives it too, the preferred
+    one; see :func:`_auto`). SEW IK's angle follows the same modes (:mod:`dualarm.ik.analytic.sew_path`).
+    """
     N = len(reference)
     if spec.mode in ("initial", "auto"):
         return np.full(N, initial)
@@ -70,11 +74,15 @@ def arm_angles(spec: ArmAngle, hand: str, reference: CartesianReference, initial
     return np.interp(time_in_repetition(reference.t, reference.rep), times, values)
 
 
+#: The default settings of :func:`solve_mc_inverse`: the ``[arm_angle]`` table's defaults.
+DEFAULT_ARM_ANGLE = ArmAngle()
+
+
 def solve_mc_inverse(
     robot: Robot,
     reference: CartesianReference,
     q0: Mapping[str, float] | str | None = None,
-    settings: ArmAngle = ArmAngle(),
+    settings: ArmAngle = DEFAULT_ARM_ANGLE,
 ) -> JointPath:
     """Joint path of every hand of ``reference`` by MC-Inverse, each arm an S-R-S chain.
 
@@ -116,7 +124,11 @@ def solve_mc_inverse(
 def arm_solvers(
     robot: Robot, reference: CartesianReference, q0: Mapping[str, float], spec: ArmAngle
 ) -> list[tuple[ArmProblem, McInverse, float]]:
-    """Each arm of ``reference`` (:func:`~dualarm.ik.arms.arm_problems` at the configuration ``q0``), its MC-Inverse solver with ``spec.vertical`` as the arm angle's reference direction, and its initial configuration's arm angle [rad]."""
+    """Each arm of ``reference``, its MC-Inverse solver and its initial configuration's arm angle [rad].
+
+    The arms are :func:`~dualarm.ik.arms.arm_problems` at the configuration ``q0``; each solver has
+    ``spec.vertical`` as the arm angle's reference direction.
+    """
     vertical = tuple(np.asarray(spec.vertical) / np.linalg.norm(spec.vertical))
     arms = []
     for arm in arm_problems(robot, reference, q0):
@@ -136,7 +148,11 @@ def _kept_branch(
     max_step: float,
     branch: int | None = None,
 ) -> np.ndarray:
-    """The candidate ``branch`` (by default the one nearest ``q0`` [rad] at sample 0), checked along the path; ``psi`` (N,) [rad] the arm angle per sample."""
+    """The candidate ``branch``, checked along the path.
+
+    ``branch`` is by default the one nearest ``q0`` [rad] at sample 0; ``psi`` (N,) [rad] the arm
+    angle per sample.
+    """
     names = solver.chain.joint_names
     if branch is None:
         branch = nearest_candidate(candidates[0], reasons[0], q0)
@@ -146,7 +162,8 @@ def _kept_branch(
             outside = reasons[0, nearest] == OUTSIDE_LIMITS
             detail = _limit_detail(solver, candidates[0, nearest]) if outside else ""
             raise NoSolutionFound(
-                f"MC-Inverse, {hand} arm: no valid solution at the path start ({why}){detail} at psi = {psi[0]:.4f} rad; {LIMIT_HINT}",
+                f"MC-Inverse, {hand} arm: no valid solution at the path start ({why}){detail} "
+                f"at psi = {psi[0]:.4f} rad; {LIMIT_HINT}",
                 stage="ik",
                 sample=0,
                 t_s=float(reference.t[0]),
@@ -159,8 +176,10 @@ def _kept_branch(
         outside = reasons[k, branch] == OUTSIDE_LIMITS
         joint = names[_worst_joint(solver, q[k])] if outside else None
         raise StageError(
-            f"MC-Inverse, {hand} arm: sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]}) has no valid solution on the kept branch {branch + 1}: "
-            f"{REASONS[int(reasons[k, branch])]}{_limit_detail(solver, q[k]) if outside else ''} at psi = {psi[k]:.4f} rad; {LIMIT_HINT}",
+            f"MC-Inverse, {hand} arm: sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]}) "
+            f"has no valid solution on the kept branch {branch + 1}: "
+            f"{REASONS[int(reasons[k, branch])]}{_limit_detail(solver, q[k]) if outside else ''} "
+            f"at psi = {psi[k]:.4f} rad; {LIMIT_HINT}",
             stage="ik",
             sample=int(k),
             t_s=float(reference.t[k]),
@@ -171,7 +190,8 @@ def _kept_branch(
     if jumps.size:
         k, j = jumps[0]
         raise StageError(
-            f"MC-Inverse, {hand} arm: {names[j]} jumps {steps[k, j]:.3f} rad between samples {k} and {k + 1} (t = {reference.t[k + 1]:.3f} s), above arm_angle.max_joint_step_rad = {max_step}",
+            f"MC-Inverse, {hand} arm: {names[j]} jumps {steps[k, j]:.3f} rad between samples {k} and {k + 1} "
+            f"(t = {reference.t[k + 1]:.3f} s), above arm_angle.max_joint_step_rad = {max_step}",
             stage="ik",
             sample=int(k + 1),
             t_s=float(reference.t[k + 1]),
@@ -181,7 +201,10 @@ def _kept_branch(
 
 
 #: What a user can do when a branch leaves the joint limits.
-LIMIT_HINT = 'set [arm_angle] mode = "auto" in the task (or a range_rad the arm angle may use; dualarm task check and dualarm ik srs --sweep show the feasible psi)'
+LIMIT_HINT = (
+    'set [arm_angle] mode = "auto" in the task (or a range_rad the arm angle may use; '
+    "dualarm task check and dualarm ik srs --sweep show the feasible psi)"
+)
 
 
 def _worst_joint(solver: McInverse, q: np.ndarray) -> int:
@@ -190,12 +213,18 @@ def _worst_joint(solver: McInverse, q: np.ndarray) -> int:
 
 
 def _limit_detail(solver: McInverse, q: np.ndarray) -> str:
-    """``: left_elbow at 2.1000 rad is 0.1000 rad (5.7 deg) above its upper limit 2.0000 rad`` for a candidate ``q`` (7,) [rad] outside the limits."""
+    """The detail of a message on a candidate ``q`` (7,) [rad] outside the limits: its worst joint.
+
+    Such as ``: left_elbow at 2.1000 rad is 0.1000 rad (5.7 deg) above its upper limit 2.0000 rad``.
+    """
     j = _worst_joint(solver, q)
     above = q[j] > solver.upper[j]
     excess = q[j] - solver.upper[j] if above else solver.lower[j] - q[j]
     side, limit = ("above its upper", solver.upper[j]) if above else ("below its lower", solver.lower[j])
-    return f": {solver.chain.joint_names[j]} at {q[j]:.4f} rad is {excess:.4f} rad ({np.degrees(excess):.1f} deg) {side} limit {limit:.4f} rad"
+    return (
+        f": {solver.chain.joint_names[j]} at {q[j]:.4f} rad is {excess:.4f} rad "
+        f"({np.degrees(excess):.1f} deg) {side} limit {limit:.4f} rad"
+    )
 
 
 def _wrap(angle):
@@ -215,8 +244,8 @@ def _auto(
 
     A shortest path over the grid of (sample, arm angle) of the first repetition, per branch:
     a node is allowed where the branch is valid within the limits and psi within
-    the open interval ``spec.range_rad``, a step where psi moves at most :data:`AUTO_MAX_CELLS` grid cells and no
-    joint more than ``spec.max_joint_step_rad``. The cost is the path's travel, sum over steps of
+    the open interval ``spec.range_rad``, a step where psi moves at most :data:`AUTO_MAX_CELLS` grid
+    cells and no joint more than ``spec.max_joint_step_rad``. The cost is the path's travel, sum over steps of
     |change of psi| + the largest joint change [rad], plus per sample how far the branch comes
     closer than ``spec.margin_rad`` to a limit [rad], plus, weighted by
     :data:`START_WEIGHT`, the start's distance from ``preferred`` and its largest joint distance
@@ -254,7 +283,8 @@ def _auto(
         k = first[reached]
         raise StageError(
             f"MC-Inverse, {hand} arm: no arm angle in arm_angle.range_rad keeps any branch inside the joint limits "
-            f"with joint steps within arm_angle.max_joint_step_rad = {spec.max_joint_step_rad} beyond sample {k} (t = {reference.t[k]:.3f} s)"
+            f"with joint steps within arm_angle.max_joint_step_rad = {spec.max_joint_step_rad} "
+            f"beyond sample {k} (t = {reference.t[k]:.3f} s)"
         )
     _, cells, branch = best
     profile = grid[cells]
@@ -271,7 +301,11 @@ STEP_CHUNK = 32
 
 
 def _step_costs(q: np.ndarray, max_step: float) -> np.ndarray:
-    """The cost of the step into grid cell g at sample k from cell g - d at k - 1, d = -W..W: |change of psi| + the largest joint change [rad], inf where a joint moves more than ``max_step``: q (n, G, 7) [rad] -> (n - 1, G, 2 W + 1)."""
+    """The cost of the step into grid cell g at sample k from cell g - d at k - 1, d = -W..W.
+
+    |change of psi| + the largest joint change [rad], inf where a joint moves more than ``max_step``:
+    q (n, G, 7) [rad] -> (n - 1, G, 2 W + 1).
+    """
     W, G = AUTO_MAX_CELLS, q.shape[1]
     joints = np.ascontiguousarray(
         np.moveaxis(q, -1, 0)
@@ -307,7 +341,10 @@ START_BATCH = 8
 
 
 def _cheapest_profile(node: np.ndarray, step_cost: np.ndarray, start: np.ndarray, closed: bool, n: int):
-    """Dynamic programming over the (sample, grid cell) graph of :func:`_auto`: node costs (m, G), step costs (m - 1, G, 2 W + 1) (see :func:`_step_costs`), start costs (G,), for the first m of the path's n samples (m < n: no node is allowed at sample m - 1).
+    """Dynamic programming over the (sample, grid cell) graph of :func:`_auto`.
+
+    Node costs (m, G), step costs (m - 1, G, 2 W + 1) (see :func:`_step_costs`), start costs (G,),
+    for the first m of the path's n samples (m < n: no node is allowed at sample m - 1).
 
     Every :data:`START_STRIDE`-th start cell is tried. One pass from all of them at once finds
     where profiles end, and one pass backwards the least cost from each cell to the path's end;
@@ -323,7 +360,10 @@ def _cheapest_profile(node: np.ndarray, step_cost: np.ndarray, start: np.ndarray
     W = AUTO_MAX_CELLS
 
     def forward(cost: np.ndarray, back: np.ndarray | None = None) -> np.ndarray | int:
-        """Least costs (..., G) at the last sample from ``cost`` (..., G) at the first, or the first sample none reaches; ``back`` (m, G) receives each cell's chosen shift."""
+        """Least costs (..., G) at the last sample from ``cost`` (..., G) at the first.
+
+        Or the first sample none reaches; ``back`` (m, G) receives each cell's chosen shift.
+        """
         best, option = np.empty(cost.shape), np.empty(cost.shape)
         for k in range(1, m):
             # cell g reached from cell g - d: the cost wrapped around the grid, shifted by d
@@ -412,7 +452,11 @@ class ArmAngleProfile:
         return {"mode": self.mode, "branch": self.branch + 1, **psi}
 
     def metrics(self) -> dict[str, float]:
-        """``ik.arm_angle_branch.<hand>`` (1-8), ``ik.arm_angle_min_rad.<hand>`` and ``ik.arm_angle_max_rad.<hand>``."""
+        """The arm angle's metrics of the hand: its branch and its range.
+
+        ``ik.arm_angle_branch.<hand>`` (1-8), ``ik.arm_angle_min_rad.<hand>`` and
+        ``ik.arm_angle_max_rad.<hand>``.
+        """
         return {
             f"ik.arm_angle_branch.{self.hand}": float(self.branch + 1),
             f"ik.arm_angle_min_rad.{self.hand}": self.psi_min_rad,
@@ -420,7 +464,10 @@ class ArmAngleProfile:
         }
 
     def line(self) -> str:
-        """One line for the command line: ``MC-Inverse, left arm: psi auto in [-1.2000, -0.8000] rad, branch 3 (elbow 0, shoulder 1, wrist 0)``."""
+        """One line for the command line.
+
+        Such as ``MC-Inverse, left arm: psi auto in [-1.2000, -0.8000] rad, branch 3 (elbow 0, shoulder 1, wrist 0)``.
+        """
         psi = (
             f"held at {self.psi_min_rad:.4f} rad"
             if self.constant
@@ -434,7 +481,10 @@ CONSTANT_TOLERANCE_RAD = 1e-9
 
 
 def arm_angle_profiles(path: JointPath, robot: Robot, settings: ArmAngle) -> tuple[ArmAngleProfile, ...]:
-    """The arm-angle profile of each arm of an MC-Inverse joint path: psi of eq (1) from its joints, and the branch, the candidate of MC-Inverse at the first sample's pose and psi equal to its joints.
+    """The arm-angle profile of each arm of an MC-Inverse joint path.
+
+    Psi of eq (1) from its joints, and the branch, the candidate of MC-Inverse at the first sample's
+    pose and psi equal to its joints.
 
     Raises:
         NotSRSError: an arm is not S-R-S.
@@ -459,7 +509,10 @@ def arm_angle_profiles(path: JointPath, robot: Robot, settings: ArmAngle) -> tup
 
 
 def recorded(path: JointPath, robot: Robot, settings: ArmAngle) -> Recorded:
-    """MC-Inverse's arm-angle profile of each arm: recorded as ``arm_angle_profile``, its metrics, a line per hand."""
+    """MC-Inverse's arm-angle profile of each arm.
+
+    Recorded as ``arm_angle_profile``, its metrics, a line per hand.
+    """
     profiles = arm_angle_profiles(path, robot, settings)
     return Recorded(
         settings={"arm_angle_profile": {p.hand: p.record() for p in profiles}},

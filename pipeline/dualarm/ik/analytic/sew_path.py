@@ -1,12 +1,15 @@
-"""SEW IK along a Cartesian path (``--ik sew``): the SEW angle per sample, every solution there, one kept, checked steps.
+"""SEW IK along a Cartesian path (``--ik sew``).
 
-MC-Inverse's consistency argument (:mod:`dualarm.ik.analytic.mc_path`) for 7R arms that are not S-R-S: when
-the SEW angle is a function of where the hand is on the task and the same solution is followed,
-every repetition of a path gives the same joints. At each sample every solution at the SEW angle is
-enumerated (:func:`dualarm.ik.analytic.sew.solve_many`, all samples at once); the one kept is the one inside
-the joint limits nearest the initial configuration at the first sample, then at each sample the one
-inside the limits nearest the previous sample's (a SEW solution has no fixed branch label: the
-roots of the 1-D search appear and merge along a path, so the branch is followed by continuity).
+The SEW angle per sample, every solution there, one kept, checked steps.
+
+MC-Inverse's consistency argument (:mod:`dualarm.ik.analytic.mc_path`) for 7R arms that are not
+S-R-S: when the SEW angle is a function of where the hand is on the task and the same solution is
+followed, every repetition of a path gives the same joints. At each sample every solution at the
+SEW angle is enumerated (:func:`dualarm.ik.analytic.sew.solve_many`, all samples at once); the one
+kept is the one inside the joint limits nearest the initial configuration at the first sample,
+then at each sample the one inside the limits nearest the previous sample's (a SEW solution has no
+fixed branch label: the roots of the 1-D search appear and merge along a path, so the branch is
+followed by continuity).
 A sample without such a solution, or a joint step above ``max_joint_step_rad``, fails the stage
 naming the sample, the time and the joint; nothing is swapped silently.
 
@@ -39,30 +42,42 @@ from dualarm.tasks.schema import ArmAngle
 
 __all__ = ["settings_for", "sew_angle_of", "solve_sew"]
 
-#: ``auto``: SEW angles of the grid the profile moves on, evenly over the circle from the initial configuration's (10 degrees apart).
+#: ``auto``: SEW angles of the grid the profile moves on, evenly over the circle from the initial configuration's
+#: (10 degrees apart).
 AUTO_ANGLES = 36
-#: ``auto``: samples of the first repetition the profile is planned on (evenly spaced; the angle is interpolated between them).
+#: ``auto``: samples of the first repetition the profile is planned on (evenly spaced; the angle is interpolated
+#: between them).
 AUTO_SAMPLES = 64
 #: ``auto``: most grid cells the angle moves from one planned sample to the next.
 AUTO_MAX_CELLS = 3
 #: ``auto``: most times the profile is planned again with more samples where the last one failed.
 AUTO_ROUNDS = 24
-#: ``auto``: the path followed and the planned solution at a planned sample differ by more than this when the path left it [rad].
+#: ``auto``: the path followed and the planned solution at a planned sample differ by more than this when the
+#: path left it [rad].
 SAME_SOLUTION_RAD = 1e-6
 
 
 def sew_angle_of(spec: ArmAngle) -> SewAngle:
-    """The stereographic SEW angle of the ``[arm_angle]`` settings: e_r their vertical, the singular half-line along -e_r."""
+    """The stereographic SEW angle of the ``[arm_angle]`` settings.
+
+    e_r is their vertical, the singular half-line along -e_r.
+    """
     return SewAngle.stereographic(spec.vertical)
+
+
+#: The default settings of :func:`solve_sew`: the initial configuration's SEW angle, held.
+DEFAULT_ARM_ANGLE = ArmAngle(mode="initial")
 
 
 def solve_sew(
     robot: Robot,
     reference: CartesianReference,
     q0: Mapping[str, float] | str | None = None,
-    settings: ArmAngle = ArmAngle(mode="initial"),
+    settings: ArmAngle = DEFAULT_ARM_ANGLE,
 ) -> JointPath:
-    """Joint path of every hand of ``reference`` by SEW IK (module docstring), each arm a 7R chain of a family :mod:`dualarm.ik.analytic.sew` solves.
+    """Joint path of every hand of ``reference`` by SEW IK (module docstring).
+
+    Each arm is a 7R chain of a family :mod:`dualarm.ik.analytic.sew` solves.
 
     Raises:
         NotSewError: an arm is of no such family (one line).
@@ -87,7 +102,7 @@ def solve_sew(
         else:
             psi = mc_path.arm_angles(spec, problem.hand, reference, initial)
         rest = [k for k in range(len(reference)) if k not in found]
-        found.update(zip(rest, solve_many(arm, problem.targets[rest], psi[rest], sew)))
+        found.update(zip(rest, solve_many(arm, problem.targets[rest], psi[rest], sew), strict=True))
         q = _followed(
             problem.hand,
             problem.chain.joint_names,
@@ -117,7 +132,11 @@ def _auto(
     limits: tuple[np.ndarray, np.ndarray, np.ndarray],
     spec: ArmAngle,
 ) -> tuple[np.ndarray, dict[int, SewSolutions]]:
-    """``auto``: the SEW angle per sample (N,) [rad] and the solutions there of the first repetition's samples (by sample), a profile of least travel that keeps a solution inside the limits (MC-Inverse's ``auto`` for an arm without fixed branches).
+    """``auto``: the SEW angle per sample (N,) [rad] and the solutions there of the first repetition.
+
+    The solutions are those of the first repetition's samples (by sample); the angles are a profile
+    of least travel that keeps a solution inside the limits (MC-Inverse's ``auto`` for an arm without
+    fixed branches).
 
     The profile is planned (:func:`_plan`) on some samples of the first repetition, at first
     :data:`AUTO_SAMPLES` evenly spaced; between them the angle is interpolated linearly. The first
@@ -187,7 +206,7 @@ def _auto(
             planned |= more
         else:
             return profile[first_repetition_index(reference.t, reference.rep, reference.period_s)], dict(
-                zip(first.tolist(), found)
+                zip(first.tolist(), found, strict=True)
             )
     raise failure or _no_profile(problem.hand, reference, int(first[-1]), spec.max_joint_step_rad)
 
@@ -199,7 +218,11 @@ def _where(failure: StageError) -> int:
 
 
 def _inside(found: list, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """The solutions of one sample at each angle (one :class:`SewSolutions` per angle) moved into the limits where they can be, those inside, as (angles, M, 7) [rad] padded with NaN."""
+    """The solutions of one sample at each angle moved into the limits where they can be, those inside.
+
+    ``found`` holds one :class:`SewSolutions` per angle; the result is (angles, M, 7) [rad] padded
+    with NaN.
+    """
     rows = [into_limits(f.q, lower, upper) for f in found]
     rows = [q[np.all((q >= lower) & (q <= upper), axis=1)] for q in rows]
     Q = np.full((len(rows), max(1, max(len(q) for q in rows)), 7), np.nan)
@@ -219,7 +242,9 @@ def _plan(
     reference: CartesianReference,
     spec: ArmAngle,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The grid cell of the angle (K,) and the solution (K, 7) [rad] at each planned sample ``picked`` (K,): dynamic programming over (planned sample, angle, solution) nodes.
+    """The grid cell of the angle (K,) and the solution (K, 7) [rad] at each planned sample ``picked``.
+
+    ``picked`` is (K,). By dynamic programming over (planned sample, angle, solution) nodes.
 
     A step from one planned sample to the next moves the angle at most :data:`AUTO_MAX_CELLS`
     cells, goes on to the solution nearest (as :func:`_follow` chooses), and moves no joint more
@@ -229,8 +254,9 @@ def _plan(
     plus per node how far it comes closer than ``margin_rad`` to a limit, plus, weighted by
     ``START_WEIGHT``, the start's distance from ``initial`` and its largest joint distance from the
     initial configuration. A start is, at an angle, the solution nearest the initial configuration
-    (the one the path takes); a profile is searched from every angle's start at once. On a ``closed`` path the
-    profile ends on the solution it began with, so that every repetition repeats it.
+    (the one the path takes); a profile is searched from every angle's start at once. On a
+    ``closed`` path the profile ends on the solution it began with, so that every repetition
+    repeats it.
 
     Raises:
         StageError: no profile; names the planned sample where the longest one ends.
@@ -314,7 +340,8 @@ def _plan(
 def _no_profile(hand: str, reference: CartesianReference, k: int, max_step: float) -> StageError:
     """The stage error of `auto` when no profile gets past planned sample ``k``."""
     return StageError(
-        f"sew, {hand} arm: no SEW angle profile keeps a solution inside the joint limits, with joint steps within arm_angle.max_joint_step_rad = {max_step} "
+        f"sew, {hand} arm: no SEW angle profile keeps a solution inside the joint limits, "
+        f"with joint steps within arm_angle.max_joint_step_rad = {max_step} "
         f"and the velocity limits, beyond sample {k} (t = {reference.t[k]:.3f} s)",
         stage="ik",
         sample=int(k),
@@ -328,7 +355,9 @@ def _nearest_turns(Q: np.ndarray, previous: np.ndarray) -> np.ndarray:
 
 
 def _followed(hand, names, found, q0, lower, upper, reference, psi, max_step) -> np.ndarray:
-    """The solution inside [lower, upper] nearest ``q0`` at sample 0, then nearest the previous one, at every sample (N, 7) [rad].
+    """The solution inside [lower, upper] at every sample (N, 7) [rad].
+
+    The one nearest ``q0`` at sample 0, then the one nearest the previous one.
 
     Raises:
         StageError: :func:`_follow`'s failure.
@@ -342,7 +371,12 @@ def _followed(hand, names, found, q0, lower, upper, reference, psi, max_step) ->
 def _follow(
     hand, names, found, q0, lower, upper, reference, psi, max_step, speed=None
 ) -> tuple[np.ndarray, StageError | None]:
-    """:func:`_followed`'s path (N, 7) [rad], filled up to the sample where it fails, and the failure (None when it does not): a sample without a solution inside the limits, a joint step above ``max_step``, or, given velocity limits ``speed`` (7,) [rad/s], a step faster (the error's ``sample``, ``t_s`` and ``joint`` say where)."""
+    """:func:`_followed`'s path (N, 7) [rad], filled up to the sample where it fails, and the failure.
+
+    The failure is None when it does not fail: a sample without a solution inside the limits, a
+    joint step above ``max_step``, or, given velocity limits ``speed`` (7,) [rad/s], a step faster
+    (the error's ``sample``, ``t_s`` and ``joint`` say where).
+    """
     q = np.full((len(found), 7), np.nan)
     previous = q0
     for k, solutions in enumerate(found):
@@ -359,7 +393,8 @@ def _follow(
         if not inside.any():
             worst = int(np.argmax(np.maximum(lower - near, near - upper).max(axis=0)))
             return q, NoSolutionFound(
-                f"sew, {hand} arm: {where}: none of its {len(near)} solutions at SEW angle {psi[k]:.4f} rad is inside the joint limits ({names[worst]} the worst)",
+                f"sew, {hand} arm: {where}: none of its {len(near)} solutions at SEW angle {psi[k]:.4f} rad "
+                f"is inside the joint limits ({names[worst]} the worst)",
                 stage="ik",
                 sample=k,
                 t_s=float(reference.t[k]),
@@ -370,7 +405,8 @@ def _follow(
         if k and steps[best].max() > max_step:
             j = int(np.argmax(steps[best]))
             return q, StageError(
-                f"sew, {hand} arm: {names[j]} jumps {steps[best, j]:.3f} rad at {where}, above arm_angle.max_joint_step_rad = {max_step}: the solution followed ends there",
+                f"sew, {hand} arm: {names[j]} jumps {steps[best, j]:.3f} rad at {where}, "
+                f"above arm_angle.max_joint_step_rad = {max_step}: the solution followed ends there",
                 stage="ik",
                 sample=k,
                 t_s=float(reference.t[k]),
@@ -395,8 +431,8 @@ METHODS: Mapping[str, Method[ArmAngle]] = {
         "sew",
         "ik",
         "SEW angle (Elias, Wen): every solution at the SEW angle by a 1-D search, the one continuing the path kept; "
-        "7R arms with a spherical wrist and two meeting shoulder axes (S-R-S, offset humanoid shoulders) or a spherical "
-        "shoulder and two meeting wrist axes (the Panda)",
+        "7R arms with a spherical wrist and two meeting shoulder axes (S-R-S, offset humanoid shoulders) "
+        "or a spherical shoulder and two meeting wrist axes (the Panda)",
         solve_sew,
         ArmAngle,
         settings_for,

@@ -1,11 +1,11 @@
 """Closed-form pieces of S-R-S inverse kinematics, as CasADi expressions of constant unit axes.
 
 Rotations are products of exponentials exp([k] angle) about axes k given at the zero
-configuration (see :mod:`dualarm.ik.analytic.mc_inverse`). Paden-Kahan sub-problem 1 turns one vector onto
-another about one axis, :func:`elbow` is MC-Inverse's sub-problem 1, :func:`subproblem2` one vector onto another by two rotations about
-intersecting axes; :func:`euler` solves three consecutive perpendicular axes (MC-Inverse
-sub-problems 2 and 3, eqs 9-10 for ZYZ axes); :func:`into_limits` moves an angle by 2 pi into
-limits that reach past +-pi.
+configuration (see :mod:`dualarm.ik.analytic.mc_inverse`). Paden-Kahan sub-problem 1 turns one
+vector onto another about one axis, :func:`elbow` is MC-Inverse's sub-problem 1, :func:`subproblem2`
+one vector onto another by two rotations about intersecting axes; :func:`euler` solves three
+consecutive perpendicular axes (MC-Inverse sub-problems 2 and 3, eqs 9-10 for ZYZ axes);
+:func:`into_limits` moves an angle by 2 pi into limits that reach past +-pi.
 """
 
 from __future__ import annotations
@@ -29,7 +29,11 @@ def turn(k: np.ndarray, p, q):
 
 
 def euler(Q, ka: np.ndarray, kb: np.ndarray, kc: np.ndarray):
-    """Both solutions of Q = exp(ka ta) exp(kb tb) exp(kc tc) for perpendicular ka, kb and kb, kc (eqs 9 and 10 for ZYZ axes): a list of two (ta, tb, tc), and |sin| of the middle angle measured from its singular positions (0 where ta and tc are not separable)."""
+    """Both solutions of Q = exp(ka ta) exp(kb tb) exp(kc tc) for perpendicular ka, kb and kb, kc.
+
+    Eqs 9 and 10 for ZYZ axes: a list of two (ta, tb, tc), and |sin| of the middle angle measured from its singular
+    positions (0 where ta and tc are not separable).
+    """
     phi = float(np.arctan2(ka @ np.cross(kb, kc), ka @ kc))  # ka . exp(kb t) kc = cos(t - phi)
     v = Q @ kc
     s = cs.norm_2(cs.cross(ka, v))  # |sin(tb - phi)|, accurate near 0 and pi
@@ -48,7 +52,10 @@ def euler(Q, ka: np.ndarray, kb: np.ndarray, kc: np.ndarray):
 
 
 def into_limits(angle, lower: float, upper: float):
-    """An angle in (-pi, pi] moved by 2 pi into [lower, upper] where that helps (only for limits that reach beyond +-pi)."""
+    """An angle in (-pi, pi] moved by 2 pi into [lower, upper] where that helps.
+
+    Only for limits that reach beyond +-pi.
+    """
     if lower < -np.pi:
         angle = cs.if_else(angle > upper, angle - 2 * np.pi, angle)
     if upper > np.pi:
@@ -65,7 +72,9 @@ def triad(x, y):
 
 
 def subproblem2(k1: np.ndarray, k2: np.ndarray, v, u):
-    """Paden-Kahan sub-problem 2: exp(k1 t1) exp(k2 t2) v = u for unit axes k1, k2 through one point (the shoulder), |u| = |v|, general axes (k1 . k2 may be any value but +-1).
+    """Paden-Kahan sub-problem 2: exp(k1 t1) exp(k2 t2) v = u for unit axes k1, k2 through one point.
+
+    The point is the shoulder; |u| = |v|, general axes (k1 . k2 may be any value but +-1).
 
     The intermediate vector c = exp(k2 t2) v = exp(-k1 t1) u keeps v's component along k2 and u's
     along k1: c = a k1 + b k2 + gamma (k1 x k2), with gamma^2 = (|v|^2 - |a k1 + b k2|^2) / |k1 x k2|^2.
@@ -92,7 +101,10 @@ def subproblem2(k1: np.ndarray, k2: np.ndarray, v, u):
 
 
 def zero_axes(chain: Chain) -> tuple[list[np.ndarray], np.ndarray]:
-    """Joint axes k_i at q = 0 in the chain base frame (unit, (3,) each) and the tip rotation at q = 0 (3x3)."""
+    """Joint axes k_i at q = 0 in the chain base frame and the tip rotation at q = 0 (3x3).
+
+    The axes are unit, (3,) each.
+    """
     movable = [j for j in chain.joints if j.movable]
     frames = chain_frames(chain)
     zero = cs.Function("zero", [frames.q], [*frames.before, frames.tip])(np.zeros(len(movable)))
@@ -102,7 +114,12 @@ def zero_axes(chain: Chain) -> tuple[list[np.ndarray], np.ndarray]:
 
 
 def elbow(geometry, S: np.ndarray, E0: np.ndarray, W0: np.ndarray, a4: np.ndarray, T):
-    """MC-Inverse sub-problem 1 (eqs 2-4) for a hand pose T (4x4): the wrist centre W, SW = W - S, d = |SW| [m], whether d is out of the elbow's reach, the elbow's interior angle beta [rad], and the two elbow joint angles theta4 = +-beta - phi0 [rad] (phi0: the elbow joint's angle at q = 0, from S, E0, W0 at q = 0 and its axis a4)."""
+    """MC-Inverse sub-problem 1 (eqs 2-4) for a hand pose T (4x4).
+
+    The wrist centre W, SW = W - S, d = |SW| [m], whether d is out of the elbow's reach, the elbow's interior angle
+    beta [rad], and the two elbow joint angles theta4 = +-beta - phi0 [rad] (phi0: the elbow joint's angle at
+    q = 0, from S, E0, W0 at q = 0 and its axis a4).
+    """
     p, R = T[:3, 3], T[:3, :3]
     L2, L3 = geometry.upper_arm, geometry.forearm
     W = p - R @ geometry.tool_from_wrist  # eq (2): SW = OT - OS - WT

@@ -52,9 +52,9 @@ PyBullet
       them as soft anyway); revolute results are wrapped by 2 pi into the limits where that helps
       and clipped otherwise, and the errors are measured after clipping.
     - With these settings it converges to about 1e-15 m and 2e-9 rad (median; at worst 3e-11 m
-      and 2e-7 rad) when the answer respects the limits; on 200 random arm poses seeded 0.1 rad (sd) away, 191 succeeded and
-      all 9 failures were answers outside the joint limits (clipping a wrist roll leaves only an
-      orientation error).
+      and 2e-7 rad) when the answer respects the limits; on 200 random arm poses seeded 0.1 rad (sd)
+      away, 191 succeeded and all 9 failures were answers outside the joint limits (clipping a wrist
+      roll leaves only an orientation error).
     - ``residualThreshold`` stops on the position residual only; it is set tiny so the iteration
       also settles the orientation (the iteration converges in a few steps with small damping).
     - ``solver=IK_SDLS`` segfaults on this 17-DOF body (even position-only), so only DLS is used.
@@ -201,7 +201,10 @@ class TracIkSolver:
     _solver: object = field(repr=False)
 
     def __repr__(self) -> str:
-        return f"TracIkSolver({self.chain.name}, timeout_s={self.timeout_s}, epsilon={self.epsilon}, solve_type={self.solve_type!r})"
+        return (
+            f"TracIkSolver({self.chain.name}, timeout_s={self.timeout_s}, epsilon={self.epsilon}, "
+            f"solve_type={self.solve_type!r})"
+        )
 
     @classmethod
     def of(
@@ -264,7 +267,10 @@ class TracIkSolver:
 
     @property
     def orientation_tolerance_rad(self) -> float:
-        """Largest orientation error of a successful solve [rad]: every component of the rotation vector below epsilon or KDL's resolution, whichever is larger."""
+        """Largest orientation error of a successful solve [rad].
+
+        Every component of the rotation vector below epsilon or KDL's resolution, whichever is larger.
+        """
         return math.sqrt(3) * max(self.epsilon, KDL_ROTATION_RESOLUTION_RAD)
 
     def solve(self, target: np.ndarray, seed: np.ndarray) -> BaselineResult:
@@ -301,7 +307,9 @@ _shared_pybullet: OrderedDict[tuple[object, ...], PyBulletIkSolver] = OrderedDic
 
 @dataclass(frozen=True, eq=False)
 class PyBulletIkSolver:
-    """PyBullet's damped-least-squares IK for one chain, in its own DIRECT client (build with :meth:`of`; close with :meth:`close` or use as a context manager).
+    """PyBullet's damped-least-squares IK for one chain, in its own DIRECT client.
+
+    Build with :meth:`of`; close with :meth:`close` or use as a context manager.
 
     Attributes:
         chain: the chain; ``q`` follows ``chain.joint_names``.
@@ -336,7 +344,10 @@ class PyBulletIkSolver:
     _tip_index: int = field(repr=False)
 
     def __repr__(self) -> str:
-        return f"PyBulletIkSolver({self.chain.name}, max_iterations={self.max_iterations}, residual_threshold_m={self.residual_threshold_m}, joint_damping={self.joint_damping})"
+        return (
+            f"PyBulletIkSolver({self.chain.name}, max_iterations={self.max_iterations}, "
+            f"residual_threshold_m={self.residual_threshold_m}, joint_damping={self.joint_damping})"
+        )
 
     @classmethod
     def of(
@@ -486,7 +497,10 @@ class PyBulletIkSolver:
     def shared(
         cls, robot: Robot, base: str, tip: str, *, locked: Mapping[str, float] | None = None, **settings: Any
     ) -> PyBulletIkSolver:
-        """:meth:`of`'s solver, built once per robot, chain, locked joints and settings in a process and kept open (a study's worker loads the robot into PyBullet once, not per trial); the least recently used beyond :data:`SHARED_PYBULLET_SOLVERS` are closed. Not to be closed by the caller.
+        """:meth:`of`'s solver, built once per robot, chain, locked joints and settings and kept open.
+
+        Built once in a process (a study's worker loads the robot into PyBullet once, not per trial); the least
+        recently used beyond :data:`SHARED_PYBULLET_SOLVERS` are closed. Not to be closed by the caller.
 
         Every answer is :meth:`of`'s: :meth:`solve` sets the chain's joints to its seed, and nothing changes the others.
         """

@@ -1,4 +1,6 @@
-"""DLS-SVD inverse kinematics: Li & Liang, *Study on Humanoid Robot's Dual-arm Collision Avoidance Motion Planning Algorithm*, eqs (12)-(20).
+"""DLS-SVD inverse kinematics, eqs (12)-(20) of Li & Liang.
+
+Li & Liang, *Study on Humanoid Robot's Dual-arm Collision Avoidance Motion Planning Algorithm*, eqs (12)-(20).
 
 One or several tips (hands) are driven to full 6-D poses given in a common base link's frame. The
 joints are the union of the base -> tip chains, shared joints (the waist of the 17-DOF model,
@@ -47,10 +49,10 @@ Step and joint limits. Each step is scaled down, direction kept, so that no join
 clamped to the joint position limits. A joint already at a limit whose step would push it further
 out is left out of the Jacobian (its column zeroed) and the step recomputed, repeatedly until no
 such joint remains (the "joint clamping" of Baerlocher & Boulic 2004), so the other joints take up
-its share of the motion instead of the solve stalling against the limit. The solve stops with ``converged=False`` and a reason when the pose
-error has not reached the tolerances after ``max_iterations`` steps (tried steps, retried ones
-included), or earlier when a step no longer changes the configuration (a local minimum of the
-error, e.g. against a limit).
+its share of the motion instead of the solve stalling against the limit. The solve stops with
+``converged=False`` and a reason when the pose error has not reached the tolerances after
+``max_iterations`` steps (tried steps, retried ones included), or earlier when a step no longer
+changes the configuration (a local minimum of the error, e.g. against a limit).
 
 Evaluation. The pose errors and the stacked Jacobian are one CasADi Function of the packed vector
 [theta; targets], called once per iteration through a FunctionBuffer; the SVD and the step are
@@ -142,7 +144,9 @@ class DlsResult:
 
 
 def damping(smallest_singular_value: float, settings: DlsSettings) -> float:
-    """Damping factor lambda of eqs (12)-(20) by the Nakamura-Maciejewski singular-region rule: lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) for s_min < eps, else 0.
+    """Damping factor lambda of eqs (12)-(20) by the Nakamura-Maciejewski singular-region rule.
+
+    lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) for s_min < eps, else 0.
 
     Args:
         smallest_singular_value: s_min of the stacked Jacobian [mixed units of J].
@@ -226,7 +230,10 @@ class DlsSolver:
 
     @classmethod
     def of(cls, robot: Robot, base: str, tips: Sequence[str], settings: DlsSettings = DlsSettings()) -> DlsSolver:
-        """The solver for ``tips`` of ``robot`` in the frame of link ``base``; built once per robot, base, tips and settings in a process, then kept (a study's worker builds it once, not per trial).
+        """The solver for ``tips`` of ``robot`` in the frame of link ``base``.
+
+        Built once per robot, base, tips and settings in a process, then kept (a study's worker builds it once, not
+        per trial).
 
         Args:
             robot: the robot.
@@ -306,7 +313,7 @@ class DlsSolver:
                 f"DLS solver: {len(targets)} target poses for {len(self.tips)} tips ({', '.join(self.tips)})"
             )
         packed = []
-        for tip, T in zip(self.tips, targets):
+        for tip, T in zip(self.tips, targets, strict=True):
             T = np.asarray(T, dtype=float)
             if T.shape != (4, 4) or not np.all(np.isfinite(T)):
                 raise StageError(f"DLS solver: the target of '{tip}' must be a finite 4x4 pose, got shape {T.shape}")
@@ -317,12 +324,16 @@ class DlsSolver:
         seed = np.asarray(seed, dtype=float)
         if seed.shape != (self.n,) or not np.all(np.isfinite(seed)):
             raise StageError(
-                f"DLS solver: the seed must be {self.n} finite joint values ({', '.join(self.joint_names)}), got shape {seed.shape}"
+                f"DLS solver: the seed must be {self.n} finite joint values ({', '.join(self.joint_names)}), "
+                f"got shape {seed.shape}"
             )
         return np.clip(seed, self.lower, self.upper)
 
     def _evaluator(self, targets: Sequence[np.ndarray]):
-        """A callable ``theta -> (dx, errors, J)`` evaluating :attr:`evaluate` through a FunctionBuffer on numpy arrays (returned arrays are overwritten by the next call)."""
+        """A callable ``theta -> (dx, errors, J)`` evaluating :attr:`evaluate` through a FunctionBuffer.
+
+        On numpy arrays (returned arrays are overwritten by the next call).
+        """
         h = len(self.tips)
         x = np.concatenate([np.zeros(self.n), self._pack_targets(targets)])
         dx, errors, J = np.zeros(6 * h), np.zeros(2 * h), np.zeros((6 * h, self.n))
@@ -340,7 +351,10 @@ class DlsSolver:
         return evaluate
 
     def damping_at(self, q: np.ndarray) -> float:
-        """The rule's damping lambda at configuration ``q`` [rad], (n,), clamped to the limits (see :func:`damping`): the lambda of the first step from ``q``, before any Levenberg-Marquardt scaling."""
+        """The rule's damping lambda at configuration ``q`` [rad], (n,), clamped to the limits.
+
+        See :func:`damping`: the lambda of the first step from ``q``, before any Levenberg-Marquardt scaling.
+        """
         J = self._evaluator([np.eye(4)] * len(self.tips))(self._seed(q))[2]
         return damping(float(np.linalg.svd(J, compute_uv=False)[-1]), self.settings)
 

@@ -6,7 +6,8 @@ previous sample's answer (the first from the task's initial configuration), and 
 repetition to the one before it except that seed. Methods:
 
 - ``trac-ik``: TRAC-IK through ``pytracik`` (:class:`~dualarm.ik.pose_level.baselines.TracIkSolver`);
-- ``pybullet``: ``pybullet.calculateInverseKinematics`` (:class:`~dualarm.ik.pose_level.baselines.PyBulletIkSolver`);
+- ``pybullet``: ``pybullet.calculateInverseKinematics``
+  (:class:`~dualarm.ik.pose_level.baselines.PyBulletIkSolver`);
 - ``dls-svd``: Li-Liang's damped least squares through the SVD, eqs (12)-(20)
   (:class:`~dualarm.ik.pose_level.dls.DlsSolver`);
 - ``ikfast-style``: the third joint discretised, the other six in closed form, the candidate
@@ -23,7 +24,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -39,11 +40,32 @@ from dualarm.settings import as_record
 #: The methods of this module.
 POINTWISE_METHODS = ("trac-ik", "pybullet", "dls-svd", "ikfast-style")
 #: Memory an arm's ikfast-style run may keep poses' candidates in [bytes] (a pose's valid candidates:
-#: up to 8 per free value, 4,340 taking 240 kB on the humanoid; a repetition of the triangle task, 600 poses).
+#: up to 8 per free value, 4,340 taking 240 kB on the humanoid; a repetition of the triangle task, 600
+#: poses).
 MEMO_BYTES = 256 * 2**20
 
 #: A solver of one arm: (target pose in the arm base frame (4, 4) [m], seed (7,) [rad]) -> (q, ok).
 ArmSolver = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, bool]]
+
+
+#: TRAC-IK's solve types.
+SolveType = Literal["Speed", "Distance", "Manip1", "Manip2"]
+SOLVE_TYPES: tuple[str, ...] = get_args(SolveType)
+
+
+def _positive(settings: object, *names: str, zero: bool = False) -> None:
+    """Refuse a field of ``settings`` that is not a finite number > 0 (>= 0 with ``zero``).
+
+    Raises:
+        InvalidArgumentError: the first such field.
+    """
+    for name in names:
+        value = getattr(settings, name)
+        number = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+        if not number or value < 0 or (value == 0 and not zero):
+            raise InvalidArgumentError(
+                name, f"must be a {'non-negative' if zero else 'positive'} number, not {value!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -59,12 +81,21 @@ class TracIkSettings:
 
     timeout_s: float = 0.005
     epsilon: float = 1e-5
-    solve_type: str = "Speed"
+    solve_type: SolveType = "Speed"
+
+    def __post_init__(self) -> None:
+        _positive(self, "timeout_s", "epsilon")
+        if self.solve_type not in SOLVE_TYPES:
+            raise InvalidArgumentError(
+                "solve_type", f"unknown TRAC-IK solve type {self.solve_type!r} (types: {', '.join(SOLVE_TYPES)})"
+            )
 
 
 @dataclass(frozen=True)
 class PyBulletIkSettings:
-    """``pybullet.calculateInverseKinematics``'s settings (see :class:`~dualarm.ik.pose_level.baselines.PyBulletIkSolver`).
+    """``pybullet.calculateInverseKinematics``'s settings.
+
+    See :class:`~dualarm.ik.pose_level.baselines.PyBulletIkSolver`.
 
     Attributes:
         max_iterations: ``maxNumIterations``.
@@ -80,6 +111,10 @@ class PyBulletIkSettings:
     position_tolerance_m: float = 1e-9
     orientation_tolerance_rad: float = 1e-6
 
+    def __post_init__(self) -> None:
+        _positive(self, "max_iterations", "residual_threshold_m", "position_tolerance_m", "orientation_tolerance_rad")
+        _positive(self, "joint_damping", zero=True)
+
 
 @dataclass(frozen=True)
 class IkfastStyleSettings:
@@ -92,8 +127,7 @@ class IkfastStyleSettings:
     resolution_rad: float = 0.01
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.resolution_rad) and self.resolution_rad > 0):
-            raise InvalidArgumentError("resolution_rad", f"must be a positive number, not {self.resolution_rad!r}")
+        _positive(self, "resolution_rad")
 
 
 def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str, float], settings: Any) -> ArmSolver:
@@ -160,7 +194,10 @@ def solve_pointwise(
     settings: Any = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> JointPath:
-    """Joint path of every hand of ``reference`` by ``method`` (:data:`POINTWISE_METHODS`), one sample at a time, each seeded with the arm's last successful solution (the first with ``q0``).
+    """Joint path of every hand of ``reference`` by ``method``, one sample at a time.
+
+    ``method`` is one of :data:`POINTWISE_METHODS`. Each sample is seeded with the arm's last successful
+    solution (the first with ``q0``).
 
     Args:
         method: ``trac-ik``, ``pybullet``, ``dls-svd`` or ``ikfast-style``.
@@ -205,7 +242,10 @@ def _solver_of(method: str) -> Callable[..., JointPath]:
         return solve_pointwise(method, robot, reference, q0, settings)
 
     solve.__name__ = f"solve_{method.replace('-', '_')}"
-    solve.__doc__ = f"{method} along a path: :func:`solve_pointwise` with ``method='{method}'`` (settings: see :data:`dualarm.methods.METHODS`)."
+    solve.__doc__ = (
+        f"{method} along a path: :func:`solve_pointwise` with ``method='{method}'`` "
+        "(settings: see :data:`dualarm.methods.METHODS`)."
+    )
     return solve
 
 
@@ -220,10 +260,22 @@ solve_ikfast_style = _solver_of("ikfast-style")
 METHODS: Mapping[str, Method[Any]] = {
     m.name: m
     for m in (
-        Method("trac-ik", "ik", "TRAC-IK (pytracik) pose by pose, seeded with the previous answer", solve_trac_ik, TracIkSettings),
-        Method("pybullet", "ik", "pybullet.calculateInverseKinematics pose by pose", solve_pybullet, PyBulletIkSettings),
         Method(
-            "dls-svd", "ik", "damped least squares through the SVD, pose by pose (Li, Liang, eqs 12-20)", solve_dls_svd, DlsSettings
+            "trac-ik",
+            "ik",
+            "TRAC-IK (pytracik) pose by pose, seeded with the previous answer",
+            solve_trac_ik,
+            TracIkSettings,
+        ),
+        Method(
+            "pybullet", "ik", "pybullet.calculateInverseKinematics pose by pose", solve_pybullet, PyBulletIkSettings
+        ),
+        Method(
+            "dls-svd",
+            "ik",
+            "damped least squares through the SVD, pose by pose (Li, Liang, eqs 12-20)",
+            solve_dls_svd,
+            DlsSettings,
         ),
         Method(
             "ikfast-style",

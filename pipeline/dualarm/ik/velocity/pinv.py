@@ -3,8 +3,8 @@
 thetadot = J^+(theta) (rdot + K (r - f(theta))) + (I - J^+ J) w with w = 0, the same feedback as
 TV-GDD and no limits at all: the scheme the paper shows leaving its bounds. In ``pose`` task space
 the orientation rows are stacked under the position rows as in TV-GDD (J_omega, omega_d and
-K log(R_d R^T); see :class:`~dualarm.ik.velocity.stack.HandStack`); in ``position`` task space, the paper's,
-only the positions.
+K log(R_d R^T); see :class:`~dualarm.ik.velocity.stack.HandStack`); in ``position`` task space, the
+paper's, only the positions.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import casadi as cs
 import numpy as np
 
-from dualarm.contracts.joint_path import JointPath, check_task_space
+from dualarm.contracts.joint_path import JointPath, TaskSpace, check_task_space
 from dualarm.contracts.reference import CartesianReference
 from dualarm.errors import InvalidArgumentError
 from dualarm.ik.velocity.stack import reference_stack, stack_joint_path, stacked_reference, start_configuration
@@ -46,7 +46,7 @@ class PinvSettings:
     feedback_gain: float = 20.0
     free_waist: bool = False
     bands: TvgddSettings = TvgddSettings()
-    task_space: str = "pose"
+    task_space: TaskSpace = "pose"
 
     def __post_init__(self) -> None:
         check_task_space(self.task_space)
@@ -59,7 +59,10 @@ class PinvSettings:
 
 
 def settings_for(task: Task, **overrides: object) -> PinvSettings:
-    """The baseline's settings for a task: TV-GDD's gain, bands and task space from its ``[gesture]`` and ``[ik]`` tables."""
+    """The baseline's settings for a task: TV-GDD's gain, bands and task space.
+
+    They come from the task's ``[gesture]`` and ``[ik]`` tables.
+    """
     from dualarm.ik.velocity.tvgdd import settings_for as tvgdd_settings
 
     bands = tvgdd_settings(task)
@@ -77,7 +80,10 @@ def solve_pinv(
     q0: Mapping[str, float] | str | None = None,
     settings: PinvSettings = PinvSettings(),
 ) -> JointPath:
-    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps at the reference's period; the hands' positions, and in ``pose`` task space their orientations, as TV-GDD.
+    """Follow ``reference`` with the minimum-norm pseudoinverse rate (eqs 2-3, w = 0) and Euler steps.
+
+    The steps are at the reference's period. It follows the hands' positions, and in ``pose`` task
+    space their orientations, as TV-GDD.
 
     Nothing bounds the joints; the path's extras hold the bands TV-GDD would impose
     (:func:`~dualarm.ik.velocity.tvgdd.gesture_band` with ``settings.bands``).

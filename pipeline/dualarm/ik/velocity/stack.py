@@ -17,7 +17,7 @@ import casadi as cs
 import numpy as np
 
 from dualarm.arrays import frozen
-from dualarm.contracts.joint_path import JointPath, check_task_space
+from dualarm.contracts.joint_path import JointPath, TaskSpace, check_task_space
 from dualarm.contracts.reference import CartesianReference
 from dualarm.errors import StageError
 from dualarm.ik.orientation import angular_jacobian, orientation_error, orientation_errors
@@ -60,7 +60,7 @@ class HandStack:
     hands: tuple[str, ...]
     fixed: Mapping[str, float]
     initial: np.ndarray
-    task_space: str
+    task_space: TaskSpace
     theta: cs.SX
     target: cs.SX
     position: cs.SX
@@ -73,7 +73,10 @@ class HandStack:
 
     @functools.cached_property
     def start_solver(self) -> cs.Function:
-        """IPOPT's problem of :func:`start_configuration`, built once per stack: min |theta - initial|^2 s.t. e(theta, p) = 0, the first reference sample p its parameter."""
+        """IPOPT's problem of :func:`start_configuration`, built once per stack.
+
+        min |theta - initial|^2 s.t. e(theta, p) = 0, the first reference sample p its parameter.
+        """
         nlp = {"x": self.theta, "p": self.target, "f": cs.sumsqr(self.theta - self.initial), "g": self.error}
         options = {
             "print_time": False,
@@ -98,7 +101,11 @@ class HandStack:
 
 
 def active_joints(robot: Robot, hands: Sequence[str], frame: str, free_waist: bool) -> tuple[str, ...]:
-    """The active joints: the joints from ``frame`` to each hand's tip that belong to its arm chain, plus the others on the way (the waist) when ``free_waist``, in URDF order."""
+    """The active joints, in URDF order.
+
+    The joints from ``frame`` to each hand's tip that belong to its arm chain, plus the others on the way (the
+    waist) when ``free_waist``.
+    """
     names: list[str] = []
     for hand in hands:
         arm = set(robot.hand_chain(hand).joint_names)
@@ -119,9 +126,12 @@ def hand_stack(
     *,
     frame: str | None = None,
     free_waist: bool = False,
-    task_space: str = "position",
+    task_space: TaskSpace = "position",
 ) -> HandStack:
-    """The stacked kinematics of ``hands`` in ``frame`` (default the robot's root link), the joints that are not active at their values in ``q0`` [rad], with the task rows of ``task_space`` (``position`` or ``pose``).
+    """The stacked kinematics of ``hands`` in ``frame`` (default the robot's root link).
+
+    The joints that are not active at their values in ``q0`` [rad], with the task rows of ``task_space``
+    (``position`` or ``pose``).
 
     Built once per robot and arguments in a process, then kept (a study's worker builds it once, not per trial).
 
@@ -139,7 +149,7 @@ def _stack(
     q0_items: tuple[tuple[str, float], ...],
     frame: str,
     free_waist: bool,
-    task_space: str,
+    task_space: TaskSpace,
 ) -> HandStack:
     """Build :func:`hand_stack`'s stack."""
     q0 = dict(q0_items)
@@ -161,7 +171,7 @@ def _stack(
     jacobian = cs.jacobian(position, theta)
     if pose:
         asked = [cs.reshape(target[3 * h + 9 * j : 3 * h + 9 * (j + 1)], 3, 3).T for j in range(h)]  # row by row
-        error = cs.vertcat(error, *[orientation_error(Rd, R) for Rd, R in zip(asked, rotations)])
+        error = cs.vertcat(error, *[orientation_error(Rd, R) for Rd, R in zip(asked, rotations, strict=True)])
         jacobian = cs.vertcat(jacobian, *[angular_jacobian(R, theta) for R in rotations])
     rotation = cs.vertcat(*rotations)
     return HandStack(
@@ -187,9 +197,12 @@ def reference_stack(
     reference: CartesianReference,
     q0: Mapping[str, float] | str | None,
     free_waist: bool,
-    task_space: str = "position",
+    task_space: TaskSpace = "position",
 ) -> HandStack:
-    """The stack of the reference's hands in its frame, ``q0`` resolved by :meth:`Robot.configuration`, with the task rows of ``task_space``."""
+    """The stack of the reference's hands in its frame, with the task rows of ``task_space``.
+
+    ``q0`` resolved by :meth:`Robot.configuration`.
+    """
     return hand_stack(
         robot,
         tuple(reference.hands),
@@ -225,7 +238,13 @@ START_TOLERANCE_RAD = 1e-9
 def start_configuration(
     stack: HandStack, reference: CartesianReference, lower: np.ndarray, upper: np.ndarray
 ) -> np.ndarray:
-    """Where a velocity-level method starts [rad], (n,): the task's initial values if they put the hands on the reference's first sample (within :data:`START_TOLERANCE_M`, and :data:`START_TOLERANCE_RAD` in pose task space), otherwise the configuration nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares problem min |theta - initial|^2 s.t. e(theta) = 0 (the stack's task error at the first sample) solved by IPOPT through CasADi.
+    """Where a velocity-level method starts [rad], (n,).
+
+    The task's initial values if they put the hands on the reference's first sample (within
+    :data:`START_TOLERANCE_M`, and :data:`START_TOLERANCE_RAD` in pose task space), otherwise the configuration
+    nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares problem
+    min |theta - initial|^2 s.t. e(theta) = 0 (the stack's task error at the first sample) solved by IPOPT through
+    CasADi.
 
     Raises:
         StageError: IPOPT finds no such configuration.
@@ -250,7 +269,10 @@ def start_configuration(
 
 
 def _on_start(stack: HandStack, theta: np.ndarray, target: np.ndarray) -> bool:
-    """Whether the task error at ``theta`` is within :data:`START_TOLERANCE_M` (positions) and :data:`START_TOLERANCE_RAD` (orientations)."""
+    """Whether the task error at ``theta`` is within the start tolerances.
+
+    :data:`START_TOLERANCE_M` (positions) and :data:`START_TOLERANCE_RAD` (orientations).
+    """
     e = np.abs(np.asarray(stack.errors(theta, target)).ravel())
     p = 3 * len(stack.hands)
     return bool(e[:p].max() <= START_TOLERANCE_M and e[p:].max(initial=0.0) <= START_TOLERANCE_RAD)
@@ -265,7 +287,11 @@ def stack_joint_path(
     solve_time_s: np.ndarray,
     extras=None,
 ):
-    """The JointPath of a velocity-level method on ``stack``: hand errors |r - f(q)| [m] and orientation errors (:func:`~dualarm.ik.orientation.orientation_errors`, [rad]) from q (N, n) by the stack's forward kinematics."""
+    """The JointPath of a velocity-level method on ``stack``.
+
+    Hand errors |r - f(q)| [m] and orientation errors (:func:`~dualarm.ik.orientation.orientation_errors`, [rad])
+    from q (N, n) by the stack's forward kinematics.
+    """
     N, h = len(reference), len(stack.hands)
     asked = np.hstack([reference.hands[hand].position for hand in stack.hands])
     positions = np.asarray(stack.positions.map(N)(q.T)).T

@@ -27,12 +27,12 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import casadi as cs
 import numpy as np
 
-from dualarm.contracts.joint_path import JointPath, check_task_space
+from dualarm.contracts.joint_path import JointPath, TaskSpace, check_task_space
 from dualarm.contracts.reference import CartesianReference
 from dualarm.errors import InvalidArgumentError, StageError
 from dualarm.ik.velocity.gesture import position_bounds, velocity_bounds
@@ -50,9 +50,11 @@ from dualarm.settings import with_overrides
 if TYPE_CHECKING:
     from dualarm.tasks import Task
 
-SCHEMES = ("mvn", "rmp", "mke")
+Scheme = Literal["mvn", "rmp", "mke"]
+SCHEMES: tuple[str, ...] = get_args(Scheme)
 #: The QP solvers: a CasADi conic in the step's CasADi Function, or the paper's LVI (eqs 26-27).
-BACKENDS = ("casadi", "lvi")
+Backend = Literal["casadi", "lvi"]
+BACKENDS: tuple[str, ...] = get_args(Backend)
 
 #: Largest breach of (24)-(25) [m/s or rad/s] a conic solution may have before its step counts as infeasible.
 FEASIBILITY_TOLERANCE = 1e-6
@@ -89,8 +91,8 @@ class TvgddSettings:
             (positions only, as in the paper).
     """
 
-    scheme: str = "mvn"
-    backend: str = "casadi"
+    scheme: Scheme = "mvn"
+    backend: Backend = "casadi"
     feedback_gain: float = 20.0
     nu: float = 2.0
     t_sp_s: float = 0.75
@@ -102,7 +104,7 @@ class TvgddSettings:
     free_waist: bool = False
     qp_plugin: str = "daqp"
     lvi_tolerance: float = LVI_TOLERANCE
-    task_space: str = "pose"
+    task_space: TaskSpace = "pose"
 
     def __post_init__(self) -> None:
         check_task_space(self.task_space)
@@ -181,7 +183,11 @@ class TvgddProblem:
         return np.concatenate([theta, [t], r, rdot, theta0])
 
     def stepper(self):
-        """A callable ``inputs (packed, see :meth:`pack`) -> (thetadot (n,), violation)`` that evaluates :attr:`packed_step` through a CasADi FunctionBuffer, reading and writing numpy arrays in place: it skips the DM conversions of a plain call, which cost three quarters of a step."""
+        """A callable ``inputs (packed, see :meth:`pack`) -> (thetadot (n,), violation)``.
+
+        It evaluates :attr:`packed_step` through a CasADi FunctionBuffer, reading and writing numpy
+        arrays in place: it skips the DM conversions of a plain call, which cost three quarters of a step.
+        """
         buffer, evaluate = self.packed_step.buffer()
         inputs, thetadot, violation = np.zeros(self.packed_step.size1_in(0)), np.zeros(self.stack.n), np.zeros(1)
         buffer.set_arg(0, inputs.data)
@@ -196,7 +202,12 @@ class TvgddProblem:
         return step
 
     def rollout(self, samples: int) -> cs.Function:
-        """The whole Euler integration as one CasADi call (``mapaccum``): ``(theta0 (n), U (1 + r + m, N), theta_ref0 (n)) -> (theta (n, N), thetadot (n, N))`` where column k of U is [t_k; r_k; rdot_k] (r the stack's reference size) and theta[:, k] is the state after step k."""
+        """The whole Euler integration as one CasADi call (``mapaccum``).
+
+        ``(theta0 (n), U (1 + r + m, N), theta_ref0 (n)) -> (theta (n, N), thetadot (n, N))`` where
+        column k of U is [t_k; r_k; rdot_k] (r the stack's reference size) and theta[:, k] is the state
+        after step k.
+        """
         n, size = self.stack.n, self.stack.reference_size
         theta, u, theta0 = cs.MX.sym("theta", n), cs.MX.sym("u", 1 + size + self.stack.m), cs.MX.sym("theta0", n)
         velocity, _ = self.step(theta, u[0], u[1 : 1 + size], u[1 + size :], theta0)
@@ -205,7 +216,11 @@ class TvgddProblem:
 
 
 def _bands(theta, t, bounds: JointBounds, settings: TvgddSettings, period_s: float):
-    """theta_new-+(t) of eq (19) and zeta_new-+(t) of eqs (21)-(22), with the bounds' rate over the step [t, t + tau] (tau = ``period_s``) as feedforward when ``settings.bound_feedforward``."""
+    """theta_new-+(t) of eq (19) and zeta_new-+(t) of eqs (21)-(22).
+
+    With the bounds' rate over the step [t, t + tau] (tau = ``period_s``) as feedforward when
+    ``settings.bound_feedforward``.
+    """
 
     def at(time):
         return position_bounds(
@@ -229,7 +244,11 @@ def build_problem(
     urdf_xml: str = "",
     all_joints: tuple[str, ...] = (),
 ) -> TvgddProblem:
-    """Formulate the TV-GDD QP for ``stack`` with Euler step ``period_s`` [s] (``urdf_xml`` and ``all_joints`` are needed for MKE); the task rows of (24) are the stack's (its ``task_space``)."""
+    """Formulate the TV-GDD QP for ``stack`` with Euler step ``period_s`` [s].
+
+    ``urdf_xml`` and ``all_joints`` are needed for MKE; the task rows of (24) are the stack's (its
+    ``task_space``).
+    """
     n, m, size = stack.n, stack.m, stack.reference_size
     theta = stack.theta
     t = cs.SX.sym("t")
@@ -264,7 +283,7 @@ def build_problem(
     except RuntimeError as exc:
         reason = str(exc).strip().splitlines()[-1]
         raise StageError(f"CasADi conic plugin '{settings.qp_plugin}' cannot take the TV-GDD QP: {reason}") from None
-    sym = [cs.MX.sym(name, *x.shape) for name, x in zip(names, inputs)]
+    sym = [cs.MX.sym(name, *x.shape) for name, x in zip(names, inputs, strict=True)]
     M_, b_, J_, rhs_, lo_, hi_, _, _ = data(*sym)
     # collapsed bounds (zeta- > zeta+) would trip CasADi's well-posedness assertion: the QP gets
     # [lo, max(lo, hi)] and the collapse shows up in the violation against the true bounds
@@ -349,7 +368,9 @@ def lvi_solve(
 
 
 def joint_bounds(robot: Robot, stack: HandStack, settings: TvgddSettings) -> JointBounds:
-    """Physical limits and gesture goals of the stack's joints; a joint without a goal keeps its limits as goals.
+    """Physical limits and gesture goals of the stack's joints.
+
+    A joint without a goal keeps its limits as goals.
 
     Raises:
         InvalidArgumentError: a goal for a joint the stack does not move.
@@ -363,14 +384,17 @@ def joint_bounds(robot: Robot, stack: HandStack, settings: TvgddSettings) -> Joi
     return JointBounds(
         lower=lower,
         upper=upper,
-        goal_lower=np.array([settings.goal_lower.get(n, lo) for n, lo in zip(names, lower)]),
-        goal_upper=np.array([settings.goal_upper.get(n, hi) for n, hi in zip(names, upper)]),
+        goal_lower=np.array([settings.goal_lower.get(n, lo) for n, lo in zip(names, lower, strict=True)]),
+        goal_upper=np.array([settings.goal_upper.get(n, hi) for n, hi in zip(names, upper, strict=True)]),
         velocity=robot.limit_array("velocity", names),
     )
 
 
 def settings_for(task: Task, **overrides: object) -> TvgddSettings:
-    """TV-GDD settings from a task's ``[gesture]`` table, ``waist`` and ``[ik] task_space`` (defaults where it has none), with ``overrides`` (fields of :class:`TvgddSettings`) on top."""
+    """TV-GDD settings from a task's ``[gesture]`` table, ``waist`` and ``[ik] task_space``.
+
+    Defaults where it has none, with ``overrides`` (fields of :class:`TvgddSettings`) on top.
+    """
     g = task.spec.gesture
     base = TvgddSettings()
     values: dict[str, object] = {"free_waist": task.spec.waist == "free", "task_space": task.spec.ik.task_space}
@@ -388,7 +412,11 @@ def settings_for(task: Task, **overrides: object) -> TvgddSettings:
 
 
 def _infeasible(problem: TvgddProblem, args, k: int, t: float) -> StageError:
-    """A StageError naming the step, the time and the joints whose bounds collapsed, or else the joints whose bounds hold back the velocity nearest to meeting (24)."""
+    """A StageError naming the step, the time and why the step is infeasible.
+
+    Why: the joints whose bounds collapsed, or else the joints whose bounds hold back the velocity
+    nearest to meeting (24).
+    """
     _, _, J, rhs, lo, hi, lower_t, upper_t = (np.asarray(x) for x in problem.data(*args))
     lo, hi, lower_t, upper_t, rhs = (x.ravel() for x in (lo, hi, lower_t, upper_t, rhs))
     names = problem.stack.joint_names
@@ -413,7 +441,11 @@ def _nearest(
     upper_t: np.ndarray,
     names: tuple[str, ...],
 ) -> str:
-    """What holds back the joint velocity within [lo, hi] nearest to J thetadot = rhs (bounded least squares, scipy's ``lsq_linear``): its miss and the joints at a bound, each with its distance to theta_new-+(t) [rad]."""
+    """What holds back the joint velocity within [lo, hi] nearest to J thetadot = rhs.
+
+    The nearest by bounded least squares, scipy's ``lsq_linear``: its miss and the joints at a bound,
+    each with its distance to theta_new-+(t) [rad].
+    """
     from scipy.optimize import lsq_linear
 
     free = lo < hi
@@ -432,7 +464,10 @@ def _nearest(
     sigma = float(
         np.linalg.svd(J, compute_uv=False).min()
     )  # near 0: a singular configuration, where no bound is needed to miss
-    return f"the nearest velocity within them misses it by {miss:.3g} m/s or rad/s, held by {', '.join(held) if held else 'no bound'} (smallest singular value of J {sigma:.3g})"
+    return (
+        f"the nearest velocity within them misses it by {miss:.3g} m/s or rad/s, "
+        f"held by {', '.join(held) if held else 'no bound'} (smallest singular value of J {sigma:.3g})"
+    )
 
 
 def solve_tvgdd(
@@ -458,7 +493,8 @@ def solve_tvgdd(
         ``zeta_lower``/``zeta_upper`` (eq 22) at every sample.
 
     Raises:
-        StageError: an infeasible step (names the step, the time, and the collapsed joints or those whose bounds hold back the velocity nearest to meeting eq 24).
+        StageError: an infeasible step (names the step, the time, and the collapsed joints or those
+            whose bounds hold back the velocity nearest to meeting eq 24).
     """
     stack = reference_stack(robot, reference, q0, settings.free_waist, settings.task_space)
     bounds = joint_bounds(robot, stack, settings)
@@ -508,7 +544,11 @@ def solve_tvgdd(
 def gesture_band(
     bounds: JointBounds, settings: TvgddSettings, period_s: float, t: np.ndarray, q: np.ndarray
 ) -> dict[str, np.ndarray]:
-    """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path: t (N,) [s], q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``, ``zeta_upper`` [rad/s], each (N, n)."""
+    """theta_new+-(t) of eq (19) and zeta_new+-(t) of eq (22) along a joint path.
+
+    t (N,) [s], q (N, n) [rad] -> ``theta_lower``, ``theta_upper`` [rad], ``zeta_lower``,
+    ``zeta_upper`` [rad/s], each (N, n).
+    """
     lower_t, upper_t, zeta_lo, zeta_hi = _bands(q, t[:, None], bounds, settings, period_s)
     return {"theta_lower": lower_t, "theta_upper": upper_t, "zeta_lower": zeta_lo, "zeta_upper": zeta_hi}
 
