@@ -15,7 +15,8 @@ below; each field's docstring names its range.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
 from typing import Annotated, Any, Literal
 
 from pydantic import (
@@ -25,11 +26,12 @@ from pydantic import (
     GetCoreSchemaHandler,
     GetJsonSchemaHandler,
     StrictBool,
+    ValidationError,
     model_validator,
 )
 from pydantic_core import core_schema
 
-from dualarm.errors import excerpt
+from dualarm.errors import InvalidArgumentError, excerpt
 
 #: Largest |coordinate| of a position, displacement, arc centre or WTA position bound [m].
 MAX_COORDINATE_M = 100.0
@@ -332,7 +334,44 @@ class Gesture(_Model):
         return self
 
 
-class ArmAngle(_Model):
+class ArmAngleTable(_Model):
+    """A task file's ``[arm_angle]`` table, validated; :meth:`settings` is what MC-Inverse and SEW IK run with.
+
+    Its keys and their ranges are those of :class:`ArmAngle`.
+    """
+
+    mode: Literal["initial", "constant", "schedule", "auto"] = "auto"
+    value_rad: dict[Literal["left", "right"], Angle] = {}
+    schedule: dict[Literal["left", "right"], tuple[tuple[Time, Angle], ...]] = {}
+    vertical: Direction = (0.0, 0.0, 1.0)
+    max_joint_step_rad: JointStep = 0.2
+    margin_rad: Margin = 0.05
+    range_rad: tuple[Float, Float] = (-math.pi, math.pi)
+
+    @model_validator(mode="after")
+    def _complete(self) -> ArmAngleTable:
+        low, high = self.range_rad
+        if not -math.pi <= low < high <= math.pi:
+            raise ValueError(f"range_rad must be an interval within [-pi, pi] (here [{low:g}, {high:g}])")
+        if self.mode == "constant" and not self.value_rad:
+            raise ValueError("mode 'constant' needs value_rad = { left = ..., right = ... }")
+        if self.mode == "schedule":
+            if not self.schedule:
+                raise ValueError("mode 'schedule' needs schedule = { left = [[t, psi], ...] }")
+            for hand, points in self.schedule.items():
+                times = [t for t, _ in points]
+                if not points or any(b <= a for a, b in zip(times, times[1:], strict=False)):
+                    raise ValueError(f"schedule.{hand}: times must increase")
+        _check_direction(self.vertical, "vertical")
+        return self
+
+    def settings(self) -> ArmAngle:
+        """The table as MC-Inverse's and SEW IK's settings."""
+        return ArmAngle(**{name: getattr(self, name) for name in type(self).model_fields})
+
+
+@dataclass(frozen=True)
+class ArmAngle:
     """How MC-Inverse picks the arm angle psi of eq (1) along the path (Zou, Min, Xu, section III.B).
 
     Attributes:
@@ -362,29 +401,27 @@ class ArmAngle(_Model):
     """
 
     mode: Literal["initial", "constant", "schedule", "auto"] = "auto"
-    value_rad: dict[Literal["left", "right"], Angle] = {}
-    schedule: dict[Literal["left", "right"], tuple[tuple[Time, Angle], ...]] = {}
-    vertical: Direction = (0.0, 0.0, 1.0)
-    max_joint_step_rad: JointStep = 0.2
-    margin_rad: Margin = 0.05
-    range_rad: tuple[Float, Float] = (-math.pi, math.pi)
+    value_rad: Mapping[str, float] = field(default_factory=dict)
+    schedule: Mapping[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
+    vertical: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    max_joint_step_rad: float = 0.2
+    margin_rad: float = 0.05
+    range_rad: tuple[float, float] = (-math.pi, math.pi)
 
-    @model_validator(mode="after")
-    def _complete(self) -> ArmAngle:
-        low, high = self.range_rad
-        if not -math.pi <= low < high <= math.pi:
-            raise ValueError(f"range_rad must be an interval within [-pi, pi] (here [{low:g}, {high:g}])")
-        if self.mode == "constant" and not self.value_rad:
-            raise ValueError("mode 'constant' needs value_rad = { left = ..., right = ... }")
-        if self.mode == "schedule":
-            if not self.schedule:
-                raise ValueError("mode 'schedule' needs schedule = { left = [[t, psi], ...] }")
-            for hand, points in self.schedule.items():
-                times = [t for t, _ in points]
-                if not points or any(b <= a for a, b in zip(times, times[1:], strict=False)):
-                    raise ValueError(f"schedule.{hand}: times must increase")
-        _check_direction(self.vertical, "vertical")
-        return self
+    def __post_init__(self) -> None:
+        """Check every field as a task file's ``[arm_angle]`` table is checked.
+
+        Raises:
+            InvalidArgumentError: naming the field and why (the table's own message).
+        """
+        try:
+            checked = ArmAngleTable.model_validate({f.name: getattr(self, f.name) for f in fields(self)})
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            where = ".".join(str(part) for part in first["loc"]) or "arm_angle"
+            raise InvalidArgumentError(where, first["msg"].removeprefix("Value error, ")) from None
+        for f in fields(self):  # the table's values: tuples, floats
+            object.__setattr__(self, f.name, getattr(checked, f.name))
 
 
 class CarriedObject(_Model):
@@ -527,7 +564,7 @@ class TaskSpec(_Model):
     retime: Retime = Retime()
     ik: Ik = Ik()
     gesture: Gesture | None = None
-    arm_angle: ArmAngle = ArmAngle()
+    arm_angle: ArmAngleTable = ArmAngleTable()
     object: CarriedObject | None = None
     environment: Annotated[tuple[EnvironmentObject, ...], Field(max_length=MAX_OBJECTS)] = ()
     wta: Annotated[tuple[WorkspaceTargetArea, ...], Field(max_length=MAX_OBJECTS)] = ()

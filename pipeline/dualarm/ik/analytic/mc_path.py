@@ -52,7 +52,7 @@ START_WEIGHT = 0.1
 
 def settings_for(task: Task, **overrides: object) -> ArmAngle:
     """MC-Inverse's settings for a task: its ``[arm_angle]`` table, with ``overrides``."""
-    return with_overrides(task.spec.arm_angle, overrides)
+    return with_overrides(task.spec.arm_angle.settings(), overrides)
 
 
 def arm_angles(spec: ArmAngle, hand: str, reference: CartesianReference, initial: float) -> np.ndarray:
