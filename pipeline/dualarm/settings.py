@@ -6,6 +6,7 @@ They are changed only by making a copy with some fields replaced.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from typing import Any, TypeVar
 
@@ -58,3 +59,19 @@ def _plain(value: Any) -> Any:
     if isinstance(value, (tuple, list)):
         return [_plain(v) for v in value]
     return value
+
+
+def check_positive(settings: object, *names: str, zero: bool = False, integer: bool = False) -> None:
+    """Refuse each field ``names`` of ``settings`` that is not a finite number > 0 (>= 0 with ``zero``).
+
+    With ``integer`` the fields must be integers too (a bool is neither).
+
+    Raises:
+        InvalidArgumentError: naming the first field at fault and its value.
+    """
+    wanted = f"a {'non-negative' if zero else 'positive'} {'integer' if integer else 'number'}"
+    for name in names:
+        value = getattr(settings, name)
+        typed = isinstance(value, int) if integer else isinstance(value, (int, float)) and math.isfinite(value)
+        if isinstance(value, bool) or not typed or value < 0 or (value == 0 and not zero):
+            raise InvalidArgumentError(name, f"must be {wanted}, not {value!r}")

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dualarm.describe.check import JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, finite_difference_jacobians
-from dualarm.errors import RobotModelError, StageError
+from dualarm.errors import InvalidArgumentError, RobotModelError, StageError
 from dualarm.ik.pose_level.dls import DlsSettings, DlsSolver
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.poses import pose_errors
@@ -105,7 +105,7 @@ def test_one_function_gives_pose_errors_and_the_stacked_jacobian(humanoid, solve
     dx, errors, J = dx.ravel(), errors.ravel(), JT.T
     h = len(solver.tips)
     assert J.shape == (6 * h, solver.n)
-    for k, ((kin, columns), target) in enumerate(zip(kinematics, targets)):
+    for k, ((kin, columns), target) in enumerate(zip(kinematics, targets, strict=True)):
         actual = kin.pose(q[columns])
         np.testing.assert_allclose(dx[6 * k : 6 * k + 6], error_vector(target, actual), atol=1e-12)
         np.testing.assert_allclose(errors[[k, h + k]], pose_error(target, actual), atol=1e-12)
@@ -118,6 +118,7 @@ def test_one_function_gives_pose_errors_and_the_stacked_jacobian(humanoid, solve
         assert np.all(np.abs(J[:6, waist]).max(axis=0) > 0) and np.all(np.abs(J[6:, waist]).max(axis=0) > 0)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", CHAIN_SETS)
 def test_random_reachable_poses_are_solved_to_1e_9(humanoid, solvers, name):
     solver = solvers[name]
@@ -126,7 +127,7 @@ def test_random_reachable_poses_are_solved_to_1e_9(humanoid, solvers, name):
     truths = rng.uniform(solver.lower + MARGIN_RAD, solver.upper - MARGIN_RAD, size=(SAMPLES, solver.n))
     seeds = np.clip(truths + rng.uniform(-PERTURBATION_RAD, PERTURBATION_RAD, truths.shape), solver.lower, solver.upper)
     targets = [tip_poses(kinematics, q) for q in truths]
-    results = [solver.solve(T, seed) for T, seed in zip(targets, seeds)]
+    results = [solver.solve(T, seed) for T, seed in zip(targets, seeds, strict=True)]
 
     converged = [i for i, r in enumerate(results) if r.converged]
     assert len(converged) >= REQUIRED_SUCCESSES, [r.reason for r in results if not r.converged]
@@ -137,7 +138,7 @@ def test_random_reachable_poses_are_solved_to_1e_9(humanoid, solvers, name):
         assert r.converged == (r.reason == "")
 
     # forward kinematics of each hand's own chain, errors measured with scipy
-    for (kin, columns), k in zip(kinematics, range(len(solver.tips))):
+    for (kin, columns), k in zip(kinematics, range(len(solver.tips)), strict=True):
         Q = np.stack([results[i].q for i in converged])[:, columns]
         wanted = np.stack([targets[i][k] for i in converged])
         position, rotation = pose_errors(wanted, kin.poses(Q))
@@ -151,7 +152,7 @@ def test_random_reachable_poses_are_solved_to_1e_9(humanoid, solvers, name):
         for i in converged[:PYBULLET_SAMPLES]:
             sim.set_positions(solver.joint_names, results[i].q)
             base = sim.link_pose(solver.base)
-            for tip, target in zip(solver.tips, targets[i]):
+            for tip, target in zip(solver.tips, targets[i], strict=True):
                 position, rotation = pose_error(target, np.linalg.solve(base, sim.link_pose(tip)))
                 assert position <= PYBULLET_TOLERANCE and rotation <= PYBULLET_TOLERANCE
 
@@ -232,7 +233,7 @@ def test_targets_at_the_joint_limits_are_reached_within_them(humanoid, solvers, 
         assert np.all(result.q >= solver.lower) and np.all(result.q <= solver.upper)
         if result.converged:
             solved += 1
-            for (kin, columns), target in zip(kinematics, tip_poses(kinematics, truth)):
+            for (kin, columns), target in zip(kinematics, tip_poses(kinematics, truth), strict=True):
                 assert max(pose_error(target, kin.pose(result.q[columns]))) <= TOLERANCE
     assert solved >= 19
 
@@ -292,7 +293,7 @@ def test_bad_inputs_raise_stage_errors(humanoid, solvers):
         DlsSolver.of(humanoid, "pelvis", ["left_hand", "left_hand"])
     with pytest.raises(RobotModelError, match="no link 'left_hnd'"):
         DlsSolver.of(humanoid, "pelvis", ["left_hnd"])
-    with pytest.raises(StageError, match="max_damping"):
+    with pytest.raises(InvalidArgumentError, match="max_damping"):
         DlsSettings(max_damping=0.0)
-    with pytest.raises(StageError, match="max_iterations"):
+    with pytest.raises(InvalidArgumentError, match="max_iterations"):
         DlsSettings(max_iterations=0)

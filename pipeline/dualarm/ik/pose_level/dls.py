@@ -73,6 +73,7 @@ from dualarm.errors import StageError
 from dualarm.model.kinematics import chain_frames, geometric_jacobian
 from dualarm.model.robot import Robot
 from dualarm.numerics.compiled import compiled
+from dualarm.settings import check_positive
 
 #: Singular values below this fraction of the largest count as zero when there is no damping.
 RANK_TOLERANCE = 1e-12
@@ -106,20 +107,11 @@ class DlsSettings:
     stall_step_rad: float = 1e-15
 
     def __post_init__(self) -> None:
-        for name in (
-            "position_tolerance_m",
-            "orientation_tolerance_rad",
-            "singular_region",
-            "max_damping",
-            "max_step_rad",
-        ):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise StageError(f"DlsSettings.{name}: must be a positive number, got {value!r}")
-        if not (np.isfinite(self.stall_step_rad) and self.stall_step_rad >= 0):
-            raise StageError(f"DlsSettings.stall_step_rad: must be a non-negative number, got {self.stall_step_rad!r}")
-        if isinstance(self.max_iterations, bool) or not isinstance(self.max_iterations, int) or self.max_iterations < 1:
-            raise StageError(f"DlsSettings.max_iterations: must be a positive integer, got {self.max_iterations!r}")
+        check_positive(
+            self, "position_tolerance_m", "orientation_tolerance_rad", "singular_region", "max_damping", "max_step_rad"
+        )
+        check_positive(self, "stall_step_rad", zero=True)
+        check_positive(self, "max_iterations", integer=True)
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ from dualarm.ik.arms import ArmProblem, ArmSolution, arm_problems, joint_path
 from dualarm.ik.pose_level.dls import DlsSettings as DlsSettings  # DLS-SVD's settings, with the others here
 from dualarm.method import Method
 from dualarm.model.robot import Robot
-from dualarm.settings import as_record
+from dualarm.settings import as_record, check_positive
 
 #: The methods of this module.
 POINTWISE_METHODS = ("trac-ik", "pybullet", "dls-svd", "ikfast-style")
@@ -51,21 +51,6 @@ ArmSolver = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, bool]]
 #: TRAC-IK's solve types.
 SolveType = Literal["Speed", "Distance", "Manip1", "Manip2"]
 SOLVE_TYPES: tuple[str, ...] = get_args(SolveType)
-
-
-def _positive(settings: object, *names: str, zero: bool = False) -> None:
-    """Refuse a field of ``settings`` that is not a finite number > 0 (>= 0 with ``zero``).
-
-    Raises:
-        InvalidArgumentError: the first such field.
-    """
-    for name in names:
-        value = getattr(settings, name)
-        number = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
-        if not number or value < 0 or (value == 0 and not zero):
-            raise InvalidArgumentError(
-                name, f"must be a {'non-negative' if zero else 'positive'} number, not {value!r}"
-            )
 
 
 @dataclass(frozen=True)
@@ -84,7 +69,7 @@ class TracIkSettings:
     solve_type: SolveType = "Speed"
 
     def __post_init__(self) -> None:
-        _positive(self, "timeout_s", "epsilon")
+        check_positive(self, "timeout_s", "epsilon")
         if self.solve_type not in SOLVE_TYPES:
             raise InvalidArgumentError(
                 "solve_type", f"unknown TRAC-IK solve type {self.solve_type!r} (types: {', '.join(SOLVE_TYPES)})"
@@ -112,8 +97,9 @@ class PyBulletIkSettings:
     orientation_tolerance_rad: float = 1e-6
 
     def __post_init__(self) -> None:
-        _positive(self, "max_iterations", "residual_threshold_m", "position_tolerance_m", "orientation_tolerance_rad")
-        _positive(self, "joint_damping", zero=True)
+        check_positive(self, "max_iterations", integer=True)
+        check_positive(self, "residual_threshold_m", "position_tolerance_m", "orientation_tolerance_rad")
+        check_positive(self, "joint_damping", zero=True)
 
 
 @dataclass(frozen=True)
@@ -127,7 +113,7 @@ class IkfastStyleSettings:
     resolution_rad: float = 0.01
 
     def __post_init__(self) -> None:
-        _positive(self, "resolution_rad")
+        check_positive(self, "resolution_rad")
 
 
 def _arm_solver(method: str, robot: Robot, arm: ArmProblem, locked: Mapping[str, float], settings: Any) -> ArmSolver:

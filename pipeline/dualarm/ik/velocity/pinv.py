@@ -19,12 +19,11 @@ import numpy as np
 
 from dualarm.contracts.joint_path import JointPath, TaskSpace, check_task_space
 from dualarm.contracts.reference import CartesianReference
-from dualarm.errors import InvalidArgumentError
 from dualarm.ik.velocity.stack import reference_stack, stack_joint_path, stacked_reference, start_configuration
 from dualarm.ik.velocity.tvgdd import TvgddSettings, gesture_band, joint_bounds
 from dualarm.method import Method
 from dualarm.model.robot import Robot
-from dualarm.settings import with_overrides
+from dualarm.settings import check_positive, with_overrides
 
 if TYPE_CHECKING:
     from dualarm.tasks import Task
@@ -50,12 +49,7 @@ class PinvSettings:
 
     def __post_init__(self) -> None:
         check_task_space(self.task_space)
-        if (
-            isinstance(self.feedback_gain, bool)
-            or not isinstance(self.feedback_gain, (int, float))
-            or not (np.isfinite(self.feedback_gain) and self.feedback_gain > 0)
-        ):
-            raise InvalidArgumentError("feedback_gain", f"must be a positive number, not {self.feedback_gain!r}")
+        check_positive(self, "feedback_gain")
 
 
 def settings_for(task: Task, **overrides: object) -> PinvSettings:

@@ -45,7 +45,7 @@ from dualarm.ik.velocity.stack import (
 )
 from dualarm.method import Method
 from dualarm.model.robot import Robot
-from dualarm.settings import with_overrides
+from dualarm.settings import check_positive, with_overrides
 
 if TYPE_CHECKING:
     from dualarm.tasks import Task
@@ -116,10 +116,7 @@ class TvgddSettings:
             raise InvalidArgumentError(
                 "backend", f"unknown QP backend '{self.backend}' (backends: {', '.join(BACKENDS)})"
             )
-        for name in ("feedback_gain", "nu", "t_sp_s", "c_tuning", "rmp_lambda", "lvi_tolerance"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (np.isfinite(value) and value > 0):
-                raise InvalidArgumentError(name, f"must be a positive number, not {value!r}")
+        check_positive(self, "feedback_gain", "nu", "t_sp_s", "c_tuning", "rmp_lambda", "lvi_tolerance")
         for name in ("goal_lower", "goal_upper"):
             object.__setattr__(self, name, dict(getattr(self, name)))  # a copy: the caller's dict may change
 
