@@ -1,4 +1,9 @@
-"""Read-only arrays for the immutable stage contracts, and the checks of array arguments at the public entry points (each failure an :class:`~dualarm.errors.InvalidArgumentError` naming the argument: a wrong shape, a NaN, a matrix that is not a rigid transform)."""
+"""Read-only arrays for the immutable stage contracts, and the checks of array arguments.
+
+The checks run at the public entry points; each failure is an
+:class:`~dualarm.errors.InvalidArgumentError` naming the argument: a wrong shape, a NaN, a matrix
+that is not a rigid transform.
+"""
 
 from __future__ import annotations
 
@@ -15,7 +20,10 @@ RIGID_TOLERANCE = 1e-6
 
 
 def frozen(a: Any, shape: tuple[int, ...], name: str, dtype: type = float) -> np.ndarray:
-    """A read-only copy of ``a`` as ``dtype``; InvalidArgumentError naming ``name`` if its shape is not ``shape``."""
+    """A read-only copy of ``a`` as ``dtype``.
+
+    Raises InvalidArgumentError naming ``name`` if its shape is not ``shape``.
+    """
     a = np.array(a, dtype=dtype)
     if a.shape != shape:
         raise InvalidArgumentError(name, f"expected shape {shape}, got {a.shape}")
@@ -34,7 +42,7 @@ def finite_array(a: Any, name: str, shape: tuple[int | None, ...] | None = None)
     except (TypeError, ValueError):
         raise InvalidArgumentError(name, f"expected an array of numbers, got {type(a).__name__}") from None
     if shape is not None and (
-        array.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, array.shape))
+        array.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, array.shape, strict=True))
     ):
         wanted = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
         raise InvalidArgumentError(name, f"expected shape {wanted}, got {array.shape}")
@@ -47,7 +55,10 @@ def finite_array(a: Any, name: str, shape: tuple[int | None, ...] | None = None)
 
 
 def rigid_transforms(a: Any, name: str, *, many: bool = False) -> np.ndarray:
-    """``a`` as a 4x4 rigid transform (or (N, 4, 4) with ``many``), checked: shape, finite, a rotation block with R^T R = I and det R = 1, and the last row [0, 0, 0, 1].
+    """``a`` as a 4x4 rigid transform (or (N, 4, 4) with ``many``), checked.
+
+    The checks: shape, finite, a rotation block with R^T R = I and det R = 1, and the last row [0,
+    0, 0, 1].
 
     Raises:
         InvalidArgumentError: naming the argument and what is wrong (a 3x3 where a 4x4 belongs, a NaN, ...).
@@ -62,13 +73,16 @@ def rigid_transforms(a: Any, name: str, *, many: bool = False) -> np.ndarray:
         which = f" (pose {bad[0]})" if many else ""
         raise InvalidArgumentError(
             name,
-            f"is not a rigid transform{which}: the rotation block must be orthonormal with determinant 1 and the last row [0, 0, 0, 1]",
+            f"is not a rigid transform{which}: the rotation block must be "
+            "orthonormal with determinant 1 and the last row [0, 0, 0, 1]",
         )
     return T
 
 
 def joint_vector(q: Any, joint_names: tuple[str, ...], name: str) -> np.ndarray:
-    """A configuration of ``joint_names`` [rad] from an array (n,) or a mapping joint name -> value (every joint named), checked finite.
+    """A configuration of ``joint_names`` [rad] from an array (n,) or a mapping joint name -> value.
+
+    The mapping names every joint; the values are checked finite.
 
     Raises:
         InvalidArgumentError: a wrong length, a joint missing from the mapping, a NaN.

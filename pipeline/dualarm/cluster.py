@@ -85,13 +85,19 @@ def _undo_malloc_trim() -> None:
 
 
 def _unraisable(unraisable: Any) -> None:
-    """A worker's ``sys.unraisablehook``: silent for a stop's :class:`Terminated` raised in a ``__del__`` (the task raises it again between stages), Python's own hook otherwise."""
+    """A worker's ``sys.unraisablehook``: silent for a stop's :class:`Terminated` raised in a ``__del__``.
+
+    The task raises it again between stages. Python's own hook otherwise.
+    """
     if not issubclass(unraisable.exc_type, Terminated):
         sys.__unraisablehook__(unraisable)
 
 
 def pin_to_core(core: int) -> None:
-    """Keep this process on CPU ``core``: every thread it has (Linux's affinity is per thread), and those they start, which inherit it; nothing where the OS cannot."""
+    """Keep this process on CPU ``core``: every thread it has, and those they start, which inherit it.
+
+    Linux's affinity is per thread. Nothing where the OS cannot.
+    """
     if not hasattr(os, "sched_setaffinity"):
         return
     threads = [int(t) for t in os.listdir("/proc/self/task")] if os.path.isdir("/proc/self/task") else [0]
@@ -101,13 +107,18 @@ def pin_to_core(core: int) -> None:
 
 
 def local_cores(workers: int) -> tuple[int, ...]:
-    """The cores a ``LocalCluster`` of ``workers`` pins its workers to, worker i to the i-th: this process's, when there are at least as many (else none: the OS places them)."""
+    """The cores a ``LocalCluster`` of ``workers`` pins its workers to, worker i to the i-th.
+
+    This process's, when there are at least as many (else none: the OS places them).
+    """
     cores = tuple(sorted(os.sched_getaffinity(0))) if hasattr(os, "sched_getaffinity") else ()
     return cores if workers <= len(cores) else ()
 
 
 def _without_gc_diagnosis() -> None:
-    """Remove the garbage-collection callback a Dask scheduler or worker installs in its process (it logs GC times at INFO level only).
+    """Remove the garbage-collection callback a Dask scheduler or worker installs in its process.
+
+    It logs GC times at INFO level only.
 
     A stop's or a signal's exception raised inside it (the callback runs wherever a collection
     starts) leaves its timer broken, and its next call prints "Exception ignored in: ...
@@ -119,7 +130,9 @@ def _without_gc_diagnosis() -> None:
 
 
 class WorkerSetup(WorkerPlugin):
-    """What each worker does once, as it starts (a Dask ``WorkerPlugin``; its ``setup`` runs in the worker's main thread).
+    """What each worker does once, as it starts (a Dask ``WorkerPlugin``).
+
+    Its ``setup`` runs in the worker's main thread.
 
     Args:
         local: a ``LocalCluster``'s worker, a child of the client's process: it ignores SIGINT.
@@ -158,7 +171,10 @@ def worker_name() -> str:
 
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None) -> Iterator[Client]:
-    """A Dask client: of the cluster at ``scheduler`` (``tcp://HOST:PORT``), else of a new ``LocalCluster`` of ``workers`` processes (default one per core), one thread each; closed at the end.
+    """A Dask client of the cluster at ``scheduler``, else of a new ``LocalCluster``; closed at the end.
+
+    ``scheduler`` is ``tcp://HOST:PORT``; the ``LocalCluster`` has ``workers`` processes (default
+    one per core), one thread each.
 
     Raises:
         DualarmError: ``scheduler`` cannot be reached (within :data:`CONNECT_TIMEOUT_S`), or ``workers`` < 1.
@@ -171,7 +187,8 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError, TypeError) as exc:
             raise DualarmError(
-                f"--scheduler {excerpt(scheduler)}: no Dask scheduler answers there ({type(exc).__name__}: {excerpt(str(exc), 120)})"
+                f"--scheduler {excerpt(scheduler)}: no Dask scheduler answers "
+                f"there ({type(exc).__name__}: {excerpt(str(exc), 120)})"
             ) from None
         with client:
             client.register_plugin(WorkerSetup(local=False))
@@ -181,10 +198,11 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
     if n < 1:
         raise DualarmError(f"--workers {n}: give at least 1 worker")
     with dask.config.set(LOCAL_CLUSTER_CONFIG):
-        # dashboard ":0": the scheduler's HTTP routes on a free port (on 8787, a warning when it is taken); bokeh's dashboard is not installed.
-        # Dask's own logs silenced up to ERROR: a task's failure comes back as its exception (a failed row or part), and an
-        # interrupted command's workers, stopped as the scheduler closes, logged "Failed to communicate with scheduler
-        # during heartbeat" with a traceback (seen once in CI, under SIGTERM).
+        # dashboard ":0": the scheduler's HTTP routes on a free port (on 8787, a warning when it is taken); bokeh's
+        # dashboard is not installed.
+        # Dask's own logs silenced up to ERROR: a task's failure comes back as its exception (a failed row or part), and
+        # an interrupted command's workers, stopped as the scheduler closes, logged "Failed to communicate with
+        # scheduler during heartbeat" with a traceback (seen once in CI, under SIGTERM).
         with (
             LocalCluster(
                 n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.CRITICAL
@@ -197,7 +215,10 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
 
 
 def stop_tasks(client: Client, futures: Collection[Future]) -> None:
-    """Stop the tasks of ``futures`` (each run inside :func:`~dualarm.interrupt.stoppable` under its key) on every worker, and wait up to :data:`STOP_WAIT_S` for them to end."""
+    """Stop the tasks of ``futures`` on every worker, and wait up to :data:`STOP_WAIT_S` for them to end.
+
+    Each runs inside :func:`~dualarm.interrupt.stoppable` under its key.
+    """
     from distributed import wait
 
     with contextlib.suppress(Exception):  # a worker that cannot be reached has nothing to close

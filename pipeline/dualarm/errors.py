@@ -112,7 +112,10 @@ class NoSolutionFound(StageError):
 
 
 class OutputError(DualarmError):
-    """An output path cannot be written without harm: it is not a directory dualarm made, holds an entry dualarm did not write, is in use by another dualarm process, or the system refuses it (the message names the path and the cause).
+    """An output path cannot be written without harm.
+
+    It is not a directory dualarm made, holds an entry dualarm did not write, is in use by another
+    dualarm process, or the system refuses it (the message names the path and the cause).
 
     Attributes:
         path: the path at fault.
@@ -146,7 +149,11 @@ class Terminated(SystemExit):
 
 
 def excerpt(text: object, limit: int = 80) -> str:
-    """``str(text)`` as a message may quote it: at most ``limit`` characters (its middle cut to "..."), control characters escaped as in a Python literal, so that it stays one line and cannot drive a terminal."""
+    """``str(text)`` as a message may quote it: at most ``limit`` characters (its middle cut to "...").
+
+    Control characters are escaped as in a Python literal, so that it stays one line and cannot
+    drive a terminal.
+    """
     s = str(text)
     if len(s) > limit:
         head = (limit - 3) // 2

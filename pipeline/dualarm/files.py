@@ -32,7 +32,10 @@ _KINDS = (
 
 
 def listing(names: Iterable[object], most: int = 12) -> str:
-    """``names`` joined by commas for a message, each quoted with :func:`~dualarm.errors.excerpt`: the first ``most`` and then how many there are in all."""
+    """``names`` joined by commas for a message: the first ``most`` and then how many there are in all.
+
+    Each is quoted with :func:`~dualarm.errors.excerpt`.
+    """
     quoted = [excerpt(n, 40) for n in names]
     if len(quoted) <= most:
         return ", ".join(quoted) or "none"
@@ -40,14 +43,20 @@ def listing(names: Iterable[object], most: int = 12) -> str:
 
 
 def cause(exc: OSError | ValueError) -> str:
-    """The reason an OS call on a path failed, in the OS's words (``strerror``: "No such file or directory", "Too many levels of symbolic links", ...)."""
+    """The reason an OS call on a path failed, in the OS's words (``strerror``).
+
+    For example "No such file or directory", "Too many levels of symbolic links", ...
+    """
     if isinstance(exc, OSError):
         return exc.strerror or type(exc).__name__
     return "the path holds a NUL byte" if "null" in str(exc) else excerpt(str(exc))
 
 
 def kind(path: str | Path) -> str | None:
-    """What ``path`` is (``a regular file``, ``a directory``, ``a FIFO``, ...), following symbolic links; None when it cannot be looked at (missing, a loop, too long, a NUL byte, ...). Never raises."""
+    """What ``path`` is (``a regular file``, ``a directory``, ``a FIFO``, ...), following symbolic links.
+
+    None when it cannot be looked at (missing, a loop, too long, a NUL byte, ...). Never raises.
+    """
     try:
         mode = os.stat(path).st_mode
     except (OSError, ValueError):

@@ -33,7 +33,10 @@ _stopped: set[str] = set()
 
 
 def _raise_in(thread_id: int, exception: type[BaseException] | None) -> None:
-    """Raise ``exception`` in thread ``thread_id`` at its next Python instruction (None: take back one not yet raised)."""
+    """Raise ``exception`` in thread ``thread_id`` at its next Python instruction.
+
+    None: take back one not yet raised.
+    """
     ctypes.pythonapi.PyThreadState_SetAsyncExc(
         ctypes.c_ulong(thread_id), ctypes.py_object(exception) if exception else None
     )
@@ -41,7 +44,10 @@ def _raise_in(thread_id: int, exception: type[BaseException] | None) -> None:
 
 @contextmanager
 def stoppable(token: str) -> Iterator[None]:
-    """Run the block so that :func:`stop` given ``token`` raises :class:`Terminated` in it; raises it at once if ``token`` was stopped already."""
+    """Run the block so that :func:`stop` given ``token`` raises :class:`Terminated` in it.
+
+    Raises it at once if ``token`` was stopped already.
+    """
     thread = threading.get_ident()
     with _lock:
         if token in _stopped:
@@ -56,7 +62,10 @@ def stoppable(token: str) -> Iterator[None]:
 
 
 def stop(tokens: Collection[str]) -> int:
-    """Stop the work running under ``tokens`` in this process (:func:`stoppable`), and any that starts under them later; returns the threads stopped now."""
+    """Stop the work running under ``tokens`` in this process (:func:`stoppable`).
+
+    And any that starts under them later. Returns the threads stopped now.
+    """
     with _lock:
         new = set(tokens) - _stopped
         _stopped.update(new)
@@ -70,13 +79,19 @@ def stop(tokens: Collection[str]) -> int:
 
 
 def stop_requested() -> bool:
-    """Whether the work this thread runs was stopped (its :class:`Terminated` may have been swallowed by a library: CasADi turns it into a failed solve)."""
+    """Whether the work this thread runs was stopped.
+
+    Its :class:`Terminated` may have been swallowed by a library: CasADi turns it into a failed
+    solve.
+    """
     return _running.get(threading.get_ident()) in _stopped
 
 
 @contextmanager
 def held() -> Iterator[list[int]]:
-    """SIGINT and SIGTERM (in the main thread), or a :func:`stop` (in another), held back until the block ends, then raised.
+    """SIGINT and SIGTERM, or a :func:`stop`, held back until the block ends, then raised.
+
+    The signals in the main thread, a :func:`stop` in another.
 
     A signal's exception raised inside ``rr.RecordingStream()`` leaves a half-built stream whose
     ``__del__`` prints a traceback; one raised inside Dask's garbage-collection callback leaves it

@@ -40,14 +40,16 @@ def per_joint(values: Any, joint_names: Sequence[str], kind: str, stage: str) ->
     except (TypeError, ValueError):
         raise InvalidArgumentError(
             kind,
-            f"{stage} expected {len(joint_names)} limits (one per joint: {', '.join(joint_names)}), got {np.shape(values)}",
+            f"{stage} expected {len(joint_names)} limits (one per "
+            f"joint: {', '.join(joint_names)}), got {np.shape(values)}",
         ) from None
     bad = np.flatnonzero(~(np.isfinite(limits) & (limits > 0)))
     if len(bad):
         j = int(bad[0])
         raise InvalidArgumentError(
             kind,
-            f"the limit of joint {j} ({joint_names[j]}) is {float(limits[j])!r} {unit} in {stage}; every limit must be a positive finite number",
+            f"the limit of joint {j} ({joint_names[j]}) is {float(limits[j])!r} "
+            f"{unit} in {stage}; every limit must be a positive finite number",
             joint=joint_names[j],
         )
     return limits

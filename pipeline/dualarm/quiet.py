@@ -1,4 +1,8 @@
-"""Silencing of what C libraries print straight to the process's file descriptors (PyBullet's banners, qpOASES's licence text), so the CLI's stdout stays machine-readable."""
+"""Silencing of what C libraries print straight to the process's file descriptors.
+
+Such as PyBullet's banners and qpOASES's licence text: silenced so the CLI's stdout stays
+machine-readable.
+"""
 
 from __future__ import annotations
 

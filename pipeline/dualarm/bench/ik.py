@@ -1,4 +1,6 @@
-"""``dualarm bench ik``: position-level IK of one arm, the analytic solver of its family against iterative solvers.
+"""``dualarm bench ik``: position-level IK of one arm.
+
+The analytic solver of its family against iterative solvers.
 
 Measured in one process, on the same random reachable poses of an arm chain: each pose is the
 forward kinematics of a configuration drawn uniformly within the joint limits (fixed seed), so
@@ -167,7 +169,11 @@ def reachable_poses(
 def bench_ik(
     robot: Robot | str | Path, arm: str = "left", poses: int = 10_000, seed: int = 0, progress: Progress | None = None
 ) -> list[IkBenchRow]:
-    """Time and success rate of the arm's analytic solver (MC-Inverse on an S-R-S arm, SEW and its peer IK-Geo on an arm of the SEW family; single and batched), DLS-SVD, TRAC-IK and PyBullet on the same random reachable poses of one arm (see the module docstring).
+    """Time and success rate of the arm's analytic solver, DLS-SVD, TRAC-IK and PyBullet.
+
+    The analytic solver: MC-Inverse on an S-R-S arm, SEW and its peer IK-Geo on an arm of the SEW
+    family; single and batched. All on the same random reachable poses of one arm (see the module
+    docstring).
 
     Args:
         robot: the robot, or its directory (as for :func:`~dualarm.model.robot.load_robot`).
@@ -200,7 +206,8 @@ def bench_ik(
     srs = not not_srs(robot, (arm,))
     if not srs and not_sew(robot, (arm,)):
         raise NotSRSError(
-            f"bench ik: the {arm} arm of '{robot.name}' is neither S-R-S nor of the SEW solver's family: {not_sew(robot, (arm,))[arm]}"
+            f"bench ik: the {arm} arm of '{robot.name}' is neither S-R-S "
+            f"nor of the SEW solver's family: {not_sew(robot, (arm,))[arm]}"
         )
     mc = McInverse.of(chain) if srs else None
     Q, T, psi = reachable_poses(robot, arm, poses, seed, mc)
@@ -246,7 +253,9 @@ def bench_ik(
     rows.append(
         replace(
             row,
-            note=f"timeout {trac.timeout_s * 1e3:g} ms, epsilon {trac.epsilon:g}, {trac.solve_type}; ok confirmed by FK",
+            note=(
+                f"timeout {trac.timeout_s * 1e3:g} ms, epsilon {trac.epsilon:g}, {trac.solve_type}; ok confirmed by FK"
+            ),
         )
     )
 
@@ -257,7 +266,10 @@ def bench_ik(
     rows.append(
         replace(
             row,
-            note=f"{bullet.max_iterations} iterations max, tolerances {bullet.position_tolerance_m:g} m, {bullet.orientation_tolerance_rad:g} rad by FK",
+            note=(
+                f"{bullet.max_iterations} iterations max, tolerances "
+                f"{bullet.position_tolerance_m:g} m, {bullet.orientation_tolerance_rad:g} rad by FK"
+            ),
         )
     )
     return rows
@@ -285,7 +297,7 @@ def _mc_rows(
 
     mc.solve(T[0], psi[0])  # the Function's first call
     row = per_pose(MC_SINGLE, mc_single)
-    distance = np.array([_closest(s.q, s.reason, q) for s, q in zip(solutions, Q)])
+    distance = np.array([_closest(s.q, s.reason, q) for s, q in zip(solutions, Q, strict=True)])
     rows.append(replace(row, success_rate=float(np.mean(distance <= MATCH_TOLERANCE_RAD)), note=_mc_note(distance)))
 
     # 2. MC-Inverse, all poses in one call.
@@ -297,7 +309,7 @@ def _mc_rows(
         q_all, reason_all = mc.solve_many(T, psi)
         calls.append((time.perf_counter() - start) / poses)
     report(MC_BATCHED, poses, poses)
-    distance = np.array([_closest(c, r, q) for c, r, q in zip(q_all, reason_all, Q)])
+    distance = np.array([_closest(c, r, q) for c, r, q in zip(q_all, reason_all, Q, strict=True)])
     note = f"{_mc_note(distance)}; best of {BATCH_REPEATS} calls {min(calls) * 1e6:.2f} µs/pose"
     note += f"; mapped calls of {BatchedCandidates.chunk} poses on {THREADS} threads"
     rows.append(
@@ -316,7 +328,10 @@ def _mc_rows(
 def _sew_rows(
     robot: Robot, arm: str, T: np.ndarray, psi: np.ndarray, Q: np.ndarray, report: Progress
 ) -> list[IkBenchRow]:
-    """SEW called singly (the first :data:`SEW_SINGLE_POSES` poses) and batched, and IK-Geo with one joint fixed (the module docstring)."""
+    """SEW called singly (the first :data:`SEW_SINGLE_POSES` poses) and batched.
+
+    And IK-Geo with one joint fixed (the module docstring).
+    """
     from dualarm.ik.analytic.sew import solve, solve_many
     from dualarm.ik.analytic.sew_path import sew_angle_of
     from dualarm.model.sew import sew_chain
@@ -329,7 +344,7 @@ def _sew_rows(
     rows = []
     single = min(poses, SEW_SINGLE_POSES)
     row, answers = _timed(SEW_SINGLE, single, lambda i: solve(sew_arm, T[i], float(psi[i]), sew).q, report)
-    success = float(np.mean([_found(a, q) for a, q in zip(answers, Q)]))
+    success = float(np.mean([_found(a, q) for a, q in zip(answers, Q, strict=False)]))
     rows.append(
         replace(
             row,
@@ -344,7 +359,7 @@ def _sew_rows(
     elapsed = (time.perf_counter() - start) / poses
     report(SEW_BATCHED, poses, poses)
     counts = np.array([len(b.q) for b in batched])
-    success = float(np.mean([_found(b.q, q) for b, q in zip(batched, Q)]))
+    success = float(np.mean([_found(b.q, q) for b, q in zip(batched, Q, strict=True)]))
     rows.append(
         IkBenchRow(
             SEW_BATCHED,
@@ -360,7 +375,11 @@ def _sew_rows(
 
 
 def _ik_geo_rows(robot: Robot, arm: str, T: np.ndarray, Q: np.ndarray, report: Progress) -> list[IkBenchRow]:
-    """IK-Geo with one joint fixed at the original configuration's, one call per pose (the module docstring): the analytic peer, on an S-R-S arm (an R-2R-R-3R arm whose first three axes meet) as on the SEW family."""
+    """IK-Geo with one joint fixed at the original configuration's, one call per pose.
+
+    See the module docstring: the analytic peer, on an S-R-S arm (an R-2R-R-3R arm whose first three
+    axes meet) as on the SEW family.
+    """
     import ik_geo
 
     from dualarm.model.sew import UPPER_ARM_FAMILY, sew_chain
@@ -380,15 +399,23 @@ def _ik_geo_rows(robot: Robot, arm: str, T: np.ndarray, Q: np.ndarray, report: P
         robot_6r = ik_geo.Robot.spherical_two_intersecting(*problems[0][:2])
         row, answers = _timed(IK_GEO, len(Q), lambda i: robot_6r.get_ik(*problems[i][2:]), report)
     success = float(
-        np.mean([_found(np.array(ik_geo_rows(sew_arm, a, q)).reshape(-1, 7), q) for a, q in zip(answers, Q)])
+        np.mean(
+            [_found(np.array(ik_geo_rows(sew_arm, a, q)).reshape(-1, 7), q) for a, q in zip(answers, Q, strict=True)]
+        )
     )
     fixed = "q7, joints 6..1" if sew_arm.family == UPPER_ARM_FAMILY else "q1, joints 2..7"
-    note = f"ik-geo's spherical_two_intersecting with {fixed} fixed at the original's; original q among its exact solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad"
+    note = (
+        f"ik-geo's spherical_two_intersecting with {fixed} fixed at the original's; "
+        f"original q among its exact solutions to {SEW_MATCH_TOLERANCE_RAD:g} rad"
+    )
     return [replace(row, success_rate=success, note=note)]
 
 
 def _found(q_all: np.ndarray, q: np.ndarray) -> bool:
-    """Whether ``q`` (7,) [rad] is among the rows of ``q_all`` to :data:`SEW_MATCH_TOLERANCE_RAD` (angles compared modulo 2 pi)."""
+    """Whether ``q`` (7,) [rad] is among the rows of ``q_all`` to :data:`SEW_MATCH_TOLERANCE_RAD`.
+
+    Angles compared modulo 2 pi.
+    """
     return (
         bool(len(q_all))
         and float(np.abs(np.angle(np.exp(1j * (np.asarray(q_all) - q)))).max(axis=1).min()) <= SEW_MATCH_TOLERANCE_RAD
@@ -396,12 +423,20 @@ def _found(q_all: np.ndarray, q: np.ndarray) -> bool:
 
 
 def ik_geo_solutions(arm: SewChain, T: np.ndarray, q: np.ndarray) -> list[np.ndarray]:
-    """IK-Geo's exact solutions (each (7,) [rad]) of the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,): :func:`ik_geo_call`'s answer as rows of the 7 joints."""
+    """IK-Geo's exact solutions (each (7,) [rad]) of the pose T (4, 4, chain base frame).
+
+    With the joint its 6R leaves out held at ``q``'s (7,): :func:`ik_geo_call`'s answer as rows of
+    the 7 joints.
+    """
     return ik_geo_rows(arm, ik_geo_call(arm, T, q), q)
 
 
 def ik_geo_call(arm: SewChain, T: np.ndarray, q: np.ndarray) -> list:
-    """IK-Geo's answer (its list of (6 joints, least-squares flag)) for the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,): :func:`ik_geo_problem`'s robot built and solved."""
+    """IK-Geo's answer for the pose T (4, 4, chain base frame).
+
+    Its list of (6 joints, least-squares flag), with the joint its 6R leaves out held at ``q``'s
+    (7,): :func:`ik_geo_problem`'s robot built and solved.
+    """
     import ik_geo
 
     axes, offsets, R, p = ik_geo_problem(arm, T, q)
@@ -409,7 +444,9 @@ def ik_geo_call(arm: SewChain, T: np.ndarray, q: np.ndarray) -> list:
 
 
 def ik_geo_problem(arm: SewChain, T: np.ndarray, q: np.ndarray) -> tuple[list, list, list, list]:
-    """IK-Geo's 6R robot (its axes and offsets) and the rotation and position it solves, for the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,).
+    """IK-Geo's 6R robot (its axes and offsets) and the rotation and position it solves.
+
+    For the pose T (4, 4, chain base frame) with the joint its 6R leaves out held at ``q``'s (7,).
 
     Both SEW families are IK-Geo's ``spherical_two_intersecting`` 6R (the ``ik-geo`` package: axes
     1 and 2 meet, axes 4-6 meet) once one joint is fixed: 3R-R-2R-R with q7 fixed, joints 6..1
@@ -441,7 +478,10 @@ def ik_geo_problem(arm: SewChain, T: np.ndarray, q: np.ndarray) -> tuple[list, l
 
 
 def _rotation(k: np.ndarray, angle: float) -> np.ndarray:
-    """exp([k] angle) for one unit axis k (3,) (Rodrigues, in numpy: a CasADi call costs more than the product on one angle)."""
+    """exp([k] angle) for one unit axis k (3,) (Rodrigues, in numpy).
+
+    In numpy: a CasADi call costs more than the product on one angle.
+    """
     from dualarm.model.rodrigues import hat
 
     K = hat(k)
@@ -449,7 +489,10 @@ def _rotation(k: np.ndarray, angle: float) -> np.ndarray:
 
 
 def ik_geo_rows(arm: SewChain, answer: list, q: np.ndarray) -> list[np.ndarray]:
-    """The exact solutions of :func:`ik_geo_call`'s ``answer`` as rows of the 7 joints [rad], the fixed one at ``q``'s."""
+    """The exact solutions of :func:`ik_geo_call`'s ``answer`` as rows of the 7 joints [rad].
+
+    The fixed one at ``q``'s.
+    """
     from dualarm.model.sew import UPPER_ARM_FAMILY
 
     if arm.family == UPPER_ARM_FAMILY:
@@ -458,7 +501,11 @@ def ik_geo_rows(arm: SewChain, answer: list, q: np.ndarray) -> list[np.ndarray]:
 
 
 def _timed(name: str, count: int, call: Callable[[int], Any], report: Progress) -> tuple[IkBenchRow, list]:
-    """Time ``call(i)`` for the first ``count`` poses, one perf_counter pair per call, reporting about every 1 %: the row (success rate 0 until the caller scores the results) and the results."""
+    """Time ``call(i)`` for the first ``count`` poses, one perf_counter pair per call.
+
+    Reports about every 1 %. Returns the row (success rate 0 until the caller scores the results)
+    and the results.
+    """
     times, results = np.empty(count), []
     every = max(1, count // 100)
     report(name, 0, count)
@@ -472,7 +519,10 @@ def _timed(name: str, count: int, call: Callable[[int], Any], report: Progress) 
 
 
 def _closest(candidates: np.ndarray, reason: np.ndarray, q: np.ndarray) -> float:
-    """Largest joint difference [rad] between ``q`` (7,) and the closest valid row of ``candidates`` (8, 7); inf when no candidate is valid."""
+    """Largest joint difference [rad] between ``q`` (7,) and the closest valid row of ``candidates``.
+
+    ``candidates`` is (8, 7); inf when no candidate is valid.
+    """
     from dualarm.ik.analytic.mc_inverse import VALID
 
     valid = candidates[reason == VALID]

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dualarm.run import record_run
-from dualarm.tasks import load_task
+from dualarm.tasks import Task, load_task
 
 #: (task file, IK method) of the benchmark: the issue's three tasks with their papers' methods.
 DEFAULT_RUNS = (
@@ -40,7 +40,11 @@ SEARCH_REPEATS = 5
 
 @dataclass(frozen=True)
 class PipelineTiming:
-    """One run's time per part [s] and its motion's duration [s]; for an MC-Inverse run with ``auto`` arm angles, each arm's search: hand -> (median time [s], samples of the first repetition, grid angles)."""
+    """One run's time per part [s] and its motion's duration [s].
+
+    For an MC-Inverse run with ``auto`` arm angles, each arm's search: hand -> (median time [s],
+    samples of the first repetition, grid angles).
+    """
 
     task: str
     ik: str
@@ -62,7 +66,11 @@ def bench_pipeline(
     with tempfile.TemporaryDirectory(prefix="dualarm-bench-") as out:
         for task_file, ik in runs:
             task = load_task(task_file)
-            run = record_run(task, ik, out_dir=out, progress=lambda stage: progress(f"{task.name} ({ik}): {stage}"))
+
+            def on_stage(stage: str, task: Task = task, ik: str = ik) -> None:  # this iteration's task and method
+                progress(f"{task.name} ({ik}): {stage}")
+
+            run = record_run(task, ik, out_dir=out, progress=on_stage)
             search = search_seconds(task) if ik == "mc-inverse" else {}
             timings.append(
                 PipelineTiming(
@@ -73,7 +81,11 @@ def bench_pipeline(
 
 
 def search_seconds(task) -> dict[str, tuple[float, int, int]]:
-    """Each arm's ``auto`` arm-angle search on ``task``'s path (none unless its ``[arm_angle]`` mode is ``auto``): hand -> (median of :data:`SEARCH_REPEATS` calls [s], samples of the first repetition, grid angles)."""
+    """Each arm's ``auto`` arm-angle search on ``task``'s path.
+
+    None unless its ``[arm_angle]`` mode is ``auto``. hand -> (median of :data:`SEARCH_REPEATS`
+    calls [s], samples of the first repetition, grid angles).
+    """
     from dualarm.ik.analytic import mc_path
     from dualarm.paths.build import build_reference
 

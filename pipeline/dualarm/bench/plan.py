@@ -7,7 +7,7 @@ times it reports the collision checks and the mean time of one check, so the rat
 as checks times cost.
 
 The checkers are then timed on the same configurations: the reference
-(:class:`~dualarm.plan.collision.PyBulletChecker`, one configuration at a time, as the planners
+(:class:`~dualarm.plan.pybullet_checker.PyBulletChecker`, one configuration at a time, as the planners
 checked before) and the planners' closed-form checker
 (:class:`~dualarm.plan.collision.CollisionChecker`) one at a time, one edge at a time and all at
 once. The configurations are those of planner-like edges: from a random configuration within the
@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from dualarm.methods import PLANNERS
-from dualarm.plan.collision import PyBulletChecker
 from dualarm.plan.problem import PlanningProblem, PlanningSettings
+from dualarm.plan.pybullet_checker import PyBulletChecker
 from dualarm.tasks import load_task
 
 #: Edges whose configurations the checkers are timed on, and the rounds of timing.
@@ -130,10 +130,14 @@ def bench_plan(
 def bench_checkers(
     problem: PlanningProblem, rng: np.random.Generator
 ) -> tuple[list[CheckerBench], list[np.ndarray], int]:
-    """Time the reference and ``problem``'s checker on the configurations of :data:`CHECKER_EDGES` planner-like edges (module docstring) over :data:`CHECKER_ROUNDS` interleaved rounds.
+    """Time the reference and ``problem``'s checker on the same configurations, in interleaved rounds.
+
+    The configurations of :data:`CHECKER_EDGES` planner-like edges (module docstring), over
+    :data:`CHECKER_ROUNDS` interleaved rounds.
 
     Returns:
-        the rows, the edges' configurations (each (k, n), its end first), and the configurations on which the verdicts differ.
+        the rows, the edges' configurations (each (k, n), its end first), and the configurations on
+        which the verdicts differ.
     """
     checker, task, settings = problem.checker, problem.task, problem.settings
     step = settings.planner.step_rad

@@ -1,4 +1,6 @@
-"""``dualarm bench study``: a study's throughput on Dask, from 1 to 2 workers and on two workers started apart, and the whole example study's time.
+"""``dualarm bench study``: a study's throughput on Dask, and the whole example study's time.
+
+The throughput from 1 to 2 workers and on two workers started apart.
 
 1. **Scaling.** The spec's first ``scaling_trials`` trials on a ``LocalCluster`` of 1 worker, then of
    ``workers``: trials per second per worker, from the submission of the trials to the last result
@@ -81,7 +83,10 @@ class StudyBench:
 
 @contextmanager
 def loopback_cluster(workers: int = 2, directory: Path | None = None) -> Iterator[str]:
-    """A Dask scheduler and ``workers`` ``dask worker`` processes (one thread each, named ``node-a``, ``node-b``, ...) started apart on 127.0.0.1, as separate nodes; yields the scheduler's address, and stops them all at the end.
+    """A Dask scheduler and ``workers`` ``dask worker`` processes started apart on 127.0.0.1.
+
+    One thread each, named ``node-a``, ``node-b``, ..., as separate nodes; yields the scheduler's
+    address, and stops them all at the end.
 
     Raises:
         DualarmError: the scheduler did not write its address, or the workers did not join, within 60 s.
@@ -145,7 +150,10 @@ def loopback_cluster(workers: int = 2, directory: Path | None = None) -> Iterato
 
 
 def differing_columns(a: pd.DataFrame, b: pd.DataFrame) -> tuple[str, ...]:
-    """The columns in which two runs' rows of the same trials differ (NaN equals NaN), but for :data:`~dualarm.study.run.VARYING` and the :data:`UNREPEATABLE` methods' rows."""
+    """The columns in which two runs' rows of the same trials differ (NaN equals NaN).
+
+    But for :data:`~dualarm.study.run.VARYING` and the :data:`UNREPEATABLE` methods' rows.
+    """
     keep_a, keep_b = (r[~r["method"].isin(UNREPEATABLE)].reset_index(drop=True) for r in (a, b))
     if len(keep_a) != len(keep_b) or list(keep_a.columns) != list(keep_b.columns):
         return ("rows or columns",)
@@ -167,11 +175,15 @@ class PlainRun:
     @property
     def rate(self) -> float:
         """Trials per second per process (the mean over the processes)."""
-        return sum(n / t for n, t in zip(self.trials, self.seconds)) / len(self.trials)
+        return sum(n / t for n, t in zip(self.trials, self.seconds, strict=True)) / len(self.trials)
 
 
 def plain_run(spec: StudySpec, base_dir: Path, processes: int) -> PlainRun:
-    """Run the trials of ``spec`` in ``processes`` plain Python processes side by side, process p the trials p, p + P, ... one after another with :func:`~dualarm.study.run.run_trial`, in the environment a ``LocalCluster``'s worker has (one thread for OpenMP and BLAS, pinned to a core of its own).
+    """Run the trials of ``spec`` in ``processes`` plain Python processes side by side.
+
+    Process p runs the trials p, p + P, ... one after another with
+    :func:`~dualarm.study.run.run_trial`, in the environment a ``LocalCluster``'s worker has (one
+    thread for OpenMP and BLAS, pinned to a core of its own).
 
     Raises:
         DualarmError: a process failed.
@@ -210,7 +222,10 @@ def _plain_process(spec_json: str, base_dir: str, first: str, step: str) -> None
 
 
 def _cpu_ticks() -> tuple[int, int]:
-    """The machine's CPU time so far and the hypervisor's share of it, from ``/proc/stat`` [ticks] ((0, 0) without it)."""
+    """The machine's CPU time so far and the hypervisor's share of it, from ``/proc/stat`` [ticks].
+
+    (0, 0) without it.
+    """
     try:
         fields = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
     except (OSError, ValueError):
@@ -237,7 +252,12 @@ def bench_study(
     whole_out: Path | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> StudyBench:
-    """Run the benchmark (module docstring) on ``spec``: its first ``scaling_trials`` trials on 1 and ``workers`` workers, on a loopback cluster and in plain processes, then (``whole``) every trial, into ``whole_out`` (kept; claimed as :func:`~dualarm.study.run.run_study` claims it) or a temporary directory."""
+    """Run the benchmark (module docstring) on ``spec``.
+
+    Its first ``scaling_trials`` trials on 1 and ``workers`` workers, on a loopback cluster and in
+    plain processes, then (``whole``) every trial, into ``whole_out`` (kept; claimed as
+    :func:`~dualarm.study.run.run_study` claims it) or a temporary directory.
+    """
     say = progress or (lambda text: None)
     if whole and whole_out is not None:  # refused now rather than after the scaling runs
         claim_study_dir(whole_out, spec, resume=False).release()
@@ -268,13 +288,20 @@ def bench_study(
 
 
 def method_seconds(one: StudyRun, many: StudyRun) -> pd.DataFrame:
-    """Per method, its mean time per trial [s] on 1 worker and on more, and their ratio: which methods slow down when the workers share the machine."""
+    """Per method, its mean time per trial [s] on 1 worker and on more, and their ratio.
+
+    Which methods slow down when the workers share the machine.
+    """
     a, b = (r.results.groupby("method", sort=False)["wall_s"].mean() for r in (one, many))
     return pd.DataFrame({"one_s": a, "many_s": b, "ratio": b / a})
 
 
 def trial_sizes(results: pd.DataFrame) -> dict[str, str]:
-    """The trials' sizes, from one method's rows: shapes (share of each kind), repetitions, IK samples per trial and per repetition (range and mean)."""
+    """The trials' sizes, from one method's rows.
+
+    Shapes (share of each kind), repetitions, IK samples per trial and per repetition (range and
+    mean).
+    """
     rows = results.drop_duplicates("trial")
     samples = (
         results.groupby("trial")["path.samples"].max().dropna()
@@ -285,7 +312,9 @@ def trial_sizes(results: pd.DataFrame) -> dict[str, str]:
     shares = rows["kind"].value_counts(normalize=True)
     return {
         "shapes": ", ".join(f"{kind} {share:.0%}" for kind, share in shares.items()),
-        "repetitions": f"{rows['repetitions'].min()}-{rows['repetitions'].max()} (mean {rows['repetitions'].mean():.2f})",
+        "repetitions": (
+            f"{rows['repetitions'].min()}-{rows['repetitions'].max()} (mean {rows['repetitions'].mean():.2f})"
+        ),
         "IK samples per trial": f"{samples.min():.0f}-{samples.max():.0f} (mean {samples.mean():.0f})"
         if len(samples)
         else "-",

@@ -1,4 +1,6 @@
-"""``dualarm bench trajectory``: the jerk-limited timing against TOPP-RA with Ruckig tracking, on the same joint paths.
+"""``dualarm bench trajectory``: the jerk-limited timing against TOPP-RA with Ruckig tracking.
+
+On the same joint paths.
 
 Each task's joint path is made once (its IK method, or its planner), then timed three ways, each
 timed on its own call (the motion the robot would execute):
@@ -78,10 +80,13 @@ class TrajectoryRow:
 
 
 def _ratios(q: np.ndarray, step_s: float, limits: Sequence[np.ndarray]) -> tuple[float, float, float]:
-    """Velocity, acceleration and jerk ratios of positions ``q`` (M, n) sampled every ``step_s`` [s], by first, second and third differences."""
+    """Velocity, acceleration and jerk ratios of positions ``q`` (M, n) sampled every ``step_s`` [s].
+
+    By first, second and third differences.
+    """
     velocity, acceleration, jerk = (
         float((np.abs(np.diff(q, order, axis=0)) / step_s**order / limit).max())
-        for order, limit in zip((1, 2, 3), limits)
+        for order, limit in zip((1, 2, 3), limits, strict=True)
     )
     return velocity, acceleration, jerk
 
@@ -89,7 +94,10 @@ def _ratios(q: np.ndarray, step_s: float, limits: Sequence[np.ndarray]) -> tuple
 def _hand_distance(
     task: Task, names: tuple[str, ...], q: np.ndarray, reference: np.ndarray, fixed: Mapping[str, float]
 ) -> float:
-    """The largest distance between where the configurations ``q`` and ``reference`` (M, n) [rad] put each driven hand (forward kinematics) [m]."""
+    """The largest distance [m] between where the configurations ``q`` and ``reference`` put each hand.
+
+    ``q`` and ``reference`` are (M, n) [rad]; each driven hand, by forward kinematics.
+    """
     at, to = (task.hand_poses(names, x, fixed) for x in (q, reference))
     return max(
         (float(np.linalg.norm(at[hand][:, :3, 3] - to[hand][:, :3, 3], axis=1).max()) for hand in at), default=0.0
@@ -137,7 +145,7 @@ def bench_trajectory(
                     compute,
                 )
             )
-        for name, share in zip(METHODS[1:], ((0.9, 0.3), (1.0, 1.0))):
+        for name, share in zip(METHODS[1:], ((0.9, 0.3), (1.0, 1.0)), strict=True):
             progress(f"{task.name}: {name}")
             start = time.perf_counter()
             retimed = retime_path(path, share[0] * v, share[1] * a, sample_period_s=PERIOD_S).trajectory

@@ -45,7 +45,12 @@ class BenchRow:
 def bench_tvgdd(
     task_file: str | Path, repeats: int = 5, plugins: tuple[str, ...] = (), progress=None
 ) -> list[BenchRow]:
-    """TV-GDD on a task, in rows: the ``casadi`` backend (DAQP) per step, the paper's LVI solver per step, the ``casadi`` backend with each conic plugin in ``plugins`` (e.g. qpoases, osqp, proxqp, qrqp) per step, and the DAQP QP as one mapaccum rollout (best of ``repeats``)."""
+    """TV-GDD on a task, in rows, for each QP solver.
+
+    The ``casadi`` backend (DAQP) per step, the paper's LVI solver per step, the ``casadi`` backend
+    with each conic plugin in ``plugins`` (e.g. qpoases, osqp, proxqp, qrqp) per step, and the DAQP
+    QP as one mapaccum rollout (best of ``repeats``).
+    """
     from dualarm.errors import StageError
     from dualarm.ik.velocity.stack import reference_stack, stacked_reference
     from dualarm.ik.velocity.tvgdd import build_problem, joint_bounds, settings_for, solve_tvgdd

@@ -1,4 +1,7 @@
-"""The ``dualarm`` Typer app and its groups, the consoles, and how a command ends: one line and exit 2 for a user's mistake, 130 or 143 on a signal."""
+"""The ``dualarm`` Typer app and its groups, the consoles, and how a command ends.
+
+One line and exit 2 for a user's mistake, 130 or 143 on a signal.
+"""
 
 from __future__ import annotations
 
@@ -52,7 +55,10 @@ MAX_LINE = 400
 
 
 def user_errors(func: Callable) -> Callable:
-    """Turn a DualarmError into one line on stderr and exit code 2; a StageError from a recorded run (a run that failed on valid input, kept as failed) into ``verdict: failed``, the error and where the run is kept, and exit code 1.
+    """Turn a DualarmError into one line on stderr and exit code 2.
+
+    A StageError from a recorded run (a run that failed on valid input, kept as failed) into
+    ``verdict: failed``, the error and where the run is kept, and exit code 1.
 
     Ctrl-C (SIGINT) and SIGTERM during the command end it with one line and exit code 130 or 143
     (:data:`EXIT_CODES`); a run being recorded is kept as failed (:func:`_catch_signals`).
@@ -98,13 +104,20 @@ _received: list[int] = []
 
 
 def _raise_swallowed() -> None:
-    """Raise again a signal the command received whose exception a library swallowed (CasADi turns it into a failed solve); called between stages."""
+    """Raise again a signal the command received whose exception a library swallowed.
+
+    CasADi turns it into a failed solve. Called between stages.
+    """
     if _received:
         raise KeyboardInterrupt if _received[0] == signal.SIGINT else Terminated()
 
 
 def _unraisable(unraisable: Any) -> None:
-    """``sys.unraisablehook``: silent for the exception of a signal, which Python cannot raise from a ``__del__`` (:func:`_raise_swallowed` raises it again); Python's own hook for anything else."""
+    """``sys.unraisablehook``: silent for the exception of a signal; Python's own hook for anything else.
+
+    Python cannot raise the exception of a signal from a ``__del__`` (:func:`_raise_swallowed`
+    raises it again).
+    """
     if not issubclass(unraisable.exc_type, (KeyboardInterrupt, Terminated)):
         sys.__unraisablehook__(unraisable)
 

@@ -27,7 +27,11 @@ def bench_tvgdd_command(
         typer.Option(help="Comma-separated CasADi conic plugins to compare with DAQP, e.g. qpoases,osqp,proxqp,qrqp."),
     ] = "",
 ) -> None:
-    """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s (optionally other conic plugins for the casadi backend)."""
+    """TV-GDD per-step median and p99 of the casadi and LVI backends, their ratio, and the whole-task time.
+
+    The whole-task IK time against the paper's T_ave = 1 ms and T_sum = 1.12 s (optionally other
+    conic plugins for the casadi backend).
+    """
     from dualarm.bench.tvgdd import PAPER_T_AVE_S, PAPER_T_SUM_S, bench_tvgdd
 
     _within(repeats, "--repeats", 1, MAX_REPEATS)
@@ -57,7 +61,8 @@ def bench_tvgdd_command(
             out.print(f"{r.name} failed: {r.failure}", markup=False, soft_wrap=True)
     out.print(f"per-step median, lvi / casadi: {rows[1].median_s / rows[0].median_s:.1f}x", markup=False)
     out.print(
-        "max |Δq̇|: largest joint-velocity difference from the first row along the task (lvi stops at ||eps|| <= 1e-5, as published)",
+        "max |Δq̇|: largest joint-velocity difference from the first row "
+        "along the task (lvi stops at ||eps|| <= 1e-5, as published)",
         markup=False,
     )
 
@@ -70,7 +75,13 @@ def bench_ik_command(
     poses: Annotated[int, typer.Option(min=1, help=f"Random reachable poses (at most {MAX_POSES}).")] = 10_000,
     seed: Annotated[int, typer.Option(help="Seed of the random configurations (an integer >= 0).")] = 0,
 ) -> None:
-    """The arm's analytic IK time per pose called singly and batched (MC-Inverse's 8 candidates on an S-R-S arm, SEW's solutions on an arm of the SEW family such as the Panda) and its analytic peer IK-Geo's, and DLS-SVD, TRAC-IK and PyBullet IK time and success rate, on the same random reachable poses, with ratios."""
+    """The arm's analytic IK time per pose against its peers' time and success rate, with ratios.
+
+    The analytic IK called singly and batched (MC-Inverse's 8 candidates on an S-R-S arm, SEW's
+    solutions on an arm of the SEW family such as the Panda) and its analytic peer IK-Geo's, and
+    DLS-SVD, TRAC-IK and PyBullet IK time and success rate, on the same random reachable poses, with
+    ratios.
+    """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
     from dualarm.bench.ik import (
@@ -124,15 +135,20 @@ def bench_ik_command(
     if MC_BATCHED in by_name:
         single, batched = by_name[MC_SINGLE], by_name[MC_BATCHED]
         out.print(
-            f"targets: MC-Inverse single <= {TARGET_SINGLE_S * 1e6:.0f} µs median ({single.median_s * 1e6:.2f}; {single.median_s / by_name[IK_GEO].median_s:.2f}x IK-Geo's median), "
-            f"batched <= {TARGET_BATCHED_S * 1e6:.0f} µs/pose ({batched.mean_s * 1e6:.2f}), DLS-SVD success >= {TARGET_DLS_SUCCESS:.1%} ({by_name['DLS-SVD'].success_rate:.2%})"
+            f"targets: MC-Inverse single <= {TARGET_SINGLE_S * 1e6:.0f} µs median ({single.median_s * 1e6:.2f}; "
+            f"{single.median_s / by_name[IK_GEO].median_s:.2f}x IK-Geo's median), "
+            f"batched <= {TARGET_BATCHED_S * 1e6:.0f} µs/pose ({batched.mean_s * 1e6:.2f}), "
+            f"DLS-SVD success >= {TARGET_DLS_SUCCESS:.1%} ({by_name['DLS-SVD'].success_rate:.2%})"
         )
 
 
 @bench_app.command("pipeline")
 @user_errors
 def bench_pipeline_command() -> None:
-    """Each stage's share of a whole recorded run, on the triangle and the circle (MC-Inverse) and the ball game (TV-GDD), and MC-Inverse's auto arm-angle search alone."""
+    """Each stage's share of a whole recorded run, and MC-Inverse's auto arm-angle search alone.
+
+    On the triangle and the circle (MC-Inverse) and the ball game (TV-GDD).
+    """
     from dualarm.bench.pipeline import PARTS, SEARCH_REPEATS, bench_pipeline
 
     with err.status("benchmarking ...") as status:
@@ -153,7 +169,8 @@ def bench_pipeline_command() -> None:
     for r in timings:
         for hand, (seconds, samples, angles) in r.search.items():
             out.print(
-                f"{r.task}, {hand} arm: the auto arm-angle search alone {seconds * 1e3:.0f} ms (median of {SEARCH_REPEATS}; {samples} samples x {angles} angles x 8 branches)",
+                f"{r.task}, {hand} arm: the auto arm-angle search alone {seconds * 1e3:.0f} ms "
+                f"(median of {SEARCH_REPEATS}; {samples} samples x {angles} angles x 8 branches)",
                 markup=False,
             )
 
@@ -175,13 +192,21 @@ def bench_study_command(
         str | None,
         typer.Option(
             "--out",
-            help="Keep the whole study's directory here (as dualarm study --out writes it; dualarm study report reads it); default a temporary directory.",
+            help=(
+                "Keep the whole study's directory here (as dualarm study --out writes "
+                "it; dualarm study report reads it); default a temporary directory."
+            ),
         ),
     ] = None,
 ) -> None:
-    """A study on Dask: trials per second per worker on 1 and on --workers workers (LocalCluster), per method; the same trials in plain processes without Dask (what the machine gives) and on workers started apart on 127.0.0.1 (two nodes) compared row by row; the whole study's time with the trials' sizes; the hypervisor's share of CPU time (steal) during each run.
+    """A study on Dask: trials per second per worker on 1 and on --workers workers (LocalCluster).
 
-    Exits 1 when the two-node run's rows differ from the LocalCluster's (but for times, workers and TRAC-IK's rows, whose timeout is wall-clock).
+    Per method; the same trials in plain processes without Dask (what the machine gives) and on
+    workers started apart on 127.0.0.1 (two nodes) compared row by row; the whole study's time with
+    the trials' sizes; the hypervisor's share of CPU time (steal) during each run.
+
+    Exits 1 when the two-node run's rows differ from the LocalCluster's (but for times, workers and
+    TRAC-IK's rows, whose timeout is wall-clock).
     """
     from dualarm.bench.study import StudyBench, bench_study, method_seconds, trial_sizes
     from dualarm.study import load_study
@@ -242,7 +267,8 @@ def bench_study_command(
         out.print(f"{what}: {value}", markup=False, soft_wrap=True)
     if bench.whole is not None:
         out.print(
-            f"whole study: {bench.whole.ran} trials x {len(spec.methods)} methods in {(bench.whole.startup_s + bench.whole.seconds) / 60:.1f} min, cluster start included",
+            f"whole study: {bench.whole.ran} trials x {len(spec.methods)} methods in "
+            f"{(bench.whole.startup_s + bench.whole.seconds) / 60:.1f} min, cluster start included",
             markup=False,
         )
     if bench.nodes_differ:
@@ -253,7 +279,8 @@ def bench_study_command(
         )
         raise typer.Exit(1)
     out.print(
-        f"two nodes: {bench.compared_rows} rows identical bit for bit to the LocalCluster's (times, workers and TRAC-IK's rows left out)",
+        f"two nodes: {bench.compared_rows} rows identical bit for bit to "
+        "the LocalCluster's (times, workers and TRAC-IK's rows left out)",
         markup=False,
     )
 
@@ -261,14 +288,23 @@ def bench_study_command(
 @bench_app.command("trajectory")
 @user_errors
 def bench_trajectory_command() -> None:
-    """The jerk-limited timing against TOPP-RA (0.9/0.3 and 1.0/1.0) with Ruckig tracking, on the triangle, the circle, the ball game and the bowl grasp: duration and its ratio to TOPP-RA at full limits, limit ratios by finite differences (red above 1 + 1e-6), path deviation per joint and at the hands, compute time. Exits 1 if a method failed, 3 if a motion exceeds a limit."""
+    """The jerk-limited timing against TOPP-RA (0.9/0.3 and 1.0/1.0) with Ruckig tracking.
+
+    On the triangle, the circle, the ball game and the bowl grasp: duration and its ratio to TOPP-RA
+    at full limits, limit ratios by finite differences (red above 1 + 1e-6), path deviation per
+    joint and at the hands, compute time. Exits 1 if a method failed, 3 if a motion exceeds a limit.
+    """
     from dualarm.bench.trajectory import bench_trajectory
     from dualarm.limits import LIMIT_TOLERANCE
 
     with err.status("benchmarking ...") as status:
         rows = bench_trajectory(progress=lambda text: status.update(f"benchmarking {text} ..."))
     table = Table(
-        title="trajectory generation on each task's joint path: velocity, acceleration and jerk limit ratios by finite differences of the motion's positions (red above 1 + 1e-6); deviation from the path per joint and at the hands; compute time per second of motion",
+        title=(
+            "trajectory generation on each task's joint path: velocity, acceleration and jerk "
+            "limit ratios by finite differences of the motion's positions (red above 1 + 1e-6); "
+            "deviation from the path per joint and at the hands; compute time per second of motion"
+        ),
         title_justify="left",
     )
     for column in ("task", "method", "duration s", "× TOPP-RA 1.0/1.0", "v", "a", "j", "Δq rad", "Δhand µm", "ms / s"):
@@ -294,7 +330,7 @@ def bench_trajectory_command() -> None:
         f"- {r.task}, {r.method}: its {kind} reaches {x:.7f} times the limit"
         for r in rows
         if not r.failure
-        for kind, x in zip(("velocity", "acceleration", "jerk"), r.ratios)
+        for kind, x in zip(("velocity", "acceleration", "jerk"), r.ratios, strict=True)
         if x > 1 + LIMIT_TOLERANCE
     ]
     for line in [f"- {r.task}, {r.method}: {r.failure}" for r in rows if r.failure] + exceeded:
@@ -310,7 +346,12 @@ def bench_plan_command(
     trials: Annotated[int, typer.Option(min=1, help=f"Trials per planner (interleaved; at most {MAX_TRIALS}).")] = 30,
     seed: Annotated[int, typer.Option(help="Seed of the first trial (an integer >= 0).")] = 0,
 ) -> None:
-    """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals: planning times and their ratio, collision checks and the time of one check; then the time of one check by PyBullet's narrow phase (the reference) and by the planners' closed-form checker, on the same configurations."""
+    """MCIKRRT against OMPL RRTConnect on the same problem, checker and goals.
+
+    Planning times and their ratio, collision checks and the time of one check; then the time of one
+    check by PyBullet's narrow phase (the reference) and by the planners' closed-form checker, on
+    the same configurations.
+    """
     from dualarm.bench.plan import bench_plan
     from dualarm.study.planning import PAPER_PLANNING_TIME_S
 
@@ -347,7 +388,10 @@ def bench_plan_command(
     mcikrrt, ompl = bench.planners[0], bench.planners[1]
     out.print(f"median planning time, ompl-rrtconnect / mcikrrt: {ompl.median_s / mcikrrt.median_s:.2f}x", markup=False)
     checks = Table(
-        title=f"one collision check, the same {bench.configurations} configurations of planner-like edges (fastest of the rounds)",
+        title=(
+            f"one collision check, the same {bench.configurations} "
+            "configurations of planner-like edges (fastest of the rounds)"
+        ),
         title_justify="left",
     )
     for column in ("checker", "configurations given", "per call", "µs / check", "pybullet / this"):

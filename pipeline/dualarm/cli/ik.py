@@ -52,7 +52,7 @@ def _arm_chain(robot_dir: Path | None, arm: str | None, urdf: Path | None, base:
 def _pose(pose: tuple[float, ...], frame: str) -> None:
     """Refuse a --pose value outside the ranges task files allow, and a --frame other than robot or chain."""
     for name, value, bound in zip(
-        ("X", "Y", "Z", "ROLL", "PITCH", "YAW"), pose, (MAX_POSITION_M,) * 3 + (MAX_ANGLE_RAD,) * 3
+        ("X", "Y", "Z", "ROLL", "PITCH", "YAW"), pose, (MAX_POSITION_M,) * 3 + (MAX_ANGLE_RAD,) * 3, strict=True
     ):
         _within(value, f"--pose {name}", -bound, bound)
     if frame not in ("robot", "chain"):
@@ -80,7 +80,10 @@ def ik_srs(
         bool,
         typer.Option(
             "--sweep",
-            help="Instead of one arm angle: the feasible psi intervals (within the joint limits) of each of the 8 branches.",
+            help=(
+                "Instead of one arm angle: the feasible psi intervals "
+                "(within the joint limits) of each of the 8 branches."
+            ),
         ),
     ] = False,
     step: Annotated[float, typer.Option(help="Grid step of --sweep [deg], in [0.01, 30].")] = 1.0,
@@ -88,11 +91,18 @@ def ik_srs(
         bool,
         typer.Option(
             "--json",
-            help="Print JSON: {chain, frame, pose, arm_angle, candidates}; with --sweep {chain, frame, pose, step_rad, branches}.",
+            help=(
+                "Print JSON: {chain, frame, pose, arm_angle, candidates}; "
+                "with --sweep {chain, frame, pose, step_rad, branches}."
+            ),
         ),
     ] = False,
 ) -> None:
-    """The 8 MC-Inverse candidates of one hand pose at one arm angle, with validity and the error of each candidate's forward kinematics (the analogue of the paper's Table I); with --sweep, the arm angles at which each branch reaches the pose within the joint limits."""
+    """The 8 MC-Inverse candidates of one hand pose at one arm angle (the analogue of the paper's Table I).
+
+    With validity and the error of each candidate's forward kinematics; with --sweep, the arm angles
+    at which each branch reaches the pose within the joint limits.
+    """
     import json
 
     from dualarm.ik.analytic.mc_inverse import PoseFrame, candidate_table
@@ -150,7 +160,10 @@ def ik_sew(
     singular: Annotated[
         tuple[float, float, float],
         typer.Option(
-            help="Stereographic SEW angle: the direction e_t of its singular half-line from the shoulder, in the chain base frame (keep it out of reach)."
+            help=(
+                "Stereographic SEW angle: the direction e_t of its singular half-line "
+                "from the shoulder, in the chain base frame (keep it out of reach)."
+            )
         ),
     ] = (0.0, 0.0, -1.0),
     conventional: Annotated[
@@ -166,9 +179,14 @@ def ik_sew(
         typer.Option("--json", help="Print JSON: {chain, frame, pose, sew_angle, reference, singular, candidates}."),
     ] = False,
 ) -> None:
-    """Every solution of one hand pose at one SEW angle for a 7R arm of a SEW family (joints 2-3 and 5-7 meet: an offset humanoid shoulder, any S-R-S arm; or joints 1-3 and 5-6: the Panda), with validity and the error of each solution's forward kinematics (Elias and Wen; the analogue of ik srs).
+    """Every solution of one hand pose at one SEW angle for a 7R arm of a SEW family (Elias and Wen).
 
-    Exits 2 with one line for an arm of another family, or when no solution exists at that SEW angle (the pose out of reach, or the elbow unable to lie in that half-plane).
+    A SEW family: joints 2-3 and 5-7 meet (an offset humanoid shoulder, any S-R-S arm), or joints
+    1-3 and 5-6 (the Panda). With validity and the error of each solution's forward kinematics (the
+    analogue of ik srs).
+
+    Exits 2 with one line for an arm of another family, or when no solution exists at that SEW angle
+    (the pose out of reach, or the elbow unable to lie in that half-plane).
     """
     import json
 
@@ -194,7 +212,8 @@ def ik_sew(
     candidates = candidate_table(robot, chain, where.to_chain(pose), sew_angle, sew)
     if not candidates:
         raise UnreachablePoseError(
-            f"no solution at psi = {sew_angle:g} rad: the pose is out of reach, or this SEW angle puts the elbow where the arm cannot reach it"
+            f"no solution at psi = {sew_angle:g} rad: the pose is out of reach, "
+            "or this SEW angle puts the elbow where the arm cannot reach it"
         )
     if as_json:
         data = {
@@ -210,18 +229,23 @@ def ik_sew(
         return
     kind = "conventional" if conventional else "stereographic"
     _print_candidates(
-        f"SEW IK, {chain.base} -> {chain.tip}, pose in the {frame} frame ({where.link}), {kind} psi = {sew_angle:g} rad",
+        f"SEW IK, {chain.base} -> {chain.tip}, pose in the {frame} "
+        f"frame ({where.link}), {kind} psi = {sew_angle:g} rad",
         candidates,
         "sew_angle_rad",
     )
     out.print(
-        f"joints: {', '.join(chain.joint_names)}; {len(candidates)} solutions, {sum(c['valid'] for c in candidates)} within the joint limits",
+        f"joints: {', '.join(chain.joint_names)}; {len(candidates)} solutions, "
+        f"{sum(c['valid'] for c in candidates)} within the joint limits",
         markup=False,
     )
 
 
 def _sew_line(chain) -> str:
-    """``robot check``'s line on a 7-DOF chain's SEW family (what ``--ik sew`` and ``ik sew`` need), or why it has none."""
+    """``robot check``'s line on a 7-DOF chain's SEW family, or why it has none.
+
+    The family is what ``--ik sew`` and ``ik sew`` need.
+    """
     from dualarm.model.sew import FIRST_JOINT_FAMILY, sew_chain
 
     try:
@@ -231,11 +255,18 @@ def _sew_line(chain) -> str:
     first = arm.family == FIRST_JOINT_FAMILY
     offset = float(np.linalg.norm(arm.crossing - arm.shoulder if first else arm.wrist - arm.crossing))
     where = "shoulder (joints 2-3 from axis 1)" if first else "wrist (axis 7 from joints 5-6)"
-    return f"SEW family {arm.family} (--ik sew, ik sew): S = {(np.round(arm.shoulder, 4) + 0.0).tolist()} m, {where} offset {offset:.4f} m"
+    return (
+        f"SEW family {arm.family} (--ik sew, ik sew): S = "
+        f"{(np.round(arm.shoulder, 4) + 0.0).tolist()} m, {where} offset {offset:.4f} m"
+    )
 
 
 def _print_candidates(title: str, candidates: list[dict], angle: str) -> None:
-    """``ik srs``'s and ``ik sew``'s table: each candidate's joints, validity (the reason's head), FK errors and its angle (the key ``angle``)."""
+    """``ik srs``'s and ``ik sew``'s table.
+
+    Each candidate's joints, validity (the reason's head), FK errors and its angle (the key
+    ``angle``).
+    """
     table = Table(title=title, title_justify="left")
     for column in ("#", *[f"θ{i}" for i in range(1, 8)], "validity", "pos. err [m]", "rot. err [rad]", "ψ of q [rad]"):
         table.add_column(column, justify="left" if column == "validity" else "right", no_wrap=True)
@@ -254,7 +285,10 @@ def _print_candidates(title: str, candidates: list[dict], angle: str) -> None:
 def _ik_srs_sweep(
     chain, pose: tuple[float, ...], vertical: tuple[float, float, float], frame, step_rad: float, as_json: bool
 ) -> None:
-    """``ik srs --sweep``: each branch's feasible arm-angle intervals at ``pose`` (in ``frame``), as a table or JSON."""
+    """``ik srs --sweep``: each branch's feasible arm-angle intervals at ``pose`` (in ``frame``).
+
+    As a table or JSON.
+    """
     import json
 
     from dualarm.ik.analytic.mc_inverse import McInverse, branch_label, sweep_arm_angle, sweep_table
@@ -277,7 +311,10 @@ def _ik_srs_sweep(
         typer.echo(json.dumps(data, indent=2))
         return
     table = Table(
-        title=f"MC-Inverse arm-angle sweep, {chain.base} -> {chain.tip}, pose in the {frame.kind} frame ({frame.link}), step {math.degrees(step_rad):g} deg",
+        title=(
+            f"MC-Inverse arm-angle sweep, {chain.base} -> {chain.tip}, pose in the "
+            f"{frame.kind} frame ({frame.link}), step {math.degrees(step_rad):g} deg"
+        ),
         title_justify="left",
     )
     for column in ("branch", "feasible psi [rad]", "samples"):
@@ -294,6 +331,7 @@ def _ik_srs_sweep(
     out.print(table)
     feasible = sum(bool(r["intervals_rad"]) for r in rows)
     out.print(
-        f"{feasible} of 8 branches reach the pose within the joint limits; interval ends are grid samples (the true ends lie within one step outside)",
+        f"{feasible} of 8 branches reach the pose within the joint limits; interval "
+        "ends are grid samples (the true ends lie within one step outside)",
         markup=False,
     )

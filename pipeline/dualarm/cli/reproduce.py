@@ -20,13 +20,19 @@ def reproduce(
         str | None,
         typer.Option(
             "--out",
-            help="Directory that receives every run, table and figure, and report.md (emptied first if it holds only an earlier reproduction); default reports/reproduction, or reports/reproduction-NAME with --robot.",
+            help=(
+                "Directory that receives every run, table and figure, and report.md (emptied first if it holds only "
+                "an earlier reproduction); default reports/reproduction, or reports/reproduction-NAME with --robot."
+            ),
         ),
     ] = None,
     only: Annotated[
         str | None,
         typer.Option(
-            help="Comma-separated parts to run (default: all): ball-game-tvgdd, ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp."
+            help=(
+                "Comma-separated parts to run (default: all): ball-game-tvgdd, "
+                "ball-game-pinv, table-i, triangle, circle, carry-box, bowl-grasp."
+            )
         ),
     ] = None,
     jobs: Annotated[
@@ -35,26 +41,41 @@ def reproduce(
             "--jobs",
             "--workers",
             min=1,
-            help="Parts run at once: the worker processes of a Dask LocalCluster (default: 2, or 1 on a 1-core machine, which runs the parts in this process).",
+            help=(
+                "Parts run at once: the worker processes of a Dask LocalCluster (default: "
+                "2, or 1 on a 1-core machine, which runs the parts in this process)."
+            ),
         ),
     ] = min(2, os.cpu_count() or 1),
     scheduler: Annotated[
         str | None,
         typer.Option(
-            help="An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the parts on instead of a LocalCluster; --out must be on a file system its workers share."
+            help=(
+                "An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the parts on "
+                "instead of a LocalCluster; --out must be on a file system its workers share."
+            )
         ),
     ] = None,
     robot_dir: Annotated[
         Path | None,
         typer.Option(
             "--robot",
-            help="Robot directory (or shipped robot's name) to run the experiments on instead of the humanoid; a part it cannot run is reported as not available, with the reason.",
+            help=(
+                "Robot directory (or shipped robot's name) to run the experiments on instead of "
+                "the humanoid; a part it cannot run is reported as not available, with the reason."
+            ),
         ),
     ] = None,
 ) -> None:
-    """Run every experiment of the three papers, record it, and write DIR/report.md: each paper claim against ours (read back from the recordings), the figures, the runs and the time of each part.
+    """Run every experiment of the three papers, record it, and write DIR/report.md.
 
-    Exits 1 if a part failed (the report says which and why), else 3 if a claim rests on a run whose verdict is not complete (MC-Inverse's runs, TV-GDD's executed ball game, the carried box, the planner's executed plan; a baseline's violations are reported, not fatal), else 2 if no part is available on the robot, else 0. A part not available on the robot is reported, not fatal.
+    The report: each paper claim against ours (read back from the recordings), the figures, the runs
+    and the time of each part.
+
+    Exits 1 if a part failed (the report says which and why), else 3 if a claim rests on a run whose
+    verdict is not complete (MC-Inverse's runs, TV-GDD's executed ball game, the carried box, the
+    planner's executed plan; a baseline's violations are reported, not fatal), else 2 if no part is
+    available on the robot, else 0. A part not available on the robot is reported, not fatal.
     """
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 

@@ -31,7 +31,11 @@ def robot_check(
     ] = 1000,
     seed: Annotated[int, typer.Option(help="Seed of the random configurations (an integer >= 0).")] = 0,
 ) -> None:
-    """Print chains, DOF and limits, and check the CasADi kinematics against adam-robotics, PyBullet and finite differences; exit 0 only if every figure is within tolerance."""
+    """Print chains, DOF and limits, and check the CasADi kinematics.
+
+    Against adam-robotics, PyBullet and finite differences; exit 0 only if every figure is within
+    tolerance.
+    """
     from dualarm.describe.check import FK_TOLERANCE, JACOBIAN_TOLERANCE, PYBULLET_TOLERANCE, check_chain, require_limits
     from dualarm.model.srs import srs_geometry
 
@@ -100,7 +104,10 @@ def robot_init(
     urdf: Annotated[
         Path,
         typer.Argument(
-            help="The robot's URDF (mesh paths: package:// through ROS_PACKAGE_PATH or the URDF's own folders, file://, absolute or relative)."
+            help=(
+                "The robot's URDF (mesh paths: package:// through ROS_PACKAGE_PATH "
+                "or the URDF's own folders, file://, absolute or relative)."
+            )
         ),
     ],
     out_dir: Annotated[
@@ -140,7 +147,10 @@ def robot_init(
         ),
     ] = None,
 ) -> None:
-    """Write a robot directory from a URDF: arm chains, waist, locked joints, S-R-S verdicts, limits, home poses zero and ready; print every choice (robots/README.md)."""
+    """Write a robot directory from a URDF; print every choice (robots/README.md).
+
+    Arm chains, waist, locked joints, S-R-S verdicts, limits, home poses zero and ready.
+    """
     from dualarm.describe.init import init_robot
 
     for value, option in ((acceleration, "--acceleration"), (jerk, "--jerk")):
@@ -161,7 +171,8 @@ def robot_init(
     for line in result.notes:
         out.print(line, markup=False, soft_wrap=True)
     out.print(
-        f"wrote {result.directory / 'robot.toml'}; next: dualarm robot check {result.directory}, dualarm robot poses {result.directory}",
+        f"wrote {result.directory / 'robot.toml'}; next: dualarm robot "
+        f"check {result.directory}, dualarm robot poses {result.directory}",
         markup=False,
         soft_wrap=True,
     )
@@ -176,7 +187,11 @@ def robot_poses(
         bool, typer.Option("--json", help="Print JSON: [{home, hand, position_m, rpy_rad, arm_angle_rad}].")
     ] = False,
 ) -> None:
-    """Each hand's pose at each home pose: position [m] and roll, pitch, yaw (extrinsic x-y-z, as task files) [rad] in the robot base frame, and the arm angle psi [rad] where the arm is S-R-S."""
+    """Each hand's pose at each home pose, and the arm angle psi [rad] where the arm is S-R-S.
+
+    Position [m] and roll, pitch, yaw (extrinsic x-y-z, as task files) [rad] in the robot base
+    frame.
+    """
     import dataclasses
     import json
 
@@ -199,6 +214,7 @@ def robot_poses(
         )
     out.print(table)
     out.print(
-        "ψ: the arm angle of MC-Inverse eq (1) (V = +z of the arm's base frame); '-' where the arm is not S-R-S or ψ is undefined (shoulder-wrist line vertical)",
+        "ψ: the arm angle of MC-Inverse eq (1) (V = +z of the arm's base frame); '-' "
+        "where the arm is not S-R-S or ψ is undefined (shoulder-wrist line vertical)",
         markup=False,
     )

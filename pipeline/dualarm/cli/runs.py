@@ -20,7 +20,10 @@ from dualarm.errors import DualarmError, excerpt
 @app.command()
 @user_errors
 def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>).")]) -> None:
-    """Print a run's verdict (status, error, each violation), topics (message counts and time range) and metrics."""
+    """Print a run's verdict (status, error, each violation), topics and metrics.
+
+    Topics with message counts and time range.
+    """
     from dualarm.record.readback import read_run
 
     data = read_run(run_dir)
@@ -59,18 +62,26 @@ def view(
         bool,
         typer.Option(
             "--web",
-            help="Serve the run with Rerun's web viewer on 127.0.0.1 and print the URL to open (no browser is started); serves until Ctrl-C.",
+            help=(
+                "Serve the run with Rerun's web viewer on 127.0.0.1 and print "
+                "the URL to open (no browser is started); serves until Ctrl-C."
+            ),
         ),
     ] = False,
     stage: Annotated[
         str | None,
         typer.Option(
             metavar="STAGE",
-            help="Open Rerun on this stage's robot and plots (one the run recorded: path, ik or plan, retime, smooth, execute).",
+            help=(
+                "Open Rerun on this stage's robot and plots (one the run "
+                "recorded: path, ik or plan, retime, smooth, execute)."
+            ),
         ),
     ] = None,
 ) -> None:
-    """Open a recorded run in Rerun's viewer (a window, or with --web the web viewer) and print how to open its run.mcap in Foxglove, with the run's layout.
+    """Open a recorded run in Rerun's viewer, and print how to open its run.mcap in Foxglove.
+
+    A window, or with --web the web viewer; Foxglove with the run's layout.
 
     The viewer is the rerun command installed with rerun-sdk (beside this Python, or on PATH).
     """
@@ -120,11 +131,17 @@ def report(
         str | None,
         typer.Option(
             "--out",
-            help="Report directory (default reports/<task>/<run-id> for one run, reports/<task or runs>/<first run-id>+<n-1> for several).",
+            help=(
+                "Report directory (default reports/<task>/<run-id> for one "
+                "run, reports/<task or runs>/<first run-id>+<n-1> for several)."
+            ),
         ),
     ] = None,
 ) -> None:
-    """Write a markdown summary and the figures each run's recording allows; for several runs also runs.csv and runs.md (a row per run, every metric), figures setting them side by side and report.md linking it all.
+    """Write a markdown summary and the figures each run's recording allows.
+
+    For several runs also runs.csv and runs.md (a row per run, every metric), figures setting them
+    side by side and report.md linking it all.
 
     Prints the report directory.
     """
@@ -151,11 +168,16 @@ def compare(
         str | None,
         typer.Option(
             "--csv",
-            help="Also write the whole table (a row per topic and field) to this CSV file (a new file, or one an earlier compare wrote).",
+            help=(
+                "Also write the whole table (a row per topic and field) to "
+                "this CSV file (a new file, or one an earlier compare wrote)."
+            ),
         ),
     ] = None,
 ) -> None:
-    """Per topic and field, the largest difference between two runs, aligned on repetition and time; exits 0 when every field is within --tol and 1 otherwise, naming where they differ first.
+    """Per topic and field, the largest difference between two runs, aligned on repetition and time.
+
+    Exits 0 when every field is within --tol and 1 otherwise, naming where they differ first.
 
     Wall-clock measurements (solve, planning, collision-check times) are listed, never judged.
     """
@@ -243,7 +265,10 @@ COMPARE_HEADER = "topic,field,max_difference,"
 
 
 def _compare_csv(text: str) -> Path:
-    """The ``--csv`` path of compare: a new file, or a regular file whose first line is :data:`COMPARE_HEADER` (an earlier compare's table); anything else is refused, untouched."""
+    """The ``--csv`` path of compare: a new file, or an earlier compare's table.
+
+    A regular file whose first line is :data:`COMPARE_HEADER`; anything else is refused, untouched.
+    """
     path = _out_path(text, "--csv")
     try:
         mode = os.lstat(path).st_mode
@@ -264,7 +289,8 @@ def _compare_csv(text: str) -> Path:
             ) from None
     if not first.startswith(COMPARE_HEADER):
         raise DualarmError(
-            f"--csv {excerpt(path)}: exists and is not a table dualarm compare wrote (it does not begin '{COMPARE_HEADER}'); give another file name"
+            f"--csv {excerpt(path)}: exists and is not a table dualarm compare "
+            f"wrote (it does not begin '{COMPARE_HEADER}'); give another file name"
         )
     return path
 

@@ -21,7 +21,10 @@ def consistency(
     methods: Annotated[
         str | None,
         typer.Option(
-            help="Comma-separated IK methods to compare (default: mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd,tvgdd,pinv, those that run on the task's robot)."
+            help=(
+                "Comma-separated IK methods to compare (default: "
+                "mc-inverse,trac-ik,ikfast-style,pybullet,dls-svd,tvgdd,pinv, those that run on the task's robot)."
+            )
         ),
     ] = None,
     reps: Annotated[int | None, typer.Option(min=1, help="Repetitions (default: the task file's).")] = None,
@@ -36,7 +39,10 @@ def consistency(
         ),
     ] = None,
 ) -> None:
-    """Run each IK method on a repeated task as a recorded run and compare repetition by repetition: consistency.csv, consistency.md and figures; prints the table (with each run's verdict) and the directory.
+    """Run each IK method on a repeated task as a recorded run and compare repetition by repetition.
+
+    Writes consistency.csv, consistency.md and figures; prints the table (with each run's verdict)
+    and the directory.
 
     Exits 0 when every run is complete, 3 when one is violated (its first violation is printed), 1 when one failed.
     """
@@ -103,7 +109,10 @@ def study(
     scheduler: Annotated[
         str | None,
         typer.Option(
-            help="An existing Dask cluster's scheduler (tcp://HOST:PORT) to run the trials on; default a LocalCluster on this machine."
+            help=(
+                "An existing Dask cluster's scheduler (tcp://HOST:PORT) to "
+                "run the trials on; default a LocalCluster on this machine."
+            )
         ),
     ] = None,
     workers: Annotated[
@@ -120,15 +129,27 @@ def study(
     record: Annotated[
         str,
         typer.Option(
-            help="metrics (no recordings, the default), ik or full: each trial's runs in DIR/runs (full runs every stage)."
+            help=(
+                "metrics (no recordings, the default), ik or full: "
+                "each trial's runs in DIR/runs (full runs every stage)."
+            )
         ),
     ] = "metrics",
 ) -> None:
-    """Run a study: every generated trial of SPEC.toml with every method, on Dask (dualarm study SPEC.toml); or write a study's report (dualarm study report DIR).
+    """Run a study, or write a study's report.
 
-    A run writes DIR/trials.parquet (one row per trial and method: the trial's features, every ik.* metric, the verdict, wall time, worker), one task file per trial in DIR/tasks, and prints per method P(inconsistent) and P(failed) with 95 % Wilson intervals. A report writes DIR/report.md, its tables (csv) and figures from DIR/trials.parquet alone.
+    Every generated trial of SPEC.toml with every method, on Dask (dualarm study SPEC.toml); or a
+    study's report (dualarm study report DIR).
 
-    Exits 0 when every trial has its rows (a method that failed a trial is the study's data, counted in the table), 1 when a row is an error (an exception other than dualarm's, or a trial whose worker died 3 times), 2 on a bad spec or --out (another study's directory, or this study's without --resume).
+    A run writes DIR/trials.parquet (one row per trial and method: the trial's features, every ik.*
+    metric, the verdict, wall time, worker), one task file per trial in DIR/tasks, and prints per
+    method P(inconsistent) and P(failed) with 95 % Wilson intervals. A report writes DIR/report.md,
+    its tables (csv) and figures from DIR/trials.parquet alone.
+
+    Exits 0 when every trial has its rows (a method that failed a trial is the study's data, counted
+    in the table), 1 when a row is an error (an exception other than dualarm's, or a trial whose
+    worker died 3 times), 2 on a bad spec or --out (another study's directory, or this study's
+    without --resume).
     """
     from dualarm.study import load_study
     from dualarm.study.report import method_rates, write_study_report
@@ -141,7 +162,8 @@ def study(
         return
     if directory_text is not None:
         raise DualarmError(
-            f"unexpected argument '{excerpt(directory_text)}': dualarm study SPEC.toml [--out DIR], or dualarm study report DIR"
+            f"unexpected argument '{excerpt(directory_text)}': dualarm "
+            "study SPEC.toml [--out DIR], or dualarm study report DIR"
         )
     spec, base = load_study(spec_or_report)
     level = _record(record)
@@ -180,7 +202,10 @@ def study(
         )
     rates = method_rates(result.results)
     table = Table(
-        title=f"study {spec.name}: {result.results['trial'].nunique()} trials ({result.ran} now in {result.seconds:.1f} s on {result.workers} workers, after {result.startup_s:.1f} s starting them)",
+        title=(
+            f"study {spec.name}: {result.results['trial'].nunique()} trials ({result.ran} now in "
+            f"{result.seconds:.1f} s on {result.workers} workers, after {result.startup_s:.1f} s starting them)"
+        ),
         title_justify="left",
     )
     for column in ("method", "trials", "P(inconsistent) [95 %]", "P(failed) [95 %]", "errors"):
@@ -199,7 +224,8 @@ def study(
     if len(errors):
         first = errors.iloc[0]
         err.print(
-            f"error: {len(errors)} rows are errors, the first trial {first['trial']} {first['method']}: {first['error']}",
+            f"error: {len(errors)} rows are errors, the first trial "
+            f"{first['trial']} {first['method']}: {first['error']}",
             markup=False,
             soft_wrap=True,
         )

@@ -18,13 +18,19 @@ def task_check(
         Path | None, typer.Option("--robot", help="Robot directory to check the task on instead of the one it names.")
     ] = None,
 ) -> None:
-    """Validate a task without running it: schema, robot, and every waypoint's reach within the joint limits (per waypoint the hand pose and, for an S-R-S arm, the MC-Inverse branches and psi intervals that reach it); exits 3 when a waypoint is unreachable, 2 for a malformed task."""
+    """Validate a task without running it: schema, robot, and every waypoint's reach.
+
+    Reach within the joint limits (per waypoint the hand pose and, for an S-R-S arm, the MC-Inverse
+    branches and psi intervals that reach it); exits 3 when a waypoint is unreachable, 2 for a
+    malformed task.
+    """
     from dualarm.task_check import check_task, report_lines, unreachable_lines
 
     result = check_task(task, robot_dir)
     if not result.waypoints:
         out.print(
-            f"{result.source}: valid; no waypoints to check (the hands start at the initial configuration and move by displacements or arcs)",
+            f"{result.source}: valid; no waypoints to check (the hands start "
+            "at the initial configuration and move by displacements or arcs)",
             markup=False,
             soft_wrap=True,
         )

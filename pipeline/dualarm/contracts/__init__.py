@@ -1,4 +1,6 @@
-"""The products passed between stages (numpy only): the bottom layer, which imports nothing of dualarm but errors and arrays.
+"""The products passed between stages (numpy only).
+
+The bottom layer, which imports nothing of dualarm but errors and arrays.
 
 Task -> :class:`CartesianReference` (path) -> :class:`JointPath` (ik or plan) -> :class:`JointTrajectory`
 (retime, smooth, approach) -> :class:`ExecutionLog` (execute); a run's products, metrics and

@@ -22,7 +22,8 @@ class ContactEvent:
         rep: the repetition index at that time.
         first: a robot link or an object (the pair sorted by name).
         second: the other.
-        depth_m: the deepest penetration between them in the step [m] (their shapes overlap: see :func:`~dualarm.sim.world.in_contact`).
+        depth_m: the deepest penetration between them in the step [m] (their shapes overlap: see
+            :func:`~dualarm.sim.world.in_contact`).
         expected: the task expects this pair to touch (``expected_contacts``).
     """
 
@@ -122,7 +123,10 @@ class ExecutionLog:
 
     @cached_property
     def contacts(self) -> tuple[PairContact, ...]:
-        """Each pair that touched, in the order of its first contact (summed up from :attr:`contact_events` once)."""
+        """Each pair that touched, in the order of its first contact.
+
+        Summed up from :attr:`contact_events` once.
+        """
         pairs: dict[tuple[str, str], PairContact] = {}
         for e in self.contact_events:
             seen = pairs.get((e.first, e.second))

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -16,7 +16,8 @@ from dualarm.errors import InvalidArgumentError, excerpt
 OK, FAILED = 0, 1
 
 #: What an IK method solves: the hands' whole ``pose``, or their ``position`` only.
-TASK_SPACES = ("pose", "position")
+TaskSpace = Literal["pose", "position"]
+TASK_SPACES: tuple[str, ...] = get_args(TaskSpace)
 
 
 def check_task_space(task_space: object) -> None:
@@ -67,7 +68,7 @@ class JointPath:
     hand_error_m: np.ndarray
     hands: tuple[str, ...]
     hand_orientation_error_rad: np.ndarray = field(default_factory=lambda: _NOT_MEASURED)
-    task_space: str = "pose"
+    task_space: TaskSpace = "pose"
     fixed: Mapping[str, float] = field(default_factory=dict)
     extras: Mapping[str, np.ndarray] = field(default_factory=dict)
     chosen: Mapping[str, Any] = field(default_factory=dict)

@@ -58,7 +58,9 @@ class HandReference:
 
 @dataclass(frozen=True)
 class CartesianReference:
-    """What the hands should do, sample by sample: the output of the path stage, and the input of every IK method.
+    """What the hands should do, sample by sample.
+
+    The output of the path stage, and the input of every IK method.
 
     Build one from a task (:func:`~dualarm.paths.build_reference`) or from sampled hand poses
     (:meth:`from_poses`).
@@ -98,7 +100,8 @@ class CartesianReference:
         if np.abs(t - uniform).max(initial=0.0) > 1e-9 * max(1.0, float(uniform[-1]) if n else 1.0):
             raise InvalidArgumentError(
                 "t",
-                f"sample times must be arange(N) * period_s ({self.period_s} s): the reference's period is its only control period",
+                f"sample times must be arange(N) * period_s ({self.period_s} "
+                "s): the reference's period is its only control period",
             )
         object.__setattr__(self, "period_s", float(self.period_s))
         object.__setattr__(self, "t", frozen(t, (n,), "t"))
@@ -156,7 +159,9 @@ class CartesianReference:
         return float(self.t[-1])
 
     def frame_in(self, robot: Robot) -> str:
-        """The link of ``robot`` the poses are in (its root link when :attr:`frame` is ""), after checking that the robot has the reference's hands.
+        """The link of ``robot`` the poses are in (its root link when :attr:`frame` is "").
+
+        After checking that the robot has the reference's hands.
 
         Raises:
             InvalidArgumentError: the frame is no link of the robot, or a hand is not one of its hands.
@@ -198,7 +203,9 @@ def _angular_velocity(R: np.ndarray, period_s: float) -> np.ndarray:
 
 
 def time_in_repetition(t: np.ndarray, rep: np.ndarray) -> np.ndarray:
-    """Time since the repetition began, per sample (N,) [s], for sample times ``t`` [s] and repetition indices ``rep``.
+    """Time since the repetition began, per sample (N,) [s].
+
+    For sample times ``t`` [s] and repetition indices ``rep``.
 
     Repetition r spans (r T, (r + 1) T] (the first also holds t = 0), so samples at the same place
     of every repetition get the same value.

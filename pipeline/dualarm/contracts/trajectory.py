@@ -56,14 +56,20 @@ class JointTrajectory:
         return len(self.t)
 
     def mean_jerk(self) -> np.ndarray:
-        """The mean jerk over each sample period, diff(qdd) / diff(t), at the period's end (0 at the first sample) (M, n) [rad/s^3]."""
+        """The mean jerk over each sample period, diff(qdd) / diff(t), (M, n) [rad/s^3].
+
+        At the period's end (0 at the first sample).
+        """
         jerk = np.zeros_like(self.qdd)
         if len(self) > 1:
             jerk[1:] = np.diff(self.qdd, axis=0) / np.diff(self.t)[:, None]
         return jerk
 
     def interpolate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """q, qd, qdd (K, n) linearly interpolated at ``times`` (K,) [s] (held at the ends), and the repetition index of the last sample at or before each time (K,)."""
+        """q, qd, qdd (K, n) linearly interpolated at ``times`` (K,) [s] (held at the ends).
+
+        And the repetition index of the last sample at or before each time (K,).
+        """
         times = np.asarray(times, dtype=float)
         q, qd, qdd = (
             np.stack([np.interp(times, self.t, x[:, j]) for j in range(x.shape[1])], axis=1).reshape(

@@ -1,4 +1,6 @@
-"""A run's verdict (``complete``, ``violated`` or ``failed``), the checks it failed, and the bounds it is judged against.
+"""A run's verdict (``complete``, ``violated`` or ``failed``), and the checks it failed.
+
+And the bounds it is judged against.
 
 How each stage's product is judged is :mod:`dualarm.violations`.
 """
@@ -68,7 +70,10 @@ class Verdict:
 
     @classmethod
     def of(cls, violations: Sequence[Violation]) -> Verdict:
-        """``violated`` with ``violations`` (each message once: the execute stage's preflight re-checks the smoothed trajectory), or ``complete`` without any."""
+        """``violated`` with ``violations``, or ``complete`` without any.
+
+        Each message once: the execute stage's preflight re-checks the smoothed trajectory.
+        """
         unique = tuple({v.message: v for v in violations}.values())  # dicts keep the first insertion's place
         return cls("violated" if unique else "complete", unique)
 

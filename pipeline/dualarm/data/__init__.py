@@ -54,7 +54,10 @@ def _bare(name: str) -> bool:
 
 
 def find_task(path: str | Path) -> Path:
-    """``path`` if it exists, else the shipped task a bare name (``triangle``, ``triangle.toml``) names, else ``path`` unchanged (so that loading it reports why it cannot be read).
+    """``path`` if it exists, else the shipped task a bare name names, else ``path`` unchanged.
+
+    A bare name: ``triangle``, ``triangle.toml``. ``path`` unchanged so that loading it reports why
+    it cannot be read.
 
     Never raises: a path the OS refuses to look at (a NUL byte, a name too long, a symlink loop)
     counts as not existing.
@@ -67,7 +70,9 @@ def find_task(path: str | Path) -> Path:
 
 
 def find_robot(path: str | Path, relative_to: Path | None = None) -> Path:
-    """The robot directory ``path`` (relative to ``relative_to`` if given) if it exists, else the shipped robot a bare name names, else the directory as given.
+    """The robot directory ``path`` if it exists, else the shipped robot a bare name names.
+
+    ``path`` is relative to ``relative_to`` if given; else the directory as given.
 
     Never raises, as :func:`find_task`.
     """

@@ -1,1 +1,4 @@
-"""Numerics: CasADi Functions compiled to machine code (:mod:`.compiled`) and evaluated many inputs per call (:mod:`.batched`)."""
+"""Numerics: CasADi Functions compiled to machine code and evaluated many inputs per call.
+
+Compiled: :mod:`.compiled`; many inputs per call: :mod:`.batched`.
+"""

@@ -1,4 +1,6 @@
-"""Evaluating a CasADi Function over many inputs in mapped calls, or on one input without CasADi's Python call path.
+"""Evaluating a CasADi Function over many inputs in mapped calls, or on one input.
+
+On one input without CasADi's Python call path.
 
 A per-item Function (an analytic IK solver's ``(T (4x4) hand pose [m], x (scalar)) -> (Q (7xC)
 [rad], reason (1xC))`` with x the arm angle or a free joint value, or a piece of the SEW search) is
@@ -18,7 +20,11 @@ import numpy as np
 
 
 def _threads() -> int:
-    """One per core, or ``OMP_NUM_THREADS`` when it is set to a whole number (a Dask nanny sets it to 1 in its worker, as a study's workers are one core each: more threads per worker only make the workers wait for each other)."""
+    """One per core, or ``OMP_NUM_THREADS`` when it is set to a whole number.
+
+    A Dask nanny sets it to 1 in its worker, as a study's workers are one core each: more threads
+    per worker only make the workers wait for each other.
+    """
     given = os.environ.get("OMP_NUM_THREADS", "")
     return int(given) if given.isdigit() and int(given) > 0 else os.cpu_count() or 1
 
@@ -44,7 +50,10 @@ class Batched:
     _buffers: dict = field(default_factory=dict, repr=False, compare=False)
 
     def _buffer(self, size: int):
-        """The Function mapped over ``size`` items with its FunctionBuffer and flat arrays (built once per size)."""
+        """The Function mapped over ``size`` items with its FunctionBuffer and flat arrays.
+
+        Built once per size.
+        """
         if size not in self._buffers:
             f = self.function
             if not all(f.sparsity_out(i).is_dense() for i in range(f.n_out())):  # the buffers hold every entry
@@ -66,7 +75,9 @@ class Batched:
         return self._buffers[size]
 
     def __call__(self, *inputs: np.ndarray | float) -> tuple[np.ndarray, ...]:
-        """Evaluate over N items: full chunks, then the rest in a map of its size rounded up to a power of two (few maps to build, at most twice the work).
+        """Evaluate over N items: full chunks, then the rest in a map of its size rounded up to a power of two.
+
+        Few maps to build, at most twice the work.
 
         Args:
             inputs: one per Function input of shape (r, c): N items (N, r, c), (N, r) for a column,
@@ -88,10 +99,10 @@ class Batched:
             m = min(self.chunk, N - start)
             size = min(self.chunk, 1 << (m - 1).bit_length())
             evaluate, ins, outs = self._buffer(size)
-            for value, array in zip(flat, ins):
+            for value, array in zip(flat, ins, strict=False):
                 array.reshape(size, -1)[:m] = value if len(value) == 1 else value[start : start + m]
             evaluate()
-            for result, array in zip(results, outs):
+            for result, array in zip(results, outs, strict=True):
                 result[start : start + m] = array.reshape(size, -1)[:m]
         shaped = []
         for i, result in enumerate(results):
@@ -101,7 +112,10 @@ class Batched:
 
 
 class BatchedCandidates(Batched):
-    """An analytic IK solver's candidates Function ``(T (4x4), x) -> (Q (7xC), reason (1xC))`` mapped over many poses."""
+    """An analytic IK solver's candidates Function mapped over many poses.
+
+    The Function: ``(T (4x4), x) -> (Q (7xC), reason (1xC))``.
+    """
 
     def candidates(self, poses: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Candidates of N poses (N, 4, 4) [m] at scalars x (N,) (or one for all).
@@ -115,7 +129,11 @@ class BatchedCandidates(Batched):
 
 
 class Single:
-    """``function`` on one input through a ``FunctionBuffer``: the inputs copied into preallocated arrays, every output written into one array, no conversion of CasADi types (a plain call costs ~30 µs more). Not thread-safe: one set of arrays."""
+    """``function`` on one input through a ``FunctionBuffer``. Not thread-safe: one set of arrays.
+
+    The inputs copied into preallocated arrays, every output written into one array, no conversion
+    of CasADi types (a plain call costs ~30 µs more).
+    """
 
     def __init__(self, function: cs.Function):
         self._buffer, self._evaluate = function.buffer()
@@ -131,8 +149,11 @@ class Single:
             self._buffer.set_res(i, self._out[start : start + sizes[i]].data)
 
     def __call__(self, *inputs: np.ndarray | float) -> np.ndarray:
-        """Evaluate on one value per Function input (of its shape, or a number for a scalar); returns the outputs one after the other, each flat in column-major order, in a new array."""
-        for flat, view, value in zip(self._ins, self._views, inputs):
+        """Evaluate on one value per Function input (of its shape, or a number for a scalar).
+
+        Returns the outputs one after the other, each flat in column-major order, in a new array.
+        """
+        for flat, view, value in zip(self._ins, self._views, inputs, strict=False):
             if flat.size == 1:
                 flat[0] = value
             else:

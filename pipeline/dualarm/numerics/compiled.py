@@ -30,7 +30,10 @@ FLAGS = ("-O2", "-ffp-contract=off", "-fPIC", "-shared")
 
 
 def cache_dir() -> Path:
-    """Where compiled Functions are kept: ``$DUALARM_CACHE_DIR``, else ``$XDG_CACHE_HOME/dualarm``, else ``~/.cache/dualarm``."""
+    """Where compiled Functions are kept.
+
+    ``$DUALARM_CACHE_DIR``, else ``$XDG_CACHE_HOME/dualarm``, else ``~/.cache/dualarm``.
+    """
     given = os.environ.get("DUALARM_CACHE_DIR")
     if given:
         return Path(given)
@@ -45,7 +48,11 @@ def _compiler() -> str | None:
 
 
 def compiled(function: cs.Function) -> cs.Function:
-    """``function`` as a compiled shared library loaded by ``casadi.external`` (built on the first call with these sources anywhere on the machine), or ``function`` itself when it cannot be compiled (see the module docstring)."""
+    """``function`` as a compiled shared library loaded by ``casadi.external``.
+
+    Built on the first call with these sources anywhere on the machine; or ``function`` itself when
+    it cannot be compiled (see the module docstring).
+    """
     compiler = _compiler()
     if compiler is None:
         return function
@@ -64,7 +71,10 @@ def compiled(function: cs.Function) -> cs.Function:
 
 
 def _build(source: str, command: tuple[str, ...], library: Path) -> None:
-    """Compile ``source`` into ``library``, written under a temporary name and renamed, so that processes building the same library at once never load a half-written one."""
+    """Compile ``source`` into ``library``, written under a temporary name and renamed.
+
+    So that processes building the same library at once never load a half-written one.
+    """
     library.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=library.parent, prefix=".build-") as tmp:
         c_file, built = Path(tmp) / "function.c", Path(tmp) / library.name

@@ -68,14 +68,19 @@ def segment_segment_distance(p1: cs.SX, q1: cs.SX, p2: cs.SX, q2: cs.SX) -> cs.S
 
 
 def point_box_distance(p: cs.SX, h: cs.SX) -> cs.SX:
-    """Signed distance from point ``p`` to the box of half-extents ``h`` [m] (negative inside: minus the distance to the nearest face)."""
+    """Signed distance from point ``p`` to the box of half-extents ``h`` [m].
+
+    Negative inside: minus the distance to the nearest face.
+    """
     outside = p - clip(p, -h, h)
     depth = _minimum([h[i] - cs.fabs(p[i]) for i in range(3)])
     return cs.if_else(depth > 0, -depth, cs.norm_2(outside))
 
 
 def segment_box_distance(p: cs.SX, q: cs.SX, h: cs.SX) -> cs.SX:
-    """Signed distance from the segment ``p``-``q`` to the box of half-extents ``h`` [m] (negative when they overlap: minus the penetration depth).
+    """Signed distance from the segment ``p``-``q`` to the box of half-extents ``h`` [m].
+
+    Negative when they overlap: minus the penetration depth.
 
     Apart: the squared distance from the point ``p + t (q - p)`` to the box is a convex, piecewise
     quadratic function of t whose pieces end where the point crosses a face's plane (six values of
@@ -126,7 +131,9 @@ def _minimum(values: list) -> cs.SX:
 
 @cache
 def distance_functions() -> dict[str, cs.Function]:
-    """The distances as CasADi Functions of 3-vectors; a box given by its rotation R (3x3), centre c and half-extents h.
+    """The distances as CasADi Functions of 3-vectors.
+
+    A box is given by its rotation R (3x3), centre c and half-extents h.
 
     ``point_point(p, q)``, ``point_segment(p, a, b)``, ``segment_segment(p1, q1, p2, q2)``,
     ``point_box(p, R, c, h)``, ``segment_box(p, q, R, c, h)``.

@@ -80,13 +80,16 @@ class WtaGoalSampler:
         )
 
     def __call__(self) -> np.ndarray | None:
-        """One goal sample: a goal configuration [rad], or None when the IK did not converge or the solution collides."""
+        """One goal sample: a goal configuration [rad], or None.
+
+        None when the IK did not converge or the solution collides.
+        """
         drawn = [sample_hand_pose(self.areas[hand], self.rng) for hand in self.areas]
         started = time.perf_counter()
         result = self.solver.solve([pose for _, pose in drawn], self.seed)
         self.ik_time_s += time.perf_counter() - started
         errors = self._hand_errors(result.q, [pose for _, pose in drawn])
-        for (area, _), error in zip(drawn, errors):
+        for (area, _), error in zip(drawn, errors, strict=True):
             stats = self.stats.setdefault(area.name, AreaStats())
             stats.drawn += 1
             stats.reached += bool(error <= GOAL_TOLERANCE[0])

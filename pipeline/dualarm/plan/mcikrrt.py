@@ -60,7 +60,10 @@ class Checker(Protocol):
         ...
 
     def segment_free(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """Whether the straight joint-space segment from ``a`` to ``b`` [rad] is collision-free (the ends not checked), its configurations in one batch."""
+        """Whether the straight joint-space segment from ``a`` to ``b`` [rad] is collision-free.
+
+        The ends not checked; its configurations in one batch.
+        """
         ...
 
 
@@ -173,7 +176,10 @@ def _connect(tree: _Tree, near: int, target: np.ndarray, checker: Checker, step:
 
 
 def shortcut(path: list[np.ndarray], checker: Checker, iterations: int, rng: np.random.Generator) -> list[np.ndarray]:
-    """SmoothSolution: ``iterations`` times, join two random waypoints directly when the segment between them is collision-free."""
+    """SmoothSolution: ``iterations`` times, join two random waypoints directly.
+
+    When the segment between them is collision-free.
+    """
     path = list(path)
     for _ in range(iterations):
         if len(path) < 3:
@@ -193,7 +199,9 @@ def mcikrrt(
     rng: np.random.Generator,
     settings: TreeSearchSettings = TreeSearchSettings(),
 ) -> PlanResult:
-    """Plan from ``start`` [rad] to a configuration ``sample_goal`` provides (None: the sample gave none), within ``lower``/``upper`` [rad], every node and edge free by ``checker``.
+    """Plan from ``start`` [rad] to a configuration ``sample_goal`` provides (None: the sample gave none).
+
+    Within ``lower``/``upper`` [rad], every node and edge free by ``checker``.
 
     Raises:
         StageError: ``start`` is not collision-free.

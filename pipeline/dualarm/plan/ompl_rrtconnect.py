@@ -32,6 +32,8 @@ with c_output_silenced():
     from ompl import util as ou
 
 _seeded = False
+#: The default settings of :func:`ompl_rrtconnect` (frozen: one instance serves every call).
+_DEFAULT_SETTINGS = TreeSearchSettings()
 
 
 def _seed_once(seed: int) -> None:
@@ -48,7 +50,10 @@ def _vector(state, n: int) -> np.ndarray:
 
 
 class _SegmentValidator(ob.MotionValidator):
-    """OMPL's motion check by ``checker``: the end state, then the segment's configurations at the checker's resolution in one batch (the start state is valid already)."""
+    """OMPL's motion check by ``checker``: the end state, then the segment's configurations.
+
+    The configurations at the checker's resolution in one batch (the start state is valid already).
+    """
 
     def __init__(self, si, checker: Checker, n: int):
         super().__init__(si)
@@ -66,10 +71,13 @@ def ompl_rrtconnect(
     checker: Checker,
     goals: Sequence[np.ndarray],
     seed: int,
-    settings: TreeSearchSettings = TreeSearchSettings(),
+    settings: TreeSearchSettings = _DEFAULT_SETTINGS,
     goal_time_s: float = 0.0,
 ) -> PlanResult:
-    """Plan from ``start`` [rad] to any of ``goals`` [rad] with OMPL's RRTConnect, within ``lower``/``upper`` [rad]; ``goal_time_s`` [s], the time it took to find the goals, is added to the planning time.
+    """Plan from ``start`` [rad] to any of ``goals`` [rad] with OMPL's RRTConnect.
+
+    Within ``lower``/``upper`` [rad]; ``goal_time_s`` [s], the time it took to find the goals, is
+    added to the planning time.
 
     Raises:
         StageError: no goals, or ``start`` in collision.

@@ -1,4 +1,7 @@
-"""The plan stage's product and metrics (the stage itself is :class:`dualarm.stages.PlanStage`): a task with Workspace Target Areas -> a collision-free joint path.
+"""The plan stage's product and metrics.
+
+A task with Workspace Target Areas -> a collision-free joint path (the stage itself is
+:class:`dualarm.stages.PlanStage`).
 
 The plan's waypoints are joined by straight joint-space segments, each collision-checked at the
 checker's resolution; the stage's :class:`~dualarm.contracts.joint_path.JointPath` holds those checked
@@ -34,10 +37,13 @@ def plan_metrics(result: PlanResult) -> dict[str, float]:
 
 
 def planned_joint_path(problem: PlanningProblem, result: PlanResult, method: str) -> JointPath:
-    """``method``'s plan: the checked configurations along the plan's segments as a joint path (module docstring)."""
+    """``method``'s plan: the checked configurations along the plan's segments as a joint path.
+
+    See the module docstring.
+    """
     checker, task = problem.checker, problem.task
     rows = [result.path[0]]
-    for a, b in zip(result.path[:-1], result.path[1:]):
+    for a, b in zip(result.path[:-1], result.path[1:], strict=True):
         steps = checker.segment_steps(a, b)
         rows += list(a + np.arange(1, steps + 1)[:, None] / steps * (b - a))
     q = np.array(rows)

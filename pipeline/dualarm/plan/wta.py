@@ -1,4 +1,6 @@
-"""Workspace Target Areas: Li & Liang, *Study on Humanoid Robot's Dual-arm Collision Avoidance Motion Planning Algorithm*, eqs (21)-(31).
+"""Workspace Target Areas: Li & Liang, eqs (21)-(31).
+
+Li & Liang, *Study on Humanoid Robot's Dual-arm Collision Avoidance Motion Planning Algorithm*.
 
 A WTA is a reference frame ^w T_WTA in the world (here: the robot base frame), the hand's offset
 ^WTA T_e in it, and a 6x2 bound matrix ^WTA B_e on the displacement of the WTA frame as the hand
@@ -33,7 +35,10 @@ from dualarm.tasks.schema import WorkspaceTargetArea
 
 
 def pose_vector(T: np.ndarray) -> np.ndarray:
-    """Eq (25): the 6-D vector [x, y, z, roll, pitch, yaw] of poses T (..., 4, 4) [m, rad]: roll = atan2(R32, R33), pitch = -asin(R31), yaw = atan2(R21, R11)."""
+    """Eq (25): the 6-D vector [x, y, z, roll, pitch, yaw] of poses T (..., 4, 4) [m, rad].
+
+    roll = atan2(R32, R33), pitch = -asin(R31), yaw = atan2(R21, R11).
+    """
     R = T[..., :3, :3]
     return np.concatenate(
         [
@@ -47,7 +52,10 @@ def pose_vector(T: np.ndarray) -> np.ndarray:
 
 
 def displacement(x: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-    """Eq (26): per component, how far ``x`` (..., 6) lies below the lower bound (negative) or above the upper bound (positive) of ``bounds`` (6, 2); 0 inside."""
+    """Eq (26): per component, how far ``x`` (..., 6) lies outside the bounds ``bounds`` (6, 2); 0 inside.
+
+    Below the lower bound (negative) or above the upper bound (positive).
+    """
     return np.where(x < bounds[:, 0], x - bounds[:, 0], np.where(x > bounds[:, 1], x - bounds[:, 1], 0.0))
 
 
@@ -88,12 +96,18 @@ class Wta:
         )
 
     def carried_vector(self, hand_pose: np.ndarray) -> np.ndarray:
-        """Eqs (22)-(25): the 6-D pose, in the WTA frame, of the frame the hand at ``hand_pose`` (..., 4, 4) [m] carries; (..., 6) [m, rad]."""
+        """Eqs (22)-(25): the 6-D pose, in the WTA frame, of the frame the hand carries; (..., 6) [m, rad].
+
+        The hand at ``hand_pose`` (..., 4, 4) [m].
+        """
         carried = hand_pose @ invert(self.offset)  # eq (22)
         return pose_vector(invert(self.reference) @ carried)  # eqs (24)-(25)
 
     def distance(self, hand_pose: np.ndarray) -> np.ndarray:
-        """Eq (26): |Delta x|, the distance of hand poses (..., 4, 4) to the area (0 inside), in the paper's mixed units (m and rad in one norm)."""
+        """Eq (26): |Delta x|, the distance of hand poses (..., 4, 4) to the area (0 inside).
+
+        In the paper's mixed units (m and rad in one norm).
+        """
         return np.linalg.norm(displacement(self.carried_vector(hand_pose), self.bounds), axis=-1)
 
     def sample_vector(self, rng: np.random.Generator) -> np.ndarray:
@@ -102,12 +116,18 @@ class Wta:
         return lower + rng.random(6) * (upper - lower)
 
     def hand_pose(self, x: np.ndarray) -> np.ndarray:
-        """Eqs (28)-(29): the hand pose (4, 4) [m] in the base frame that puts the carried frame at ``x`` (6,) of the WTA frame: ^w T_WTA ^WTA T_rand ^WTA T_e."""
+        """Eqs (28)-(29): the hand pose (4, 4) [m] in the base frame that puts the carried frame at ``x``.
+
+        ``x`` (6,) of the WTA frame: ^w T_WTA ^WTA T_rand ^WTA T_e.
+        """
         return self.reference @ pose_matrix(x[:3], x[3:]) @ self.offset
 
 
 def sampling_weights(areas: Sequence[Wta]) -> np.ndarray:
-    """Eq (31): each area's weight Z_i, the sum of its six widths times its ``weight``, normalised to sum 1 (in proportion to ``weight`` alone when every area is a single pose)."""
+    """Eq (31): each area's weight Z_i, the sum of its six widths times its ``weight``.
+
+    Normalised to sum 1 (in proportion to ``weight`` alone when every area is a single pose).
+    """
     widths = np.array([a.weight * float(np.sum(a.bounds[:, 1] - a.bounds[:, 0])) for a in areas])
     if widths.sum() <= 0:
         widths = np.array([a.weight for a in areas])
@@ -115,6 +135,9 @@ def sampling_weights(areas: Sequence[Wta]) -> np.ndarray:
 
 
 def sample_hand_pose(areas: Sequence[Wta], rng: np.random.Generator) -> tuple[Wta, np.ndarray]:
-    """Eqs (27)-(31): draw one of a hand's ``areas`` by weight, then a pose in it; returns the area and the hand pose (4, 4) [m]."""
+    """Eqs (27)-(31): draw one of a hand's ``areas`` by weight, then a pose in it.
+
+    Returns the area and the hand pose (4, 4) [m].
+    """
     area = areas[int(rng.choice(len(areas), p=sampling_weights(areas)))] if len(areas) > 1 else areas[0]
     return area, area.hand_pose(area.sample_vector(rng))

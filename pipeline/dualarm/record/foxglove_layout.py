@@ -1,17 +1,19 @@
-"""A Foxglove layout for a run's ``run.mcap``: the JSON Foxglove Studio 1.48 writes with "Export layout".
+"""A Foxglove layout for a run's ``run.mcap``.
+
+The JSON Foxglove Studio 1.48 writes with "Export layout".
 
 The recorder writes it into each run directory as ``foxglove-layout.json``. To use it, open
 ``run.mcap`` in Foxglove Studio or Lichtblick (its open-source continuation, same layout format),
 then choose Layouts -> Import from file... -> ``foxglove-layout.json``.
 
 What it shows: on the left one 3D panel in frame ``world`` with the robot (the URDF layer of
-``/robot_description``, moved by ``/tf``), the task's reference path, the hands' path (executed, when
-the run executed) and the task's objects, frame axes small and unlabelled, the camera framing the
-whole robot; on the right one Plot panel per quantity, stacked: hand error, arm angle, the joint
-positions of each chain, and the contact counts. Only panels for topics that ``stages`` produce are included. Plot paths use
-Studio's message path syntax ``<topic>.<field>.<key>`` over the run's JSON messages (see
-:mod:`dualarm.record.schemas`); ``tests/record/test_viewer_foxglove.py`` opens a run with this layout
-in Studio itself.
+``/robot_description``, moved by ``/tf``), the task's reference path, the hands' path (executed,
+when the run executed) and the task's objects, frame axes small and unlabelled, the camera framing
+the whole robot; on the right one Plot panel per quantity, stacked: hand error, arm angle, the joint
+positions of each chain, and the contact counts. Only panels for topics that ``stages`` produce are
+included. Plot paths use Studio's message path syntax ``<topic>.<field>.<key>`` over the run's JSON
+messages (see :mod:`dualarm.record.schemas`); ``tests/record/test_viewer_foxglove.py`` opens a run
+with this layout in Studio itself.
 """
 
 from __future__ import annotations
@@ -107,13 +109,19 @@ def _check(argument: str, given: Sequence[str], valid: Sequence[str]) -> None:
 
 
 def _shown(stages: Sequence[str]) -> str | None:
-    """The stage whose robot is on ``/tf``, its hands' path on ``/<stage>/hand_path`` and its joints in ``/<stage>/sample`` (none for the path stage alone)."""
+    """The stage whose robot is on ``/tf`` (none for the path stage alone).
+
+    Its hands' path is on ``/<stage>/hand_path`` and its joints in ``/<stage>/sample``.
+    """
     shown = shown_stage(stages)
     return None if shown == "path" else shown
 
 
 def _three_d(stages: Sequence[str]) -> dict:
-    """The 3D panel: the URDF layer, the task's paths and objects and the shown stage's hand path (the executed one), in ``world``."""
+    """The 3D panel, in ``world``.
+
+    The URDF layer, the task's paths and objects and the shown stage's hand path (the executed one).
+    """
     topics: dict[str, dict] = {"/robot_description": {"visible": True}}
     if "path" in stages:
         topics["/task/reference_path"] = {"visible": True}
@@ -171,7 +179,10 @@ def _plots(
 
 
 def _joint_groups(robot: Robot, joints: tuple[str, ...]) -> list[tuple[str, tuple[str, ...]]]:
-    """``joints`` grouped by the robot's chain holding them (chain order), those of no chain last as ``other``."""
+    """``joints`` grouped by the robot's chain holding them (chain order).
+
+    Those of no chain last as ``other``.
+    """
     groups = [(name, tuple(j for j in chain.joint_names if j in joints)) for name, chain in robot.chains.items()]
     chained = {j for _, names in groups for j in names}
     groups.append(("other", tuple(j for j in joints if j not in chained)))
@@ -179,7 +190,10 @@ def _joint_groups(robot: Robot, joints: tuple[str, ...]) -> list[tuple[str, tupl
 
 
 def _short(name: str, names: tuple[str, ...]) -> str:
-    """``name`` without the ``<word>_`` prefix every one of ``names`` shares (``left_elbow`` among the left arm's joints: ``elbow``), for short legends."""
+    """``name`` without the ``<word>_`` prefix every one of ``names`` shares, for short legends.
+
+    For example ``left_elbow`` among the left arm's joints: ``elbow``.
+    """
     prefix = name.split("_", 1)[0] + "_"
     return (
         name.removeprefix(prefix)

@@ -1,4 +1,6 @@
-"""The MCAP sink: each stage's product once into ``run.mcap``, with foxglove-sdk, and ``foxglove-layout.json``.
+"""The MCAP sink: each stage's product once into ``run.mcap``, with foxglove-sdk.
+
+And ``foxglove-layout.json``.
 
 One Context per run, so nothing is global: one topic family per stage (``/task/...`` for the path
 stage, :data:`STAGE_TOPICS`), ``/robot_description`` with the URDF as URDF 1.0 viewers read it,
@@ -72,7 +74,11 @@ def _ns(t: float) -> int:
 
 
 def _encoder(*values: np.ndarray | float) -> Callable[[dict], bytes]:
-    """The JSON encoder of messages made of ``values``: orjson's (a few times faster than json's, for the per-sample topics) when all are finite, else json's, which writes NaN and Infinity as Python and Foxglove read them (orjson writes null)."""
+    """The JSON encoder of messages made of ``values``: orjson's when all are finite, else json's.
+
+    orjson's is a few times faster than json's, for the per-sample topics; json writes NaN and
+    Infinity as Python and Foxglove read them (orjson writes null).
+    """
     if all(np.isfinite(np.asarray(v, dtype=float)).all() for v in values):
         return orjson.dumps
     return lambda message: json.dumps(message).encode()
@@ -87,7 +93,9 @@ def _quat(q) -> dict[str, float]:
 
 
 class McapSink(NullSink):
-    """The sink that writes one run's ``run.mcap`` (and, when closed, ``foxglove-layout.json``) into ``directory``.
+    """The sink that writes one run's ``run.mcap`` into ``directory``.
+
+    And, when closed, ``foxglove-layout.json``.
 
     Args:
         directory: the (temporary) run directory.
@@ -121,7 +129,10 @@ class McapSink(NullSink):
         )
 
     def _json(self, topic: str, schema: dict, **keys: Sequence[str]) -> foxglove.Channel:
-        """The JSON channel ``topic``, opened on first use with ``schema``, its maps keyed by the robot's joints and hands (and ``keys``: kind -> names)."""
+        """The JSON channel ``topic``, opened on first use with ``schema``.
+
+        Its maps keyed by the robot's joints and hands (and ``keys``: kind -> names).
+        """
         if topic not in self._channels:
             self._channels[topic] = foxglove.Channel(
                 topic, schema=schemas.named(schema, {**self._keys, **keys}), context=self._context
@@ -129,7 +140,10 @@ class McapSink(NullSink):
         return self._channels[topic]
 
     def _tf(self, stage: str, t: np.ndarray | float, q: Mapping[str, np.ndarray | float]) -> None:
-        """The robot's link frames on ``/tf`` at times ``t`` (K,) [s] (joint name -> (K,) positions [rad]), root hung from ``world``: the shown stage's only."""
+        """The robot's link frames on ``/tf`` at times ``t`` (K,) [s]: the shown stage's only.
+
+        ``q``: joint name -> (K,) positions [rad]; the root hung from ``world``.
+        """
         if stage != self.shown:
             return
         t = np.atleast_1d(np.asarray(t, dtype=float))
@@ -159,7 +173,10 @@ class McapSink(NullSink):
             )
 
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
-        """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: ``/tf`` and ``<family>/joint_state``."""
+        """The robot at configuration ``q`` [rad] at motion time ``t`` [s].
+
+        On ``/tf`` and ``<family>/joint_state``.
+        """
         if stage not in self.stages:
             return
         self._tf(stage, t, q)
@@ -206,12 +223,12 @@ class McapSink(NullSink):
                         "method": path.method,
                         "status": int(path.status[k]),
                         "solve_time_s": float(path.solve_time_s[k]),
-                        "position": dict(zip(names, path.q[k].tolist())),
-                        "velocity": dict(zip(names, path.qd[k].tolist())),
-                        "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist())),
+                        "position": dict(zip(names, path.q[k].tolist(), strict=True)),
+                        "velocity": dict(zip(names, path.qd[k].tolist(), strict=True)),
+                        "hand_error_m": dict(zip(path.hands, path.hand_error_m[k].tolist(), strict=True)),
                         **(
                             {
-                                "hand_orientation_error_rad": dict(zip(path.hands, angle[k].tolist())),
+                                "hand_orientation_error_rad": dict(zip(path.hands, angle[k].tolist(), strict=True)),
                                 "task_space": path.task_space,
                             }
                             if measured
@@ -225,7 +242,11 @@ class McapSink(NullSink):
             if bounds is not None:
                 bounds.log(
                     encode(
-                        {"t": t, "rep": rep, **{key: dict(zip(names, v[k].tolist())) for key, v in path.extras.items()}}
+                        {
+                            "t": t,
+                            "rep": rep,
+                            **{key: dict(zip(names, v[k].tolist(), strict=True)) for key, v in path.extras.items()},
+                        }
                     ),
                     log_time=_ns(t),
                 )
@@ -245,7 +266,7 @@ class McapSink(NullSink):
     ) -> None:
         """The robot of ``stage`` on ``/tf`` at :func:`~dualarm.record.sink.animation_rows`."""
         rows = animation_rows(t)
-        self._tf(stage, t[rows], {**fixed, **dict(zip(names, q[rows].T))})
+        self._tf(stage, t[rows], {**fixed, **dict(zip(names, q[rows].T, strict=True))})
 
     def _limits(self, stage: str, names: tuple[str, ...], limits: Mapping[str, np.ndarray]) -> None:
         lower, upper = self.robot.lower_upper(names)
@@ -254,13 +275,19 @@ class McapSink(NullSink):
             {
                 "t": 0.0,
                 "rep": 0,
-                **{key: dict(zip(names, np.asarray(v, dtype=float).tolist())) for key, v in values.items()},
+                **{
+                    key: dict(zip(names, np.asarray(v, dtype=float).tolist(), strict=False))
+                    for key, v in values.items()
+                },
             },
             log_time=0,
         )
 
     def _hand_path(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
-        """Each hand's path (M, 3) [m] in ``stage`` on ``/<stage>/hand_path`` (Foxglove lines, the stage's colour): the shown stage's."""
+        """Each hand's path (M, 3) [m] in ``stage`` on ``/<stage>/hand_path``: the shown stage's.
+
+        Foxglove lines, the stage's colour.
+        """
         if stage == self.shown:
             color = STAGE_COLORS.get(stage, (200, 200, 200))
             self._lines(
@@ -271,7 +298,10 @@ class McapSink(NullSink):
             )
 
     def _lines(self, topic: str, frame: str, positions: Mapping[str, np.ndarray], color: Color | None = None) -> None:
-        """Paths (name -> (M, 3) [m]) as Foxglove line strips in ``frame``, once at t = 0 on ``topic`` (each hand in its colour unless ``color``)."""
+        """Paths (name -> (M, 3) [m]) as Foxglove line strips in ``frame``, once at t = 0 on ``topic``.
+
+        Each hand in its colour unless ``color``.
+        """
         entities = []
         for name, p in positions.items():
             r, g, b = HAND_COLORS.get(name, (200, 200, 200))
@@ -316,8 +346,8 @@ class McapSink(NullSink):
                     {
                         "t": t,
                         "rep": int(traj.rep[k]),
-                        "position": dict(zip(names, traj.q[k].tolist())),
-                        **{key: dict(zip(names, v[k].tolist())) for key, v in series.items()},
+                        "position": dict(zip(names, traj.q[k].tolist(), strict=True)),
+                        **{key: dict(zip(names, v[k].tolist(), strict=False)) for key, v in series.items()},
                         "hand_position": {hand: _vec(p[k]) for hand, p in hand_positions.items()},
                     }
                 ),
@@ -357,9 +387,9 @@ class McapSink(NullSink):
                     {
                         "t": t,
                         "rep": int(log.rep[k]),
-                        "position": dict(zip(names, log.q[k].tolist())),
-                        "velocity": dict(zip(names, log.qd[k].tolist())),
-                        "command": dict(zip(names, log.q_command[k].tolist())),
+                        "position": dict(zip(names, log.q[k].tolist(), strict=True)),
+                        "velocity": dict(zip(names, log.qd[k].tolist(), strict=True)),
+                        "command": dict(zip(names, log.q_command[k].tolist(), strict=True)),
                         "hand_position": {hand: _vec(p[k]) for hand, p in positions.items()},
                         "hand_error_m": {hand: float(e[k]) for hand, e in log.hand_error_m.items()},
                         "self_contacts": int(log.self_contacts[k]),
@@ -384,7 +414,11 @@ class McapSink(NullSink):
             )
 
     def environment(self, objects) -> None:
-        """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame, ``world``): once on ``/task/environment`` (Foxglove SceneUpdate)."""
+        """A task's fixed objects: once on ``/task/environment`` (Foxglove SceneUpdate).
+
+        The objects: :class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base
+        frame, ``world``.
+        """
         if "path" not in self.stages:
             return
         entities = []
@@ -420,7 +454,11 @@ class McapSink(NullSink):
             )
 
     def reference(self, ref: CartesianReference) -> None:
-        """The path stage's product: one ``/task/reference/<hand>`` message per sample, the hands' whole paths once on ``/task/reference_path`` (Foxglove line strips in the reference's frame)."""
+        """The path stage's product: one ``/task/reference/<hand>`` message per sample.
+
+        The hands' whole paths once on ``/task/reference_path`` (Foxglove line strips in the
+        reference's frame).
+        """
         if "path" not in self.stages:
             return
         family = STAGE_TOPICS["path"]
@@ -455,7 +493,10 @@ class McapSink(NullSink):
         )
 
     def close(self, manifest: Mapping[str, object]) -> None:
-        """Write the Foxglove layout (``foxglove-layout.json``) and the manifest as MCAP metadata, and finish the file."""
+        """Write the Foxglove layout and the manifest as MCAP metadata, and finish the file.
+
+        The layout: ``foxglove-layout.json``.
+        """
         if self._closed:
             return
         self._closed = True

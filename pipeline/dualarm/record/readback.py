@@ -72,7 +72,10 @@ _TF_COLUMNS = (
 
 
 def _json_frame(times: list[float], payloads: list[bytes]) -> pd.DataFrame:
-    """JSON messages -> a DataFrame (nested fields joined with dots); a message's own ``t`` wins over its log time."""
+    """JSON messages -> a DataFrame (nested fields joined with dots).
+
+    A message's own ``t`` wins over its log time.
+    """
     df = pd.json_normalize(json.loads(b"[" + b",".join(payloads) + b"]"), sep=".")
     if "t" not in df:
         df.insert(0, "t", times)
@@ -94,7 +97,7 @@ def _frame_transforms(times: list[float], messages: list) -> pd.DataFrame:
             tr.rotation.z,
             tr.rotation.w,
         )
-        for t, message in zip(times, messages)
+        for t, message in zip(times, messages, strict=True)
         for tr in message.transforms
     ]
     return pd.DataFrame(rows, columns=("t", *_TF_COLUMNS))
@@ -112,9 +115,13 @@ def _flatten(data: Mapping, prefix: str = "") -> dict:
 
 
 def _protobuf_frame(schema_name: str, times: list[float], messages: list) -> pd.DataFrame:
-    """Other protobuf messages -> flat rows; a message holding a list of poses gives a row per pose, one of line entities (paths) a row per point."""
+    """Other protobuf messages -> flat rows.
+
+    A message holding a list of poses gives a row per pose, one of line entities (paths) a row per
+    point.
+    """
     rows: list[dict] = []
-    for t, message in zip(times, messages):
+    for t, message in zip(times, messages, strict=True):
         data = MessageToDict(message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True)
         items = data.pop("poses", None) if schema_name == "foxglove.PosesInFrame" else None
         entities = data.get("entities") if schema_name == "foxglove.SceneUpdate" else None
@@ -171,7 +178,8 @@ class McapTopics(Mapping[str, pd.DataFrame]):
         payloads: list[bytes] = []
         try:
             with self._path.open("rb") as stream:
-                for schema, channel, message in make_reader(stream, validate_crcs=True).iter_messages(
+                # B007 does not apply: the last schema and channel of the loop are read after it.
+                for schema, channel, message in make_reader(stream, validate_crcs=True).iter_messages(  # noqa: B007
                     topics=[topic], log_time_order=True
                 ):
                     times.append(message.log_time / 1e9)
@@ -189,7 +197,8 @@ class McapTopics(Mapping[str, pd.DataFrame]):
                     df = _protobuf_frame(schema.name, times, messages)
         except Exception as exc:  # any failure to decode (struct, McapError, protobuf, JSON...) is corruption
             raise RecordingError(
-                f"{excerpt(self._path)}: topic {_quote(topic)} is not readable ({excerpt(f'{type(exc).__name__}: {exc}')})"
+                f"{excerpt(self._path)}: topic {_quote(topic)} is not "
+                f"readable ({excerpt(f'{type(exc).__name__}: {exc}')})"
             ) from None
         if "rep" not in df:
             df["rep"] = 0
@@ -240,7 +249,10 @@ class RunData:
 
     @property
     def violations(self) -> list[str]:
-        """The messages of the verdict's violations, in order (empty for a complete run, or a run recorded before verdicts)."""
+        """The messages of the verdict's violations, in order.
+
+        Empty for a complete run, or a run recorded before verdicts.
+        """
         violations = self.manifest.get("violations", [])
         return (
             [str(v.get("message", "")) for v in violations if isinstance(v, Mapping)]
@@ -255,12 +267,18 @@ class RunData:
 
     @property
     def record(self) -> str:
-        """How much of the run was recorded: ``full``, ``ik`` or ``metrics`` (:data:`~dualarm.record.sink.RECORD_LEVELS`; ``full`` for a run recorded before levels)."""
+        """How much of the run was recorded: ``full``, ``ik`` or ``metrics``.
+
+        See :data:`~dualarm.record.sink.RECORD_LEVELS`; ``full`` for a run recorded before levels.
+        """
         return str(self.manifest.get("record", "full"))
 
     @property
     def recorded_stages(self) -> list[str]:
-        """The stages whose products the run's recordings hold (:attr:`stages` for a ``full`` run, none for a ``metrics`` run)."""
+        """The stages whose products the run's recordings hold.
+
+        :attr:`stages` for a ``full`` run, none for a ``metrics`` run.
+        """
         return list(recorded_stages(self.record, self.stages))
 
     def lacks(self) -> str:
@@ -268,7 +286,10 @@ class RunData:
         if self.record == "metrics":
             return f"no {MCAP_FILE}, no {RRD_FILE}, no topics: only {MANIFEST} and {METRICS}"
         if self.record != "full":
-            return f"{MCAP_FILE} and {RRD_FILE} hold the stages {', '.join(self.recorded_stages) or '(none)'} only, not {', '.join(s for s in self.stages if s not in self.recorded_stages)}"
+            return (
+                f"{MCAP_FILE} and {RRD_FILE} hold the stages {', '.join(self.recorded_stages) or '(none)'} "
+                f"only, not {', '.join(s for s in self.stages if s not in self.recorded_stages)}"
+            )
         return ""
 
     def setting(self, stage: str, key: str) -> object:
@@ -289,7 +310,8 @@ class RunData:
                 self.record != "full" and stage_of(topic) in self.stages and stage_of(topic) not in self.recorded_stages
             ):
                 raise RecordingError(
-                    f"{excerpt(self.directory)}: no topic {_quote(topic)}: the run was recorded with --record {self.record} ({self.lacks()})"
+                    f"{excerpt(self.directory)}: no topic {_quote(topic)}: the run "
+                    f"was recorded with --record {self.record} ({self.lacks()})"
                 )
             raise RecordingError(
                 f"{excerpt(self.directory)}: no topic {_quote(topic)} (topics: {', '.join(self.topics)})"
@@ -314,7 +336,8 @@ def read_run(directory: str | Path) -> RunData:
         raise RecordingError(f"{excerpt(directory)}: cannot read the run directory: {cause(exc)}") from None
     if not is_directory:
         raise RecordingError(
-            f"{excerpt(directory)}: not a directory (a run directory holds {MANIFEST}, {METRICS}, {MCAP_FILE} and {RRD_FILE})"
+            f"{excerpt(directory)}: not a directory (a run directory "
+            f"holds {MANIFEST}, {METRICS}, {MCAP_FILE} and {RRD_FILE})"
         )
     manifest = _manifest(directory / MANIFEST)
     if manifest.get("record") == "metrics":
@@ -334,11 +357,15 @@ def read_run(directory: str | Path) -> RunData:
 
 
 def _metrics_run(directory: Path, manifest: dict[str, Any]) -> RunData:
-    """A run recorded with ``--record metrics``: its manifest and metrics, no topics; a recording beside it is refused."""
+    """A run recorded with ``--record metrics``: its manifest and metrics, no topics.
+
+    A recording beside it is refused.
+    """
     for name in (MCAP_FILE, RRD_FILE):
         if os.path.lexists(directory / name):
             raise RecordingError(
-                f"{excerpt(directory / name)}: present, but {MANIFEST} says the run was recorded with --record metrics (no {MCAP_FILE}, no {RRD_FILE}): the files are not of one run"
+                f"{excerpt(directory / name)}: present, but {MANIFEST} says the run was recorded "
+                f"with --record metrics (no {MCAP_FILE}, no {RRD_FILE}): the files are not of one run"
             )
     metrics = _metrics(directory / METRICS)
     _check_metrics(directory / METRICS, str(manifest["status"]), metrics, None, in_mcap=False)
@@ -351,7 +378,10 @@ def _metrics_run(directory: Path, manifest: dict[str, Any]) -> RunData:
 
 
 def read_runs(directories: Iterable[str | Path], topics: Iterable[str] | None = None) -> dict[str, pd.DataFrame]:
-    """Many runs, concatenated per topic (only ``topics`` when given), with ``run`` (run id) and ``task`` columns added."""
+    """Many runs, concatenated per topic, with ``run`` (run id) and ``task`` columns added.
+
+    Only ``topics`` when given.
+    """
     wanted = None if topics is None else set(topics)
     per_topic: dict[str, list[pd.DataFrame]] = defaultdict(list)
     for directory in directories:

@@ -1,4 +1,6 @@
-"""The recorder: each stage hands it its product once; it writes ``run.mcap``, ``run.rrd`` and ``foxglove-layout.json``.
+"""The recorder: each stage hands it its product once.
+
+It writes ``run.mcap``, ``run.rrd`` and ``foxglove-layout.json``.
 
 A :class:`~dualarm.record.sink.Tee` of the MCAP sink (:mod:`dualarm.record.mcap_sink`: ``run.mcap``
 for Foxglove, and its layout) and the Rerun sink (:mod:`dualarm.record.rerun_sink`: ``run.rrd`` and

@@ -1,4 +1,6 @@
-"""The Rerun sink: each stage's product once into ``run.rrd``, and the :func:`blueprint` the run opens on.
+"""The Rerun sink: each stage's product once into ``run.rrd``.
+
+And the :func:`blueprint` the run opens on.
 
 The URDF per stage under ``/<stage>/<robot>``, reference paths and each stage's hand traces in 3D
 under ``/world``, time series under ``/plots``; the blueprint is sent before any data.
@@ -36,7 +38,9 @@ LIMIT_LINE = rr.SeriesLines(colors=[(200, 0, 0)], widths=[2.0], names=["limit"])
 
 
 def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> rrb.Blueprint:
-    """The Rerun layout a run of ``stages`` opens on, centred on the stage ``focus`` (default :func:`shown_stage`).
+    """The Rerun layout a run of ``stages`` opens on, centred on the stage ``focus``.
+
+    ``focus`` defaults to :func:`shown_stage`.
 
     Tab "run": the ``focus`` robot with the reference and its hand paths in one 3D view, beside
     plots grouped by quantity: hand errors; velocity, acceleration and jerk over their limits
@@ -116,7 +120,10 @@ class RerunSink(NullSink):
         self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
-        """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world (logged on first use)."""
+        """The URDF under ``/<stage>``, with frames prefixed ``<stage>/`` and rooted at the world.
+
+        Logged on first use.
+        """
         if stage not in self._robot_trees:
             # one static entity per stage robot: static data logged twice to one entity replaces the first
             tree = rr.urdf.UrdfTree.from_file_path(
@@ -164,20 +171,24 @@ class RerunSink(NullSink):
     def joint_path(
         self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik"
     ) -> None:
-        """The IK (or plan) stage's product: the animated robot under ``/<stage>``, every joint's position, velocity and bounds, the hand errors and the arm angles as time series, and the hand traces."""
+        """The IK (or plan) stage's product: the animated robot under ``/<stage>``, time series, hand traces.
+
+        Every joint's position, velocity and bounds, the hand errors and the arm angles as time
+        series, and the hand traces.
+        """
         if stage not in self.stages:
             return
         names = path.joint_names
         angle = path.hand_orientation_error_rad
         measured = bool(np.isfinite(angle).all())  # a planner's path measures no orientation
         self._animation(stage, path.t, names, path.q, path.fixed)
-        self._series(f"{stage}/position", path.t, dict(zip(names, path.q.T)))
-        self._series(f"{stage}/velocity", path.t, dict(zip(names, path.qd.T)))
+        self._series(f"{stage}/position", path.t, dict(zip(names, path.q.T, strict=True)))
+        self._series(f"{stage}/velocity", path.t, dict(zip(names, path.qd.T, strict=True)))
         for key, v in path.extras.items():
-            self._series(f"{stage}/{key}", path.t, dict(zip(names, v.T)))
-        self._series(f"{stage}/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T)))
+            self._series(f"{stage}/{key}", path.t, dict(zip(names, v.T, strict=True)))
+        self._series(f"{stage}/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T, strict=True)))
         if measured:
-            self._series(f"{stage}/hand_orientation_error_rad", path.t, dict(zip(path.hands, angle.T)))
+            self._series(f"{stage}/hand_orientation_error_rad", path.t, dict(zip(path.hands, angle.T, strict=True)))
         self._series(f"{stage}/solve_time_s", path.t, {"all": path.solve_time_s})
         self._series(f"{stage}/arm_angle_rad", path.t, arm_angles)
         self._hand_traces(
@@ -200,7 +211,9 @@ class RerunSink(NullSink):
         """The robot of ``stage`` at :func:`~dualarm.record.sink.animation_rows`."""
         rows = animation_rows(t)
         self._rerun_motion(
-            stage, t[rows], {**{n: np.full(len(rows), v) for n, v in fixed.items()}, **dict(zip(names, q[rows].T))}
+            stage,
+            t[rows],
+            {**{n: np.full(len(rows), v) for n, v in fixed.items()}, **dict(zip(names, q[rows].T, strict=True))},
         )
 
     def _hand_traces(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
@@ -228,16 +241,25 @@ class RerunSink(NullSink):
         series = {"velocity": traj.qd, "acceleration": traj.qdd, **extras}
         self._animation(stage, traj.t, names, traj.q, traj.fixed)
         self._hand_traces(stage, hand_positions)
-        self._series(f"{stage}/position", traj.t, dict(zip(names, traj.q.T)))
+        self._series(f"{stage}/position", traj.t, dict(zip(names, traj.q.T, strict=True)))
         for kind, limit in limits.items():
             ratio = np.abs(series[kind]) / np.asarray(limit, dtype=float)
-            self._series(f"{stage}/{kind}_ratio", traj.t, {**dict(zip(names, ratio.T)), "limit": np.ones(len(traj))})
+            self._series(
+                f"{stage}/{kind}_ratio",
+                traj.t,
+                {**dict(zip(names, ratio.T, strict=False)), "limit": np.ones(len(traj))},
+            )
             self._rr.log(f"plots/{stage}/{kind}_ratio/limit", LIMIT_LINE, static=True)
         if "deviation_rad" in extras:
-            self._series(f"{stage}/deviation_rad", traj.t, dict(zip(names, extras["deviation_rad"].T)))
+            self._series(f"{stage}/deviation_rad", traj.t, dict(zip(names, extras["deviation_rad"].T, strict=False)))
 
     def execution(self, log: ExecutionLog) -> None:
-        """The execute stage's product: the robot under ``/execute``, the measured hand traces under ``/world/execute``, and under ``/plots/execute`` the hand errors, contacts and the joints' tracking error (``/plots/approach/executed_*`` for the approach)."""
+        """The execute stage's product: the robot under ``/execute``, measured hand traces, plots.
+
+        The measured hand traces under ``/world/execute``, and under ``/plots/execute`` the hand
+        errors, contacts and the joints' tracking error (``/plots/approach/executed_*`` for the
+        approach).
+        """
         if "execute" not in self.stages:
             return
         self._executed(log, "execute/")
@@ -251,7 +273,9 @@ class RerunSink(NullSink):
         """One played trajectory's plots, named ``plots/<plots><quantity>``."""
         names = log.joint_names
         self._series(f"{plots}hand_error_m", log.t, dict(log.hand_error_m))
-        self._series(f"{plots}tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T)))
+        self._series(
+            f"{plots}tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T, strict=True))
+        )
         self._series(
             f"{plots}contacts",
             log.t,
@@ -259,7 +283,11 @@ class RerunSink(NullSink):
         )
 
     def environment(self, objects) -> None:
-        """A task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base frame) under ``/world/environment/<name>``."""
+        """A task's fixed objects under ``/world/environment/<name>``.
+
+        The objects: :class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base
+        frame.
+        """
         if "path" not in self.stages:
             return
         for obj in objects:
@@ -286,7 +314,10 @@ class RerunSink(NullSink):
             self._rr.log(f"world/environment/{obj.name}", archetype, static=True)
 
     def reference(self, ref: CartesianReference) -> None:
-        """The path stage's product: the hands' paths as 3D line strips and the position components as time series."""
+        """The path stage's product: the hands' paths as 3D line strips.
+
+        And the position components as time series.
+        """
         if "path" not in self.stages:
             return
         for hand, hr in ref.hands.items():

@@ -1,4 +1,7 @@
-"""Run directories: ``<out>/<task>/<run-id>/{run.mcap, run.rrd, foxglove-layout.json, manifest.json, metrics.json}``; and every output directory.
+"""Run directories, and every output directory.
+
+A run directory:
+``<out>/<task>/<run-id>/{run.mcap, run.rrd, foxglove-layout.json, manifest.json, metrics.json}``.
 
 A run recorded with ``--record metrics`` holds only ``manifest.json`` and ``metrics.json``
 (:data:`~dualarm.record.sink.RECORD_LEVELS`).
@@ -77,7 +80,9 @@ def package_versions() -> dict[str, str]:
 
 
 def write_whole(path: Path, text: str | bytes) -> Path:
-    """Write ``text`` (or bytes) beside ``path``, then rename it into place: a file that exists is complete. Creates ``path``'s directory; returns ``path``.
+    """Write ``text`` (or bytes) beside ``path``, then rename it into place.
+
+    A file that exists is complete. Creates ``path``'s directory; returns ``path``.
 
     Nothing is left beside ``path`` when the write fails or is interrupted.
 
@@ -221,10 +226,14 @@ class OutputDir:
         self.release()
 
     def clear(self) -> None:
-        """Delete everything in the directory but its marker, once every entry at every depth is one dualarm writes there and no directory inside is in use.
+        """Delete everything in the directory but its marker.
+
+        Once every entry at every depth is one dualarm writes there and no directory inside is in
+        use.
 
         Raises:
-            OutputError: an entry dualarm does not write (nothing is deleted), or a directory inside locked by another process.
+            OutputError: an entry dualarm does not write (nothing is deleted), or a directory inside
+                locked by another process.
         """
         held: list[int] = []
         try:
@@ -243,7 +252,9 @@ class OutputDir:
 
 
 def claim_output_dir(path: str | Path, kind: str) -> OutputDir:
-    """Make or reuse ``path`` as an output directory of ``kind``, locked; every command calls this before it writes there.
+    """Make or reuse ``path`` as an output directory of ``kind``, locked.
+
+    Every command calls this before it writes there.
 
     A missing directory is made (with its parents) and marked (:data:`MARKER`); an empty one is
     marked. An existing one is reused only when its marker names ``kind`` and every entry in it is
@@ -274,7 +285,8 @@ def claim_output_dir(path: str | Path, kind: str) -> OutputDir:
     except BlockingIOError:
         claimed.release()
         raise OutputError(
-            f"{excerpt(target)}: in use by another dualarm process (locked); wait for it to end or give another output directory",
+            f"{excerpt(target)}: in use by another dualarm process "
+            "(locked); wait for it to end or give another output directory",
             str(target),
         ) from None
     try:
@@ -318,7 +330,10 @@ def _make(target: Path, kind: str) -> None:
 
 
 def _write_marker(directory: Path, kind: str) -> None:
-    text = f"dualarm {kind}\nwritten by dualarm: it writes into this directory again only if it holds nothing else than what dualarm writes there.\n"
+    text = (
+        f"dualarm {kind}\nwritten by dualarm: it writes into this directory "
+        "again only if it holds nothing else than what dualarm writes there.\n"
+    )
     marker = directory / MARKER
     if not marker.is_file() or _marker_kind(directory) != kind:
         write_whole(marker, text)
@@ -349,12 +364,14 @@ def _check(target: Path, kind: str, layout: Layout) -> None:
             return
         if marked is None and not layout.add_only:
             raise OutputError(
-                f"{excerpt(target)}: not a {kind} directory made by dualarm (no {MARKER} marker) and not empty: it holds '{excerpt(entries[0])}'; give an empty or new directory",
+                f"{excerpt(target)}: not a {kind} directory made by dualarm (no {MARKER} marker) "
+                f"and not empty: it holds '{excerpt(entries[0])}'; give an empty or new directory",
                 str(target),
             )
         if marked is not None and marked != kind:
             raise OutputError(
-                f"{excerpt(target)}: not a {kind} directory (its {MARKER} marker says '{excerpt(marked)}'); give another directory",
+                f"{excerpt(target)}: not a {kind} directory (its {MARKER} "
+                f"marker says '{excerpt(marked)}'); give another directory",
                 str(target),
             )
         foreign = _foreign(target, layout, strict=False, held=[])
@@ -366,7 +383,8 @@ def _check(target: Path, kind: str, layout: Layout) -> None:
 
 def _foreign_error(target: Path, kind: str, foreign: Path) -> OutputError:
     return OutputError(
-        f"{excerpt(target)}: holds '{excerpt(foreign.relative_to(target))}', which dualarm does not write into a {kind} directory; move it away or give another directory",
+        f"{excerpt(target)}: holds '{excerpt(foreign.relative_to(target))}', which dualarm "
+        f"does not write into a {kind} directory; move it away or give another directory",
         str(target),
     )
 
@@ -379,7 +397,9 @@ def _match(name: str, patterns: Mapping[str, Layout | str] | tuple[str, ...]) ->
 
 
 def _foreign(directory: Path, layout: Layout, *, strict: bool, held: list[int]) -> Path | None:
-    """The first entry under ``directory`` (sorted, depth first) that dualarm does not write there, or None.
+    """The first entry under ``directory`` that dualarm does not write there, or None.
+
+    Sorted, depth first.
 
     Outside ``strict`` (reuse), an add-only directory accepts anything; in ``strict`` (before
     deleting) every entry must be dualarm's, and each marked directory inside is locked
@@ -495,7 +515,11 @@ class RunDirectory:
         return self.final.name
 
     def conclude(self, verdict: Verdict) -> None:
-        """Fix the run's verdict (``status``: complete, violated or failed; ``error``; ``violations``, each with its check, stage, message and time) and end time in the manifest."""
+        """Fix the run's verdict and end time in the manifest.
+
+        The verdict: ``status`` (complete, violated or failed), ``error``, ``violations``, each with
+        its check, stage, message and time.
+        """
         self.manifest["status"] = verdict.status
         self.manifest["error"] = verdict.error
         self.manifest["violations"] = [v.as_record() for v in verdict.violations]
@@ -503,7 +527,10 @@ class RunDirectory:
         self.manifest["wall_time_s"] = round(time.perf_counter() - self._started, 3)
 
     def finish(self, metrics: Mapping[str, float] | None) -> Path:
-        """Write manifest.json (and metrics.json if the run finished: complete or violated) and move the run into place."""
+        """Write manifest.json (and metrics.json if the run finished) and move the run into place.
+
+        The run finished: complete or violated.
+        """
         if "finished_at" not in self.manifest:
             from dualarm.contracts.verdict import Verdict
 

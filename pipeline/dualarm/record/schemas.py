@@ -13,7 +13,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-#: Internal key of a map object: the kind of its keys ("joints", "hands" or "metrics"), replaced by ``properties`` in :func:`named`.
+#: Internal key of a map object: the kind of its keys ("joints", "hands" or "metrics"), replaced by
+#: ``properties`` in :func:`named`.
 _KEYS = "x-dualarm-keys"
 _NUMBER = {"type": "number"}
 _VECTOR3 = {"type": "object", "properties": {k: _NUMBER for k in "xyz"}, "required": list("xyz")}
@@ -24,7 +25,10 @@ _HAND_VECTORS = {"type": "object", "additionalProperties": _VECTOR3, _KEYS: "han
 
 
 def named(schema: Mapping, keys: Mapping[str, Sequence[str]]) -> dict:
-    """``schema`` with each map's keys (kind -> names; kinds ``joints``, ``hands``, ``metrics``) listed as its ``properties``."""
+    """``schema`` with each map's keys listed as its ``properties``.
+
+    The keys: kind -> names; kinds ``joints``, ``hands``, ``metrics``.
+    """
     filled = {
         key: named(value, keys) if isinstance(value, Mapping) else value
         for key, value in schema.items()
@@ -100,7 +104,10 @@ IK_SAMPLE = {
         "hand_error_m": {**_HAND_MAP, "description": "hand -> |r - f(q)| [m]"},
         "hand_orientation_error_rad": {
             **_HAND_MAP,
-            "description": "hand -> angle of R_asked^T R_reached [rad] (IK stages; measured even where the method solved positions only)",
+            "description": (
+                "hand -> angle of R_asked^T R_reached [rad] (IK stages; "
+                "measured even where the method solved positions only)"
+            ),
         },
         "task_space": {
             "type": "string",
@@ -109,7 +116,9 @@ IK_SAMPLE = {
         },
         "arm_angle_rad": {
             **_HAND_MAP,
-            "description": "hand -> arm angle [rad]: psi of MC-Inverse eq (1) on an S-R-S arm, else the stereographic SEW angle",
+            "description": (
+                "hand -> arm angle [rad]: psi of MC-Inverse eq (1) on an S-R-S arm, else the stereographic SEW angle"
+            ),
         },
     },
     "required": [

@@ -1,4 +1,6 @@
-"""Sinks: where the stages hand their products. The pipeline never writes files itself; it tells a sink, and the sink decides what to keep.
+"""Sinks: where the stages hand their products.
+
+The pipeline never writes files itself; it tells a sink, and the sink decides what to keep.
 
 - :class:`Sink`: the protocol. Each stage calls :meth:`Sink.begin` when it starts and hands its
   product once; the driver hands the run's metrics last.
@@ -44,7 +46,10 @@ class Sink(Protocol):
     def joint_path(
         self, path: JointPath, velocity_limits: np.ndarray, arm_angles: Mapping[str, np.ndarray], stage: str = "ik"
     ) -> None:
-        """The IK (or plan) stage's product, with the joints' velocity limits [rad/s] and each hand's arm angle [rad] per sample."""
+        """The IK (or plan) stage's product, with the joints' velocity limits and each hand's arm angle.
+
+        The velocity limits [rad/s]; the arm angle [rad] per sample.
+        """
 
     def trajectory(
         self,
@@ -53,7 +58,10 @@ class Sink(Protocol):
         hand_positions: Mapping[str, np.ndarray],
         extras: Mapping[str, np.ndarray] = ...,
     ) -> None:
-        """A retime or smooth stage's product, its limits (kind -> (n,)), the hands' positions (M, 3) [m] and extra per-sample arrays."""
+        """A retime or smooth stage's product, its limits, the hands' positions and extra per-sample arrays.
+
+        The limits: kind -> (n,); the hands' positions (M, 3) [m].
+        """
 
     def execution(self, log: ExecutionLog) -> None:
         """The execute stage's product (with its approach's log, when the approach was played)."""
@@ -90,7 +98,7 @@ class NullSink:
     def stage_seconds(self) -> dict[str, float]:
         """Wall time of each stage that began, from its start to the next one's (or to now) [s]."""
         marks = [*self._marks, ("", time.perf_counter())] if self._marks and self._marks[-1][0] else self._marks
-        return {stage: end - start for (stage, start), (_, end) in zip(marks, marks[1:])}
+        return {stage: end - start for (stage, start), (_, end) in zip(marks, marks[1:], strict=False)}
 
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
         """Ignored."""
@@ -168,7 +176,10 @@ MOTION_STAGES = ("path", "ik", "plan", "retime", "smooth", "execute")
 
 
 def shown_stage(stages: Sequence[str]) -> str:
-    """The stage a recording of ``stages`` is shown by: the last whose robot moves (``execute`` when it ran); its robot is the one on ``/tf``."""
+    """The stage a recording of ``stages`` is shown by: the last whose robot moves.
+
+    ``execute`` when it ran; its robot is the one on ``/tf``.
+    """
     return [s for s in MOTION_STAGES if s in stages][-1] if any(s in stages for s in MOTION_STAGES) else "path"
 
 
@@ -260,6 +271,9 @@ ANIMATION_PERIOD_S = 0.01
 
 
 def animation_rows(t: np.ndarray) -> np.ndarray:
-    """The samples of times ``t`` (N,) [s] a recording animates the robot at: every :data:`ANIMATION_PERIOD_S` and the last."""
+    """The samples of times ``t`` (N,) [s] a recording animates the robot at.
+
+    Every :data:`ANIMATION_PERIOD_S` and the last.
+    """
     stride = max(1, int(round(ANIMATION_PERIOD_S / float(np.median(np.diff(t))))) if len(t) > 1 else 1)
     return np.unique(np.r_[np.arange(0, len(t), stride), len(t) - 1])

@@ -68,7 +68,10 @@ METRIC_KEY = r"[a-z][a-z0-9_]*\.[A-Za-z0-9_.\-]+"
 
 
 def _quote(value: object) -> str:
-    """A value read from a file, for a message: its repr, at most about 80 characters (:func:`~dualarm.errors.excerpt`)."""
+    """A value read from a file, for a message: its repr, at most about 80 characters.
+
+    See :func:`~dualarm.errors.excerpt`.
+    """
     return excerpt(repr(value))
 
 
@@ -88,7 +91,10 @@ def _json_type(value: object) -> str:
 
 
 def _regular_file(path: Path, what: str) -> os.stat_result:
-    """``path``'s status if it is a regular file; looked at before opening it (a FIFO would block the read)."""
+    """``path``'s status if it is a regular file.
+
+    Looked at before opening it (a FIFO would block the read).
+    """
     try:
         status = os.stat(path)
     except (OSError, ValueError) as exc:
@@ -99,7 +105,10 @@ def _regular_file(path: Path, what: str) -> os.stat_result:
 
 
 def _read_bytes(path: Path, what: str) -> bytes:
-    """The bytes of the regular file ``path``, opened non-blocking and checked again once open (as :func:`~dualarm.files.read_text` does for text)."""
+    """The bytes of the regular file ``path``, opened non-blocking and checked again once open.
+
+    As :func:`~dualarm.files.read_text` does for text.
+    """
     _regular_file(path, what)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0))
@@ -168,9 +177,15 @@ def _invalid(path: Path, exc: ValidationError) -> RecordingError:
     if error["type"] == "missing":
         problem = f"key {key} is missing"
     elif error["type"] == "string_pattern_mismatch":
-        problem = f"{'key' if loc[-1] == '[key]' else 'value of ' + key} {_quote(error['input'])} is not {_PATTERNS.get(str(loc[-1]), 'of the right form')}"
+        problem = (
+            f"{'key' if loc[-1] == '[key]' else 'value of ' + key} {_quote(error['input'])} "
+            f"is not {_PATTERNS.get(str(loc[-1]), 'of the right form')}"
+        )
     else:
-        problem = f"value of {key} is {_json_type(error['input'])} {_quote(error['input'])}: {error['msg'][0].lower()}{error['msg'][1:]}"
+        problem = (
+            f"value of {key} is {_json_type(error['input'])} "
+            f"{_quote(error['input'])}: {error['msg'][0].lower()}{error['msg'][1:]}"
+        )
     more = len(errors) - 1
     return RecordingError(f"{excerpt(path)}: {problem}" + (f" (and {more} more problems)" if more else ""))
 
@@ -196,7 +211,10 @@ def _metrics(path: Path) -> dict[str, float | None] | None:
 
 
 def path_name(value: object, field: Literal["task", "run_id"], directory: Path) -> str:
-    """``value``, the ``task`` or ``run_id`` of the run in ``directory``, when it may name a directory: a task name (:data:`TASK_NAME`) or a run id (:data:`RUN_ID`), which hold no ``/`` and are never ``.`` or ``..``.
+    """``value``, the ``task`` or ``run_id`` of the run in ``directory``, when it may name a directory.
+
+    A task name (:data:`TASK_NAME`) or a run id (:data:`RUN_ID`), which hold no ``/`` and are never
+    ``.`` or ``..``.
 
     Raises:
         RecordingError: it is not, naming the run's manifest.
@@ -204,7 +222,8 @@ def path_name(value: object, field: Literal["task", "run_id"], directory: Path) 
     if isinstance(value, str) and re.fullmatch(TASK_NAME if field == "task" else RUN_ID, value):
         return value
     raise RecordingError(
-        f"{excerpt(directory / MANIFEST)}: {field} {_quote(value)} is not {_PATTERNS[field]}; it cannot name a directory"
+        f"{excerpt(directory / MANIFEST)}: {field} {_quote(value)} "
+        f"is not {_PATTERNS[field]}; it cannot name a directory"
     )
 
 
@@ -233,7 +252,10 @@ def _encoded(record: DataEnd) -> bytes:
 
 
 def _verify_crcs(data: bytes) -> None:
-    """Check every byte of an MCAP file: magic, record structure, data section CRC, chunk CRCs (the ``mcap`` library's checks), summary CRC and the DataEnd record (here).
+    """Check every byte of an MCAP file.
+
+    Magic, record structure, data section CRC, chunk CRCs (the ``mcap`` library's checks), summary
+    CRC and the DataEnd record (here).
 
     Raises:
         McapError, CRCValidationError, ...: what the library raises, or McapError naming the fault.
@@ -261,7 +283,9 @@ def _verify_crcs(data: bytes) -> None:
     data_end = _encoded(data_ends[0])
     if data[footer.summary_start - len(data_end) : footer.summary_start] != data_end:
         raise McapError("damaged DataEnd record (it is not where the footer says the data section ends)")
-    for chunk in chunks:  # decompressed and its CRC checked; its records are not parsed, as the CRC covers each of their bytes as written (parsing them in pure Python took 20 s of a reproduction report's 46 s in a profile)
+    # Each chunk decompressed and its CRC checked; its records are not parsed, as the CRC covers each of their bytes as
+    # written (parsing them in pure Python took 20 s of a reproduction report's 46 s in a profile).
+    for chunk in chunks:
         get_chunk_data_stream(chunk, validate_crc=True)
 
 
@@ -286,7 +310,9 @@ def _recorded_metrics(reader: SeekingReader) -> dict[str, object] | None:
 
 
 def verify_mcap(path: Path) -> VerifiedMcap:
-    """Read ``path`` end to end, checking every CRC it carries; return its summary, stored manifest and recorded metrics.
+    """Read ``path`` end to end, checking every CRC it carries.
+
+    Returns its summary, stored manifest and recorded metrics.
 
     Raises:
         RecordingError: the file is missing, not a regular file, not MCAP, truncated, unfinished,
@@ -307,7 +333,8 @@ def verify_mcap(path: Path) -> VerifiedMcap:
         ) from None
     except EndOfFile:
         raise RecordingError(
-            f"{excerpt(path)}: not a readable MCAP recording (truncated: it ends inside a record; its writer never finished?)"
+            f"{excerpt(path)}: not a readable MCAP recording (truncated: "
+            "it ends inside a record; its writer never finished?)"
         ) from None
     except InvalidMagic:
         raise RecordingError(
@@ -326,12 +353,16 @@ def verify_mcap(path: Path) -> VerifiedMcap:
 
 
 def _check_one_run(manifest: Mapping[str, object], mcap: VerifiedMcap) -> None:
-    """``manifest.json`` and the manifest stored in ``run.mcap`` agree on task, run id, status, stages and recording level."""
+    """``manifest.json`` and the manifest stored in ``run.mcap`` agree.
+
+    On task, run id, status, stages and recording level.
+    """
     for key in ("task", "run_id", "status", "stages", "record"):
         stored = mcap.manifest.get(key)
         if stored != manifest.get(key):
             raise RecordingError(
-                f"{excerpt(mcap.path)}: records {key} {_quote(stored)}, but {MANIFEST} says {_quote(manifest.get(key))}: the files are not of one run"
+                f"{excerpt(mcap.path)}: records {key} {_quote(stored)}, but {MANIFEST} "
+                f"says {_quote(manifest.get(key))}: the files are not of one run"
             )
 
 
@@ -349,7 +380,10 @@ def _check_metrics(
     *,
     in_mcap: bool = True,
 ) -> None:
-    """``metrics.json`` exists if the run finished and (``in_mcap``: the run has a ``run.mcap``) equals the metrics recorded in ``run.mcap``."""
+    """``metrics.json`` exists if the run finished and equals the metrics recorded in ``run.mcap``.
+
+    Equal only when ``in_mcap``: the run has a ``run.mcap``.
+    """
     if metrics is None:
         if status in FINISHED:
             raise RecordingError(
@@ -365,10 +399,12 @@ def _check_metrics(
     extra, lacking = sorted(set(metrics) - set(recorded)), sorted(set(recorded) - set(metrics))
     if extra or lacking:
         raise RecordingError(
-            f"{excerpt(path)}: keys differ from the metrics {MCAP_FILE} records (here only: {_quote(extra)}; there only: {_quote(lacking)}): not this run's metrics"
+            f"{excerpt(path)}: keys differ from the metrics {MCAP_FILE} records (here "
+            f"only: {_quote(extra)}; there only: {_quote(lacking)}): not this run's metrics"
         )
     for key, value in metrics.items():
         if not _same_metric(value, recorded[key]):
             raise RecordingError(
-                f"{excerpt(path)}: {key} = {_quote(value)}, but {MCAP_FILE} records {_quote(recorded[key])}: not this run's metrics"
+                f"{excerpt(path)}: {key} = {_quote(value)}, but {MCAP_FILE} "
+                f"records {_quote(recorded[key])}: not this run's metrics"
             )

@@ -1,4 +1,6 @@
-"""Opening a recorded run in Rerun's viewer, native or web, and saying how to open it in Foxglove (``dualarm view``).
+"""Opening a recorded run in Rerun's viewer, native or web (``dualarm view``).
+
+And saying how to open it in Foxglove.
 
 The viewer is Rerun's own command line, ``rerun``, installed with rerun-sdk beside the Python
 that runs dualarm (or found on ``PATH``); it runs as a child process in its own session and is
@@ -84,7 +86,8 @@ def viewable(run_dir: str | Path) -> Viewable:
     directory = data.directory.absolute()
     if data.record == "metrics":
         raise RecordingError(
-            f"{excerpt(directory)}: recorded with --record metrics: nothing to view (only manifest.json and metrics.json)"
+            f"{excerpt(directory)}: recorded with --record metrics: "
+            "nothing to view (only manifest.json and metrics.json)"
         )
     layout = directory / FOXGLOVE_LAYOUT
     foxglove = [f"Foxglove (or Lichtblick): open {directory / MCAP_FILE}"]
@@ -116,7 +119,9 @@ def check_stage(run: Viewable, stage: str) -> str:
 
 
 def blueprint_file(run: Viewable, stage: str, directory: Path) -> Path:
-    """Write the Rerun blueprint of ``run`` focused on ``stage`` to ``directory/<stage>.rbl``; returns its path.
+    """Write the Rerun blueprint of ``run`` focused on ``stage`` to ``directory/<stage>.rbl``.
+
+    Returns its path.
 
     The robot is the one the run's MCAP holds (its robot.toml and URDF attachments), so a run
     copied from another machine is shown as it was recorded.
@@ -149,7 +154,9 @@ def _recorded_robot(mcap: Path, directory: Path) -> Robot:
 
 
 def rerun_executable() -> Path:
-    """Rerun's command line: ``rerun`` beside the running Python (installed with rerun-sdk), else on ``PATH``.
+    """Rerun's command line: ``rerun`` beside the running Python, else on ``PATH``.
+
+    Beside the running Python: installed with rerun-sdk.
 
     Raises:
         DualarmError: neither exists.
@@ -160,20 +167,28 @@ def rerun_executable() -> Path:
     found = shutil.which("rerun")
     if found is None:
         raise DualarmError(
-            f"no Rerun viewer: no 'rerun' beside {excerpt(sys.executable)} nor on PATH (it comes with rerun-sdk: pip install rerun-sdk)"
+            f"no Rerun viewer: no 'rerun' beside {excerpt(sys.executable)} "
+            "nor on PATH (it comes with rerun-sdk: pip install rerun-sdk)"
         )
     return Path(found)
 
 
 def has_display() -> bool:
-    """Whether a native window can open: always on macOS and Windows; on Linux and other systems, when ``DISPLAY`` or ``WAYLAND_DISPLAY`` is set."""
+    """Whether a native window can open.
+
+    Always on macOS and Windows; on Linux and other systems, when ``DISPLAY`` or ``WAYLAND_DISPLAY``
+    is set.
+    """
     if sys.platform == "darwin" or sys.platform.startswith("win"):
         return True
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 def web_url(web_port: int, grpc_port: int) -> str:
-    """The address of Rerun's web viewer on ``web_port``, connecting to its gRPC server on ``grpc_port`` (both on 127.0.0.1)."""
+    """The address of Rerun's web viewer on ``web_port``, connecting to its gRPC server on ``grpc_port``.
+
+    Both on 127.0.0.1.
+    """
     return f"http://127.0.0.1:{web_port}/?url=" + quote(f"rerun+http://127.0.0.1:{grpc_port}/proxy", safe="")
 
 
@@ -196,7 +211,10 @@ def _last_line(log: IO[bytes]) -> str:
 
 @contextlib.contextmanager
 def _viewer(executable: Path, arguments: Sequence[str]) -> Iterator[tuple[subprocess.Popen, IO[bytes]]]:
-    """Rerun's command line ``executable`` with ``arguments``, in its own session (its output kept in a temporary file); its process group is stopped when the block ends."""
+    """Rerun's command line ``executable`` with ``arguments``, in its own session.
+
+    Its output kept in a temporary file; its process group is stopped when the block ends.
+    """
     with tempfile.TemporaryFile() as log:
         process = subprocess.Popen(
             [str(executable), *arguments],
@@ -213,7 +231,11 @@ def _viewer(executable: Path, arguments: Sequence[str]) -> Iterator[tuple[subpro
 
 
 def _stop(process: subprocess.Popen) -> None:
-    """Stop ``process`` and every process of its group (Rerun's wrapper script and the viewer it runs): SIGTERM, then SIGKILL to what is left after :data:`STOP_TIMEOUT_S`."""
+    """Stop ``process`` and every process of its group.
+
+    Rerun's wrapper script and the viewer it runs: SIGTERM, then SIGKILL to what is left after
+    :data:`STOP_TIMEOUT_S`.
+    """
     for signum in (signal.SIGTERM, signal.SIGKILL):
         try:
             os.killpg(process.pid, signum)
@@ -256,7 +278,9 @@ def check_display() -> None:
 
 
 def open_native(executable: Path, files: Sequence[Path]) -> None:
-    """Open ``files`` (a ``.rrd``, and ``.rbl`` blueprints) in Rerun's native viewer (the command line ``executable``) and wait until its window is closed.
+    """Open ``files`` in Rerun's native viewer and wait until its window is closed.
+
+    ``files``: a ``.rrd``, and ``.rbl`` blueprints; the viewer: the command line ``executable``.
 
     Raises:
         DualarmError: no display, or the viewer stopped with an error.
@@ -269,7 +293,10 @@ def open_native(executable: Path, files: Sequence[Path]) -> None:
 
 @contextlib.contextmanager
 def serve_web(executable: Path, files: Sequence[Path]) -> Iterator[tuple[str, subprocess.Popen]]:
-    """Serve ``files`` (a ``.rrd``, and ``.rbl`` blueprints) with Rerun's web viewer (the command line ``executable``) on 127.0.0.1; yields its URL, once it answers there, and the server's process (stopped when the block ends).
+    """Serve ``files`` with Rerun's web viewer on 127.0.0.1; yields its URL, once it answers there.
+
+    ``files``: a ``.rrd``, and ``.rbl`` blueprints; the viewer: the command line ``executable``.
+    Also yields the server's process (stopped when the block ends).
 
     Raises:
         DualarmError: the viewer stopped, or did not answer within :data:`START_TIMEOUT_S`.
@@ -292,7 +319,8 @@ def serve_web(executable: Path, files: Sequence[Path]) -> Iterator[tuple[str, su
                 raise _failed(process, log, "Rerun's web viewer")
             if time.monotonic() > deadline:
                 raise DualarmError(
-                    f"Rerun's web viewer did not answer on port {web_port} within {START_TIMEOUT_S:g} s: {excerpt(_last_line(log), 200)}"
+                    f"Rerun's web viewer did not answer on port {web_port} within "
+                    f"{START_TIMEOUT_S:g} s: {excerpt(_last_line(log), 200)}"
                 )
             time.sleep(0.05)
         yield web_url(web_port, grpc_port), process

@@ -59,10 +59,11 @@ class Comparison:
         a, b: the run directories.
         tolerance: the largest absolute difference accepted (in each field's own unit).
         table: a row per topic and field (:data:`COLUMNS`): ``max_difference`` (inf where rows,
-            fields or text differ; NaN where no rows aligned, which the ``(rows)`` row flags), where it is (``t`` [s], ``rep``), where the difference first
-            exceeds ``tolerance`` (``first_beyond_t``, ``first_beyond_rep``; NaN when it does
-            not), the rows of each run and how many were aligned, and whether the field is a
-            wall-clock measurement (never judged).
+            fields or text differ; NaN where no rows aligned, which the ``(rows)`` row flags), where
+            it is (``t`` [s], ``rep``), where the difference first exceeds ``tolerance``
+            (``first_beyond_t``, ``first_beyond_rep``; NaN when it does not), the rows of each run
+            and how many were aligned, and whether the field is a wall-clock measurement (never
+            judged).
     """
 
     a: Path
@@ -166,7 +167,10 @@ def compare_topic(topic: str, a: pd.DataFrame, b: pd.DataFrame, tolerance: float
                 *counts,
                 first_beyond_t=float(first_t),
                 first_beyond_rep=int(first["rep"]),
-                note=f"{(unmatched['_merge'] == 'left_only').sum()} rows only in A, {(unmatched['_merge'] == 'right_only').sum()} only in B",
+                note=(
+                    f"{(unmatched['_merge'] == 'left_only').sum()} rows only in "
+                    f"A, {(unmatched['_merge'] == 'right_only').sum()} only in B"
+                ),
             )
         )
     fields_a, fields_b = set(ka.columns) - set(_KEYS), set(kb.columns) - set(_KEYS)
@@ -181,14 +185,21 @@ def compare_topic(topic: str, a: pd.DataFrame, b: pd.DataFrame, tolerance: float
 
 
 def compare_status(a: RunData, b: RunData) -> list[dict[str, object]]:
-    """The row of :attr:`Comparison.table` judging the runs' statuses (``complete``, ``violated``, ``failed``...): 0 when equal, inf otherwise."""
+    """The row of :attr:`Comparison.table` judging the runs' statuses: 0 when equal, inf otherwise.
+
+    The statuses: ``complete``, ``violated``, ``failed``...
+    """
     if a.status == b.status:
         return [_row(MANIFEST_ROWS, "status", 1, 1, 1, max_difference=0.0)]
     return [_row(MANIFEST_ROWS, "status", 1, 1, 1, note=f"{excerpt(repr(a.status))} vs {excerpt(repr(b.status))}")]
 
 
 def compare_metrics(a: Mapping[str, float | None], b: Mapping[str, float | None]) -> list[dict[str, object]]:
-    """Rows of :attr:`Comparison.table` for every key of two runs' ``metrics.json``: the absolute difference; inf for a key of one run only or a value null in one run only (0 when null in both)."""
+    """Rows of :attr:`Comparison.table` for every key of two runs' ``metrics.json``.
+
+    The absolute difference; inf for a key of one run only or a value null in one run only (0 when
+    null in both).
+    """
     rows = []
     for key in sorted(set(a) | set(b)):
         counts = (int(key in a), int(key in b), int(key in a and key in b))

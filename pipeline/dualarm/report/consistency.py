@@ -1,14 +1,14 @@
 """``dualarm consistency``: IK methods compared on one repeated task, repetition by repetition.
 
 The MC-Inverse paper's experiments (section V.B-V.D): the same task is repeated and each IK method
-is judged by whether its joints and arm angles repeat. Every method is run as a normal recorded
-run (``DIR/runs/<task>/<run-id>``); the comparison reads the runs back like any report and writes
+is judged by whether its joints and arm angles repeat. Every method is run as a normal recorded run
+(``DIR/runs/<task>/<run-id>``); the comparison reads the runs back like any report and writes
 ``DIR/consistency.csv`` (a row per method), ``DIR/consistency.md`` and the figures. A method that
-fails is a row with its error, not the end of the comparison; each row carries its run's verdict
-and first violation (a baseline failing a repetition is the paper's point, not an error). Beside the joint deviations stands
-the largest hand orientation error; a method that solved the hands' positions only (TV-GDD and pinv
-in ``position`` task space, ``ik.orientation_solved`` 0) is marked "position only", since its
-repeatability is not bought at the same price as a full-pose method's.
+fails is a row with its error, not the end of the comparison; each row carries its run's verdict and
+first violation (a baseline failing a repetition is the paper's point, not an error). Beside the
+joint deviations stands the largest hand orientation error; a method that solved the hands'
+positions only (TV-GDD and pinv in ``position`` task space, ``ik.orientation_solved`` 0) is marked
+"position only", since its repeatability is not bought at the same price as a full-pose method's.
 
 On a robot whose driven arms are not S-R-S there is no arm angle: its column is left out of the
 table and the arm-angle figure is not drawn, and without a list of methods only those that run on
@@ -90,7 +90,10 @@ def run_consistency(
     progress: Callable[[str], None] | None = None,
     robot: str | Path | None = None,
 ) -> Consistency:
-    """Run ``methods`` (None: :data:`DEFAULT_METHODS` that run on the task's robot) on ``task_file`` (``repetitions`` overriding the file's; ``robot``, a robot directory or shipped robot's name, the robot it names) and compare them.
+    """Run ``methods`` on ``task_file`` and compare them.
+
+    ``methods`` None: :data:`DEFAULT_METHODS` that run on the task's robot. ``repetitions``
+    overrides the file's; ``robot``, a robot directory or shipped robot's name, the robot it names.
 
     Raises:
         DualarmError: an unknown method, a method that needs S-R-S arms on a robot whose arm is not
@@ -165,7 +168,11 @@ def run_consistency(
 
 
 def any_arm_angle(task) -> bool:
-    """Whether a driven arm of ``task`` has an arm angle: MC-Inverse's on an S-R-S arm, the SEW angle on another arm of a SEW family (S-R-S arms are of one too)."""
+    """Whether a driven arm of ``task`` has an arm angle.
+
+    MC-Inverse's on an S-R-S arm, the SEW angle on another arm of a SEW family (S-R-S arms are of
+    one too).
+    """
     from dualarm.methods import not_sew
 
     return len(not_sew(task.robot, task.spec.hands)) < len(task.spec.hands)
@@ -215,8 +222,10 @@ def _markdown(
     lines = [
         f"# Consistency: {task.name}, {reps} repetitions",
         "",
-        f"Task file `{task.file}`. Rep 0 is the reference; deviations compare samples at the same place of every repetition where both succeeded.",
-        f"orientation_error_max_rad is the largest angle between an asked and a reached hand orientation; a method marked ({POSITION_ONLY}) solved the hands' positions only, its orientation followed.",
+        f"Task file `{task.file}`. Rep 0 is the reference; deviations compare "
+        "samples at the same place of every repetition where both succeeded.",
+        "orientation_error_max_rad is the largest angle between an asked and a reached hand orientation; "
+        f"a method marked ({POSITION_ONLY}) solved the hands' positions only, its orientation followed.",
         "",
     ]
     if columns != COLUMNS:
@@ -241,7 +250,10 @@ def _markdown(
 
 
 def method_label(row: pd.Series) -> str:
-    """A table row's method, marked "(position only)" when it did not solve the asked orientation (``orientation_solved`` 0)."""
+    """A table row's method, marked "(position only)" when it did not solve the asked orientation.
+
+    Not solved: ``orientation_solved`` 0.
+    """
     return f"{row['method']} ({POSITION_ONLY})" if row.get("orientation_solved") == 0 else str(row["method"])
 
 

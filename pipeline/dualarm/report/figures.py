@@ -28,13 +28,17 @@ def _grid(n: int):
 
 
 def joints_against_bounds(sample: pd.DataFrame, bounds: pd.DataFrame, kind: str, title: str, path: Path) -> Path:
-    """Each joint's position (``kind="position"``, against theta_new+-) or velocity (``kind="velocity"``, against zeta_new+-) over time; excursions are shaded red."""
+    """Each joint's position or velocity over time, against its bounds; excursions are shaded red.
+
+    The position with ``kind="position"``, against theta_new+-; the velocity with
+    ``kind="velocity"``, against zeta_new+-.
+    """
     lower, upper = ("theta_lower", "theta_upper") if kind == "position" else ("zeta_lower", "zeta_upper")
     unit = "rad" if kind == "position" else "rad/s"
     joints = _joints(sample, kind)
     fig, axes = _grid(len(joints))
     t = sample["t"].to_numpy()
-    for ax, joint in zip(axes, joints):
+    for ax, joint in zip(axes, joints, strict=False):
         v = sample[f"{kind}.{joint}"].to_numpy()
         lo, hi = bounds[f"{lower}.{joint}"].to_numpy(), bounds[f"{upper}.{joint}"].to_numpy()
         ax.fill_between(t, lo, hi, color="tab:green", alpha=0.15, lw=0)
@@ -78,7 +82,9 @@ def hand_errors(sample: pd.DataFrame, title: str, path: Path) -> Path:
 
 
 def bound_profiles(duration_s: float, path: Path) -> Path:
-    """TV-GDD eq (19) with theta+- = 0 and theta_goal+- = 5 (the paper's Fig. 2): left, several c_tuning with N = 2; right, several N with c_tuning = 0.9.
+    """TV-GDD eq (19) with theta+- = 0 and theta_goal+- = 5 (the paper's Fig. 2).
+
+    Left, several c_tuning with N = 2; right, several N with c_tuning = 0.9.
 
     T_SP = T_d / N.
     """
@@ -111,7 +117,11 @@ TAB10 = tuple(TABLEAU_COLORS)
 
 
 def _per_repetition(ax, sample: pd.DataFrame, column: str, colours: tuple[str, ...]) -> None:
-    """``column`` of ``sample`` against the time within the repetition, one line per repetition; failed samples are left out; a column the sample lacks (an arm angle of an arm that is not S-R-S) is said so in the panel."""
+    """``column`` of ``sample`` against the time within the repetition, one line per repetition.
+
+    Failed samples are left out; a column the sample lacks (an arm angle of an arm that is not
+    S-R-S) is said so in the panel.
+    """
     if column not in sample.columns:
         ax.text(
             0.5,
@@ -154,17 +164,21 @@ def _finish_per_repetition(fig, axes, title: str, path: Path) -> Path:
 
 
 def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], title: str, path: Path) -> Path:
-    """The MC-Inverse paper's Figs 9 and 12: each joint of ``joints`` (columns) per method (rows) against the time within the repetition, one line per repetition (I, II, ...), so a method that repeats itself draws one line [rad]."""
+    """The MC-Inverse paper's Figs 9 and 12: each joint per method against the time within the repetition.
+
+    Each joint of ``joints`` (columns) per method (rows), one line per repetition (I, II, ...), so a
+    method that repeats itself draws one line [rad].
+    """
     colours = TAB10
     fig, axes = plt.subplots(
         len(samples), len(joints), figsize=(2.1 * len(joints), 1.8 * len(samples) + 0.8), squeeze=False, sharex=True
     )
-    for row, (method, sample) in zip(axes, samples.items()):
-        for ax, joint in zip(row, joints):
+    for row, (method, sample) in zip(axes, samples.items(), strict=True):
+        for ax, joint in zip(row, joints, strict=True):
             _per_repetition(ax, sample, f"position.{joint}", colours)
             ax.tick_params(labelsize=6)
         row[0].set_ylabel(method, fontsize=8)
-    for ax, joint in zip(axes[0], joints):
+    for ax, joint in zip(axes[0], joints, strict=True):
         ax.set_title(joint.replace("_", " "), fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("t in repetition [s]", fontsize=7)
@@ -172,7 +186,11 @@ def joints_per_repetition(samples: dict[str, pd.DataFrame], joints: list[str], t
 
 
 def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str], title: str, path: Path) -> Path:
-    """The MC-Inverse paper's Figs 10, 13 and 16: each hand's arm angle psi (columns) per method (rows) against the time within the repetition, one line per repetition [rad]; a hand without one (its arm not S-R-S) is a panel saying so."""
+    """The MC-Inverse paper's Figs 10, 13 and 16: each hand's arm angle psi per method, by repetition.
+
+    Each hand's arm angle (columns) per method (rows) against the time within the repetition, one
+    line per repetition [rad]; a hand without one (its arm not S-R-S) is a panel saying so.
+    """
     colours = TAB10
     fig, axes = plt.subplots(
         len(samples),
@@ -181,8 +199,8 @@ def arm_angle_per_repetition(samples: dict[str, pd.DataFrame], hands: list[str],
         squeeze=False,
         sharex=True,
     )
-    for row, (method, sample) in zip(axes, samples.items()):
-        for ax, hand in zip(row, hands):
+    for row, (method, sample) in zip(axes, samples.items(), strict=True):
+        for ax, hand in zip(row, hands, strict=True):
             _per_repetition(ax, sample, f"arm_angle_rad.{hand}", colours)
             ax.set_ylabel(f"{method}\n{hand} psi", fontsize=8)
             ax.tick_params(labelsize=7)
@@ -208,7 +226,10 @@ def runs_over_time(series: dict[str, tuple[np.ndarray, np.ndarray]], ylabel: str
 
 
 def limit_ratios(ratios: pd.DataFrame, title: str, path: Path) -> Path:
-    """Grouped bars: each run (rows of ``ratios``) against each ratio (columns, e.g. "smooth jerk"); the limit is drawn at 1."""
+    """Grouped bars: each run (rows of ``ratios``) against each ratio (columns, e.g. "smooth jerk").
+
+    The limit is drawn at 1.
+    """
     fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(ratios.columns) * max(1, len(ratios)) ** 0.5), 3.6))
     width = 0.8 / max(1, len(ratios))
     x = np.arange(len(ratios.columns))

@@ -1,4 +1,6 @@
-"""``dualarm report RUN_DIR...``: a markdown summary of each run and the figures its topics allow; for several runs also tables across them (CSV and markdown) and figures that set them side by side.
+"""``dualarm report RUN_DIR...``: a markdown summary of each run and the figures its topics allow.
+
+For several runs also tables across them (CSV and markdown) and figures that set them side by side.
 
 Everything comes from the pandas read-back of the recordings (:mod:`dualarm.record.readback`), so
 runs copied from another machine report the same.
@@ -20,7 +22,11 @@ from dualarm.report import figures
 
 
 def _outside(sample: pd.DataFrame, kind: str, lower_of, upper_of) -> pd.DataFrame:
-    """Per joint, how far and when ``kind`` (position or velocity) leaves [lower_of(joint), upper_of(joint)]: columns joint, max_outside, t_first_out, t_max_out (only joints that leave)."""
+    """Per joint, how far and when ``kind`` leaves [lower_of(joint), upper_of(joint)].
+
+    ``kind``: position or velocity. Columns joint, max_outside, t_first_out, t_max_out (only joints
+    that leave).
+    """
     rows = []
     t = sample["t"].to_numpy()
     for column in sample.columns:
@@ -42,7 +48,10 @@ def _outside(sample: pd.DataFrame, kind: str, lower_of, upper_of) -> pd.DataFram
 
 
 def excursions(sample: pd.DataFrame, bounds: pd.DataFrame, kind: str) -> pd.DataFrame:
-    """Where ``kind`` (position or velocity) leaves the time-varying bounds of ``/ik/bounds`` (theta_new+- or zeta_new+-); see :func:`_outside` for the columns."""
+    """Where ``kind`` (position or velocity) leaves the time-varying bounds of ``/ik/bounds``.
+
+    The bounds theta_new+- or zeta_new+-; see :func:`_outside` for the columns.
+    """
     lower, upper = ("theta_lower", "theta_upper") if kind == "position" else ("zeta_lower", "zeta_upper")
     return _outside(
         sample, kind, lambda j: bounds[f"{lower}.{j}"].to_numpy(), lambda j: bounds[f"{upper}.{j}"].to_numpy()
@@ -115,9 +124,10 @@ def write_report(run_dir: str | Path | RunData, out_dir: str | Path | None = Non
         sample = data["/ik/sample"]
         method = str(sample["method"].iloc[0])
         lines += ["", f"## IK: {method}", ""]
-        lines.append(
-            f"![hand errors]({figures.hand_errors(sample, f'{method}: hand position errors (cf. TV-GDD Fig. 8)', out / 'hand_errors.png').name})"
+        hand_errors_png = figures.hand_errors(
+            sample, f"{method}: hand position errors (cf. TV-GDD Fig. 8)", out / "hand_errors.png"
         )
+        lines.append(f"![hand errors]({hand_errors_png.name})")
         if "/ik/bounds" in data.topics:
             bounds = data["/ik/bounds"]
             figs = ("3", "4") if method == "pinv" else ("5", "6")
@@ -179,9 +189,9 @@ def runs_table(runs: Sequence[RunData]) -> pd.DataFrame:
     Labels are made unique with the run id where two runs share one.
     """
     base = [run_label(r) for r in runs]
-    labels = _unique([b if base.count(b) == 1 else f"{b} {r.run_id}" for b, r in zip(base, runs)])
+    labels = _unique([b if base.count(b) == 1 else f"{b} {r.run_id}" for b, r in zip(base, runs, strict=True)])
     rows = []
-    for run, label in zip(runs, labels):
+    for run, label in zip(runs, labels, strict=True):
         rows.append(
             {
                 "label": label,
@@ -201,7 +211,10 @@ def runs_table(runs: Sequence[RunData]) -> pd.DataFrame:
 
 
 def _unique(names: Sequence[str]) -> list[str]:
-    """``names`` with " (2)", " (3)", ... added to repeats (the same run given twice, or a run and its copy from another machine)."""
+    """``names`` with " (2)", " (3)", ... added to repeats.
+
+    Repeats: the same run given twice, or a run and its copy from another machine.
+    """
     seen: dict[str, int] = {}
     out = []
     for name in names:
@@ -250,12 +263,17 @@ def _hand_error(sample: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path) -> list[tuple[str, Path]]:
-    """Figures that put the runs side by side, each only when some runs hold its data: IK hand errors, execution tracking errors, retime and smooth limit ratios, and per task with repetitions, the joints and arm angles per repetition.
+    """Figures that put the runs side by side, each only when some runs hold its data.
+
+    IK hand errors, execution tracking errors, retime and smooth limit ratios, and per task with
+    repetitions, the joints and arm angles per repetition.
 
     Returns (caption, file) pairs.
     """
     written = []
-    ik = {label: _hand_error(r["/ik/sample"]) for r, label in zip(runs, labels) if "/ik/sample" in r.topics}
+    ik = {
+        label: _hand_error(r["/ik/sample"]) for r, label in zip(runs, labels, strict=True) if "/ik/sample" in r.topics
+    }
     if ik:
         written.append(
             (
@@ -269,7 +287,9 @@ def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path)
             )
         )
     executed = {
-        label: _hand_error(r["/execute/sample"]) for r, label in zip(runs, labels) if "/execute/sample" in r.topics
+        label: _hand_error(r["/execute/sample"])
+        for r, label in zip(runs, labels, strict=True)
+        if "/execute/sample" in r.topics
     }
     if executed:
         written.append(
@@ -298,7 +318,7 @@ def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path)
             )
         )
     by_task: dict[str, dict[str, pd.DataFrame]] = {}
-    for run, label in zip(runs, labels):
+    for run, label in zip(runs, labels, strict=True):
         if "/ik/sample" in run.topics and run["/ik/sample"]["rep"].nunique() > 1:
             by_task.setdefault(str(run.manifest.get("task")), {})[label] = run["/ik/sample"]
     for task, samples in by_task.items():
@@ -332,7 +352,11 @@ def cross_run_figures(runs: Sequence[RunData], labels: Sequence[str], out: Path)
 
 
 def write_runs_report(run_dirs: Sequence[str | Path], out_dir: str | Path | None = None) -> Path:
-    """Report several runs: each run's summary in ``<task>-<run-id>/``, ``runs.csv`` and ``runs.md`` (a row per run, every metric), the cross-run figures and ``report.md`` linking it all; returns the report directory (default ``reports/<task>/<first run id>+<n - 1>``, the task being ``runs`` when they differ).
+    """Report several runs; returns the report directory.
+
+    Each run's summary in ``<task>-<run-id>/``, ``runs.csv`` and ``runs.md`` (a row per run, every
+    metric), the cross-run figures and ``report.md`` linking it all. The report directory defaults
+    to ``reports/<task>/<first run id>+<n - 1>``, the task being ``runs`` when they differ.
 
     Raises:
         RecordingError: a run directory is missing or its recording unreadable.
@@ -353,7 +377,7 @@ def write_runs_report(run_dirs: Sequence[str | Path], out_dir: str | Path | None
     )  # refuses a directory holding files dualarm did not write; locked until this returns
     out.mkdir(parents=True, exist_ok=True)
     names = _unique([f"{run.manifest.get('task')}-{run.run_id}" for run in runs])
-    summaries = [write_report(run, out / _slug(name)) for run, name in zip(runs, names)]
+    summaries = [write_report(run, out / _slug(name)) for run, name in zip(runs, names, strict=True)]
     table.to_csv(out / "runs.csv", index=False)
     lines = [
         f"# {len(runs)} runs",
@@ -362,8 +386,9 @@ def write_runs_report(run_dirs: Sequence[str | Path], out_dir: str | Path | None
         "|---|---|---|---|---|---:|---|",
     ]
     lines += [
-        f"| {r.run} | {r.task} | {r.method} | {r.status} | {r.stages} | {_cell(r.repetitions)} | [{s.name}]({s.name}/summary.md) |"
-        for r, s in zip(table.itertuples(), summaries)
+        f"| {r.run} | {r.task} | {r.method} | {r.status} | {r.stages} "
+        f"| {_cell(r.repetitions)} | [{s.name}]({s.name}/summary.md) |"
+        for r, s in zip(table.itertuples(), summaries, strict=True)
     ]
     metrics = ["", "## Metrics", "", *metrics_markdown(table)]
     (out / "runs.md").write_text("\n".join(lines + metrics) + "\n")

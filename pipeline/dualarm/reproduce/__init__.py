@@ -1,1 +1,4 @@
-"""``dualarm reproduce``: every experiment of the three papers, run, recorded and set against the papers' figures."""
+"""``dualarm reproduce``: every experiment of the three papers, run, recorded and set against them.
+
+Set against the papers' figures.
+"""

@@ -303,7 +303,7 @@ def table_i_claims(table: Mapping) -> list[Claim]:
     equal, signed, unmatched = 0, [], []
     for j, column in enumerate(PAPER_TABLE_I):
         best = np.argmin([np.sum(np.abs(column - row) > TABLE_DECIMALS_RAD) for row in q])
-        for i, (theirs, ours) in enumerate(zip(column, q[best])):
+        for i, (theirs, ours) in enumerate(zip(column, q[best], strict=True)):
             if abs(theirs - ours) <= TABLE_DECIMALS_RAD:
                 equal += 1
             elif abs(theirs + ours) <= TABLE_DECIMALS_RAD:
@@ -316,8 +316,10 @@ def table_i_claims(table: Mapping) -> list[Claim]:
             "Table I",
             "the joint values of the 4 solutions",
             "28 values",
-            f"{equal} of 28 equal to 5 decimals; {len(signed)} equal but for the sign ({', '.join(signed)}); {len(unmatched)} others",
-            "the sign differences break the table's own ZYZ pattern (θ1 + π, θ7 + π between paired solutions), see docs/papers.md",
+            f"{equal} of 28 equal to 5 decimals; {len(signed)} equal but "
+            f"for the sign ({', '.join(signed)}); {len(unmatched)} others",
+            "the sign differences break the table's own ZYZ pattern (θ1 "
+            "+ π, θ7 + π between paired solutions), see docs/papers.md",
             not unmatched,
             "table-i",
         )
@@ -335,11 +337,16 @@ def _by_method(runs: list[RunData]) -> dict[str, RunData]:
 
 
 def _deviation(metrics: Mapping[str, float]) -> str:
-    return f"Δq {metrics['ik.rep_joint_deviation_max_rad']:.2g} rad, Δψ {metrics['ik.rep_arm_angle_deviation_max_rad']:.2g} rad"
+    return (
+        f"Δq {metrics['ik.rep_joint_deviation_max_rad']:.2g} rad, "
+        f"Δψ {metrics['ik.rep_arm_angle_deviation_max_rad']:.2g} rad"
+    )
 
 
 def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
-    """Zou, Min, Xu, V.B-V.D: each method's largest change between repetitions (rep 0 the reference; ``ik.rep_*`` of each run's metrics).
+    """Zou, Min, Xu, V.B-V.D: each method's largest change between repetitions.
+
+    Rep 0 is the reference; ``ik.rep_*`` of each run's metrics.
 
     A claim about a method whose run failed says so and is not judged.
     """
@@ -419,7 +426,8 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
                 "change, jumps (drawn)",
                 ("ikfast-style", "mc-inverse"),
                 lambda: (
-                    f"{_deviation(m['ikfast-style'])}; largest step {m['ikfast-style']['ik.max_joint_step_rad']:.2g} rad"
+                    f"{_deviation(m['ikfast-style'])}; largest step "
+                    f"{m['ikfast-style']['ik.max_joint_step_rad']:.2g} rad"
                 ),
                 lambda: (
                     dq["ikfast-style"] > CHANGES_RAD
@@ -482,7 +490,8 @@ def carry_box_claims(executed: RunData) -> list[Claim]:
             "section IV",
             "TOPP gives a time-optimal trajectory within the velocity and acceleration limits",
             "within (no figure)",
-            f"retimed velocity / limit {ratios['retime.velocity_ratio_max']:.3f}, acceleration / limit {ratios['retime.acceleration_ratio_max']:.3f}",
+            f"retimed velocity / limit {ratios['retime.velocity_ratio_max']:.3f}, "
+            f"acceleration / limit {ratios['retime.acceleration_ratio_max']:.3f}",
             "TOPP-RA at 90 % / 30 % of the limits",
             max(ratios["retime.velocity_ratio_max"], ratios["retime.acceleration_ratio_max"]) <= 1.0,
             "carry-box",
@@ -528,7 +537,8 @@ def plan_claims(trials: pd.DataFrame, run: RunData | None) -> list[Claim]:
                 "section 5, Fig. 2",
                 "the planned joint motion is collision-free",
                 "yes",
-                f"executed in PyBullet: {contacts} steps with unexpected contacts, tracking error {run.metrics['execute.tracking_error_max_m'] * 1e6:.1f} µm",
+                f"executed in PyBullet: {contacts} steps with unexpected contacts, tracking "
+                f"error {run.metrics['execute.tracking_error_max_m'] * 1e6:.1f} µm",
                 "",
                 contacts == 0,
                 "bowl-grasp",
@@ -539,7 +549,10 @@ def plan_claims(trials: pd.DataFrame, run: RunData | None) -> list[Claim]:
 
 
 def all_claims(out: Path, parts: Mapping[str, Mapping]) -> list[Claim]:
-    """Every claim whose part completed, read back from the reproduction in ``out`` (``parts``: part name -> its entry in parts.json)."""
+    """Every claim whose part completed, read back from the reproduction in ``out``.
+
+    ``parts``: part name -> its entry in parts.json.
+    """
 
     def runs(name: str) -> list[RunData]:
         return [read_run(out / r) for r in parts[name]["outputs"].get("runs", [])]

@@ -99,7 +99,11 @@ def ball_game_pinv(out: Path, robot: Path, progress: Progress) -> Outputs:
 
 
 def table_i_pose(robot: Path = ROBOT) -> tuple[list[float], float]:
-    """The Table I analogue's hand pose (X Y Z [m] ROLL PITCH YAW [rad], in the left arm's base frame) and arm angle [rad]: where ``robot``'s left hand is, and its arm angle, with the arm at the paper's solution 1 joints."""
+    """The Table I analogue's hand pose and arm angle [rad], at the paper's solution 1 joints.
+
+    The pose: X Y Z [m] ROLL PITCH YAW [rad], in the left arm's base frame; where ``robot``'s left
+    hand is, and its arm angle, with the arm at the paper's solution 1 joints.
+    """
     import numpy as np
     from scipy.spatial.transform import Rotation
 
@@ -115,7 +119,10 @@ def table_i_pose(robot: Path = ROBOT) -> tuple[list[float], float]:
 
 
 def table_i(out: Path, robot: Path, progress: Progress) -> Outputs:
-    """MC-Inverse Table I: the 8 candidates of one pose at one arm angle, as ``table_i.json`` (the JSON of ``dualarm ik srs --json``)."""
+    """MC-Inverse Table I: the 8 candidates of one pose at one arm angle, as ``table_i.json``.
+
+    The JSON of ``dualarm ik srs --json``.
+    """
     from dualarm.ik.analytic.mc_inverse import candidate_table
     from dualarm.model.robot import load_robot
 
@@ -156,14 +163,21 @@ def circle_consistency(out: Path, robot: Path, progress: Progress) -> Outputs:
 
 
 def carry_box(out: Path, robot: Path, progress: Progress) -> Outputs:
-    """The dual-arm box carried up and down 5 times: the paper's three methods compared over the repetitions (Fig. 16), and MC-Inverse through every stage (eq 11, Fig. 14)."""
+    """The dual-arm box carried up and down 5 times.
+
+    The paper's three methods compared over the repetitions (Fig. 16), and MC-Inverse through every
+    stage (eq 11, Fig. 14).
+    """
     compared = _consistency("carry_box", CARRY_BOX_METHODS, out, robot, lambda f, text: progress(0.6 * f, text))
     executed = _run("carry_box", "mc-inverse", None, out, robot, lambda f, text: progress(0.6 + 0.4 * f, text))
     return {"table": compared["table"], "runs": [*compared["runs"], *executed["runs"]]}
 
 
 def bowl_grasp(out: Path, robot: Path, progress: Progress) -> Outputs:
-    """MCIKRRT planning the bowl grasp :data:`PLAN_TRIALS` times; the first plan retimed, smoothed, executed and recorded (Li & Liang, section 5)."""
+    """MCIKRRT planning the bowl grasp :data:`PLAN_TRIALS` times (Li & Liang, section 5).
+
+    The first plan retimed, smoothed, executed and recorded.
+    """
     from dualarm.study.planning import run_trials
 
     result = run_trials(
@@ -185,14 +199,17 @@ def bowl_grasp(out: Path, robot: Path, progress: Progress) -> Outputs:
 
 
 def _left_arm_at_solution_1(robot: Robot) -> str:
-    """Why Table I's analogue cannot run on ``robot`` ("" when it can): it needs an S-R-S left arm whose limits hold the paper's solution 1."""
+    """Why Table I's analogue cannot run on ``robot`` ("" when it can).
+
+    It needs an S-R-S left arm whose limits hold the paper's solution 1.
+    """
     from dualarm.methods import not_srs
 
     if "left" not in robot.hands:
         return f"needs a left arm; robot '{robot.name}' has {', '.join(robot.hands)}"
     if reason := not_srs(robot, ("left",)).get("left"):
         return f"needs an S-R-S left arm: {reason}"
-    for name, value in zip(robot.hand_chain("left").joint_names, TABLE_I_SOLUTION_1):
+    for name, value in zip(robot.hand_chain("left").joint_names, TABLE_I_SOLUTION_1, strict=True):
         low, high = robot.limits[name].lower, robot.limits[name].upper
         if not low <= value <= high:
             return f"the paper's solution 1 puts {name} at {value:g} rad, outside its limits [{low:g}, {high:g}]"
@@ -200,7 +217,10 @@ def _left_arm_at_solution_1(robot: Robot) -> str:
 
 
 def _srs_arms(robot: Robot) -> str:
-    """Why the carried box's methods cannot run on ``robot`` ("" when they can): MC-Inverse and IKFast-style need both arms S-R-S."""
+    """Why the carried box's methods cannot run on ``robot`` ("" when they can).
+
+    MC-Inverse and IKFast-style need both arms S-R-S.
+    """
     from dualarm.methods import not_srs
 
     reasons = not_srs(robot, tuple(h for h in ("left", "right") if h in robot.hands))
@@ -287,7 +307,8 @@ PARTS = (
         "carry-box",
         "MC-Inverse",
         "dual-arm box carried 5 times",
-        f"dualarm consistency tasks/carry_box.toml --methods {','.join(CARRY_BOX_METHODS)}; dualarm run tasks/carry_box.toml --ik mc-inverse",
+        "dualarm consistency tasks/carry_box.toml --methods "
+        f"{','.join(CARRY_BOX_METHODS)}; dualarm run tasks/carry_box.toml --ik mc-inverse",
         carry_box,
         15,
         "carry_box",
@@ -309,7 +330,9 @@ BY_NAME = {p.name: p for p in PARTS}
 
 
 def unavailable(part: Part, robot: Path) -> str:
-    """Why ``part`` cannot run on the robot directory ``robot`` ("" when it can): what it needs and the robot lacks, or why its task does not load there (one line).
+    """Why ``part`` cannot run on the robot directory ``robot`` ("" when it can), in one line.
+
+    What it needs and the robot lacks, or why its task does not load there.
 
     Raises:
         RobotModelError: ``robot`` is not a robot directory.
@@ -329,7 +352,10 @@ def unavailable(part: Part, robot: Path) -> str:
 
 
 def command(part: Part, robot: Path = ROBOT) -> str:
-    """The command that reproduces ``part`` alone on the robot directory ``robot`` (``--robot`` added to each dualarm command unless it is the humanoid)."""
+    """The command that reproduces ``part`` alone on the robot directory ``robot``.
+
+    ``--robot`` added to each dualarm command unless it is the humanoid.
+    """
     option = robot_option(robot)
     if not option:
         return part.command

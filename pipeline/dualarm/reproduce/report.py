@@ -1,4 +1,8 @@
-"""``report.md`` of a reproduction: each paper claim against ours, the figures, the runs and the time of each part, written from the reproduction directory's files alone (so it can be rewritten from a directory copied from another machine)."""
+"""``report.md`` of a reproduction: each paper claim against ours, the figures, the runs and times.
+
+The time of each part. Written from the reproduction directory's files alone (so it can be rewritten
+from a directory copied from another machine).
+"""
 
 from __future__ import annotations
 
@@ -19,15 +23,26 @@ from dualarm.reproduce.runner import NOT_AVAILABLE, PARTS_FILE
 
 #: The papers, in the order of the report.
 PAPERS = {
-    "TV-GDD": "Zhang, Kong, Niu — *A Time-Varying-Constrained Motion Generation Scheme for Humanoid Robot Arms* (ball game, section 4)",
-    "MC-Inverse": "Zou, Min, Xu — *MC-Inverse: An Analytical Method for Consistent Motion of Anthropomorphic Dual-arm Robot* (section V)",
-    "Li & Liang": "Li, Liang — *Study on Humanoid Robot's Dual-arm Collision Avoidance Motion Planning Algorithm* (section 5)",
+    "TV-GDD": (
+        "Zhang, Kong, Niu — *A Time-Varying-Constrained Motion Generation Scheme for Humanoid Robot Arms* "
+        "(ball game, section 4)"
+    ),
+    "MC-Inverse": (
+        "Zou, Min, Xu — *MC-Inverse: An Analytical Method for Consistent Motion of Anthropomorphic Dual-arm Robot* "
+        "(section V)"
+    ),
+    "Li & Liang": (
+        "Li, Liang — *Study on Humanoid Robot's Dual-arm Collision Avoidance Motion Planning Algorithm* (section 5)"
+    ),
 }
 VERDICT = {True: "agrees", False: "**differs**", None: "—"}
 
 
 def command_of(name: str, out: Path, parts: Mapping[str, Mapping], robot: Path = ROBOT) -> str:
-    """The command that reproduces part ``name`` alone on the robot directory ``robot`` (Table I's with the analogue's pose)."""
+    """The command that reproduces part ``name`` alone on the robot directory ``robot``.
+
+    Table I's with the analogue's pose.
+    """
     text = command(BY_NAME[name], robot)
     if name == "table-i" and parts.get(name, {}).get("status") == "complete":
         data = json.loads((out / parts[name]["outputs"]["table"]).read_text())
@@ -66,7 +81,11 @@ def _table_i(out: Path, parts: Mapping[str, Mapping]) -> list[str]:
     lines = [
         "## Table I, ours and the paper's",
         "",
-        f"HR2's arm base frame and link lengths are not this robot's, so the paper's pose cannot be reused. The analogue puts this robot's left arm at the paper's solution 1 joints (its axes run z, y, z, y, z, y, z like HR2's) and asks MC-Inverse for the hand pose found there, {data['pose']} (m, rad, in `{data['chain']['base']}`), at that configuration's arm angle ψ = {data['arm_angle']:g} rad (the paper's 2.2 rad is in HR2's convention).",
+        "HR2's arm base frame and link lengths are not this robot's, so the paper's pose cannot "
+        "be reused. The analogue puts this robot's left arm at the paper's solution 1 joints (its "
+        "axes run z, y, z, y, z, y, z like HR2's) and asks MC-Inverse for the hand pose found "
+        f"there, {data['pose']} (m, rad, in `{data['chain']['base']}`), at that configuration's "
+        f"arm angle ψ = {data['arm_angle']:g} rad (the paper's 2.2 rad is in HR2's convention).",
         "",
         "| # | θ1 | θ2 | θ3 | θ4 | θ5 | θ6 | θ7 | ours | ψ(q) [rad] | FK error [m] |",
         "|---|" + "---:|" * 7 + "---|---:|---:|",
@@ -158,7 +177,9 @@ def reproduction_claims(out: str | Path) -> list[Claim]:
 
 
 def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None) -> Path:
-    """Write ``out/report.md`` from ``out/parts.json`` and the recordings it lists (``claims``: :func:`reproduction_claims`, read when not given); returns it.
+    """Write ``out/report.md`` from ``out/parts.json`` and the recordings it lists; returns it.
+
+    ``claims``: :func:`reproduction_claims`, read when not given.
 
     Raises:
         RecordingError: ``out`` holds no reproduction, or a recording it lists is unreadable.
@@ -179,7 +200,8 @@ def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None
             []
             if not robot_option(robot)
             else [
-                f"Robot: `{name}` ({robot}); the tasks transfer to it as tasks/README.md describes (frame, scale, `[transfer]`).",
+                f"Robot: `{name}` ({robot}); the tasks transfer to it as "
+                "tasks/README.md describes (frame, scale, `[transfer]`).",
                 "",
             ]
         ),
@@ -189,10 +211,13 @@ def write_reproduction_report(out: str | Path, claims: list[Claim] | None = None
             if contradicted
             else ""
         )
-        + f'. Every figure under "ours" is read back from the recordings in this directory; the papers\' figures are quoted from their text. '
-        f"The parts ran {index['jobs']} at a time on a {index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s"
+        + '. Every figure under "ours" is read back from the recordings in this directory; '
+        "the papers' figures are quoted from their text. "
+        f"The parts ran {index['jobs']} at a time on a "
+        f"{index['cpu_count']}-core machine in {index['wall_time_s']:.0f} s"
         + (
-            ", so computing times were measured with another part running (`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)."
+            ", so computing times were measured with another part running "
+            "(`--jobs 1` runs one part at a time; `dualarm bench` measures speed as ratios)."
             if index["jobs"] > 1
             else "."
         ),

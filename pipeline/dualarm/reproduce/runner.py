@@ -75,7 +75,9 @@ def parts_named(names: Sequence[str] | None) -> tuple[str, ...]:
 
 
 def prepare(out: Path) -> OutputDir:
-    """Claim ``out`` as a reproduction's directory and empty it; returns the claim, which keeps ``out`` locked while it lives.
+    """Claim ``out`` as a reproduction's directory and empty it.
+
+    Returns the claim, which keeps ``out`` locked while it lives.
 
     Raises:
         OutputError: ``out`` is not a directory, is a non-empty directory that is not a
@@ -109,11 +111,17 @@ PROGRESS_TOPIC = "dualarm-reproduce-progress"
 
 def _unseen(worker: object, out: Path) -> str:
     """Why a worker cannot run a part: it does not see ``out``."""
-    return f"worker {excerpt(worker, 40)} does not see {excerpt(out)}: with --scheduler, --out must be on a file system the workers share"
+    return (
+        f"worker {excerpt(worker, 40)} does not see {excerpt(out)}: with "
+        "--scheduler, --out must be on a file system the workers share"
+    )
 
 
 def _part_task(name: str, out: Path, robot: Path, topic: str) -> PartResult:
-    """Run part ``name`` as a Dask task: its progress logged to ``topic``, stoppable under its key (:func:`dualarm.cluster.stop_tasks`), its run then recorded as failed."""
+    """Run part ``name`` as a Dask task: its progress logged to ``topic``, stoppable under its key.
+
+    Stopped by :func:`dualarm.cluster.stop_tasks`, its run is then recorded as failed.
+    """
     from distributed import get_worker
 
     worker = get_worker()
@@ -138,7 +146,9 @@ def _part_task(name: str, out: Path, robot: Path, topic: str) -> PartResult:
 def _run_on_cluster(
     out: Path, names: Sequence[str], robot: Path, jobs: int, scheduler: str | None, on_progress: OnProgress
 ) -> tuple[dict[str, PartResult], int]:
-    """Run ``names`` as Dask tasks (the longest first) on the cluster at ``scheduler``, else a ``LocalCluster`` of ``jobs`` workers; returns the results and the number of workers.
+    """Run ``names`` as Dask tasks (the longest first); returns the results and the number of workers.
+
+    On the cluster at ``scheduler``, else a ``LocalCluster`` of ``jobs`` workers.
 
     Ctrl-C or SIGTERM in this process stops the parts running on the workers (their runs are
     recorded as failed) and waits for them before the interruption goes on. A part whose worker
@@ -172,7 +182,8 @@ def _run_on_cluster(
         submitted = time.perf_counter()
         pending = set(futures)
         try:
-            # Ctrl-C and SIGTERM are raised here, between polls, not inside Dask's code in this process (its scheduler's)
+            # Ctrl-C and SIGTERM are raised here, between polls, not inside Dask's code in this
+            # process (its scheduler's)
             with held() as signalled:
                 while pending and not signalled:
                     time.sleep(0.2)
@@ -210,7 +221,9 @@ def run_parts(
     robot: Path = ROBOT,
     scheduler: str | None = None,
 ) -> list[PartResult]:
-    """Run the parts ``names`` on the robot directory ``robot`` into ``out`` (after :func:`prepare`) and write :data:`PARTS_FILE`.
+    """Run the parts ``names`` on the robot directory ``robot`` into ``out`` and write :data:`PARTS_FILE`.
+
+    After :func:`prepare`.
 
     The parts run as Dask tasks, the longest first: on the cluster at ``scheduler``
     (``tcp://HOST:PORT``; ``out`` must be on a file system its workers share), else on a

@@ -1,1 +1,4 @@
-"""The simulation world: the robot and the task's objects loaded in PyBullet (DIRECT mode), its shapes and contacts."""
+"""The simulation world: the robot and the task's objects loaded in PyBullet (DIRECT mode).
+
+Its shapes and contacts.
+"""

@@ -42,7 +42,7 @@ class PyBulletRobot:
 
     def set_positions(self, names: Sequence[str], q: Sequence[float] | np.ndarray) -> None:
         """Teleport joints ``names`` to positions ``q`` [rad] (no dynamics)."""
-        for name, value in zip(names, q):
+        for name, value in zip(names, q, strict=True):
             pb.resetJointState(self.body, self.joint_index[name], float(value), physicsClientId=self.client)
 
     def link_pose(self, link: str) -> np.ndarray:
@@ -68,7 +68,10 @@ class PyBulletRobot:
         }
 
     def solid_parents(self) -> dict[int, tuple[int, bool]]:
-        """For each link with collision geometry below another such link: that nearest ancestor with geometry, and whether the way up passes through links without geometry."""
+        """For each link with collision geometry below another such link: that nearest ancestor with geometry.
+
+        And whether the way up passes through links without geometry.
+        """
         parent = {
             i: pb.getJointInfo(self.body, i, physicsClientId=self.client)[16]
             for i in range(pb.getNumJoints(self.body, physicsClientId=self.client))
@@ -167,7 +170,10 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
 
 
 def add_environment(sim: PyBulletRobot, objects) -> dict[int, str]:
-    """Static bodies in ``sim``'s client for a task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`); body id -> object name."""
+    """Static bodies in ``sim``'s client for a task's fixed objects; body id -> object name.
+
+    The objects: :class:`~dualarm.tasks.schema.EnvironmentObject`.
+    """
     bodies = {}
     for obj in objects:
         if obj.shape == "box":

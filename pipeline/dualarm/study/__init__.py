@@ -1,11 +1,15 @@
-"""``dualarm study``: the MC-Inverse paper's open question, when and how often motion becomes inconsistent, over many generated trials.
+"""``dualarm study``: the MC-Inverse paper's open question, over many generated trials.
+
+The question: when and how often motion becomes inconsistent.
 
 Modules:
 
 - :mod:`dualarm.study.spec`: the study spec file (:class:`StudySpec`, :func:`load_study`).
 - :mod:`dualarm.study.trials`: the trials it draws (:func:`trial`, :func:`reachable_trial`), the same on any machine.
-- :mod:`dualarm.study.run`: running them on Dask distributed (:func:`run_study`), the rows as they come (:func:`read_study`).
-- :mod:`dualarm.study.report`: P(inconsistent) per method and condition from ``trials.parquet`` (:func:`write_study_report`).
+- :mod:`dualarm.study.run`: running them on Dask distributed (:func:`run_study`), the rows as they
+  come (:func:`read_study`).
+- :mod:`dualarm.study.report`: P(inconsistent) per method and condition from ``trials.parquet``
+  (:func:`write_study_report`).
 """
 
 from dualarm.study.report import write_study_report

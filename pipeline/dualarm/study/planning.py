@@ -1,4 +1,6 @@
-"""``dualarm plan``: repeated planning trials on one task, their table and summary, and the first successful plan recorded as a run.
+"""``dualarm plan``: repeated planning trials on one task, their table and summary.
+
+And the first successful plan recorded as a run.
 
 Trial ``i`` plans from seed ``seed + i`` on one planning problem (one collision checker for all
 trials). ``DIR/plan_trials.csv`` has a row per trial; ``DIR/plan_summary.json`` the success rate,
@@ -30,6 +32,8 @@ from dualarm.tasks import Task, load_task
 
 #: Li & Liang's average planning time for their bowl grasp [s].
 PAPER_PLANNING_TIME_S = 4.21088
+#: The default settings of :func:`run_trials` (frozen: one instance serves every call).
+_DEFAULT_SETTINGS = PlanningSettings()
 
 
 @dataclass(frozen=True)
@@ -57,13 +61,15 @@ def run_trials(
     trials: int,
     seed: int,
     out_dir: Path,
-    settings: PlanningSettings = PlanningSettings(),
+    settings: PlanningSettings = _DEFAULT_SETTINGS,
     recordings: Path = Path("recordings"),
     command: list[str] | None = None,
     progress: Callable[[int, int], None] = lambda done, total: None,
     robot: str | Path | None = None,
 ) -> TrialsResult:
-    """Plan ``trials`` times with ``planner``, write the CSV and the summary into ``out_dir``, and record the first successful plan through retime, smooth and execute under ``recordings``.
+    """Plan ``trials`` times with ``planner``, write the CSV and the summary into ``out_dir``.
+
+    And record the first successful plan through retime, smooth and execute under ``recordings``.
 
     ``progress`` is told the trials done and the total after each trial; ``robot`` (a robot
     directory or shipped robot's name) replaces the one the task names.

@@ -1,4 +1,6 @@
-"""A study's report, from its ``trials.parquet`` alone: how often each method's motion is inconsistent, and under which conditions.
+"""A study's report, from its ``trials.parquet`` alone.
+
+How often each method's motion is inconsistent, and under which conditions.
 
 - Per method (:func:`method_rates`): of its trials, the share inconsistent and the share failed,
   each with its 95 % Wilson score interval (``statsmodels``' ``proportion_confint``); a row with
@@ -104,7 +106,11 @@ def _judged(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def method_rates(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per method (in the table's order): trials, errors (left out), inconsistent and failed counts, each share with its Wilson interval, and the median and 90th percentile of the largest joint deviation between repetitions (of the trials that have one) [rad]."""
+    """Per method (in the table's order): trials, errors, inconsistent and failed counts, and more.
+
+    Errors are left out; each share with its Wilson interval, and the median and 90th percentile of
+    the largest joint deviation between repetitions (of the trials that have one) [rad].
+    """
     out = []
     for method, group in rows.groupby("method", sort=False):
         judged = _judged(group)
@@ -131,7 +137,10 @@ def method_rates(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def _quantiles(rows: pd.DataFrame) -> dict[str, float]:
-    """The median and 90th percentile of :data:`DEVIATION` over the rows that have it [rad] (NaN without any)."""
+    """The median and 90th percentile of :data:`DEVIATION` over the rows that have it [rad].
+
+    NaN without any.
+    """
     values = rows[DEVIATION].dropna() if DEVIATION in rows.columns else pd.Series(dtype=float)
     return {
         "deviation_median_rad": float(values.median()) if len(values) else math.nan,
@@ -140,14 +149,19 @@ def _quantiles(rows: pd.DataFrame) -> dict[str, float]:
 
 
 def _bins(values: pd.Series) -> pd.Series:
-    """A feature's bins: its categories, or :data:`BINS` quantile bins of a number (fewer where values repeat)."""
+    """A feature's bins: its categories, or :data:`BINS` quantile bins of a number.
+
+    Fewer where values repeat.
+    """
     if not pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(values) or values.nunique() <= BINS:
         return values.astype(str)
     return pd.qcut(values, BINS, duplicates="drop").astype(str)
 
 
 def feature_rates(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per feature of :data:`FEATURES` the table has, bin and method: trials, inconsistent, the share and its Wilson interval.
+    """Per feature of :data:`FEATURES` the table has, bin and method: trials, inconsistent, the share.
+
+    The share with its Wilson interval.
 
     A trial's features are binned over all methods' trials alike; a feature of a method's own
     joint path (``ik.*``) is binned per method, in its quartiles ``Q1``-``Q4`` (and only where the
@@ -197,7 +211,10 @@ def feature_rates(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def logistic_fit(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
-    """Per method, ``inconsistent`` ~ the standardised numeric features (statsmodels ``Logit``): odds ratio per standard deviation, its interval and p-value; and per method without a fit, why."""
+    """Per method, ``inconsistent`` ~ the standardised numeric features (statsmodels ``Logit``).
+
+    Odds ratio per standard deviation, its interval and p-value; and per method without a fit, why.
+    """
     import statsmodels.api as sm
     from statsmodels.tools.sm_exceptions import ConvergenceWarning, PerfectSeparationError, PerfectSeparationWarning
 
@@ -257,13 +274,15 @@ def _methods_figure(rates: pd.DataFrame, path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(7, 0.5 * len(rates) + 1.5))
     y = np.arange(len(rates))
-    for offset, (what, colour) in zip((-0.18, 0.18), (("p_inconsistent", "tab:red"), ("p_failed", "tab:grey"))):
+    for offset, (what, colour) in zip(
+        (-0.18, 0.18), (("p_inconsistent", "tab:red"), ("p_failed", "tab:grey")), strict=True
+    ):
         p = rates[what].to_numpy()
         err = np.clip(
             np.vstack([p - rates[f"{what}_low"], rates[f"{what}_high"] - p]), 0.0, None
         )  # the interval's end at 0 or 1 is p up to rounding
         ax.errorbar(p, y + offset, xerr=err, fmt="o", color=colour, capsize=3, label=what.replace("p_", "P(") + ")")
-    ax.set_yticks(y, [f"{m} (n = {n})" for m, n in zip(rates["method"], rates["trials"])])
+    ax.set_yticks(y, [f"{m} (n = {n})" for m, n in zip(rates["method"], rates["trials"], strict=True)])
     ax.invert_yaxis()
     ax.set_xlim(-0.02, 1.02)
     ax.set_xlabel("share of trials, with 95 % Wilson intervals")
@@ -275,7 +294,10 @@ def _methods_figure(rates: pd.DataFrame, path: Path) -> None:
 
 
 def _deviations_figure(rows: pd.DataFrame, threshold: float | None, path: Path) -> None:
-    """Per method, the share of trials whose largest joint deviation between repetitions is at most x (an empirical CDF, x logarithmic); the spec's threshold dashed."""
+    """Per method, the share of trials whose largest joint deviation between repetitions is at most x.
+
+    An empirical CDF, x logarithmic; the spec's threshold dashed.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -316,7 +338,7 @@ def _features_figure(features: pd.DataFrame, path: Path) -> None:
         math.ceil(len(names) / cols), cols, figsize=(4.2 * cols, 3.2 * math.ceil(len(names) / cols)), squeeze=False
     )
     methods = list(dict.fromkeys(features["method"]))
-    for ax, name in zip(axes.flat, names):
+    for ax, name in zip(axes.flat, names, strict=False):
         table = features[features["feature"] == name]
         for k, method in enumerate(methods):
             t = table[table["method"] == method]
@@ -358,7 +380,9 @@ def _markdown(table: pd.DataFrame, digits: int = 3) -> str:
 
 
 def write_study_report(directory: str | Path) -> Path:
-    """Write the study's report into ``directory`` (module docstring) from its ``trials.parquet``; returns ``report.md``'s path.
+    """Write the study's report into ``directory`` (module docstring) from its ``trials.parquet``.
+
+    Returns ``report.md``'s path.
 
     Raises:
         RecordingError: no ``trials.parquet``, or not a study's table.
@@ -383,19 +407,22 @@ def write_study_report(directory: str | Path) -> Path:
         shown = rates.assign(
             P=[
                 f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
-                for p, lo, hi in zip(rates["p_inconsistent"], rates["p_inconsistent_low"], rates["p_inconsistent_high"])
+                for p, lo, hi in zip(
+                    rates["p_inconsistent"], rates["p_inconsistent_low"], rates["p_inconsistent_high"], strict=True
+                )
             ]
         )
         shown = shown.assign(
             P_failed=[
                 f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
-                for p, lo, hi in zip(rates["p_failed"], rates["p_failed_low"], rates["p_failed_high"])
+                for p, lo, hi in zip(rates["p_failed"], rates["p_failed_low"], rates["p_failed_high"], strict=True)
             ]
         )
         text = [
             f"# Study {study}: when does repeated motion become inconsistent?\n",
             f"{rows['trial'].nunique()} trials, {len(rows)} rows (trial x method); from `{RESULTS}` alone. "
-            "P is the share of a method's trials, with its 95 % Wilson interval; rows with `status = error` are left out and counted.\n",
+            "P is the share of a method's trials, with its 95 % Wilson "
+            "interval; rows with `status = error` are left out and counted.\n",
             "## Per method\n",
             _markdown(
                 shown[
@@ -420,12 +447,15 @@ def write_study_report(directory: str | Path) -> Path:
                 )
             ),
             "\n![per method](methods.png)\n",
-            "\nHow far apart the repetitions are, per method (the largest joint deviation, `ik.rep_joint_deviation_max_rad`):\n\n![deviations](deviations.png)\n"
+            "\nHow far apart the repetitions are, per method (the largest joint deviation, "
+            "`ik.rep_joint_deviation_max_rad`):\n\n![deviations](deviations.png)\n"
             if drawn
             else "",
-            f"## Against the conditions\n\nEach feature in {BINS} quantile bins (categories as they are); `features.csv` holds every bin.\n",
+            f"## Against the conditions\n\nEach feature in {BINS} quantile "
+            "bins (categories as they are); `features.csv` holds every bin.\n",
             "![against the conditions](features.png)\n" if len(features) else "",
-            "## Logistic regression\n\nPer method, `inconsistent` on the standardised numeric features: odds ratio per standard deviation [95 %] and p-value (`logit.csv`).\n",
+            "## Logistic regression\n\nPer method, `inconsistent` on the standardised numeric "
+            "features: odds ratio per standard deviation [95 %] and p-value (`logit.csv`).\n",
             _markdown(fit) if len(fit) else "No method has a fit.\n",
             "".join(f"- {m}: {why}\n" for m, why in skipped.items()),
         ]

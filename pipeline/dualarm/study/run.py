@@ -1,4 +1,6 @@
-"""Running a study on Dask distributed: every trial with every method, one row each, written as the study goes.
+"""Running a study on Dask distributed: every trial with every method, one row each.
+
+Written as the study goes.
 
 The trials run on a Dask cluster (:func:`run_study`): a ``LocalCluster`` of worker processes (one
 thread each) by default, or an existing one given by its scheduler's address (as dask-jobqueue and
@@ -75,7 +77,8 @@ COLUMNS = (
     "wall_s",
     "worker",
 )
-#: The columns that differ from run to run of one study (times and where it ran): a comparison of two runs leaves them out.
+#: The columns that differ from run to run of one study (times and where it ran): a comparison of
+#: two runs leaves them out.
 VARYING = ("wall_s", "worker", "ik.solve_time_mean_s", "ik.solve_time_median_s", "ik.solve_time_total_s")
 
 
@@ -145,7 +148,10 @@ def run_trial(
 def _method_row(
     spec: StudySpec, drawn: Trial, task: Any, method: str, record: str, runs: str | None, worker: str, refused: str = ""
 ) -> dict[str, Any]:
-    """One method's row of one trial (module docstring); ``refused``: why the trial has no task (then the row is ``failed``)."""
+    """One method's row of one trial (module docstring).
+
+    ``refused``: why the trial has no task (then the row is ``failed``).
+    """
     from dualarm.run import build_stages, record_stages, run_stages
     from dualarm.stages import IkStage
 
@@ -195,7 +201,10 @@ def _method_row(
 
 
 def _task_file(drawn: Trial, base_dir: str) -> dict[str, Any]:
-    """The trial's task as a file in ``DIR/tasks``: its robot, if a directory, made absolute (it was relative to the spec)."""
+    """The trial's task as a file in ``DIR/tasks``.
+
+    Its robot, if a directory, made absolute (it was relative to the spec).
+    """
     beside = Path(base_dir) / drawn.task["robot"]
     return {**drawn.task, "robot": str(beside.resolve())} if beside.is_dir() else drawn.task
 
@@ -206,7 +215,10 @@ def _identity(spec: StudySpec, index: int, method: str) -> dict[str, Any]:
 
 
 def error_rows(spec: StudySpec, index: int, error: str) -> tuple[dict[str, Any], ...]:
-    """The rows of a trial that produced none (its worker died :data:`~dualarm.cluster.ALLOWED_FAILURES` times): ``status = error``, without features (its draw is not known here)."""
+    """The rows of a trial that produced none: ``status = error``, without features.
+
+    Its worker died :data:`~dualarm.cluster.ALLOWED_FAILURES` times; its draw is not known here.
+    """
     rest = {
         "status": "error",
         "failed": True,
@@ -220,7 +232,9 @@ def error_rows(spec: StudySpec, index: int, error: str) -> tuple[dict[str, Any],
 
 
 def read_study(directory: str | Path) -> pd.DataFrame:
-    """Every row of the study in ``directory``: its parts (the trials finished so far), sorted by trial and method in the spec's order; empty without any.
+    """Every row of the study in ``directory``: its parts (the trials finished so far).
+
+    Sorted by trial and method in the spec's order; empty without any.
 
     Raises:
         RecordingError: a part that is not a readable parquet file (named).
@@ -234,13 +248,17 @@ def read_study(directory: str | Path) -> pd.DataFrame:
             frames.append(pd.read_parquet(part))
         except Exception as exc:  # pyarrow raises its own errors for a truncated or foreign file
             raise RecordingError(
-                f"{excerpt(part)}: not a readable study part ({type(exc).__name__}: {excerpt(str(exc), 120)}); delete it to run the trial again with --resume"
+                f"{excerpt(part)}: not a readable study part ({type(exc).__name__}: "
+                f"{excerpt(str(exc), 120)}); delete it to run the trial again with --resume"
             ) from None
     return _ordered(pd.concat(frames, ignore_index=True)) if frames else pd.DataFrame(columns=list(COLUMNS))
 
 
 def _ordered(rows: pd.DataFrame) -> pd.DataFrame:
-    """``rows`` sorted by trial, then method as the spec lists them, with :data:`COLUMNS` first and the metrics last, by name."""
+    """``rows`` sorted by trial, then method as the spec lists them.
+
+    With :data:`COLUMNS` first and the metrics last, by name.
+    """
     order = {m: i for i, m in enumerate(dict.fromkeys(rows["method"]))}
     rows = rows.sort_values(
         ["trial", "method"], key=lambda c: c.map(order) if c.name == "method" else c, kind="stable", ignore_index=True
@@ -253,7 +271,10 @@ def _ordered(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def claim_study_dir(directory: Path, spec: StudySpec, resume: bool) -> Any:
-    """Claim ``directory`` for ``spec``: refuse another study's directory, and one with results unless ``resume``; returns the claim (a lock held while it lives)."""
+    """Claim ``directory`` for ``spec``; returns the claim (a lock held while it lives).
+
+    Refuses another study's directory, and one with results unless ``resume``.
+    """
     claimed = claim_output_dir(directory, "study")
     recorded = {"spec": spec.model_dump(mode="json"), "dualarm_version": __version__}
     file = directory / SPEC_FILE
@@ -264,12 +285,14 @@ def claim_study_dir(directory: Path, spec: StudySpec, resume: bool) -> Any:
             raise OutputError(f"{excerpt(file)}: not a study's spec record; give another --out") from None
         if theirs != recorded["spec"]:
             raise OutputError(
-                f"{excerpt(directory)}: holds study '{excerpt(theirs.get('name', '?'), 40)}' of another spec; give another --out (one study per directory)",
+                f"{excerpt(directory)}: holds study '{excerpt(theirs.get('name', '?'), 40)}' "
+                "of another spec; give another --out (one study per directory)",
                 str(directory),
             )
         if not resume and any((directory / PARTS).glob("trial-*.parquet")):
             raise OutputError(
-                f"{excerpt(directory)}: already holds trials of study '{spec.name}'; continue it with --resume, or give another --out",
+                f"{excerpt(directory)}: already holds trials of study "
+                f"'{spec.name}'; continue it with --resume, or give another --out",
                 str(directory),
             )
     else:
@@ -348,7 +371,7 @@ def run_study(
                 start = time.perf_counter()
                 base, runs = str(Path(base_dir).resolve()), str((directory / RUNS).resolve())
                 futures = [client.submit(run_trial, spec, base, i, record, runs, pure=False) for i in todo]
-                index = {f.key: i for f, i in zip(futures, todo)}
+                index = {f.key: i for f, i in zip(futures, todo, strict=True)}
                 written = time.perf_counter()
                 for future in as_completed(futures):
                     try:
@@ -383,7 +406,11 @@ def _write_trial(directory: Path, spec: StudySpec, result: TrialResult) -> None:
 
 
 def _consolidate(directory: Path, rows: list[dict[str, Any]]) -> pd.DataFrame:
-    """Write ``trials.parquet`` from ``rows`` (whole, then renamed); returns them as a table. Without rows nothing is written: a study that ran no trial (its cluster unreachable) leaves no empty table that looks like results."""
+    """Write ``trials.parquet`` from ``rows`` (whole, then renamed); returns them as a table.
+
+    Without rows nothing is written: a study that ran no trial (its cluster unreachable) leaves no
+    empty table that looks like results.
+    """
     if not rows:
         return pd.DataFrame(columns=list(COLUMNS))
     table = _ordered(pd.DataFrame(rows))

@@ -1,4 +1,6 @@
-"""A study's spec (``SPEC.toml``): which robot and methods, how many trials, and the distributions the trials' tasks are drawn from.
+"""A study's spec (``SPEC.toml``): which robot and methods, how many trials, and the distributions.
+
+The distributions the trials' tasks are drawn from.
 
 A study asks the MC-Inverse paper's open question (section VI): under what conditions, and how
 often, does motion become inconsistent when an arm repeats a motion to the same targets? Each
@@ -78,7 +80,9 @@ class Shape(_Model):
 
 
 class Centre(_Model):
-    """Where a shape's centre is drawn (uniformly in a box), in the drawing hand's shoulder frame [m] (module docstring).
+    """Where a shape's centre is drawn (uniformly in a box), in the drawing hand's shoulder frame [m].
+
+    See the module docstring.
 
     Attributes:
         x, y, z: the box, [low, high] each [m].
@@ -125,7 +129,9 @@ class Orientation(_Model):
 
 
 class Carry(_Model):
-    """A master-slave carry, the trials whose ``hands`` draw is ``both`` (MC-Inverse section IV, eq (11); the carry_box task's grasp by default).
+    """A master-slave carry, the trials whose ``hands`` draw is ``both``.
+
+    MC-Inverse section IV, eq (11); the carry_box task's grasp by default.
 
     The left (master) hand draws the trial's shape as the left hand alone would (its centre in the
     left shoulder's frame, ``[centre]``), and the right (slave) hand holds a box with it: its pose

@@ -1,4 +1,6 @@
-"""A study's trials: each one a repeated-motion task drawn from the spec's distributions, the same on any machine.
+"""A study's trials: each one a repeated-motion task drawn from the spec's distributions.
+
+The same on any machine.
 
 Trial ``i`` of a spec is drawn by its own generator, ``numpy.random.default_rng(SeedSequence([seed,
 i, draw]))`` (PCG64, whose streams numpy keeps identical across platforms and versions), so it does
@@ -47,7 +49,9 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Trial:
-    """One trial: its index, the task it runs (a task file's keys) and its features (what the study report bins by).
+    """One trial: its index, the task it runs (a task file's keys) and its features.
+
+    The features are what the study report bins by.
 
     Attributes:
         index: its number in the study, from 0.
@@ -68,7 +72,10 @@ ARMS = {"left": ("left",), "right": ("right",), "both": ("left", "right")}
 
 
 def trial(spec: StudySpec, index: int, draw: int = 0) -> Trial:
-    """Draw ``draw`` of trial ``index`` of ``spec`` (module docstring); the same for the same spec, seed, index and draw."""
+    """Draw ``draw`` of trial ``index`` of ``spec`` (module docstring).
+
+    The same for the same spec, seed, index and draw.
+    """
     rng = np.random.default_rng(np.random.SeedSequence([spec.seed, index, draw]))
     hand = str(rng.choice(spec.hands))
     drawing = ARMS[hand][0]  # a carry's master hand draws
@@ -202,7 +209,9 @@ REACH_POSES = 64
 
 
 def reachable_trial(spec: StudySpec, index: int, base_dir: str | Path = ".") -> tuple[Trial, Task]:
-    """Trial ``index`` of ``spec`` and its task: the first draw within reach (:func:`within_reach`) with ``[centre] reachable``, else draw 0.
+    """Trial ``index`` of ``spec`` and its task.
+
+    The first draw within reach (:func:`within_reach`) with ``[centre] reachable``, else draw 0.
 
     Its feature ``reachable`` says whether the trial kept is within reach: false after
     :data:`MAX_DRAWS` draws none of which was (the last is kept), or without the check.
@@ -234,7 +243,10 @@ def reachable_trial(spec: StudySpec, index: int, base_dir: str | Path = ".") -> 
 
 @cache
 def study_robot(robot: str, base_dir: str) -> Robot:
-    """A spec's ``robot`` (a directory relative to ``base_dir``, or a shipped robot's name), loaded once per process: a study's worker parses its URDF once, not once per trial.
+    """A spec's ``robot``, loaded once per process.
+
+    A directory relative to ``base_dir``, or a shipped robot's name. A study's worker parses its
+    URDF once, not once per trial.
 
     Raises:
         RobotModelError: no such robot, or its description is unusable.
@@ -246,7 +258,10 @@ def study_robot(robot: str, base_dir: str) -> Robot:
 
 
 def within_reach(task: Task) -> bool:
-    """Whether every hand pose of the task's first repetition (at most :data:`REACH_POSES` of them, evenly spaced, with its first and last) has an analytic S-R-S solution inside the joint limits, for some branch at some arm angle of a :data:`REACH_STEP_RAD` grid.
+    """Whether every hand pose of the task's first repetition has an analytic S-R-S solution.
+
+    At most :data:`REACH_POSES` of them, evenly spaced, with its first and last; a solution inside
+    the joint limits, for some branch at some arm angle of a :data:`REACH_STEP_RAD` grid.
 
     Raises:
         NotSRSError: an arm of the task is not S-R-S.
@@ -272,7 +287,10 @@ def within_reach(task: Task) -> bool:
 
 
 def _mirrored(rpy: tuple[float, float, float]) -> np.ndarray:
-    """The orientation (extrinsic x-y-z Euler angles [rad]) mirrored through the x-z plane, M R M with M = diag(1, -1, 1): the right hand's of the left's."""
+    """The orientation (extrinsic x-y-z Euler angles [rad]) mirrored through the x-z plane.
+
+    M R M with M = diag(1, -1, 1): the right hand's of the left's.
+    """
     mirror = np.diag([1.0, -1.0, 1.0])
     return np.asarray(
         Rotation.from_matrix(mirror @ Rotation.from_euler("xyz", rpy).as_matrix() @ mirror).as_euler("xyz")
@@ -280,7 +298,10 @@ def _mirrored(rpy: tuple[float, float, float]) -> np.ndarray:
 
 
 def _turned_x(angle: float, towards: float) -> np.ndarray:
-    """The x axis turned by ``angle`` [rad] about the axis (0, cos(towards), sin(towards)) of the y-z plane (Rodrigues)."""
+    """The x axis turned by ``angle`` [rad] about an axis of the y-z plane (Rodrigues).
+
+    The axis (0, cos(towards), sin(towards)).
+    """
     axis = np.array([0.0, math.cos(towards), math.sin(towards)])
     x = np.array([1.0, 0.0, 0.0])
     return x * math.cos(angle) + np.cross(axis, x) * math.sin(angle) + axis * (axis @ x) * (1 - math.cos(angle))

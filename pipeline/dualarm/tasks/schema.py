@@ -335,7 +335,7 @@ class Gesture(_Model):
 
 
 class ArmAngleTable(_Model):
-    """A task file's ``[arm_angle]`` table, validated; :meth:`settings` is what MC-Inverse and SEW IK run with.
+    """A task file's ``[arm_angle]`` table, validated; :meth:`settings` converts it to :class:`ArmAngle`.
 
     Its keys and their ranges are those of :class:`ArmAngle`.
     """
