@@ -4,13 +4,16 @@ gap, the start on one side and a goal region (sampled like a WTA) on the other."
 import numpy as np
 import pytest
 
-from dualarm.errors import StageError
+from dualarm.errors import InvalidArgumentError, StageError
 from dualarm.plan.mcikrrt import TreeSearchSettings, mcikrrt, path_length, shortcut
+from dualarm.plan.problem import PlanningSettings
 
 WALL = (0.45, 0.55)  # x band of the wall
 GAP = (0.49, 0.51)  # the only opening, in y
 LOWER, UPPER = np.zeros(2), np.ones(2)
 START = np.array([0.1, 0.1])
+#: The planner settings of :func:`plan` unless a test gives its own.
+SETTINGS = TreeSearchSettings(step_rad=0.1, timeout_s=10.0)
 
 
 class WallChecker:
@@ -51,7 +54,7 @@ def goal_sampler(rng, goals):
     return sample
 
 
-def plan(seed, checker=None, settings=TreeSearchSettings(step_rad=0.1, timeout_s=10.0)):
+def plan(seed, checker=None, settings=SETTINGS):
     goals = []
     checker = checker or WallChecker()
     result = mcikrrt(
@@ -73,10 +76,13 @@ def test_finds_a_path_through_the_narrow_passage(seed):
     path = result.path
     assert np.array_equal(path[0], START)
     assert any(np.array_equal(path[-1], g) for g in goals)
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in zip(path[:-1], path[1:], strict=True):
         assert not crosses_wall_outside_gap(a, b), (a, b)
     # the path gets from x < 0.45 to x > 0.55, so some segment crosses the band, through the gap
-    assert any(a[0] < WALL[0] and b[0] > WALL[1] or WALL[0] <= a[0] <= WALL[1] for a, b in zip(path[:-1], path[1:]))
+    assert any(
+        a[0] < WALL[0] and b[0] > WALL[1] or WALL[0] <= a[0] <= WALL[1]
+        for a, b in zip(path[:-1], path[1:], strict=True)
+    )
     assert result.collision_checks == checker.checks
     assert result.nodes >= 2 and result.goals >= 1
     assert result.path_length_rad <= result.raw_path_length_rad + 1e-12
@@ -113,7 +119,11 @@ def test_shortcut_keeps_ends_and_never_lengthens():
 
 
 def test_settings_are_checked():
-    with pytest.raises(StageError, match="goal probability"):
+    with pytest.raises(InvalidArgumentError, match="goal probability"):
         TreeSearchSettings(goal_probability=1.5)
-    with pytest.raises(StageError, match="timeout"):
+    with pytest.raises(InvalidArgumentError, match="timeout"):
         TreeSearchSettings(timeout_s=0)
+    with pytest.raises(InvalidArgumentError, match="step_rad: must be a positive number, not nan"):
+        TreeSearchSettings(step_rad=float("nan"))
+    with pytest.raises(InvalidArgumentError, match="margin_m: must be a non-negative number, not -0.1"):
+        PlanningSettings(margin_m=-0.1)

@@ -1,5 +1,5 @@
-"""Running a study on Dask (dualarm.study.run): a small study on a LocalCluster and on a separately started scheduler and
-workers, resume, a killed worker, a failing trial, and the refusals.
+"""Running a study on Dask (dualarm.study.run): a small study on a LocalCluster and on a separately started scheduler
+and workers, resume, a killed worker, a failing trial, and the refusals.
 
 Every row is checked against the same trial run again alone, in this process, from the task file the study wrote
 (dualarm.run_task): the study's rows are the pipeline's own numbers, wherever they ran.
@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -50,6 +51,7 @@ def local(tmp_path_factory) -> tuple[Path, pd.DataFrame]:
     return out, result.results
 
 
+@pytest.mark.integration
 def test_a_study_on_a_local_cluster_writes_a_row_per_trial_and_method(local):
     out, rows = local
     assert len(rows) == 4 * 3 and set(rows["worker"]) <= {"0", "1"}
@@ -59,6 +61,7 @@ def test_a_study_on_a_local_cluster_writes_a_row_per_trial_and_method(local):
     assert (rows["reachable"]).all()
 
 
+@pytest.mark.integration
 def test_each_row_is_the_trial_run_alone_from_its_task_file(local):
     out, rows = local
     for _, row in rows.iterrows():
@@ -76,6 +79,7 @@ def test_each_row_is_the_trial_run_alone_from_its_task_file(local):
         assert row["inconsistent"] == (alone.metrics["ik.rep_joint_deviation_max_rad"] > 0.01 or failed)
 
 
+@pytest.mark.integration
 def test_resume_runs_only_the_trials_missing(local, tmp_path):
     out, rows = local
     copy = tmp_path / "small"
@@ -89,6 +93,7 @@ def test_resume_runs_only_the_trials_missing(local, tmp_path):
     _same(again.results, rows)
 
 
+@pytest.mark.integration
 def test_another_study_into_the_same_directory_is_refused(local):
     out, _ = local
     other = study_from_toml(SPEC.replace("trials = 4", "trials = 5"))
@@ -96,6 +101,7 @@ def test_another_study_into_the_same_directory_is_refused(local):
         run_study(other, REPO, out, resume=True)
 
 
+@pytest.mark.integration
 def test_the_cli_refuses_a_bad_spec_in_one_line(tmp_path):
     spec = tmp_path / "bad.toml"
     spec.write_text('name = "s"\ntrials = 10\nrepetitions = [9, 3]\n')
@@ -118,6 +124,7 @@ def test_the_cli_refuses_a_bad_spec_in_one_line(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.integration
 def test_a_separately_started_scheduler_and_workers_give_the_same_rows(local, tmp_path):
     """A scheduler and two `dask worker` processes on 127.0.0.1, started apart as two nodes would be."""
     _, rows = local
@@ -127,6 +134,7 @@ def test_a_separately_started_scheduler_and_workers_give_the_same_rows(local, tm
     _same(result.results, rows)
 
 
+@pytest.mark.integration
 def test_an_unreachable_scheduler_is_one_line_and_leaves_no_table(tmp_path, monkeypatch):
     monkeypatch.setattr(
         "dualarm.cluster.CONNECT_TIMEOUT_S", 2.0
@@ -139,8 +147,10 @@ def test_an_unreachable_scheduler_is_one_line_and_leaves_no_table(tmp_path, monk
     assert not (tmp_path / "out" / RESULTS).exists()
 
 
+@pytest.mark.integration
 def test_a_killed_worker_has_its_trial_retried_on_another(local, tmp_path):
-    """A worker process killed while it runs a trial: the scheduler gives the trial to another, and the rows are the same."""
+    """A worker process killed while it runs a trial: the scheduler gives the trial to another, and the rows are the
+    same."""
     _, rows = local
     from distributed import Client, LocalCluster
 
@@ -176,13 +186,16 @@ def test_a_killed_worker_has_its_trial_retried_on_another(local, tmp_path):
     _same(result.results, rows)
 
 
+@pytest.mark.integration
 def test_a_method_that_raises_is_its_rows_error_not_a_lost_trial(monkeypatch):
     """A bug in one method (an exception that is not dualarm's) is that row's error, and the other methods still run."""
 
     def broken(*args, **kwargs):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr("dualarm.ik.velocity.pinv.solve_pinv", broken)
+    from dualarm.ik.velocity import pinv
+
+    monkeypatch.setitem(pinv.METHODS, "pinv", replace(pinv.METHODS["pinv"], solve=broken))
     result = run_trial(study_from_toml(SPEC), str(REPO), 0)
     by_method = {r["method"]: r for r in result.rows}
     assert by_method["pinv"]["status"] == "error" and by_method["pinv"]["error"] == "ZeroDivisionError: a bug"
@@ -194,8 +207,8 @@ def test_a_method_that_raises_is_its_rows_error_not_a_lost_trial(monkeypatch):
 
 
 def test_a_shape_out_of_reach_fails_mc_inverse_in_its_row_and_is_drawn_again_when_checked():
-    """With [centre] reachable = false a shape far out is kept and fails MC-Inverse (a `failed` row, its message); with the
-    check, every draw before the one kept is out of reach (the analytic check) and the one kept is within."""
+    """With [centre] reachable = false a shape far out is kept and fails MC-Inverse (a `failed` row, its message); with
+    the check, every draw before the one kept is out of reach (the analytic check) and the one kept is within."""
     far = (
         SPEC.replace('["pinv", "dls-svd", "pybullet"]', '["mc-inverse"]')
         + "[centre]\nx = [0.8, 0.9]\ny = [0.0, 0.1]\nz = [-0.2, -0.1]\n"
@@ -231,12 +244,16 @@ def load_task_dict(task: dict):
     return task_from_dict(task, base_dir=REPO)
 
 
+@pytest.mark.integration
 def test_duckdb_reads_the_table_as_pandas_does(local):
     """The README's query: DuckDB on DIR/trials.parquet, against the same rates from pandas."""
     import duckdb
 
     out, rows = local
-    query = f"""select method, avg(inconsistent::int) as p, median("ik.rep_joint_deviation_max_rad") as deviation from '{out / RESULTS}' group by method order by method"""
+    query = (
+        'select method, avg(inconsistent::int) as p, median("ik.rep_joint_deviation_max_rad") as deviation'
+        f" from '{out / RESULTS}' group by method order by method"
+    )
     got = duckdb.sql(query).df().set_index("method")
     expected = rows.groupby("method").agg(
         p=("inconsistent", "mean"), deviation=("ik.rep_joint_deviation_max_rad", "median")
@@ -253,9 +270,11 @@ def test_a_robot_the_reach_check_cannot_use_is_refused_before_anything_is_writte
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.integration
 def test_a_worker_builds_its_solvers_once_not_per_trial(monkeypatch):
-    """Trials run one after another in one process, as on a worker: after the first, the later trials load the robot into
-    PyBullet, build DLS's Function, the hand stacks and IPOPT's start problem no more (counted at the libraries' calls)."""
+    """Trials run one after another in one process, as on a worker: after the first, the later trials load the robot
+    into PyBullet, build DLS's Function, the hand stacks and IPOPT's start problem no more (counted at the libraries'
+    calls)."""
     import casadi
 
     from dualarm.ik.pose_level import baselines, dls
@@ -286,7 +305,8 @@ def test_a_worker_builds_its_solvers_once_not_per_trial(monkeypatch):
 
 @pytest.mark.parametrize("hands", ['["both"]', '["right", "left"]'])
 def test_a_hand_the_robot_does_not_have_is_refused_before_anything_is_written(tmp_path, hands):
-    """The Panda drives one hand, `right`: a carry (both) or a left-hand trial is refused in one line, naming the key."""
+    """The Panda drives one hand, `right`: a carry (both) or a left-hand trial is refused in one line, naming the
+    key."""
     spec = study_from_toml(SPEC.replace('name = "small"', f'name = "small"\nrobot = "panda"\nhands = {hands}'))
     with pytest.raises(TaskFileError, match=r"^hands: robot 'panda' has no left hand \(hands: right\)$"):
         run_study(spec, REPO, tmp_path / "out")
@@ -298,12 +318,14 @@ def _affinity() -> list[list[int]]:
     return [sorted(os.sched_getaffinity(int(t))) for t in os.listdir("/proc/self/task")]
 
 
+@pytest.mark.integration
 @pytest.mark.skipif(
     not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2 or not Path("/proc/self/task").exists(),
     reason="needs 2 cores and Linux's per-thread affinity",
 )
 def test_local_workers_are_each_pinned_to_a_core_of_their_own():
-    """A LocalCluster of 2 workers: every thread of worker i, and a task's thread, runs on core i only (read back from the OS); the client's process is left alone."""
+    """A LocalCluster of 2 workers: every thread of worker i, and a task's thread, runs on core i only (read back from
+    the OS); the client's process is left alone."""
     cores = sorted(os.sched_getaffinity(0))[:2]
     with connect(workers=2) as client:
         threads = client.run(_affinity)

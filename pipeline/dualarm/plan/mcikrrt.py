@@ -47,7 +47,8 @@ from typing import Protocol
 import numpy as np
 
 from dualarm.arrays import frozen
-from dualarm.errors import StageError
+from dualarm.errors import InvalidArgumentError, StageError
+from dualarm.settings import check_positive
 
 
 class Checker(Protocol):
@@ -86,12 +87,13 @@ class TreeSearchSettings:
     smoothing_iterations: int = 30
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.timeout_s) and self.timeout_s > 0):
-            raise StageError(f"planner: the timeout must be a positive number of seconds, not {self.timeout_s}")
-        if not 0.0 <= self.goal_probability <= 1.0:
-            raise StageError(f"planner: the goal probability f_r must lie in [0, 1], not {self.goal_probability}")
-        if not (np.isfinite(self.step_rad) and self.step_rad > 0):
-            raise StageError(f"planner: the step must be a positive number of radians, not {self.step_rad}")
+        check_positive(self, "timeout_s", "step_rad")
+        check_positive(self, "connect_tolerance_rad", "goal_probability", zero=True)
+        check_positive(self, "smoothing_iterations", zero=True, integer=True)
+        if self.goal_probability > 1.0:
+            raise InvalidArgumentError(
+                "goal_probability", f"the goal probability f_r must lie in [0, 1], not {self.goal_probability}"
+            )
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from dualarm.plan.collision import CollisionChecker
 from dualarm.plan.goals import WtaGoalSampler
 from dualarm.plan.mcikrrt import PlanResult, TreeSearchSettings, mcikrrt
 from dualarm.plan.wta import Wta
+from dualarm.settings import check_positive
 from dualarm.tasks import Task
 
 #: The planners :meth:`PlanningProblem.solve` runs (the registry's, :data:`dualarm.methods.PLANNERS`).
@@ -45,6 +46,11 @@ class PlanningSettings:
     margin_m: float = 0.01
     resolution_rad: float = 0.02
     ompl_goals: int = 4
+
+    def __post_init__(self) -> None:
+        check_positive(self, "margin_m", zero=True)
+        check_positive(self, "resolution_rad")
+        check_positive(self, "ompl_goals", integer=True)
 
     def with_timeout(self, timeout_s: float | None) -> PlanningSettings:
         """The same settings with the planner's timeout [s] (unchanged for None)."""
