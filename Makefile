@@ -1,10 +1,16 @@
-# Quick start:  make run   (install, then run the main job: dualarm reproduce -> reports/reproduction/report.md)
-#               make test  (install, then run the test suite)
+# Quick start:  make run        (install, then run the main job: dualarm reproduce -> reports/reproduction/report.md)
+#               make test       (install, then run every test: both tiers, the viewers' too where Node.js is)
+#               make test-fast  (the unit tier alone: no PyBullet world, Dask cluster, subprocess or viewer, no run recorded)
 PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: install run test lint typecheck docs clean
+# Foxglove Studio's packages, which tests/record/test_viewer_foxglove.py runs; npm's own record of an install
+# (node_modules/.package-lock.json) is the stamp, so ``npm ci`` runs once per change of the lock file.
+FOXGLOVE := viewers/foxglove
+FOXGLOVE_STAMP := $(FOXGLOVE)/node_modules/.package-lock.json
+
+.PHONY: install viewers run test test-fast lint typecheck docs clean
 
 install: $(VENV)/.installed
 
@@ -17,8 +23,24 @@ $(VENV)/.installed: pyproject.toml
 run: install
 	$(BIN)/dualarm reproduce
 
-test: install
+viewers: $(FOXGLOVE_STAMP)
+
+$(FOXGLOVE_STAMP): $(FOXGLOVE)/package-lock.json
+	@if command -v npm >/dev/null; then \
+		echo "npm ci --prefix $(FOXGLOVE)"; \
+		npm ci --prefix $(FOXGLOVE) --loglevel=error >/dev/null && touch $@ \
+			|| { rm -f $@; echo "warning: npm ci --prefix $(FOXGLOVE) failed: the Foxglove tests will be skipped" >&2; }; \
+	else \
+		echo "npm not found: the Foxglove viewer tests will be skipped (they need Node.js >= 20)"; \
+	fi
+
+# Every test, both tiers (pyproject.toml's markers; tests/tiers.py guards them).
+test: install viewers
 	$(BIN)/python -m pytest -n auto --dist loadfile
+
+# The unit tier: what make test runs but the tests marked integration; pre-commit runs it.
+test-fast: install
+	$(BIN)/python -m pytest -n auto --dist loadfile -m "not integration"
 
 # ruff (lint and format), mypy and the layers (import-linter: an upward import fails); CI runs this
 # before the tests, pre-commit on every commit.

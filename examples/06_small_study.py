@@ -1,4 +1,5 @@
-"""A small study from Python: 6 generated trials, two methods, on a Dask LocalCluster; the rows in pandas, then the report."""
+"""A small study from Python: 6 generated trials, two methods, on a Dask LocalCluster; the rows in pandas, then the
+report."""
 
 import tempfile
 
@@ -20,6 +21,7 @@ if __name__ == "__main__":  # Dask starts its workers as new processes, which im
         print(rows.groupby("method")[["inconsistent", "failed"]].mean())
         solved = rows[(rows["method"] == "mc-inverse") & ~rows["failed"]]
         print(
-            f"mc-inverse, {len(solved)} trials solved: largest joint deviation between repetitions {solved['ik.rep_joint_deviation_max_rad'].max():.1e} rad"
+            f"mc-inverse, {len(solved)} trials solved: largest joint deviation between repetitions"
+            f" {solved['ik.rep_joint_deviation_max_rad'].max():.1e} rad"
         )
         print("report:", dualarm.write_study_report(out).name)

@@ -1,27 +1,26 @@
-"""Shared fixtures: the repository's robot and task directories, and PyBullet's own view of a URDF."""
+"""Fixtures and hooks shared by the tests; the helpers they import are in :mod:`tests.helpers`."""
 
-import contextlib
+import functools
 import json
 import shutil
 import subprocess
 import sys
 import sysconfig
 import tempfile
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterator
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-HUMANOID = REPO / "robots" / "humanoid"
-OFFSET = REPO / "robots" / "humanoid_offset"
-TASKS = REPO / "tasks"
+from tests import tiers
+from tests.helpers import HUMANOID, REPO, SHIPPED
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """A short base temporary directory, made for this run: a one-line message quotes a long path shortened (:func:`dualarm.errors.excerpt`), and the tests match whole paths, written for pytest's own base (``/tmp/pytest-of-USER/pytest-N``, 31 characters here); pytest-xdist adds ``popen-gwN/`` to it, which made 56 of those paths too long."""
+    """A short base temporary directory, made for this run: a one-line message quotes a long path shortened
+    (:func:`dualarm.errors.excerpt`), and the tests match whole paths, written for pytest's own base
+    (``/tmp/pytest-of-USER/pytest-N``, 31 characters here); pytest-xdist adds ``popen-gwN/`` to it, which made 56 of
+    those paths too long."""
     if config.option.basetemp is None and not hasattr(
         config, "workerinput"
     ):  # the controller's; the workers get theirs below it
@@ -29,23 +28,73 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    """The base temporary directory made in :func:`pytest_configure` removed when every test passed (kept, to look into, otherwise)."""
+    """The base temporary directory made in :func:`pytest_configure` removed when every test passed (kept, to look into,
+    otherwise)."""
     made = getattr(session.config, "_dualarm_basetemp", None)
     if made is not None and exitstatus == 0:
         shutil.rmtree(made, ignore_errors=True)
 
 
-def wrist_offset_robot(directory: Path) -> Path:
-    """Write into ``directory`` the offset humanoid with its left wrist pitch axis moved 2 cm off the forearm roll axis: a 7R arm of no SEW family (the right arm untouched). Returns ``directory``."""
-    text = (OFFSET / "humanoid_offset.urdf").read_text()
-    origin = text.index('<origin xyz="0 0 0"', text.index('<joint name="left_wrist_pitch"'))
-    (directory / "offset_wrist.urdf").write_text(
-        text[:origin] + '<origin xyz="0.02 0 0"' + text[origin + len('<origin xyz="0 0 0"') :]
-    )
-    (directory / "robot.toml").write_text(
-        (OFFSET / "robot.toml").read_text().replace('urdf = "humanoid_offset.urdf"', 'urdf = "offset_wrist.urdf"')
-    )
-    return directory
+@pytest.fixture(scope="session", autouse=True)
+def _tier_guard() -> Iterator[None]:
+    """The tiers' guard (:mod:`tests.tiers`): a test not marked ``integration`` that connects to PyBullet, starts a Dask
+    cluster or client, starts a process (but the numerics' C compiler) or a viewer, or records a run fails, naming the
+    call."""
+    with tiers.installed():
+        yield
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[object]:
+    """The test the guard judges: the one whose setup (its module and session fixtures included), call or teardown
+    runs."""
+    tiers.current = item
+    try:
+        return (yield)
+    finally:
+        tiers.current = None
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """A unit test that gets a fixture which, set up for an earlier test, made a guarded call fails before its setup."""
+    tiers.check_fixtures(item)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_fixture_setup(fixturedef: pytest.FixtureDef, request: pytest.FixtureRequest) -> Iterator[object]:
+    """The fixture the guard names when a test's setup makes a guarded call (its scope may share it with others)."""
+    tiers.fixtures.append(tiers.fixture_key(fixturedef))
+    try:
+        return (yield)
+    finally:
+        tiers.fixtures.pop()
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Iterator[pytest.TestReport]:
+    """A phase in which a unit test made a guarded call fails, even if the code under test caught the guard's error."""
+    report = yield
+    violations = item.stash.get(tiers.VIOLATIONS, [])
+    if violations and report.passed:
+        report.outcome = "failed"
+        report.longrepr = "\n".join(violations)
+    violations.clear()
+    return report
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _click_command_built_once() -> Iterator[None]:
+    """typer's ``CliRunner.invoke`` builds the app's Click command anew on every call (0.04 s; over the unit tier's 500
+    invocations, a tenth of its time): built once per app here, as the ``dualarm`` script builds it once per process."""
+    import typer.testing
+
+    build = typer.testing._get_command
+    typer.testing._get_command = functools.cache(build)
+    try:
+        yield
+    finally:
+        typer.testing._get_command = build
 
 
 @pytest.fixture(scope="session")
@@ -106,37 +155,6 @@ def wheel_env(tmp_path_factory) -> Path:
     return venv
 
 
-def still_path_fields(
-    n: int, *, joint: str = "a", hand: str = "left", method: str = "x", period_s: float = 0.01, **fields
-) -> dict:
-    """The fields of a one-joint, one-hand :class:`~dualarm.contracts.joint_path.JointPath` of ``n`` samples at rest at 0, every sample solved; ``fields`` replace any of them."""
-    import numpy as np
-
-    return {
-        "method": method,
-        "joint_names": (joint,),
-        "t": np.arange(n) * period_s,
-        "rep": np.zeros(n, int),
-        "q": np.zeros((n, 1)),
-        "qd": np.zeros((n, 1)),
-        "status": np.zeros(n, int),
-        "solve_time_s": np.zeros(n),
-        "hand_error_m": np.zeros((n, 1)),
-        "hands": (hand,),
-        **fields,
-    }
-
-
-#: Each shipped task and the method it is reproduced with, for the tests that open runs in the viewers.
-SHIPPED = {
-    "triangle": "mc-inverse",
-    "circle": "mc-inverse",
-    "ball_game": "tvgdd",
-    "carry_box": "mc-inverse",
-    "bowl_grasp": "mcikrrt",
-}
-
-
 @pytest.fixture(scope="session")
 def shipped_runs(tmp_path_factory, worker_id) -> dict[str, Path]:
     """Task name -> the run directory of a one-repetition run of that shipped task through every stage.
@@ -161,52 +179,3 @@ def shipped_runs(tmp_path_factory, worker_id) -> dict[str, Path]:
         if not made.is_file():
             made.write_text(json.dumps({name: str(run) for name, run in make(shared).items()}))
     return {name: Path(run) for name, run in json.loads(made.read_text()).items()}
-
-
-@dataclass
-class PyBulletURDF:
-    """A URDF loaded in its own DIRECT PyBullet client (fixed base at the origin): an independent forward kinematics for tests."""
-
-    client: int
-    body: int
-    joint: dict[str, int]
-    link: dict[str, int]
-
-    def set(self, names: Sequence[str], values: Sequence[float]) -> None:
-        """Put joints ``names`` at ``values`` [rad]."""
-        import pybullet as pb
-
-        for name, value in zip(names, values):
-            pb.resetJointState(self.body, self.joint[name], float(value), physicsClientId=self.client)
-
-    def frame(self, link: str) -> np.ndarray:
-        """The URDF frame of ``link`` (not a root link) in the world, (4, 4) [m]; PyBullet computes in single precision."""
-        import pybullet as pb
-
-        state = pb.getLinkState(self.body, self.link[link], computeForwardKinematics=True, physicsClientId=self.client)
-        T = np.eye(4)
-        T[:3, :3] = np.reshape(pb.getMatrixFromQuaternion(state[5]), (3, 3))
-        T[:3, 3] = state[4]
-        return T
-
-
-@contextlib.contextmanager
-def pybullet_urdf(path: Path) -> Iterator[PyBulletURDF]:
-    """``path`` loaded in a DIRECT PyBullet client, joints and child links by name; the client is closed after."""
-    import pybullet as pb
-
-    client = pb.connect(pb.DIRECT)
-    try:
-        body = pb.loadURDF(str(path), useFixedBase=True, physicsClientId=client)
-        infos = [
-            pb.getJointInfo(body, i, physicsClientId=client)
-            for i in range(pb.getNumJoints(body, physicsClientId=client))
-        ]
-        yield PyBulletURDF(
-            client,
-            body,
-            {info[1].decode(): i for i, info in enumerate(infos)},
-            {info[12].decode(): i for i, info in enumerate(infos)},
-        )
-    finally:
-        pb.disconnect(client)

@@ -19,8 +19,7 @@ import pytest
 
 import dualarm
 from dualarm.errors import DualarmError, InvalidArgumentError
-
-from .conftest import TASKS
+from tests.helpers import TASKS
 
 STUB = Path(dualarm.__file__).with_suffix(".pyi")
 
@@ -39,12 +38,17 @@ def test_all_is_the_stub_and_every_name_is_documented():
             assert value.__doc__ and value.__doc__.strip(), f"dualarm.{name} has no docstring"
 
 
+@pytest.mark.integration
 def test_import_is_light():
-    code = "import sys, dualarm; print(sorted(m for m in ('casadi', 'toppra', 'ruckig', 'pybullet', 'rerun', 'pandas') if m in sys.modules))"
+    code = (
+        "import sys, dualarm; print(sorted(m for m in ('casadi', 'toppra', 'ruckig', 'pybullet', 'rerun', 'pandas')"
+        " if m in sys.modules))"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]"
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("module", ["dualarm.contracts", "dualarm.stages"])
 def test_the_contracts_and_the_stages_import_no_heavy_library(module):
     """Stages import what they run on first use; the products passed between them are numpy alone."""
@@ -82,6 +86,7 @@ def robot():
     return dualarm.load_robot("humanoid")
 
 
+@pytest.mark.integration
 def test_frame_helpers_against_pybullet(robot):
     from dualarm.sim.world import load_pybullet_robot
 
@@ -132,7 +137,7 @@ def test_mc_inverse_one_pose_is_the_path_solvers_branch(robot):
     )
     np.testing.assert_array_equal(path.q[0], q)
     np.testing.assert_allclose(
-        dualarm.hand_pose(robot, "left", {**ready, **dict(zip(solution.joint_names, q))}), pose, atol=1e-9
+        dualarm.hand_pose(robot, "left", {**ready, **dict(zip(solution.joint_names, q, strict=True))}), pose, atol=1e-9
     )
 
 
@@ -194,6 +199,7 @@ def test_task_from_a_dict_is_the_task_from_its_file():
     )
 
 
+@pytest.mark.integration
 def test_run_in_memory_writes_nothing_and_every_sink_sees_the_same(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     task = dualarm.load_task("triangle", 2)

@@ -4,7 +4,7 @@ import pytest
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 runner = CliRunner()
 
@@ -39,6 +39,7 @@ def test_every_command_has_help(command):
     assert "Usage" in result.output and len(result.output.splitlines()) > 3
 
 
+@pytest.mark.integration
 def test_robot_check_humanoid_passes():
     result = runner.invoke(app, ["robot", "check", str(HUMANOID)])
     assert result.exit_code == 0, result.output
@@ -48,6 +49,7 @@ def test_robot_check_humanoid_passes():
     assert "L2 = 0.3200 m" in result.stdout
 
 
+@pytest.mark.integration
 def test_robot_check_bare_urdf(kuka_urdf):
     result = runner.invoke(
         app,
@@ -135,6 +137,7 @@ def test_user_mistakes_give_one_line_and_exit_2(args, needle, tmp_path):
     assert "Traceback" not in result.output
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("backend", ["casadi", "lvi"])
 def test_infeasible_ik_step_prints_one_line_even_from_c(backend, tmp_path):
     """Run in a subprocess, so that anything CasADi prints from C would show on stderr too."""
@@ -166,6 +169,7 @@ def test_infeasible_ik_step_prints_one_line_even_from_c(backend, tmp_path):
     assert "meets the hand-velocity equality (24)" in lines[1] and lines[2].startswith("the run is kept as failed in ")
 
 
+@pytest.mark.integration
 def test_ik_srs_json_lists_8_candidates_that_pybullet_confirms(humanoid):
     """Table I's analogue: every candidate of the JSON output reaches the pose in PyBullet, the
     valid ones are inside the limits, and all share the elbow magnitude |theta_4|."""
@@ -295,8 +299,10 @@ def test_arguments_outside_their_meaning_are_one_line_before_any_work(args, need
     assert "Traceback" not in result.output and not list(tmp_path.iterdir())
 
 
+@pytest.mark.integration
 def test_a_seed_of_any_size_plans_and_is_recorded_exactly(tmp_path):
-    """2**64 + 5 is past numpy's legacy range and OMPL's (its trials' seeds go on past it): the CSV, the summary and the run's manifest, read by the standard library, hold the exact integers."""
+    """2**64 + 5 is past numpy's legacy range and OMPL's (its trials' seeds go on past it): the CSV, the summary and the
+    run's manifest, read by the standard library, hold the exact integers."""
     import csv
     import json
     from pathlib import Path
@@ -327,6 +333,7 @@ def test_a_seed_of_any_size_plans_and_is_recorded_exactly(tmp_path):
     assert json.loads((Path(summary["run"]) / "manifest.json").read_text())["seed"] == summary["run_seed"]
 
 
+@pytest.mark.integration
 def test_a_run_with_a_huge_seed_records_it(tmp_path):
     import json
 
@@ -345,6 +352,7 @@ def test_messages_are_printed_as_they_are(tmp_path):
     assert "🤖" not in result.stderr and "🎶" not in result.stderr
 
 
+@pytest.mark.integration
 def test_table_cells_are_printed_as_they_are(tmp_path):
     """A run directory named with emoji codes and markup keeps its name in compare's table."""
     import shutil

@@ -1,4 +1,5 @@
-"""CasADi Functions compiled to machine code: the same results as CasADi's virtual machine, kept on disk, and the Function itself where there is no compiler."""
+"""CasADi Functions compiled to machine code: the same results as CasADi's virtual machine, kept on disk, and the
+Function itself where there is no compiler."""
 
 import subprocess
 
@@ -22,7 +23,8 @@ def cache(tmp_path, monkeypatch):
 
 
 def test_the_compiled_mc_inverse_equals_the_virtual_machine_bit_for_bit(humanoid, cache, monkeypatch):
-    """On reachable poses, singular ones (straight elbow), poses out of reach and random arm angles: every candidate and every reason."""
+    """On reachable poses, singular ones (straight elbow), poses out of reach and random arm angles: every candidate and
+    every reason."""
     chain = humanoid.hand_chain("left")
     solver = McInverse.of(chain)
     monkeypatch.setenv("DUALARM_COMPILE", "0")
@@ -37,7 +39,7 @@ def test_the_compiled_mc_inverse_equals_the_virtual_machine_bit_for_bit(humanoid
     psi = rng.uniform(-np.pi, np.pi, len(T))
     machine = [np.asarray(x) for x in plain.map(len(T))(np.hstack(list(T)), psi[None])]
     native = [np.asarray(x) for x in compiled(plain).map(len(T))(np.hstack(list(T)), psi[None])]
-    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(machine, native))
+    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(machine, native, strict=True))
     assert len(list(cache.glob("mc_inverse-*.so"))) == 1
 
 
@@ -79,7 +81,8 @@ def test_a_compiler_that_fails_leaves_the_function_as_it_is(cache, tmp_path, mon
 
 
 def test_one_pose_calls_equal_the_batched_path_and_check_their_inputs(humanoid):
-    """McInverse.solve checks its inputs inside the compiled call; what it does not accept is named as the numpy checks name it."""
+    """McInverse.solve checks its inputs inside the compiled call; what it does not accept is named as the numpy checks
+    name it."""
     solver = McInverse.of(humanoid.hand_chain("right"))
     rng = np.random.default_rng(3)
     Q = rng.uniform(solver.lower, solver.upper, (200, 7))

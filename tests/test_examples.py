@@ -38,6 +38,7 @@ def test_examples_are_numbered_and_short():
         assert len(code) <= 30, f"{path.name}: {len(code)} lines of code"
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
 def test_example_runs(path: Path, tmp_path: Path, wheel_env: Path):
     out = run_example(wheel_env / "bin" / "python", path, tmp_path)

@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 from dualarm.cli import app
 from dualarm.cli.runs import COMPARE_HEADER
 from dualarm.run import record_run
-from tests.conftest import TASKS
+from tests.helpers import TASKS
 
 runner = CliRunner()
 
@@ -34,7 +34,8 @@ def tree(directory: Path) -> dict[str, bytes | None]:
 
 
 def plant(directory: Path) -> dict[str, bytes | None]:
-    """The user's files of issue 16 in ``directory``: report.md (their notes), precious.txt and sub/data.csv; returns the tree."""
+    """The user's files of issue 16 in ``directory``: report.md (their notes), precious.txt and sub/data.csv; returns
+    the tree."""
     (directory / "sub").mkdir(parents=True, exist_ok=True)
     (directory / "report.md").write_bytes(b"# my notes\n")
     (directory / "precious.txt").write_bytes(b"keep me\n")
@@ -74,6 +75,7 @@ def _args(command: str, out: Path | str, run: Path, tmp_path: Path) -> list[str]
     return [a.format(out=out, run=run, rec=tmp_path / "rec") for a in WRITERS[command]]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("command", list(WRITERS))
 def test_a_users_directory_is_refused_and_survives(command, run, tmp_path):
     mine = tmp_path / "mine"
@@ -110,6 +112,7 @@ def test_a_reproduction_replaces_its_own_outputs(tmp_path):
     assert json.loads((out / "parts.json").read_text())["parts"][0]["name"] == "table-i"
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     ("args", "written"),
     [
@@ -129,6 +132,7 @@ def test_a_command_writes_again_into_its_own_directory(args, written, run, tmp_p
     assert (tmp_path / "o" / written).is_file()
 
 
+@pytest.mark.integration
 def test_a_run_adds_itself_beside_a_users_files(tmp_path):
     """A recordings directory only gains runs: the user's files, even inside the task's directory, stay as they were."""
     before = plant(tmp_path / "rec")
@@ -143,6 +147,7 @@ def test_a_run_adds_itself_beside_a_users_files(tmp_path):
     assert json.loads((tmp_path / "rec" / "triangle" / added / "manifest.json").read_text())["status"] == "complete"
 
 
+@pytest.mark.integration
 def test_plan_records_beside_a_users_files(tmp_path):
     before = plant(tmp_path / "rec")
     result = runner.invoke(
@@ -163,6 +168,7 @@ def test_plan_records_beside_a_users_files(tmp_path):
     assert {k: v for k, v in after.items() if k in before} == before and (tmp_path / "rec" / "bowl_grasp").is_dir()
 
 
+@pytest.mark.integration
 def test_compare_csv_never_overwrites_a_users_file(run, tmp_path):
     mine = tmp_path / "mine.csv"
     mine.write_bytes(b"name,value\nx,1\n")
@@ -171,6 +177,7 @@ def test_compare_csv_never_overwrites_a_users_file(run, tmp_path):
     assert mine.read_bytes() == b"name,value\nx,1\n"
 
 
+@pytest.mark.integration
 def test_compare_csv_writes_a_new_file_and_replaces_its_own(run, tmp_path):
     table = tmp_path / "deep" / "compare.csv"
     for _ in range(2):  # new, then an earlier compare's table
@@ -193,6 +200,7 @@ def _refused_paths(tmp_path: Path) -> dict[str, tuple[str, str]]:
     }
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("case", ["a regular file", "through a file", "too long", "empty"])
 @pytest.mark.parametrize("command", ["run", *WRITERS, "plan --recordings", "compare --csv"])
 def test_a_path_the_system_refuses_is_one_line(command, case, run, tmp_path):
@@ -226,8 +234,10 @@ def test_a_path_the_system_refuses_is_one_line(command, case, run, tmp_path):
     )  # plan made its own --out first, empty but for its marker
 
 
+@pytest.mark.integration
 def test_a_second_reproduction_into_a_directory_in_use_is_refused(tmp_path):
-    """Two real processes: the first holds its lock (its part paused until the test lets it go on); the second exits 2; the first then finishes with its outputs intact."""
+    """Two real processes: the first holds its lock (its part paused until the test lets it go on); the second exits 2;
+    the first then finishes with its outputs intact."""
     out, held, release = tmp_path / "repro", tmp_path / "held", tmp_path / "release"
     first_code = f"""
 import dataclasses, pathlib, sys, time

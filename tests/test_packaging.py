@@ -10,6 +10,10 @@ import sys
 import sysconfig
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.integration
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -41,7 +45,10 @@ def test_an_editable_install_is_a_plain_path_that_mypy_follows(tmp_path: Path):
 
 def test_wheel_holds_the_data_and_the_stub(wheel_env: Path, tmp_path: Path):
     python = wheel_env / "bin" / "python"
-    code = "import json, dualarm, dualarm.data as d; print(json.dumps([dualarm.__file__, str(d.robots_dir()), d.shipped_tasks(), d.shipped_robots(), len(dualarm.__all__)]))"
+    code = (
+        "import json, dualarm, dualarm.data as d; print(json.dumps([dualarm.__file__, str(d.robots_dir()),"
+        " d.shipped_tasks(), d.shipped_robots(), len(dualarm.__all__)]))"
+    )
     done = subprocess.run([str(python), "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     module, robots, tasks, shipped_robots, exported = json.loads(done.stdout)

@@ -1,4 +1,5 @@
-"""Ctrl-C (SIGINT) and SIGTERM on real ``dualarm`` processes: one line, exit 130 or 143, the run kept as failed, nothing hidden left, workers stopped and reaped.
+"""Ctrl-C (SIGINT) and SIGTERM on real ``dualarm`` processes: one line, exit 130 or 143, the run kept as failed, nothing
+hidden left, workers stopped and reaped.
 
 Each process is stopped (SIGSTOP) as soon as the state to interrupt is on disk, signalled, then
 continued (SIGCONT): the signal lands there whatever the machine's speed.
@@ -21,7 +22,8 @@ PATIENCE_S = 300
 
 
 def _default_sigint() -> None:
-    """In the child before exec: SIGINT as a terminal's foreground job has it (a shell may start background jobs with it ignored)."""
+    """In the child before exec: SIGINT as a terminal's foreground job has it (a shell may start background jobs with it
+    ignored)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
@@ -47,6 +49,7 @@ def _error_lines(stderr: str) -> list[str]:
     return [line for line in stderr.splitlines() if line.strip()]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     ("signum", "code", "line", "error"),
     [
@@ -80,7 +83,8 @@ def test_a_signalled_run_is_kept_as_failed(tmp_path, signum, code, line, error):
 
 
 def _workers(pid: int) -> dict[int, str]:
-    """The reproduction's worker processes (spawned children of ``pid``, by any of its threads: Dask's nannies start them from its event loop's): pid -> its start time, which tells a pid's later owner apart."""
+    """The reproduction's worker processes (spawned children of ``pid``, by any of its threads: Dask's nannies start
+    them from its event loop's): pid -> its start time, which tells a pid's later owner apart."""
     found = {}
     for child in " ".join(p.read_text() for p in Path(f"/proc/{pid}/task").glob("*/children")).split():
         cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
@@ -96,6 +100,7 @@ def _alive(pid: int, started: str) -> bool:
         return False
 
 
+@pytest.mark.integration
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="finds the workers in /proc (Linux)")
 @pytest.mark.parametrize(
     ("signum", "group", "code", "line"),
@@ -137,7 +142,8 @@ def test_an_interrupted_reproduction_stops_its_workers(tmp_path, signum, group, 
 
 
 def test_a_signal_while_the_rerun_stream_is_built_is_raised_after_it():
-    """The signal arrives inside the block (as it did inside ``rr.RecordingStream()``): the block completes, then the handler raises."""
+    """The signal arrives inside the block (as it did inside ``rr.RecordingStream()``): the block completes, then the
+    handler raises."""
     from dualarm.interrupt import held
 
     def handler(signum, frame):
@@ -156,7 +162,8 @@ def test_a_signal_while_the_rerun_stream_is_built_is_raised_after_it():
 
 
 def test_an_ignored_signal_stays_ignored_in_a_held_block():
-    """A command started in the background ignores SIGINT: inside held() it is neither held (a reproduction's loop watching the list ended on it, its parts unfinished, and a KeyError's traceback followed) nor raised after."""
+    """A command started in the background ignores SIGINT: inside held() it is neither held (a reproduction's loop
+    watching the list ended on it, its parts unfinished, and a KeyError's traceback followed) nor raised after."""
     from dualarm.interrupt import held
 
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -170,7 +177,8 @@ def test_an_ignored_signal_stays_ignored_in_a_held_block():
 
 
 def _in_thread(target) -> list:
-    """Run ``target`` in a thread; returns what it appends (and an exception's type name when it raises), and the thread."""
+    """Run ``target`` in a thread; returns what it appends (and an exception's type name when it raises), and the
+    thread."""
     seen: list = []
 
     def run():
@@ -185,7 +193,8 @@ def _in_thread(target) -> list:
 
 
 def test_a_stop_raises_terminated_in_the_thread_running_the_work_and_waits_for_a_held_block():
-    """dualarm.interrupt: stop(token) raises Terminated in the thread inside stoppable(token) (and in no other work), at once outside held() and at the block's end inside it; work started under a stopped token stops at once."""
+    """dualarm.interrupt: stop(token) raises Terminated in the thread inside stoppable(token) (and in no other work), at
+    once outside held() and at the block's end inside it; work started under a stopped token stops at once."""
     from dualarm.interrupt import held, stop, stoppable
 
     events = {name: threading.Event() for name in ("busy", "holding", "release")}

@@ -21,10 +21,13 @@ from dualarm.record.readback import read_run
 from dualarm.run import record_run
 from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
+
+pytestmark = pytest.mark.integration
 
 TRIANGLE = TASKS / "triangle.toml"
-#: A shipped task that starts at robot.toml's ``ready`` pose, away from its path start (the triangle starts on its path).
+#: A shipped task that starts at robot.toml's ``ready`` pose, away from its path start (the triangle starts on its
+#: path).
 CARRY_BOX = TASKS / "carry_box.toml"
 SLACK = 1 + 1e-6
 

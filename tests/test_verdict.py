@@ -26,7 +26,7 @@ from dualarm.stages import ExecuteStage
 from dualarm.tasks import load_task
 from dualarm.tasks.load import task_from_dict
 from dualarm.violations import ik_violations
-from tests.conftest import still_path_fields
+from tests.helpers import still_path_fields
 
 #: The right hand draws a square across the chest; DLS-SVD swings the right upper arm into the
 #: torso (found with `dualarm run ... --ik dls-svd --execute-anyway`).
@@ -87,7 +87,8 @@ right = { by = [0.0, 0.30, 0.0] }
 
 
 def _distance(task, q: dict[str, float], a: str, b: str) -> float:
-    """Signed distance [m] between robot links ``a`` and ``b`` at ``q``, by a fresh PyBullet client (no margin, no filter)."""
+    """Signed distance [m] between robot links ``a`` and ``b`` at ``q``, by a fresh PyBullet client (no margin, no
+    filter)."""
     with load_pybullet_robot(task.robot.urdf.path) as sim:
         sim.set_positions(list(q), list(q.values()))
         pb.performCollisionDetection(physicsClientId=sim.client)
@@ -120,6 +121,7 @@ def too_fast():
     return task, JointTrajectory("smooth", names, t, q, qd, qdd, np.zeros(len(t), int), fixed), T
 
 
+@pytest.mark.integration
 def test_a_trajectory_over_a_velocity_limit_is_refused_before_execution(too_fast):
     task, trajectory, T = too_fast
     with pytest.raises(StageError, match=r"refused to play the trajectory") as refused:
@@ -151,6 +153,7 @@ def square_runs(tmp_path_factory):
     return load_task(tmp / "square.toml"), tmp, refused, played
 
 
+@pytest.mark.integration
 def test_the_colliding_square_is_refused_naming_the_pair(square_runs):
     task, tmp, refused, _ = square_runs
     assert refused.exit_code == EXIT_CODES["failed"] == 1, refused.output
@@ -164,6 +167,7 @@ def test_the_colliding_square_is_refused_naming_the_pair(square_runs):
     assert any("right_upper_arm" in m and "torso" in m for m in refusal), manifest["violations"]
 
 
+@pytest.mark.integration
 def test_the_colliding_square_played_anyway_is_violated_with_the_pair_time_and_depth(square_runs):
     """The upper arm against the torso, at the time the preflight names: a fresh PyBullet client
     finds the two links overlapping at the smoothed trajectory's configuration at that time."""
@@ -193,6 +197,7 @@ def test_the_colliding_square_played_anyway_is_violated_with_the_pair_time_and_d
     assert data.metrics["execute.self_collisions"] > 0
 
 
+@pytest.mark.integration
 def test_crossing_hands_played_anyway_name_the_arms_that_touch():
     result = run_task(
         task_from_dict(tomllib.loads(CROSSING)), "dls-svd", execution=ExecutionSettings(execute_anyway=True)

@@ -1,14 +1,15 @@
-"""Build robots/dual_iiwa: two KUKA LBR iiwa 14 R820 arms (pybullet_data's kuka_iiwa/model.urdf) on a fixed torso, described by ``dualarm robot init``.
+"""Build robots/dual_iiwa: two KUKA LBR iiwa 14 R820 arms on a fixed torso, described by ``dualarm robot init``.
 
-The assembled URDF: ``base_link`` on the floor (x forward, y left, z up) holding a pedestal,
-``torso`` fixed 1.40 m above it (a 0.20 m wide box hanging 0.50 m below), and one iiwa on each side
-of the torso at that height, its base's z axis pointing out sideways (+y left, -y right) and its x
-axis forward. So each arm's first joint turns about the lateral axis, like a shoulder's pitch, and
-at the zero pose the arms stretch out sideways (a T pose) with the shoulder centres S 0.46 m out.
-Every iiwa link and joint is copied from pybullet_data (inertias, origins, axes, limits, and the
-licence comment), renamed ``left_...`` / ``right_...``; visuals and collisions use the STL meshes
-(the OBJ visuals would double the size for a colour the URDF's materials give), referenced as
-``package://kuka_iiwa/meshes/...`` and found through ``ROS_PACKAGE_PATH`` = pybullet_data's folder.
+The arms are pybullet_data's kuka_iiwa/model.urdf. The assembled URDF: ``base_link`` on the floor (x
+forward, y left, z up) holding a pedestal, ``torso`` fixed 1.40 m above it (a 0.20 m wide box
+hanging 0.50 m below), and one iiwa on each side of the torso at that height, its base's z axis
+pointing out sideways (+y left, -y right) and its x axis forward. So each arm's first joint turns
+about the lateral axis, like a shoulder's pitch, and at the zero pose the arms stretch out sideways
+(a T pose) with the shoulder centres S 0.46 m out. Every iiwa link and joint is copied from
+pybullet_data (inertias, origins, axes, limits, and the licence comment), renamed ``left_...`` /
+``right_...``; visuals and collisions use the STL meshes (the OBJ visuals would double the size for
+a colour the URDF's materials give), referenced as ``package://kuka_iiwa/meshes/...`` and found
+through ``ROS_PACKAGE_PATH`` = pybullet_data's folder.
 
 Then ``dualarm robot init`` writes the robot directory (URDF copy with relative mesh paths, the
 meshes, robot.toml) into a temporary folder, and its outputs replace dual_iiwa.urdf, robot.toml and
@@ -109,7 +110,10 @@ def assemble() -> str:
         _arm(robot, iiwa, side)
     ET.indent(robot)
     header = IIWA.read_text().split("<robot", 1)[0].replace('<?xml version="1.0" ?>', "").strip()
-    note = "<!-- dual_iiwa: two copies of pybullet_data's kuka_iiwa/model.urdf on a torso, assembled by robots/dual_iiwa/build.py; the iiwa's header and licence follow. -->"
+    note = (
+        "<!-- dual_iiwa: two copies of pybullet_data's kuka_iiwa/model.urdf on a torso, assembled by"
+        " robots/dual_iiwa/build.py; the iiwa's header and licence follow. -->"
+    )
     return '<?xml version="1.0"?>\n' + note + "\n" + header + "\n" + ET.tostring(robot, encoding="unicode") + "\n"
 
 

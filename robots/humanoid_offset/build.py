@@ -1,4 +1,6 @@
-"""Build robots/humanoid_offset: the shipped humanoid with a shoulder offset and an elbow offset, so its arms are 7R but not S-R-S.
+"""Build robots/humanoid_offset: the shipped humanoid with a shoulder offset and an elbow offset.
+
+So its arms are 7R but not S-R-S.
 
 Real humanoid arms rarely meet S-R-S exactly: their shoulder and elbow carry offsets of a few
 centimetres. This robot is the humanoid (``robots/humanoid``) with two of them on each arm:
@@ -29,10 +31,13 @@ HUMANOID = HERE.parent / "humanoid"
 SHOULDER_OFFSET_M = 0.04
 #: How far behind (-x) the upper arm's axis the elbow axis runs [m].
 ELBOW_OFFSET_M = 0.03
-HEADER = f"""dualarm humanoid with offsets, built by robots/humanoid_offset/build.py from robots/humanoid/humanoid.urdf
-     (do not edit: rebuild). The humanoid's arms with the shoulder pitch and upper-arm roll axes meeting
-     {SHOULDER_OFFSET_M} m in front of the shoulder yaw axis, and the elbow axis {ELBOW_OFFSET_M} m behind the upper arm's axis
-     (the forearm coming back as much). Not S-R-S: 7R arms of the R-2R-R-3R family. """
+HEADER = (
+    "dualarm humanoid with offsets, built by robots/humanoid_offset/build.py from robots/humanoid/humanoid.urdf\n"
+    "     (do not edit: rebuild). The humanoid's arms with the shoulder pitch and upper-arm roll axes meeting\n"
+    f"     {SHOULDER_OFFSET_M} m in front of the shoulder yaw axis, and the elbow axis {ELBOW_OFFSET_M} m behind the"
+    " upper arm's axis\n"
+    "     (the forearm coming back as much). Not S-R-S: 7R arms of the R-2R-R-3R family. "
+)
 
 
 def _shift(element: ET.Element, dx: float) -> None:
@@ -62,8 +67,10 @@ def build_toml() -> str:
         'urdf = "humanoid.urdf"', 'urdf = "humanoid_offset.urdf"'
     )
     description = (
-        f"The dualarm humanoid with a {SHOULDER_OFFSET_M * 100:g} cm shoulder offset (the shoulder pitch and upper-arm roll axes meet\n"
-        f"in front of the shoulder yaw axis) and a {ELBOW_OFFSET_M * 100:g} cm elbow offset on each arm: 7R arms that are not S-R-S\n"
+        f"The dualarm humanoid with a {SHOULDER_OFFSET_M * 100:g} cm shoulder offset (the shoulder pitch and"
+        " upper-arm roll axes meet\n"
+        f"in front of the shoulder yaw axis) and a {ELBOW_OFFSET_M * 100:g} cm elbow offset on each arm: 7R arms"
+        " that are not S-R-S\n"
         "(the SEW solver's R-2R-R-3R family). Built by build.py; everything else is the humanoid's."
     )
     text = re.sub(r'description = """.*?"""', f'description = """\n{description}"""', text, count=1, flags=re.S)

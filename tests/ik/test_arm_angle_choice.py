@@ -1,4 +1,5 @@
-"""MC-Inverse's arm angle: the sweep of feasible psi per branch, the default ``auto`` mode, the profile a run records, and the joint named when a branch leaves the limits."""
+"""MC-Inverse's arm angle: the sweep of feasible psi per branch, the default ``auto`` mode, the profile a run records,
+and the joint named when a branch leaves the limits."""
 
 import json
 import re
@@ -15,7 +16,7 @@ from dualarm.model.poses import pose_matrix
 from dualarm.paths import build_reference
 from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 #: triangle.toml's waypoint A, in the robot base frame.
 POSE_A = pose_matrix([0.300, 0.270, 1.003], [-1.572, -0.975, -1.570])
@@ -30,10 +31,11 @@ def _pybullet_check(sim, names, q, target) -> tuple[bool, bool]:
         for i in range(pb.getNumJoints(sim.body, physicsClientId=sim.client))
     }
     info = [pb.getJointInfo(sim.body, index[n], physicsClientId=sim.client) for n in names]
-    inside = all(i[8] - 1e-12 <= v <= i[9] + 1e-12 for i, v in zip(info, q))
+    inside = all(i[8] - 1e-12 <= v <= i[9] + 1e-12 for i, v in zip(info, q, strict=True))
     return reached, inside
 
 
+@pytest.mark.integration
 def test_sweep_intervals_agree_with_single_solves_checked_in_pybullet(humanoid):
     """Waypoint A of the triangle: at sampled psi inside a branch's intervals a single
     mc_inverse solve gives joints that PyBullet puts on the pose within PyBullet's joint limits;
@@ -65,7 +67,8 @@ def test_sweep_intervals_agree_with_single_solves_checked_in_pybullet(humanoid):
 
 
 def test_sweep_from_the_command_line_in_both_frames_agrees(humanoid):
-    """``ik srs --sweep --json`` of waypoint A in the robot frame and of the same pose in the chain frame give the same intervals, each output naming its frame."""
+    """``ik srs --sweep --json`` of waypoint A in the robot frame and of the same pose in the chain frame give the same
+    intervals, each output naming its frame."""
     from scipy.spatial.transform import Rotation
     from typer.testing import CliRunner
 
@@ -98,7 +101,7 @@ def test_sweep_from_the_command_line_in_both_frames_agrees(humanoid):
         outputs[frame] = json.loads(result.stdout)
         assert outputs[frame]["frame"]["kind"] == frame
     assert outputs["robot"]["frame"]["link"] == humanoid.urdf.root and outputs["chain"]["frame"]["link"] == "torso"
-    for a, b in zip(outputs["robot"]["branches"], outputs["chain"]["branches"]):
+    for a, b in zip(outputs["robot"]["branches"], outputs["chain"]["branches"], strict=True):
         assert a["valid_samples"] == b["valid_samples"] and np.allclose(
             a["intervals_rad"] or 0, b["intervals_rad"] or 0
         )
@@ -112,7 +115,8 @@ def _triangle(tmp_path, edit=lambda t: t):
 
 
 def test_the_default_mode_is_auto_and_chooses_what_auto_chooses(tmp_path):
-    """The triangle with its ``mode = "auto"`` line removed (the default) gives the joints of the shipped file's explicit auto, to the bit."""
+    """The triangle with its ``mode = "auto"`` line removed (the default) gives the joints of the shipped file's
+    explicit auto, to the bit."""
     explicit = load_task(TASKS / "triangle.toml", 1)
     default = _triangle(tmp_path, lambda t: t.replace('mode = "auto"\n', ""))
     assert 'mode = "auto"' not in default.text and default.spec.arm_angle.mode == "auto"
@@ -121,6 +125,7 @@ def test_the_default_mode_is_auto_and_chooses_what_auto_chooses(tmp_path):
     assert np.array_equal(a.q, b.q)
 
 
+@pytest.mark.integration
 def test_a_run_records_the_profile_in_its_manifest_and_metrics(tmp_path):
     """The manifest's ik settings and metrics.json hold the branch and the psi; checked against
     eq (1) from PyBullet's frames of the recorded joints, and the branch against a single solve."""
@@ -152,7 +157,8 @@ def test_a_run_records_the_profile_in_its_manifest_and_metrics(tmp_path):
 
 
 def test_a_branch_leaving_the_limits_names_the_joint_the_sample_and_the_way_out(tmp_path, humanoid):
-    """carry_box with the left arm angle held at 2.5 rad: the kept branch leaves a limit; the error names that joint (checked against the robot's limits), the sample, the time, and suggests auto."""
+    """carry_box with the left arm angle held at 2.5 rad: the kept branch leaves a limit; the error names that joint
+    (checked against the robot's limits), the sample, the time, and suggests auto."""
     text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     path = tmp_path / "carry_box.toml"
     path.write_text(text.replace('mode = "initial"', 'mode = "constant"\nvalue_rad = { left = 2.5, right = 0.0 }'))
@@ -162,7 +168,8 @@ def test_a_branch_leaving_the_limits_names_the_joint_the_sample_and_the_way_out(
         solve_mc_inverse(task.robot, ref, task.initial_q, settings_for(task))
     message = str(failure.value)
     match = re.search(
-        r"sample (\d+) \(t = ([\d.]+) s.*: (left_\w+) at (-?[\d.]+) rad is ([\d.]+) rad \(.* deg\) (above its upper|below its lower) limit",
+        r"sample (\d+) \(t = ([\d.]+) s.*: (left_\w+) at (-?[\d.]+) rad is ([\d.]+) rad \(.* deg\)"
+        r" (above its upper|below its lower) limit",
         message,
     )
     assert match, message

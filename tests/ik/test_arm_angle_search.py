@@ -1,4 +1,5 @@
-"""MC-Inverse's ``auto`` arm-angle search against the plain search it replaced: every start followed at once, the grid's candidates solved one pose and angle at a time in the virtual machine's mapped call.
+"""MC-Inverse's ``auto`` arm-angle search against the plain search it replaced: every start followed at once, the grid's
+candidates solved one pose and angle at a time in the virtual machine's mapped call.
 
 The search (:func:`dualarm.ik.analytic.mc_path._auto`) bounds each start's profile and follows only the
 starts that can still win, on candidates from the compiled grid call; the result must be the same
@@ -16,11 +17,12 @@ from dualarm.ik.analytic import mc_path
 from dualarm.ik.analytic.mc_inverse import VALID, McInverse
 from dualarm.paths import build_reference
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 
 def plain_search(solver: McInverse, targets, reference, preferred, q0, spec):
-    """The search as first written (session 10's code): all starts followed together in one dense dynamic programme; (profile, branch), or the sample where the longest profile ends."""
+    """The search as first written (session 10's code): all starts followed together in one dense dynamic programme;
+    (profile, branch), or the sample where the longest profile ends."""
     W, G = mc_path.AUTO_MAX_CELLS, len(mc_path.AUTO_GRID)
     shifts = np.arange(-W, W + 1)
     first = np.flatnonzero(reference.rep == reference.rep[0])
@@ -43,7 +45,7 @@ def plain_search(solver: McInverse, targets, reference, preferred, q0, spec):
             change = np.stack([np.abs(q[1:] - np.roll(q[:-1], d, axis=1)).max(axis=2) for d in shifts], axis=2)
         step_cost = np.where(change <= spec.max_joint_step_rad, change, np.inf) + np.abs(shifts) * (2 * np.pi / G)
 
-        def forward(cost, back=None):
+        def forward(cost, back=None, step_cost=step_cost, node=node):
             for k in range(1, n):
                 options = np.stack([np.roll(cost, d, axis=-1) + step_cost[k - 1, :, j] for j, d in enumerate(shifts)])
                 if back is not None:
@@ -108,7 +110,8 @@ def test_the_search_finds_the_plain_searchs_profile_and_branch_on_the_shipped_ta
 
 
 def test_an_open_path_and_a_failing_range_give_the_plain_searchs_answers(tmp_path):
-    """The triangle's first 150 samples (the profile ends anywhere), and psi held in (-0.3, 0.3) (no profile: the same sample is named)."""
+    """The triangle's first 150 samples (the profile ends anywhere), and psi held in (-0.3, 0.3) (no profile: the same
+    sample is named)."""
     task = load_task(TASKS / "triangle.toml")
     reference = build_reference(task)
     inputs = _search_inputs(task, reference)

@@ -67,7 +67,10 @@ def samples(humanoid):
 @pytest.fixture(scope="module")
 def results(solvers, samples):
     Q, targets, seeds = samples
-    return {name: [solver.solve(T, seed) for T, seed in zip(targets, seeds)] for name, solver in solvers.items()}
+    return {
+        name: [solver.solve(T, seed) for T, seed in zip(targets, seeds, strict=True)]
+        for name, solver in solvers.items()
+    }
 
 
 def pybullet_pose_error(world, humanoid, q, target, waist=None):
@@ -83,22 +86,25 @@ def pybullet_pose_error(world, humanoid, q, target, waist=None):
     return np.linalg.norm(reached[:3, 3] - goal[:3, 3]), np.arccos(cos)
 
 
+@pytest.mark.integration
 def test_tracik_success_rate(results):
     ok = sum(r.ok for r in results["trac-ik"])
     assert ok >= TRACIK_MIN_OK, f"TRAC-IK solved {ok}/{N}"
 
 
+@pytest.mark.integration
 def test_pybullet_success_rate(results):
     ok = sum(r.ok for r in results["pybullet"])
     assert ok >= PYBULLET_MIN_OK, f"PyBullet IK solved {ok}/{N}"
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["trac-ik", "pybullet"])
 def test_successes_reach_the_target_per_pybullet_fk(name, solvers, results, samples, pybullet_fk, humanoid):
     solver = solvers[name]
     _, targets, _ = samples
     checked = 0
-    for result, target in zip(results[name], targets):
+    for result, target in zip(results[name], targets, strict=True):
         if not result.ok:
             continue
         assert result.position_error_m <= solver.position_tolerance_m
@@ -109,12 +115,14 @@ def test_successes_reach_the_target_per_pybullet_fk(name, solvers, results, samp
     assert checked >= min(TRACIK_MIN_OK, PYBULLET_MIN_OK)
 
 
+@pytest.mark.integration
 def test_tolerances_follow_the_settings(tracik, pybullet_ik):
     assert tracik.position_tolerance_m == pytest.approx(np.sqrt(3) * 1e-9)
     assert tracik.orientation_tolerance_rad == pytest.approx(np.sqrt(3) * 5e-7)  # KDL's rotation resolution
     assert pybullet_ik.position_tolerance_m == 1e-9 and pybullet_ik.orientation_tolerance_rad == 1e-6
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["trac-ik", "pybullet"])
 def test_every_answer_respects_the_joint_limits(name, results, humanoid):
     lower, upper = humanoid.lower_upper(humanoid.chain_between(BASE, TIP).joint_names)
@@ -123,6 +131,7 @@ def test_every_answer_respects_the_joint_limits(name, results, humanoid):
         assert (result.q >= lower).all() and (result.q <= upper).all()
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("tip", ["left_hand", "right_hand"])
 def test_an_exact_seed_comes_back(tip, humanoid, pybullet_ik):
     chain = humanoid.chain_between(BASE, tip)
@@ -140,6 +149,7 @@ def test_an_exact_seed_comes_back(tip, humanoid, pybullet_ik):
             assert near.ok and np.abs(near.q - q).max() < 1e-5  # measured: up to 5e-7 rad, median 2e-15
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["trac-ik", "pybullet"])
 def test_an_unreachable_target_fails_without_raising(name, solvers, samples, humanoid, capfd):
     Q, targets, seeds = samples
@@ -154,24 +164,26 @@ def test_an_unreachable_target_fails_without_raising(name, solvers, samples, hum
     assert result.q.shape == (7,) and (result.q >= lower).all() and (result.q <= upper).all()
 
 
+@pytest.mark.integration
 def test_pybullet_keeps_the_waist_locked_where_asked(humanoid, samples, pybullet_fk):
     waist = {"waist_yaw": 0.3, "waist_pitch": -0.2, "waist_roll": 0.1}
     Q, targets, seeds = samples
     with PyBulletIkSolver.of(humanoid, BASE, TIP, locked=waist) as solver:
         pybullet_fk.set_positions(list(waist), list(waist.values()))
         assert np.abs(solver.base_in_world - pybullet_fk.link_pose(BASE)).max() < 1e-6
-        results = [solver.solve(T, seed) for T, seed in zip(targets[:10], seeds[:10])]
+        results = [solver.solve(T, seed) for T, seed in zip(targets[:10], seeds[:10], strict=True)]
     assert sum(r.ok for r in results) >= 9
-    for result, target in zip(results, targets):
+    for result, target in zip(results, targets, strict=False):
         if result.ok:
             position, orientation = pybullet_pose_error(pybullet_fk, humanoid, result.q, target, waist)
             assert position < PYBULLET_FK_TOLERANCE and orientation < PYBULLET_FK_TOLERANCE
 
 
+@pytest.mark.integration
 def test_a_shared_pybullet_solver_answers_as_a_new_one_does(humanoid, samples):
-    """PyBulletIkSolver.shared is kept open per process and reused (a study's worker loads the robot once): after solving
-    other targets from other seeds, with the waist locked elsewhere by another shared solver, it returns what a solver built
-    afresh returns, bit for bit; the same arguments give the same solver."""
+    """PyBulletIkSolver.shared is kept open per process and reused (a study's worker loads the robot once): after
+    solving other targets from other seeds, with the waist locked elsewhere by another shared solver, it returns what a
+    solver built afresh returns, bit for bit; the same arguments give the same solver."""
     Q, targets, seeds = samples
     waist = {"waist_yaw": 0.3, "waist_pitch": -0.2, "waist_roll": 0.1}
     shared = PyBulletIkSolver.shared(humanoid, BASE, TIP)
@@ -179,15 +191,16 @@ def test_a_shared_pybullet_solver_answers_as_a_new_one_does(humanoid, samples):
         PyBulletIkSolver.shared(humanoid, BASE, TIP) is shared
         and PyBulletIkSolver.shared(humanoid, BASE, TIP, locked=waist) is not shared
     )
-    for T, seed in zip(targets[10:20], seeds[::-1][:10]):
+    for T, seed in zip(targets[10:20], seeds[::-1][:10], strict=True):
         shared.solve(T, seed)
         PyBulletIkSolver.shared(humanoid, BASE, TIP, locked=waist).solve(T, seed)
     with PyBulletIkSolver.of(humanoid, BASE, TIP) as fresh:
-        for T, seed in zip(targets[:10], seeds[:10]):
+        for T, seed in zip(targets[:10], seeds[:10], strict=True):
             a, b = shared.solve(T, seed), fresh.solve(T, seed)
             assert np.array_equal(a.q, b.q) and a.ok == b.ok
 
 
+@pytest.mark.integration
 def test_a_root_link_with_inertia_and_a_base_com_offset(kuka_urdf, capfd):
     """The KUKA iiwa's root link has an inertia (KDL warns on stdout unless a dummy root is
     added) and a centre-of-mass offset (PyBullet moves its targets by it if given
@@ -201,7 +214,7 @@ def test_a_root_link_with_inertia_and_a_base_com_offset(kuka_urdf, capfd):
         Q = rng.uniform(tracik.lower, tracik.upper, size=(10, 7))
         seeds = np.clip(Q + rng.normal(0.0, 0.05, Q.shape), tracik.lower, tracik.upper)
         for solver in (tracik, pybullet_solver):
-            ok = sum(solver.solve(kin.pose(q), seed).ok for q, seed in zip(Q, seeds))
+            ok = sum(solver.solve(kin.pose(q), seed).ok for q, seed in zip(Q, seeds, strict=True))
             assert ok >= 9, f"{solver}: {ok}/10"
     assert capfd.readouterr().out == ""
 
@@ -235,6 +248,7 @@ def test_pybullet_rejects_bad_locked_joints(locked, humanoid):
         PyBulletIkSolver.of(humanoid, BASE, TIP, locked=locked)
 
 
+@pytest.mark.integration
 def test_results_are_frozen(results):
     result = results["trac-ik"][0]
     with pytest.raises(dataclasses.FrozenInstanceError):

@@ -48,5 +48,5 @@ def test_casadi_and_numpy_agree():
             tv, np.array([-1.0, -2.0]), np.array([1.0, 2.0]), np.array([0.5, -2.0]), np.array([0.5, 2.0]), 0.75, 1.0
         )
         nzlo, nzhi = velocity_bounds(np.array(th), nlo, nhi, -6.0, 6.0, 2.0)
-        for a, b in zip(f(tv, th), (nlo, nhi, nzlo, nzhi)):
+        for a, b in zip(f(tv, th), (nlo, nhi, nzlo, nzhi), strict=True):
             np.testing.assert_allclose(np.asarray(a).ravel(), b, atol=1e-14)

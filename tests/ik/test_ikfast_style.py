@@ -117,7 +117,7 @@ def test_nearest_returns_a_configuration_on_the_grid(request, which):
     Q = random_configurations(robot, chain, 20, seed=14)
     Q[:, 2] = ik.free_values[rng.integers(0, len(ik.free_values), len(Q))]
     T = adam_poses(robot, chain, Q)
-    for q, pose in zip(Q, T):
+    for q, pose in zip(Q, T, strict=True):
         result = ik.nearest(pose, q)
         assert result.ok
         assert np.abs(result.q - q).max() <= CONTAINS[which]
@@ -145,7 +145,8 @@ def test_out_of_reach_pose_keeps_the_seed(humanoid):
 
 
 def test_a_repeated_path_is_solved_as_each_pose_alone(humanoid):
-    """Along the circle task (its poses met again in each repetition, their candidates then reused): every sample is :meth:`IkfastStyle.nearest` of its pose from the previous solution, computed here without reuse."""
+    """Along the circle task (its poses met again in each repetition, their candidates then reused): every sample is
+    :meth:`IkfastStyle.nearest` of its pose from the previous solution, computed here without reuse."""
     from pathlib import Path
 
     from dualarm.ik.pose_level.pointwise import arm_problems, solve_pointwise

@@ -51,6 +51,7 @@ def test_reasons_match_independent_checks(humanoid):
     assert (reason == OUTSIDE_LIMITS).any() and (reason == VALID).any()
 
 
+@pytest.mark.integration
 def test_candidates_reach_the_pose_in_pybullet(humanoid):
     mc = McInverse.of(humanoid.chain("right_arm"))
     kin, Q, T, psi, C, reason = _roundtrip(mc, 20, seed=3)

@@ -13,7 +13,7 @@ from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.poses import invert, pose_errors
 from dualarm.paths import build_reference
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +65,8 @@ def test_a_scheduled_arm_angle_repeats_with_the_repetitions(tmp_path):
     path = tmp_path / "carry_box.toml"
     path.write_text(
         text.replace('mode = "initial"\n', "")
-        + 'mode = "schedule"\nschedule = { left = [[0.0, 0.0], [2.0, 0.1], [4.0, 0.0]], right = [[0.0, 0.0], [2.0, -0.1], [4.0, 0.0]] }\n'
+        + 'mode = "schedule"\nschedule = { left = [[0.0, 0.0], [2.0, 0.1], [4.0, 0.0]],'
+        " right = [[0.0, 0.0], [2.0, -0.1], [4.0, 0.0]] }\n"
     )
     task = load_task(path)
     ref = build_reference(task)

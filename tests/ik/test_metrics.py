@@ -10,7 +10,7 @@ from dualarm.ik.metrics import arm_angles, consistency_metrics
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.paths import build_reference
 from dualarm.tasks import load_task
-from tests.conftest import TASKS
+from tests.helpers import TASKS
 
 
 @pytest.fixture(scope="module")
@@ -74,8 +74,11 @@ def test_single_repetition_has_no_consistency_metrics():
     assert consistency_metrics(path, ref, arm_angles(path, task.robot, task.spec.arm_angle.vertical)) == {}
 
 
+@pytest.mark.integration
 def test_orientation_metrics_of_a_pose_level_method_and_of_an_unmeasured_path(carry):
-    """MC-Inverse reaches every asked orientation (PyBullet agrees to 1e-6 rad at every 50th sample), so its orientation error is ~0 and it counts as solving the orientation; a path that measured no orientation (a planner's, NaN) gets no orientation error keys rather than NaN in metrics.json."""
+    """MC-Inverse reaches every asked orientation (PyBullet agrees to 1e-6 rad at every 50th sample), so its orientation
+    error is ~0 and it counts as solving the orientation; a path that measured no orientation (a planner's, NaN) gets no
+    orientation error keys rather than NaN in metrics.json."""
     from scipy.spatial.transform import Rotation
 
     from dualarm.ik.metrics import ik_metrics
@@ -97,9 +100,9 @@ def test_orientation_metrics_of_a_pose_level_method_and_of_an_unmeasured_path(ca
 
 
 def test_condition_metrics_against_finite_differences_and_the_limits():
-    """The least joint-limit margin, from the robot's limits sample by sample, and the least manipulability sqrt(det(J J^T)),
-    from the singular values of Jacobians by central differences of the arm's forward kinematics (dualarm.describe.check), on
-    MC-Inverse's triangle."""
+    """The least joint-limit margin, from the robot's limits sample by sample, and the least manipulability sqrt(det(J
+    J^T)), from the singular values of Jacobians by central differences of the arm's forward kinematics
+    (dualarm.describe.check), on MC-Inverse's triangle."""
     from dualarm.describe.check import finite_difference_jacobians
     from dualarm.ik.metrics import condition_metrics
     from dualarm.model.kinematics import ChainKinematics
@@ -110,7 +113,7 @@ def test_condition_metrics_against_finite_differences_and_the_limits():
     metrics = condition_metrics(path, robot)
     margins = [
         min(q - robot.lower_upper([name])[0][0], robot.lower_upper([name])[1][0] - q)
-        for name, column in zip(path.joint_names, path.q.T)
+        for name, column in zip(path.joint_names, path.q.T, strict=True)
         for q in column
     ]
     assert metrics["ik.joint_limit_margin_min_rad"] == min(margins)

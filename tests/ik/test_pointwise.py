@@ -8,7 +8,9 @@ from dualarm.describe.check import pybullet_poses
 from dualarm.ik.pose_level.pointwise import POINTWISE_METHODS, solve_pointwise
 from dualarm.paths import build_reference
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
+
+pytestmark = pytest.mark.integration
 
 #: Position accuracy each method promises on a sample it reports as solved [m] (TRAC-IK runs with
 #: its own default epsilon, 1e-5 per twist component); PyBullet's FK is single precision (~1e-7).

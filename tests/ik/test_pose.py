@@ -1,4 +1,5 @@
-"""Pose task space of TV-GDD and pinv (orientation rows under the position rows of eqs 24 and 2-3), and the hand orientation error every IK run measures.
+"""Pose task space of TV-GDD and pinv (orientation rows under the position rows of eqs 24 and 2-3), and the hand
+orientation error every IK run measures.
 
 Orientation errors are checked against PyBullet's forward kinematics and scipy's rotations;
 feasibility against HiGHS (scipy's linprog), a solver other than the QP's.
@@ -32,7 +33,7 @@ from dualarm.ik.velocity.tvgdd import (
 )
 from dualarm.paths import build_reference
 from dualarm.sim.world import load_pybullet_robot
-from tests.conftest import still_path_fields
+from tests.helpers import still_path_fields
 
 #: Sample stride of the PyBullet checks along a path.
 STRIDE = 25
@@ -45,7 +46,8 @@ POSE_NU = 10.0
 def pybullet_orientation_errors(
     task, path: JointPath, reference, stride: int = STRIDE
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Rows k = 0, stride, ...: the angle of R_asked^T R_reached per hand [rad], R_reached by PyBullet, R_asked^T R_reached by scipy."""
+    """Rows k = 0, stride, ...: the angle of R_asked^T R_reached per hand [rad], R_reached by PyBullet, R_asked^T
+    R_reached by scipy."""
     rows = np.arange(0, len(path), stride)
     angles = np.empty((len(rows), len(path.hands)))
     with load_pybullet_robot(task.robot.urdf.path) as sim:
@@ -62,7 +64,8 @@ def pybullet_orientation_errors(
 
 @pytest.fixture(scope="module")
 def triangle():
-    """The shipped triangle (five repetitions), its reference, and MC-Inverse's first configuration (on the path start in position and orientation)."""
+    """The shipped triangle (five repetitions), its reference, and MC-Inverse's first configuration (on the path start
+    in position and orientation)."""
     task = dualarm.load_task("triangle")
     ref = build_reference(task)
     mc = solve_mc_inverse(
@@ -73,7 +76,8 @@ def triangle():
 
 @pytest.fixture(scope="module")
 def tvgdd_paths(triangle):
-    """TV-GDD on the triangle: position task space from the task's initial configuration, pose task space (the task's) from MC-Inverse's start with RMP and nu = POSE_NU (see test_pose_mode_with_the_task_defaults_fails_at_the_elbow)."""
+    """TV-GDD on the triangle: position task space from the task's initial configuration, pose task space (the task's)
+    from MC-Inverse's start with RMP and nu = POSE_NU (see test_pose_mode_with_the_task_defaults_fails_at_the_elbow)."""
     task, ref, start = triangle
     pose_settings = settings_for(task, scheme="rmp", nu=POSE_NU)
     assert pose_settings.task_space == "pose" == task.spec.ik.task_space
@@ -94,7 +98,8 @@ def pinv_paths(triangle):
 
 
 def test_rotation_vector_is_scipys():
-    """Seeded rotations of every angle, near 0 and near pi included: the CasADi log map equals scipy's rotation vector."""
+    """Seeded rotations of every angle, near 0 and near pi included: the CasADi log map equals scipy's rotation
+    vector."""
     M = cs.SX.sym("M", 3, 3)
     log = cs.Function("log", [M], [rotation_vector(M)])
     rng = np.random.default_rng(7)
@@ -123,8 +128,11 @@ def test_orientation_errors_are_the_angle_between():
     assert orientation_errors(A, A).max() < 1e-7
 
 
+@pytest.mark.integration
 def test_pose_stack_rows_match_pybullet_and_finite_differences(triangle):
-    """The pose stack of the triangle's hand: 6 rows on 7 joints; its rotation is PyBullet's, and the angular rows of its Jacobian are the central differences of the rotation (rotation vectors of R(theta + h e_i) R(theta - h e_i)^T / 2h, by scipy)."""
+    """The pose stack of the triangle's hand: 6 rows on 7 joints; its rotation is PyBullet's, and the angular rows of
+    its Jacobian are the central differences of the rotation (rotation vectors of R(theta + h e_i) R(theta - h e_i)^T /
+    2h, by scipy)."""
     task, _, _ = triangle
     stack = hand_stack(task.robot, task.spec.hands, task.initial_q, task_space="pose")
     assert (stack.n, stack.m, stack.reference_size) == (7, 6, 12)
@@ -143,8 +151,10 @@ def test_pose_stack_rows_match_pybullet_and_finite_differences(triangle):
         np.testing.assert_allclose(J[3:, i], omega, atol=1e-7)
 
 
+@pytest.mark.integration
 def test_pose_start_puts_the_hand_on_the_start_pose(triangle):
-    """The triangle's initial configuration is off the path start; in pose task space the start configuration puts the hand on the first sample's position and orientation (PyBullet), within the joint limits."""
+    """The triangle's initial configuration is off the path start; in pose task space the start configuration puts the
+    hand on the first sample's position and orientation (PyBullet), within the joint limits."""
     task, ref, _ = triangle
     stack = reference_stack(task.robot, ref, task.initial_q, False, "pose")
     lower, upper = task.robot.lower_upper(stack.joint_names)
@@ -157,9 +167,13 @@ def test_pose_start_puts_the_hand_on_the_start_pose(triangle):
     assert Rotation.from_matrix(ref.hands["left"].rotation[0].T @ T[:3, :3]).magnitude() < 1e-6
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("method", ["tvgdd", "pinv"])
 def test_pose_mode_tracks_the_orientation_and_position_mode_does_not(triangle, tvgdd_paths, pinv_paths, method):
-    """Along the triangle (every 25th sample, PyBullet): the recorded orientation error is the angle between the asked and the reached hand rotations; in pose task space it stays under 2e-3 rad (measured 1.55e-3 rad for TV-GDD, 1.52e-3 rad for pinv, the lag of the K = 20 feedback) and the hand position under 0.5 mm, while in position task space the orientation is up to 2.37 rad off. The metrics say which solved the orientation."""
+    """Along the triangle (every 25th sample, PyBullet): the recorded orientation error is the angle between the asked
+    and the reached hand rotations; in pose task space it stays under 2e-3 rad (measured 1.55e-3 rad for TV-GDD, 1.52e-3
+    rad for pinv, the lag of the K = 20 feedback) and the hand position under 0.5 mm, while in position task space the
+    orientation is up to 2.37 rad off. The metrics say which solved the orientation."""
     task, ref, _ = triangle
     paths = tvgdd_paths if method == "tvgdd" else pinv_paths
     worst = {}
@@ -188,13 +202,18 @@ def test_pose_mode_stays_within_the_bounds(tvgdd_paths, triangle):
 
 
 def test_pose_mode_with_the_papers_nu_fails_at_the_elbow(triangle):
-    """With the paper's nu = 2 instead of the triangle's 10 (MVN, the start nearest the initial configuration) the pose QP runs out of room at the left elbow: the error names it at its eq (21) bound, and HiGHS finds no velocity within the bounds (25) that meets (24) at that step (rebuilt here by the same Euler steps)."""
+    """With the paper's nu = 2 instead of the triangle's 10 (MVN, the start nearest the initial configuration) the pose
+    QP runs out of room at the left elbow: the error names it at its eq (21) bound, and HiGHS finds no velocity within
+    the bounds (25) that meets (24) at that step (rebuilt here by the same Euler steps)."""
     task, ref, _ = triangle
     settings = settings_for(task, nu=2.0)
     assert (settings.task_space, settings.scheme, settings.nu) == ("pose", "mvn", 2.0)
     with pytest.raises(
         StageError,
-        match=r"infeasible: no joint velocity within the bounds \(25\) meets the hand-velocity equality \(24\) \(6 task rows \(pose\) on 7 joints\).*left_elbow at zeta-",
+        match=(
+            r"infeasible: no joint velocity within the bounds \(25\) meets the hand-velocity equality \(24\)"
+            r" \(6 task rows \(pose\) on 7 joints\).*left_elbow at zeta-"
+        ),
     ) as caught:
         solve_tvgdd(task.robot, ref, task.initial_q, settings)
     k = caught.value.sample
@@ -209,7 +228,10 @@ def test_pose_mode_with_the_papers_nu_fails_at_the_elbow(triangle):
         theta = theta + ref.period_s * np.asarray(velocity).ravel()
     _, _, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(theta, ref.t[k], R[k], V[k], theta0))
     assert (
-        linprog(np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(lo.ravel(), hi.ravel()))).status == 2
+        linprog(
+            np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(lo.ravel(), hi.ravel(), strict=True))
+        ).status
+        == 2
     )  # infeasible
     elbow = stack.joint_names.index("left_elbow")
     assert lo.ravel()[elbow] == pytest.approx(
@@ -218,11 +240,16 @@ def test_pose_mode_with_the_papers_nu_fails_at_the_elbow(triangle):
     # with that one bound loosened to the velocity limit, the step is feasible: the elbow is what holds it back
     loose = lo.ravel().copy()
     loose[elbow] = -bounds.velocity[elbow]
-    assert linprog(np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(loose, hi.ravel()))).status == 0
+    assert (
+        linprog(np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(loose, hi.ravel(), strict=True))).status
+        == 0
+    )
 
 
+@pytest.mark.integration
 def test_ball_game_stays_position_only():
-    """The ball game keeps the TV-GDD paper's task (m = 3 per hand): its settings, stack and path say position, and its orientation is measured (PyBullet) but not solved."""
+    """The ball game keeps the TV-GDD paper's task (m = 3 per hand): its settings, stack and path say position, and its
+    orientation is measured (PyBullet) but not solved."""
     task = dualarm.load_task("ball_game")
     ref = build_reference(task)
     settings = settings_for(task)
@@ -235,8 +262,10 @@ def test_ball_game_stays_position_only():
     assert ik_metrics(path, task.robot)["ik.orientation_solved"] == 0.0
 
 
+@pytest.mark.integration
 def test_pose_level_methods_measure_their_orientation_error(triangle):
-    """PyBullet's own IK on one triangle repetition: the path's orientation errors are PyBullet FK's, and it counts as solving the orientation."""
+    """PyBullet's own IK on one triangle repetition: the path's orientation errors are PyBullet FK's, and it counts as
+    solving the orientation."""
     task, _, _ = triangle
     one = dualarm.load_task("triangle", 1)
     ref = build_reference(one)
@@ -294,8 +323,12 @@ def pose_tvgdd(pose_task):
     return solve_tvgdd(task.robot, ref, task.initial_q, settings_for(task))
 
 
+@pytest.mark.integration
 def test_pose_task_starts_on_the_path_at_mc_inverses_configuration(pose_task):
-    """The task's initial configuration puts the left hand on the path start in position and orientation (PyBullet FK) and is MC-Inverse's first configuration, as the task's notes say: rounded to 1e-6 rad, and the auto arm-angle grid is centred on the initial configuration's arm angle, which moves MC-Inverse's path by about 1e-6 rad. The right arm is at robot.toml's ready."""
+    """The task's initial configuration puts the left hand on the path start in position and orientation (PyBullet FK)
+    and is MC-Inverse's first configuration, as the task's notes say: rounded to 1e-6 rad, and the auto arm-angle grid
+    is centred on the initial configuration's arm angle, which moves MC-Inverse's path by about 1e-6 rad. The right arm
+    is at robot.toml's ready."""
     task, ref, mc = pose_task
     initial = np.array([task.initial_q[n] for n in mc.joint_names])
     np.testing.assert_allclose(initial, mc.q[0], rtol=0, atol=2e-6)
@@ -307,8 +340,13 @@ def test_pose_task_starts_on_the_path_at_mc_inverses_configuration(pose_task):
     assert Rotation.from_matrix(ref.hands["left"].rotation[0].T @ T[:3, :3]).magnitude() < 5e-6
 
 
+@pytest.mark.integration
 def test_the_hand_pose_fixes_the_elbow_beyond_the_papers_nu(pose_task):
-    """The elbow angle from the reference alone - the law of cosines on the shoulder-wrist distance, with the link lengths and the wrist's offset in the hand frame read from PyBullet - is MC-Inverse's at every sample (any IK on the pose has it). Eq (21) lets a joint approach its limit at most nu times its distance per second; the path asks the elbow for 5.0 (triangle) and 7.3 (circle) times, 0.031 and 0.027 rad from its limit, as the notes say: more than the paper's nu = 2, less than the task's."""
+    """The elbow angle from the reference alone - the law of cosines on the shoulder-wrist distance, with the link
+    lengths and the wrist's offset in the hand frame read from PyBullet - is MC-Inverse's at every sample (any IK on the
+    pose has it). Eq (21) lets a joint approach its limit at most nu times its distance per second; the path asks the
+    elbow for 5.0 (triangle) and 7.3 (circle) times, 0.031 and 0.027 rad from its limit, as the notes say: more than the
+    paper's nu = 2, less than the task's."""
     task, ref, mc = pose_task
     elbow = mc.joint_names.index("left_elbow")
     with load_pybullet_robot(task.robot.urdf.path) as sim:
@@ -334,8 +372,12 @@ def test_the_hand_pose_fixes_the_elbow_beyond_the_papers_nu(pose_task):
     assert 2.0 < needed < task.spec.gesture.nu
 
 
+@pytest.mark.integration
 def test_pose_tvgdd_completes_the_shipped_task_with_its_own_settings(pose_task, pose_tvgdd):
-    """TV-GDD with the task's [gesture] and [ik] settings from its initial configuration: every step feasible, the joints within PyBullet's limits and within the velocity bounds (25), the hand within 0.5 mm and 2e-3 rad of the reference (PyBullet FK, every 25th sample). Where the task sets no goal the bands of eq (19) are the joint limits; on the triangle the joints repeat within 0.03 rad (the notes' 0.027)."""
+    """TV-GDD with the task's [gesture] and [ik] settings from its initial configuration: every step feasible, the
+    joints within PyBullet's limits and within the velocity bounds (25), the hand within 0.5 mm and 2e-3 rad of the
+    reference (PyBullet FK, every 25th sample). Where the task sets no goal the bands of eq (19) are the joint limits;
+    on the triangle the joints repeat within 0.03 rad (the notes' 0.027)."""
     task, ref, _ = pose_task
     path = pose_tvgdd
     assert path.task_space == "pose" and len(path) == len(ref)
@@ -359,7 +401,9 @@ def test_pose_tvgdd_completes_the_shipped_task_with_its_own_settings(pose_task, 
 
 
 def test_triangle_mvn_without_the_shoulder_yaw_goal_drifts_out_of_room(triangle):
-    """The triangle's [gesture] without its one goal: MVN drifts along the self-motion (the shoulder yaw rises by more than 0.4 rad in each of the first two triangles) and a step of the third triangle is infeasible; HiGHS confirms it at that step (rebuilt by the same Euler steps)."""
+    """The triangle's [gesture] without its one goal: MVN drifts along the self-motion (the shoulder yaw rises by more
+    than 0.4 rad in each of the first two triangles) and a step of the third triangle is infeasible; HiGHS confirms it
+    at that step (rebuilt by the same Euler steps)."""
     task, ref, _ = triangle
     settings = settings_for(task, goal_upper={})
     assert settings.scheme == "mvn" and task.spec.gesture.goal_upper == {
@@ -385,12 +429,18 @@ def test_triangle_mvn_without_the_shoulder_yaw_goal_drifts_out_of_room(triangle)
     assert starts[1] - starts[0] > 0.4 and starts[2] - starts[1] > 0.4
     _, _, J, rhs, lo, hi, _, _ = (np.asarray(x) for x in problem.data(theta, ref.t[k], R[k], V[k], theta0))
     assert (
-        linprog(np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(lo.ravel(), hi.ravel()))).status == 2
+        linprog(
+            np.zeros(stack.n), A_eq=J, b_eq=rhs.ravel(), bounds=list(zip(lo.ravel(), hi.ravel(), strict=True))
+        ).status
+        == 2
     )  # infeasible
 
 
+@pytest.mark.integration
 def test_pose_tvgdd_from_ready_starts_on_another_branch_and_fails(pose_task):
-    """Why the pose tasks start on the path: from robot.toml's ready, TV-GDD (the task's settings) starts on the pose solution nearest ready, which puts the hand on the path start too (PyBullet) but on another branch than MC-Inverse's (the wrist pitch of the other sign), and its QP runs out of room within the first repetition."""
+    """Why the pose tasks start on the path: from robot.toml's ready, TV-GDD (the task's settings) starts on the pose
+    solution nearest ready, which puts the hand on the path start too (PyBullet) but on another branch than MC-Inverse's
+    (the wrist pitch of the other sign), and its QP runs out of room within the first repetition."""
     task, ref, mc = pose_task
     settings = settings_for(task)
     stack = reference_stack(task.robot, ref, "ready", False, "pose")

@@ -1,4 +1,6 @@
-"""SEW-angle IK on arms that are not S-R-S, of both families: the Franka Panda (3R-R-2R-R) and the offset humanoid (R-2R-R-3R). Every candidate against the project's double-precision FK, PyBullet's FK, the paper's form of the stereographic SEW angle, and IK-Geo (the `ik-geo` package) with one joint fixed; on S-R-S arms, against MC-Inverse."""
+"""SEW-angle IK on arms that are not S-R-S, of both families: the Franka Panda (3R-R-2R-R) and the offset humanoid
+(R-2R-R-3R). Every candidate against the project's double-precision FK, PyBullet's FK, the paper's form of the
+stereographic SEW angle, and IK-Geo (the `ik-geo` package) with one joint fixed; on S-R-S arms, against MC-Inverse."""
 
 import numpy as np
 import pytest
@@ -10,7 +12,7 @@ from dualarm.ik.analytic.sew import SewAngle, solve, solve_many
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import load_robot
 from dualarm.model.sew import FIRST_JOINT_FAMILY, UPPER_ARM_FAMILY, NotSewError, sew_chain
-from tests.conftest import HUMANOID, OFFSET, REPO, pybullet_urdf, wrist_offset_robot
+from tests.helpers import HUMANOID, OFFSET, REPO, pybullet_urdf, wrist_offset_robot
 
 PANDA = REPO / "robots" / "panda"
 #: The stereographic SEW angle: singular half-line straight down from the shoulder (into the robot), reference up.
@@ -43,8 +45,11 @@ def _chain_frame(sim, chain, link):
     return np.linalg.inv(base) @ sim.frame(link)
 
 
+@pytest.mark.integration
 def test_the_product_of_exponentials_is_the_urdf_chain(arm7):
-    """The POE poses equal the chain's FK (1e-11) at random configurations; S, E, C, W sit on the axes that define them, as PyBullet places the joints at q = 0; the offsets are the arm's: the Panda's 0.088 m at the wrist and 0.0825 m at the elbow, the offset humanoid's 0.04 m at the shoulder and 0.03 m at the elbow (behind the upper arm)."""
+    """The POE poses equal the chain's FK (1e-11) at random configurations; S, E, C, W sit on the axes that define them,
+    as PyBullet places the joints at q = 0; the offsets are the arm's: the Panda's 0.088 m at the wrist and 0.0825 m at
+    the elbow, the offset humanoid's 0.04 m at the shoulder and 0.03 m at the elbow (behind the upper arm)."""
     robot, chain, arm, Q, urdf = arm7
     assert np.abs(arm.poses(Q) - ChainKinematics.of(chain).poses(Q)).max() < 1e-11
     S, E, C, W = arm.shoulder, arm.elbow, arm.crossing, arm.wrist
@@ -52,7 +57,7 @@ def test_the_product_of_exponentials_is_the_urdf_chain(arm7):
     with pybullet_urdf(urdf) as sim:  # at q = 0
         import pybullet as pb
 
-        for name, point in zip(chain.joint_names, on):
+        for name, point in zip(chain.joint_names, on, strict=True):
             info = pb.getJointInfo(sim.body, sim.joint[name], physicsClientId=sim.client)
             T = _chain_frame(sim, chain, info[12].decode())  # the joint frame is its child link's
             axis = T[:3, :3] @ np.asarray(info[13])
@@ -72,7 +77,8 @@ def test_the_product_of_exponentials_is_the_urdf_chain(arm7):
 
 
 def test_the_stereographic_angle_is_the_papers_formula():
-    """psi = atan2(n_sew . (w x n_ref), n_sew . n_ref), n_sew = W x E, n_ref = (w - e_t) x e_r (Elias and Wen), on random points."""
+    """psi = atan2(n_sew . (w x n_ref), n_sew . n_ref), n_sew = W x E, n_ref = (w - e_t) x e_r (Elias and Wen), on
+    random points."""
     rng = np.random.default_rng(0)
     S, E, W = rng.normal(size=(3, 200, 3))
     t, r = np.array(STEREO.singular), np.array(STEREO.reference)
@@ -86,7 +92,10 @@ def test_the_stereographic_angle_is_the_papers_formula():
 
 
 def test_every_candidate_reproduces_the_pose_and_angle_and_one_is_the_configuration(arm7):
-    """60 random configurations within the limits: at each one's own pose and SEW angle, one candidate is that configuration (1e-6: near a double root it is determined only so far), and every candidate reproduces the pose by the chain's FK to 1e-9 m / 1e-9 and the angle to 1e-9 rad. Their number is even: the last subproblem (the shoulder's or the wrist's pair of axes) gives two distinct roots at a configuration off its singularity."""
+    """60 random configurations within the limits: at each one's own pose and SEW angle, one candidate is that
+    configuration (1e-6: near a double root it is determined only so far), and every candidate reproduces the pose by
+    the chain's FK to 1e-9 m / 1e-9 and the angle to 1e-9 rad. Their number is even: the last subproblem (the shoulder's
+    or the wrist's pair of axes) gives two distinct roots at a configuration off its singularity."""
     _, chain, arm, Q, _ = arm7
     kin = ChainKinematics.of(chain)
     for q in Q:
@@ -101,11 +110,12 @@ def test_every_candidate_reproduces_the_pose_and_angle_and_one_is_the_configurat
         assert len(found.q) % 2 == 0
 
 
-#: Configurations (indices among `random_configurations(robot, chain, 10000, seed=0)`, as `dualarm bench ik` draws them) whose
-#: solutions a sign change on the search's grid alone does not bracket: on the offset humanoid a branch that exists only
-#: between two samples (the elbow near its reach: 129, 671, 1208, 4474, 8993, 9035; subproblem 2 at its limit: 1773, 5379,
-#: 5514, 8218); on the Panda a root between a branch's end and the first sample, with a turn (2678, 4764, 8408), and a root
-#: at a gap in a branch narrower than a sample (7129). The numpy search of the previous version missed all 14.
+#: Configurations (indices among `random_configurations(robot, chain, 10000, seed=0)`, as `dualarm bench ik` draws them)
+#: whose solutions a sign change on the search's grid alone does not bracket: on the offset humanoid a branch that
+#: exists only between two samples (the elbow near its reach: 129, 671, 1208, 4474, 8993, 9035; subproblem 2 at its
+#: limit: 1773, 5379, 5514, 8218); on the Panda a root between a branch's end and the first sample, with a turn (2678,
+#: 4764, 8408), and a root at a gap in a branch narrower than a sample (7129). The numpy search of the previous version
+#: missed all 14.
 HARD = {
     "humanoid_offset": [129, 671, 1208, 1773, 4474, 5379, 5514, 8218, 8993, 9035],
     "panda": [2678, 4764, 7129, 8408],
@@ -113,19 +123,22 @@ HARD = {
 
 
 def test_roots_near_and_between_a_branchs_ends_are_found(arm7):
-    """At the :data:`HARD` configurations' poses and SEW angles the configuration is among the solutions (1e-9 rad), which reproduce the pose by the chain's FK (1e-9)."""
+    """At the :data:`HARD` configurations' poses and SEW angles the configuration is among the solutions (1e-9 rad),
+    which reproduce the pose by the chain's FK (1e-9)."""
     from dualarm.model.robot import random_configurations
 
     robot, chain, arm, _, _ = arm7
     Q = random_configurations(robot, chain, 10000, 0)[HARD[robot.name]]
     T = ChainKinematics.of(chain).poses(Q)
-    for q, pose, found in zip(Q, T, solve_many(arm, T, STEREO.angle(*arm.points(Q)), STEREO)):
+    for q, pose, found in zip(Q, T, solve_many(arm, T, STEREO.angle(*arm.points(Q)), STEREO), strict=True):
         assert _wrapped(found.q - q).max(axis=1).min() < 1e-9
         assert np.abs(ChainKinematics.of(chain).poses(found.q) - pose).max() < 1e-9
 
 
+@pytest.mark.integration
 def test_candidates_agree_with_pybullet(arm7):
-    """PyBullet's hand frame (in the chain's base frame) at every candidate of 10 poses equals the asked pose (1e-6: PyBullet reports float32)."""
+    """PyBullet's hand frame (in the chain's base frame) at every candidate of 10 poses equals the asked pose (1e-6:
+    PyBullet reports float32)."""
     _, chain, arm, Q, urdf = arm7
     kin = ChainKinematics.of(chain)
     with pybullet_urdf(urdf) as sim:
@@ -139,7 +152,9 @@ def test_candidates_agree_with_pybullet(arm7):
 
 
 def test_ik_geo_with_one_joint_fixed_finds_the_same_solutions(arm7):
-    """IK-Geo (`ik-geo`, wired by dualarm.bench.ik.ik_geo_solutions) with the joint its 6R leaves out fixed at a candidate's (q7 on the Panda, reversed; q1 on the offset humanoid): every candidate is among its solutions, and every exact solution it finds there with our SEW angle is among ours (1e-6)."""
+    """IK-Geo (`ik-geo`, wired by dualarm.bench.ik.ik_geo_solutions) with the joint its 6R leaves out fixed at a
+    candidate's (q7 on the Panda, reversed; q1 on the offset humanoid): every candidate is among its solutions, and
+    every exact solution it finds there with our SEW angle is among ours (1e-6)."""
     _, chain, arm, Q, _ = arm7
     kin = ChainKinematics.of(chain)
     checked = 0
@@ -158,7 +173,10 @@ def test_ik_geo_with_one_joint_fixed_finds_the_same_solutions(arm7):
 
 @pytest.mark.parametrize("robot_dir", [HUMANOID, REPO / "robots" / "dual_iiwa"], ids=["humanoid", "dual_iiwa"])
 def test_on_s_r_s_arms_it_gives_mc_inverses_candidates(robot_dir):
-    """On an S-R-S arm (R-2R-R-3R with axis 1 through the shoulder) the SEW angle with e_r = -V (conventional) is minus MC-Inverse's arm angle of eq (1) (1e-9 rad: the iiwa's URDF axes are exact only to ~1e-13), and at a pose's angle the SEW solutions are MC-Inverse's 8 candidates, each of ours one of theirs and each of theirs one of ours (1e-9 rad), at 30 random configurations per arm."""
+    """On an S-R-S arm (R-2R-R-3R with axis 1 through the shoulder) the SEW angle with e_r = -V (conventional) is minus
+    MC-Inverse's arm angle of eq (1) (1e-9 rad: the iiwa's URDF axes are exact only to ~1e-13), and at a pose's angle
+    the SEW solutions are MC-Inverse's 8 candidates, each of ours one of theirs and each of theirs one of ours (1e-9
+    rad), at 30 random configurations per arm."""
     robot = load_robot(robot_dir)
     for hand in ("left", "right"):
         chain = robot.hand_chain(hand)
@@ -170,7 +188,7 @@ def test_on_s_r_s_arms_it_gives_mc_inverses_candidates(robot_dir):
         psi_mc = mc.kinematics.arm_angles(Q)
         assert _wrapped(conventional.angle(*arm.points(Q)) + psi_mc).max() < 1e-9
         kin = ChainKinematics.of(chain)
-        for q, psi in zip(Q, psi_mc):
+        for q, psi in zip(Q, psi_mc, strict=True):
             T = kin.pose(q)
             ours, theirs = solve(arm, T, -psi, conventional).q, mc.solve(T, psi).q
             assert len(ours) == 8
@@ -179,11 +197,15 @@ def test_on_s_r_s_arms_it_gives_mc_inverses_candidates(robot_dir):
 
 
 def test_refusals_name_the_chain_and_why(tmp_path):
-    """A 7R arm of neither family names both families' axes and how far they miss; a chain without 7 joints is no 7R arm: one line each, a NotSRSError (the CLI's exit 2)."""
+    """A 7R arm of neither family names both families' axes and how far they miss; a chain without 7 joints is no 7R
+    arm: one line each, a NotSRSError (the CLI's exit 2)."""
     odd = load_robot(wrist_offset_robot(tmp_path))
     with pytest.raises(
         NotSewError,
-        match=r"left_arm' is of no family .*left_forearm_roll, left_wrist_pitch, left_wrist_roll \(miss 0\.0[12]\d* m\)",
+        match=(
+            r"left_arm' is of no family .*left_forearm_roll, left_wrist_pitch, left_wrist_roll"
+            r" \(miss 0\.0[12]\d* m\)"
+        ),
     ) as caught:
         sew_chain(odd.hand_chain("left"))
     assert "\n" not in str(caught.value)
@@ -194,7 +216,9 @@ def test_refusals_name_the_chain_and_why(tmp_path):
 
 
 def test_ik_sew_command_prints_every_solution_as_json(arm7):
-    """`dualarm ik sew ROBOT --arm HAND --pose ... --sew-angle PSI --json` at the pose and SEW angle of a configuration inside the limits: that configuration is among the candidates and marked valid, every candidate's reported FK errors are below 1e-9, and valid means inside robot.toml's limits."""
+    """`dualarm ik sew ROBOT --arm HAND --pose ... --sew-angle PSI --json` at the pose and SEW angle of a configuration
+    inside the limits: that configuration is among the candidates and marked valid, every candidate's reported FK errors
+    are below 1e-9, and valid means inside robot.toml's limits."""
     import json
 
     from scipy.spatial.transform import Rotation

@@ -1,4 +1,5 @@
-"""`--ik sew` along a path on the offset humanoid (7R arms, not S-R-S), the SEW angle chosen by the `auto` search: the shipped circle on another robot repeats exactly, as PyBullet measures it."""
+"""`--ik sew` along a path on the offset humanoid (7R arms, not S-R-S), the SEW angle chosen by the `auto` search: the
+shipped circle on another robot repeats exactly, as PyBullet measures it."""
 
 import numpy as np
 import pytest
@@ -7,7 +8,9 @@ from dualarm.ik.analytic.sew_path import settings_for, sew_angle_of
 from dualarm.model.sew import sew_chain
 from dualarm.report.consistency import run_consistency
 from dualarm.tasks import load_task
-from tests.conftest import OFFSET, TASKS, pybullet_urdf
+from tests.helpers import OFFSET, TASKS, pybullet_urdf
+
+pytestmark = pytest.mark.integration
 
 
 @pytest.fixture(scope="module")
@@ -22,7 +25,8 @@ def circle(tmp_path_factory):
 
 
 def test_auto_sew_repeats_the_circle_on_the_offset_humanoid(circle):
-    """2 circles on robots/humanoid_offset, [arm_angle] mode auto: sew completes (every check of the IK stage, joint velocities included, passes) and its joints repeat to 1e-9 rad; DLS-SVD's do not (more than 1e-3 rad)."""
+    """2 circles on robots/humanoid_offset, [arm_angle] mode auto: sew completes (every check of the IK stage, joint
+    velocities included, passes) and its joints repeat to 1e-9 rad; DLS-SVD's do not (more than 1e-3 rad)."""
     table = circle.table.set_index("method")
     assert table.loc["sew", "status"] == "complete"
     assert table.loc["sew", "rep_joint_deviation_max_rad"] <= 1e-9
@@ -30,7 +34,8 @@ def test_auto_sew_repeats_the_circle_on_the_offset_humanoid(circle):
 
 
 def test_the_sew_angle_repeats_as_pybullet_measures_it(circle):
-    """The SEW angle of the recorded joints, S, E and W carried by PyBullet's link frames (E fixed in the upper arm, W in the wrist pitch link), is the same at the same time of each repetition (1e-6: PyBullet's float32)."""
+    """The SEW angle of the recorded joints, S, E and W carried by PyBullet's link frames (E fixed in the upper arm, W
+    in the wrist pitch link), is the same at the same time of each repetition (1e-6: PyBullet's float32)."""
     from dualarm.contracts.reference import first_repetition_index
     from dualarm.record.readback import read_run
 

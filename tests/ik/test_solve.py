@@ -16,7 +16,7 @@ from dualarm.paths import build_reference
 from dualarm.run import record_run
 from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 # Zhang, Kong, Niu, section 4.2: MAE, AAE, RMSE of the hand positions
 PAPER_MAE_M, PAPER_AAE_M, PAPER_RMSE_M = 2.1832e-5, 6.2e-6, 8.41e-6
@@ -55,7 +55,7 @@ def test_gesture_joints_reach_their_goals(ball_game, tvgdd_path):
     g = task.spec.gesture
     gesture = [n for n in g.goal_lower if g.goal_lower[n] == g.goal_upper[n]]
     assert len(gesture) == 4
-    final = dict(zip(tvgdd_path.joint_names, tvgdd_path.q[-1]))
+    final = dict(zip(tvgdd_path.joint_names, tvgdd_path.q[-1], strict=True))
     for name in gesture:
         assert abs(final[name] - g.goal_lower[name]) <= 1e-3, name
 
@@ -76,6 +76,7 @@ def test_gesture_joints_stay_inside_the_closing_bounds_only_with_the_feedforward
     assert ik_metrics(published, task.robot)["ik.position_error_max_m"] <= PAPER_MAE_M
 
 
+@pytest.mark.integration
 def test_recorded_hand_errors_match_pybullet(ball_game, tvgdd_path):
     task, ref = ball_game
     with load_pybullet_robot(task.robot.urdf.path) as sim:
@@ -128,8 +129,10 @@ def test_rmp_returns_to_the_start_on_a_closed_path_and_mvn_does_not(tmp_path):
     assert closure["rmp"] <= 1e-5 < 1e-4 < closure["mvn"]
 
 
+@pytest.mark.integration
 def test_infeasible_step_fails_the_run_naming_step_time_and_joint(tmp_path):
-    """A wrist goal 3.3 rad away (from -1.0323 rad) reached within 0.1 s: nu (theta_new- - theta) exceeds the 6 rad/s limit."""
+    """A wrist goal 3.3 rad away (from -1.0323 rad) reached within 0.1 s: nu (theta_new- - theta) exceeds the 6 rad/s
+    limit."""
     text = (TASKS / "ball_game.toml").read_text()
     text = (
         text.replace("t_sp_s = 0.75", "t_sp_s = 0.05")
@@ -163,13 +166,15 @@ def test_rollout_in_one_call_equals_the_step_loop(ball_game, tvgdd_path):
 
 
 def _triangle_from_ready(tmp_path):
-    """triangle.toml with its ``[initial]`` table (MC-Inverse's configuration on the path start) replaced by ``initial = "ready"``."""
+    """triangle.toml with its ``[initial]`` table (MC-Inverse's configuration on the path start) replaced by ``initial =
+    "ready"``."""
     text = (TASKS / "triangle.toml").read_text()
     text, count = re.subn(r"^\[initial\][^\n]*\n(?:\w+ = [^\n]*\n)+", 'initial = "ready"\n', text, flags=re.MULTILINE)
     assert count == 1
     return _variant(tmp_path, text)
 
 
+@pytest.mark.integration
 def test_one_hand_off_the_path_start_begins_on_it(tmp_path):
     """triangle, started from robot.toml's ``ready``: one hand (7 DOF), whose initial configuration is
     then 0.16 m off the path start. The IK (position task space here; pose in tests/ik/test_pose.py)
@@ -184,7 +189,7 @@ def test_one_hand_off_the_path_start_begins_on_it(tmp_path):
     start = start_configuration(stack, ref, lower, upper)
     assert stack.n == 7 and np.all(start >= lower) and np.all(start <= upper)
     with load_pybullet_robot(task.robot.urdf.path) as sim:
-        q = {**task.initial_q, **dict(zip(stack.joint_names, start))}
+        q = {**task.initial_q, **dict(zip(stack.joint_names, start, strict=True))}
         sim.set_positions(list(q), list(q.values()))
         assert np.linalg.norm(sim.link_pose("left_hand")[:3, 3] - ref.hands["left"].position[0]) < 1e-6
         sim.set_positions(list(task.initial_q), list(task.initial_q.values()))

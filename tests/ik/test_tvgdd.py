@@ -10,7 +10,7 @@ from dualarm.ik.velocity.tvgdd import TvgddSettings, build_problem, joint_bounds
 from dualarm.paths import build_reference
 from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
-from tests.conftest import TASKS
+from tests.helpers import TASKS
 
 
 @pytest.fixture(scope="module")
@@ -27,6 +27,7 @@ def quadprog_solve(M, b, J, rhs, lo, hi):
     return quadprog.solve_qp(M, -b, C, np.concatenate([rhs, lo, -hi]), meq=J.shape[0])[0]
 
 
+@pytest.mark.integration
 def test_stack_positions_match_pybullet(ball_game):
     task, stack, _, _ = ball_game
     theta = stack.initial
@@ -74,7 +75,7 @@ def along(problem, ref, theta0):
         data.append(qp)
         expected.append(quadprog_solve(*qp))
         theta = theta + problem.period_s * expected[-1]
-    return problem, steps, [np.array(column) for column in zip(*data)], np.array(expected)
+    return problem, steps, [np.array(column) for column in zip(*data, strict=True)], np.array(expected)
 
 
 @pytest.fixture(scope="module")

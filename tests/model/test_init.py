@@ -1,4 +1,5 @@
-"""``dualarm robot init`` / ``robot poses`` / ``robot check``'s limit refusal, on robots nobody here wrote: pybullet_data's KUKA iiwa (S-R-S), Franka Panda (not S-R-S) and the dual iiwa of robots/dual_iiwa.
+"""``dualarm robot init`` / ``robot poses`` / ``robot check``'s limit refusal, on robots nobody here wrote:
+pybullet_data's KUKA iiwa (S-R-S), Franka Panda (not S-R-S) and the dual iiwa of robots/dual_iiwa.
 
 Every number is compared with PyBullet loading the original URDF (or, for the dual iiwa, the URDF
 its build script assembles), never with our own output."""
@@ -25,7 +26,7 @@ from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import load_robot
 from dualarm.quiet import c_output_silenced
 from dualarm.sim.world import load_pybullet_robot, pb
-from tests.conftest import HUMANOID, REPO
+from tests.helpers import HUMANOID, REPO
 
 runner = CliRunner()
 DATA = Path(pybullet_data.getDataPath())
@@ -42,7 +43,8 @@ def _build_module():
 
 @pytest.fixture(scope="module")
 def made(tmp_path_factory):
-    """name -> (the source URDF as PyBullet loads it, RobotInit) for the iiwa, the Panda and the dual iiwa (assembled by build.py, meshes through ROS_PACKAGE_PATH)."""
+    """name -> (the source URDF as PyBullet loads it, RobotInit) for the iiwa, the Panda and the dual iiwa (assembled by
+    build.py, meshes through ROS_PACKAGE_PATH)."""
     root = tmp_path_factory.mktemp("init")
     dual = root / "src" / "dual_iiwa.urdf"
     dual.parent.mkdir()
@@ -66,6 +68,7 @@ def _pybullet_link_poses(urdf: Path, q: dict[str, float], links: list[str]) -> d
         return {link: sim.link_pose(link) for link in links}
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["iiwa", "panda", "dual_iiwa"])
 def test_chains_fk_equals_pybullet_on_the_source_urdf(made, name):
     source, result = made[name]
@@ -84,6 +87,7 @@ def test_chains_fk_equals_pybullet_on_the_source_urdf(made, name):
                 assert np.allclose(T, sim.link_pose(arm.tip), atol=2e-6)
 
 
+@pytest.mark.integration
 def test_chain_choice(made):
     assert [(a.hand, a.base, a.tip) for a in made["iiwa"][1].arms] == [("left", "lbr_iiwa_link_0", "lbr_iiwa_link_7")]
     assert [(a.hand, a.tip) for a in made["panda"][1].arms] == [("left", "panda_hand")]  # above the prismatic fingers
@@ -116,6 +120,7 @@ def _line_distance(a, b) -> float:
     )
 
 
+@pytest.mark.integration
 def test_srs_verdicts(made):
     assert all(a.srs is None for name in ("iiwa", "dual_iiwa") for a in made[name][1].arms)
     (panda,) = made["panda"][1].arms
@@ -133,6 +138,7 @@ def test_srs_verdicts(made):
     assert d > 0.08 and d / 2 <= miss <= d
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["iiwa", "panda", "dual_iiwa"])
 def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
     source, result = made[name]
@@ -173,7 +179,8 @@ def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
                 pb.resetJointState(body, index[joint], value, physicsClientId=client)
             pb.performCollisionDetection(physicsClientId=client)
             penetrating = [p for p in pb.getContactPoints(body, body, physicsClientId=client) if p[8] < 0]
-            # a pair joined through links without geometry (a Panda's hand and link 7) is not an ancestor pair to PyBullet's flag when the link between has none
+            # a pair joined through links without geometry (a Panda's hand and link 7) is not an ancestor pair to
+            # PyBullet's flag when the link between has none
             touching = {tuple(sorted((a, b))) for a, b in result.touching_pairs}
             names = {i: pb.getJointInfo(body, i, physicsClientId=client)[12].decode() for i in index.values()}
             assert not [p for p in penetrating if tuple(sorted((names[p[3]], names[p[4]]))) not in touching]
@@ -190,6 +197,7 @@ def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
             pb.disconnect(physicsClientId=client)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["iiwa", "panda", "dual_iiwa"])
 def test_robot_poses_equal_pybullet_link_poses(made, name):
     _, result = made[name]
@@ -215,6 +223,7 @@ def test_robot_poses_equal_pybullet_link_poses(made, name):
     )
 
 
+@pytest.mark.integration
 def test_init_prints_every_choice_and_assumption(tmp_path):
     done = runner.invoke(app, ["robot", "init", str(IIWA), "--out", str(tmp_path / "kuka"), "--jerk", "80"])
     assert done.exit_code == 0, done.output
@@ -231,6 +240,7 @@ def test_init_prints_every_choice_and_assumption(tmp_path):
     assert (tmp_path / "kuka" / "meshes" / "link_0.stl").is_file()
 
 
+@pytest.mark.integration
 def test_dual_iiwa_loads_and_passes_robot_check():
     robot = load_robot(DUAL_IIWA)
     assert robot.hands == ("left", "right")
@@ -288,6 +298,7 @@ def test_refusals(tmp_path):
     assert not any((tmp_path / n).exists() for n in "abcde")
 
 
+@pytest.mark.integration
 def test_mesh_paths_resolve_through_ros_package_path(tmp_path):
     urdf = tmp_path / "one.urdf"
     urdf.write_text(IIWA.read_text().replace('filename="meshes/', 'filename="package://kuka_iiwa/meshes/'))
@@ -316,6 +327,7 @@ def test_robot_check_refuses_a_chain_joint_without_jerk(tmp_path):
     )
 
 
+@pytest.mark.integration
 def test_robot_toml_overrides_velocity(tmp_path):
     robot_dir = _humanoid_copy(tmp_path, lambda t: t + "\n[limits.velocity]\nleft_elbow = 0.5\n")
     robot = load_robot(robot_dir)
@@ -329,8 +341,10 @@ def test_robot_toml_overrides_velocity(tmp_path):
         load_robot(bad)
 
 
+@pytest.mark.integration
 def test_committed_dual_iiwa_is_what_build_py_makes(made):
-    """robots/dual_iiwa holds build.py's outputs: init on the URDF it assembles writes the same robot.toml (plus build.py's velocity table) and the same meshes."""
+    """robots/dual_iiwa holds build.py's outputs: init on the URDF it assembles writes the same robot.toml (plus
+    build.py's velocity table) and the same meshes."""
     built = made["dual_iiwa"][1].directory
     assert (DUAL_IIWA / "robot.toml").read_text() == (
         built / "robot.toml"

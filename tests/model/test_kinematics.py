@@ -17,6 +17,7 @@ from dualarm.model.poses import pose_errors
 from dualarm.model.robot import random_configurations, robot_from_urdf
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("chain_name", ["left_arm", "right_arm", "waist"])
 def test_humanoid_chains_pass_robot_check(humanoid, chain_name):
     result = check_chain(humanoid, humanoid.chain(chain_name), samples=1000, seed=1)
@@ -28,6 +29,7 @@ def test_humanoid_chains_pass_robot_check(humanoid, chain_name):
     assert result.passed
 
 
+@pytest.mark.integration
 def test_waist_and_arm_chain_from_floor_matches_pybullet(humanoid):
     chain = humanoid.chain_between("base_link", "right_hand")  # 10 DOF: waist + arm
     assert chain.dof == 10
@@ -39,6 +41,7 @@ def test_waist_and_arm_chain_from_floor_matches_pybullet(humanoid):
     assert position.max() <= FK_TOLERANCE and rotation.max() <= FK_TOLERANCE
 
 
+@pytest.mark.integration
 def test_bare_urdf_chain_of_another_robot(kuka_urdf):
     robot = robot_from_urdf(kuka_urdf, "lbr_iiwa_link_0", "lbr_iiwa_link_7")
     result = check_chain(robot, robot.chain("chain"), samples=300, seed=2)

@@ -8,7 +8,7 @@ import pytest
 from dualarm.errors import RobotModelError
 from dualarm.model.robot import load_robot, robot_from_urdf
 from dualarm.sim.world import load_pybullet_robot, pb
-from tests.conftest import HUMANOID
+from tests.helpers import HUMANOID
 
 
 def test_chains_and_hands(humanoid):
@@ -19,6 +19,7 @@ def test_chains_and_hands(humanoid):
     assert len(humanoid.joint_names) == 17
 
 
+@pytest.mark.integration
 def test_limits_agree_with_pybullet(humanoid):
     """Position and velocity limits as PyBullet reads them from the same URDF."""
     with load_pybullet_robot(humanoid.urdf.path) as sim:
@@ -168,7 +169,8 @@ def test_urdf_origin_overflowing_to_inf(tmp_path):
 
 
 def test_urdf_entity_bomb_and_deep_nesting(tmp_path):
-    """An XML entity bomb (10^10 characters) and 200,000 nested elements: refused in one line, not expanded or recursed into."""
+    """An XML entity bomb (10^10 characters) and 200,000 nested elements: refused in one line, not expanded or recursed
+    into."""
     bomb = ['<?xml version="1.0"?>', "<!DOCTYPE robot [", ' <!ENTITY e0 "aaaaaaaaaa">']
     bomb += [f' <!ENTITY e{i} "{f"&e{i - 1};" * 10}">' for i in range(1, 10)]
     bomb += ["]>", '<robot name="&e9;"><link name="a"/></robot>']

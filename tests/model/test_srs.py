@@ -12,6 +12,7 @@ from dualarm.model.urdf import JointSpec
 from dualarm.sim.world import load_pybullet_robot
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("side", ["left", "right"])
 def test_shoulder_elbow_wrist_match_pybullet_joint_frames(humanoid, side):
     """S, E, W are the origins of the shoulder, elbow and forearm-roll joints in the URDF."""
@@ -26,7 +27,7 @@ def test_shoulder_elbow_wrist_match_pybullet_joint_frames(humanoid, side):
                 (base @ sim.link_pose(link))[:3, 3]
                 for link in (f"{side}_shoulder_yaw_link", f"{side}_forearm", f"{side}_forearm_roll_link")
             ]
-            for ours, theirs in zip(srs.points(q), expected):
+            for ours, theirs in zip(srs.points(q), expected, strict=True):
                 assert np.linalg.norm(np.asarray(ours).ravel() - theirs) <= PYBULLET_TOLERANCE
 
 
@@ -92,13 +93,14 @@ def test_arm_angle_measures_rotation_of_the_elbow_about_sw():
         assert abs(np.angle(np.exp(1j * (change - delta)))) < 1e-9
 
 
+@pytest.mark.integration
 def test_arm_angle_of_q_matches_pybullet_points(humanoid):
     chain = humanoid.chain("left_arm")
     srs = SrsKinematics.of(chain)
     Q = random_configurations(humanoid, chain, 50, seed=12)
     psis = srs.arm_angles(Q)
     with load_pybullet_robot(humanoid.urdf.path) as sim:
-        for q, psi in zip(Q, psis):
+        for q, psi in zip(Q, psis, strict=True):
             sim.set_positions(chain.joint_names, q)
             base = np.linalg.inv(sim.link_pose(chain.base))
             S, E, W = (

@@ -4,10 +4,13 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pybullet as pb
+import pytest
 
 from dualarm.model.urdf import viewer_urdf
 from dualarm.sim.world import load_pybullet_robot
-from tests.conftest import HUMANOID
+from tests.helpers import HUMANOID
+
+pytestmark = pytest.mark.integration
 
 URDF = HUMANOID / "humanoid.urdf"
 
@@ -22,7 +25,8 @@ def _collision_boxes(path) -> dict[str, np.ndarray]:
 
 
 def test_capsules_become_urdf_1_0_shapes_that_pybullet_bounds_alike(tmp_path):
-    """Each capsule becomes a cylinder and two spheres: PyBullet, which reads both, bounds every link's collision shapes in the same box."""
+    """Each capsule becomes a cylinder and two spheres: PyBullet, which reads both, bounds every link's collision shapes
+    in the same box."""
     text = URDF.read_text()
     published = tmp_path / "humanoid.urdf"
     published.write_text(viewer_urdf(text))

@@ -1,4 +1,5 @@
-"""The methods registry on a robot that is not S-R-S: the Panda runs every method but those that need S-R-S, which are refused in one line."""
+"""The methods registry on a robot that is not S-R-S: the Panda runs every method but those that need S-R-S, which are
+refused in one line."""
 
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from dualarm.methods import IK_METHODS, METHODS, suited_methods
 from dualarm.model.robot import load_robot
 from dualarm.run import build_stages
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID
+from tests.helpers import HUMANOID
 
 HERE = Path(__file__).parent
 TASK = HERE / "panda_triangle.toml"
@@ -23,7 +24,8 @@ runner = CliRunner()
 
 
 def _axes_6_7_distance_m() -> float:
-    """The distance between the axes of panda_joint6 and panda_joint7 at a random configuration, by PyBullet on pybullet_data's panda.urdf (in an S-R-S wrist they meet)."""
+    """The distance between the axes of panda_joint6 and panda_joint7 at a random configuration, by PyBullet on
+    pybullet_data's panda.urdf (in an S-R-S wrist they meet)."""
     client = pb.connect(pb.DIRECT)
     try:
         body = pb.loadURDF(
@@ -50,6 +52,7 @@ def _axes_6_7_distance_m() -> float:
     )
 
 
+@pytest.mark.integration
 def test_the_panda_wrist_is_not_spherical():
     assert abs(_axes_6_7_distance_m() - 0.088) < 1e-6  # the flange offset of the URDF
 

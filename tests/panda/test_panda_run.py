@@ -1,4 +1,5 @@
-"""The Franka Panda (robots/panda, one arm, not S-R-S) through every stage with the methods that do not need S-R-S, checked against PyBullet on pybullet_data's own panda.urdf."""
+"""The Franka Panda (robots/panda, one arm, not S-R-S) through every stage with the methods that do not need S-R-S,
+checked against PyBullet on pybullet_data's own panda.urdf."""
 
 from pathlib import Path
 
@@ -35,7 +36,7 @@ class OriginalPanda:
         """The grasp target's position [m] at arm configurations q (N, 7) [rad]; (N, 3)."""
         out = []
         for row in np.atleast_2d(q):
-            for name, value in zip(ARM, row):
+            for name, value in zip(ARM, row, strict=True):
                 pb.resetJointState(self.body, self.joint[name], float(value), physicsClientId=self.client)
             out.append(
                 pb.getLinkState(
@@ -58,13 +59,14 @@ def original():
     sim.close()
 
 
+@pytest.mark.integration
 def test_the_copied_urdf_moves_as_pybullet_datas(original):
     from dualarm.model.kinematics import hand_pose
 
     robot = load_robot(PANDA)
     lower, upper = robot.lower_upper(ARM)
     q = np.random.default_rng(3).uniform(lower, upper, (20, 7))
-    ours = np.array([hand_pose(robot, "right", dict(zip(ARM, row)))[:3, 3] for row in q])
+    ours = np.array([hand_pose(robot, "right", dict(zip(ARM, row, strict=True)))[:3, 3] for row in q])
     assert np.abs(ours - original.hand(q)).max() < 1e-6  # PyBullet computes in single precision here (2.8e-8 m seen)
 
 
@@ -78,6 +80,7 @@ def test_ready_is_inside_the_limits_and_the_datasheet_limits_are_read():
     assert robot.limit_array("jerk", ARM).tolist() == [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("method", ["tvgdd", "dls-svd", "sew"])
 def test_every_stage_runs_and_the_hand_follows_the_path(method, original, tmp_path):
     result = record_run(TASK, method, out_dir=tmp_path, command=["test"])

@@ -1,4 +1,5 @@
-"""`--ik sew` on the Franka Panda: the SEW angle held along a repeated path gives identical repetitions (the consistency MC-Inverse gives S-R-S arms), measured through PyBullet; refusals in one line."""
+"""`--ik sew` on the Franka Panda: the SEW angle held along a repeated path gives identical repetitions (the consistency
+MC-Inverse gives S-R-S arms), measured through PyBullet; refusals in one line."""
 
 from pathlib import Path
 
@@ -11,7 +12,7 @@ from dualarm.ik.analytic.sew_path import settings_for, sew_angle_of
 from dualarm.model.sew import sew_chain
 from dualarm.report.consistency import run_consistency
 from dualarm.tasks import load_task
-from tests.conftest import REPO, pybullet_urdf, wrist_offset_robot
+from tests.helpers import REPO, pybullet_urdf, wrist_offset_robot
 
 HERE = Path(__file__).parent
 PANDA = REPO / "robots" / "panda"
@@ -28,16 +29,21 @@ def compared(request, tmp_path_factory):
     )
 
 
+@pytest.mark.integration
 def test_sew_repeats_every_repetition_and_dls_svd_does_not(compared):
-    """3 triangles, 2 circles: sew's joints repeat to 1e-9 rad (the issue's bound), DLS-SVD's drift by more than 1e-3 rad; both complete."""
+    """3 triangles, 2 circles: sew's joints repeat to 1e-9 rad (the issue's bound), DLS-SVD's drift by more than 1e-3
+    rad; both complete."""
     table = compared.table.set_index("method")
     assert table.loc["sew", "status"] == "complete" and table.loc["dls-svd", "status"] == "complete"
     assert table.loc["sew", "rep_joint_deviation_max_rad"] <= 1e-9
     assert table.loc["dls-svd", "rep_joint_deviation_max_rad"] > 1e-3
 
 
+@pytest.mark.integration
 def test_the_sew_angle_is_held_along_the_path_as_pybullet_measures_it(compared):
-    """The SEW angle of the recorded joints, with S, E, W carried by PyBullet's link frames of pybullet_data's Panda (E fixed in link 3, W in link 6), equals the initial configuration's at every 10th sample (1e-6: PyBullet's float32)."""
+    """The SEW angle of the recorded joints, with S, E, W carried by PyBullet's link frames of pybullet_data's Panda (E
+    fixed in link 3, W in link 6), equals the initial configuration's at every 10th sample (1e-6: PyBullet's
+    float32)."""
     from dualarm.record.readback import read_run
 
     run = read_run(compared.table.set_index("method").loc["sew", "run"])
@@ -63,7 +69,8 @@ def test_the_sew_angle_is_held_along_the_path_as_pybullet_measures_it(compared):
 
 
 def test_sew_on_an_arm_of_no_family_is_refused_in_one_line(tmp_path):
-    """The offset humanoid with its left wrist offset too (no SEW family): `dualarm run triangle --robot` with sew exits 2 with one line naming the chain, and leaves no run behind."""
+    """The offset humanoid with its left wrist offset too (no SEW family): `dualarm run triangle --robot` with sew exits
+    2 with one line naming the chain, and leaves no run behind."""
     (tmp_path / "robot").mkdir()
     robot = wrist_offset_robot(tmp_path / "robot")
     result = runner.invoke(

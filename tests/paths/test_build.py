@@ -91,8 +91,8 @@ def central_angular_velocity(R: np.ndarray, dt: float) -> np.ndarray:
 
 
 def variant(tmp_path: Path, task: str, *edits: tuple[str, str]) -> Path:
-    """A copy of tasks/<task>.toml in the base frame (:data:`BASE_FRAME_FORM`) with the robot path made absolute and (old, new) edits applied
-    to exactly one occurrence each."""
+    """A copy of tasks/<task>.toml in the base frame (:data:`BASE_FRAME_FORM`) with the robot path made absolute and
+    (old, new) edits applied to exactly one occurrence each."""
     text = _base_frame_text(task)
     edits = (('robot = "../robots/humanoid"', f'robot = "{ROBOT_DIR.as_posix()}"'),) + edits
     for old, new in edits:
@@ -150,7 +150,7 @@ def _triangle_boundaries():
     indices = [0]
     k = 0
     for _ in range(data["repetitions"]):
-        for move, n in zip(data["moves"], steps):
+        for move, n in zip(data["moves"], steps, strict=True):
             k += n
             indices.append(k)
             names.append(move["left"]["to"])
@@ -161,7 +161,7 @@ def test_triangle_visits_the_waypoints(triangle):
     data, indices, names = _triangle_boundaries()
     assert names[:4] == ["A", "B", "C", "A"]
     hand = triangle.hands["left"]
-    for k, name in zip(indices, names):
+    for k, name in zip(indices, names, strict=True):
         wp = data["waypoints"][name]
         np.testing.assert_allclose(hand.position[k], wp["position"], rtol=0, atol=1e-12)
         np.testing.assert_allclose(hand.rotation[k], rot(wp["rpy"]), rtol=0, atol=1e-9)
@@ -213,7 +213,7 @@ def test_triangle_peak_speed_is_the_quintic_peak(triangle):
     T = data["moves"][0]["duration_s"]
     lengths = [
         np.linalg.norm(np.subtract(data["waypoints"][a]["position"], data["waypoints"][b]["position"]))
-        for a, b in zip(names[:3], names[1:4])
+        for a, b in zip(names[:3], names[1:4], strict=True)
     ]
     vmax = np.linalg.norm(triangle.hands["left"].linear_velocity, axis=1).max()
     assert vmax == pytest.approx(15 / 8 * max(lengths) / T, rel=1e-3)
@@ -376,7 +376,7 @@ def test_carry_box_master_motion(carry_box):
     grasp = np.asarray(data["waypoints"]["grasp"]["position"])
     k = 0
     for _ in range(data["repetitions"]):
-        for move, steps in zip(data["moves"], n):
+        for move, steps in zip(data["moves"], n, strict=True):
             np.testing.assert_allclose(left[k + steps] - left[k], move["left"]["by"], rtol=0, atol=1e-12)
             k += steps
     assert k + 1 == len(carry_box)
@@ -539,7 +539,8 @@ def test_carry_box_rotating_master_slave_velocity(tmp_path: Path):
 
 @pytest.mark.parametrize("name", ["circle", "carry_box"])
 def test_every_repetition_is_the_one_repetition_path_bit_for_bit(name):
-    """The path repeated R times is the path of the task with one repetition, its moves then again R - 1 times: the same targets, not merely within rounding."""
+    """The path repeated R times is the path of the task with one repetition, its moves then again R - 1 times: the same
+    targets, not merely within rounding."""
     many = build_reference(load_task(TASKS / f"{name}.toml"))
     once = build_reference(load_task(TASKS / f"{name}.toml", repetitions=1))
     R, n = int(many.rep.max()) + 1, len(once) - 1
@@ -555,6 +556,7 @@ def test_every_repetition_is_the_one_repetition_path_bit_for_bit(name):
     )
 
 
+@pytest.mark.integration
 def test_a_task_without_moves_is_its_start_alone():
     """The bowl grasp is planned, not drawn: its reference is the start pose of each hand, one sample."""
     task = load_task(TASKS / "bowl_grasp.toml")

@@ -17,7 +17,7 @@ from dualarm.plan.mcikrrt import TreeSearchSettings
 from dualarm.plan.problem import PlanningProblem, PlanningSettings
 from dualarm.record.readback import read_run
 from dualarm.tasks import load_task
-from tests.conftest import TASKS
+from tests.helpers import TASKS
 
 BOWL = TASKS / "bowl_grasp.toml"
 runner = CliRunner()
@@ -49,6 +49,7 @@ def bare_checker(task, problem):
         yield checker
 
 
+@pytest.mark.integration
 def test_the_straight_segment_to_every_goal_collides(problem, bare_checker):
     goals = []
     for seed in range(6):
@@ -62,6 +63,7 @@ def test_the_straight_segment_to_every_goal_collides(problem, bare_checker):
         assert not bare_checker.segment_free(problem.start, goal)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("planner", ["mcikrrt", "ompl-rrtconnect"])
 def test_planners_find_free_paths(problem, bare_checker, planner):
     for seed in range(3):
@@ -69,7 +71,7 @@ def test_planners_find_free_paths(problem, bare_checker, planner):
         assert result.success, result.reason
         assert np.array_equal(result.path[0], problem.start)
         assert np.all(result.path >= problem.lower - 1e-12) and np.all(result.path <= problem.upper + 1e-12)
-        for a, b in zip(result.path[:-1], result.path[1:]):
+        for a, b in zip(result.path[:-1], result.path[1:], strict=True):
             assert bare_checker.segment_free(a, b)
         # the last waypoint puts each hand in its WTA (eq 26 distance ~ 0)
         poses = problem.task.hand_poses(problem.joint_names, result.path[-1:], problem.fixed)
@@ -77,6 +79,7 @@ def test_planners_find_free_paths(problem, bare_checker, planner):
             assert min(float(a.distance(poses[hand][0])) for a in areas) < 1e-5
 
 
+@pytest.mark.integration
 def test_plan_command_writes_trials_summary_and_a_collision_free_run(tmp_path, bare_checker):
     result = runner.invoke(
         app,
@@ -106,6 +109,7 @@ def test_plan_command_writes_trials_summary_and_a_collision_free_run(tmp_path, b
     assert len(scene) == 1 and scene[0].message_encoding == "protobuf"
 
 
+@pytest.mark.integration
 def test_unreachable_wta_is_named_at_the_timeout(tmp_path):
     text = BOWL.read_text().replace(
         'name = "bowl_right"\nhand = "right"\nreference = { position = [0.40, 0.0, 0.93] }',
@@ -123,10 +127,12 @@ def test_unreachable_wta_is_named_at_the_timeout(tmp_path):
     assert "bowl_left" not in line
 
 
+@pytest.mark.integration
 def test_start_in_collision_names_the_pair(tmp_path):
     text = BOWL.read_text().replace(
         "[[wta]]",
-        '[[environment]]\nname = "post"\nshape = "box"\nsize_m = [0.05, 0.05, 0.3]\npose = { position = [0.0, 0.2, 0.8] }\n\n[[wta]]',
+        '[[environment]]\nname = "post"\nshape = "box"\nsize_m = [0.05, 0.05, 0.3]\n'
+        "pose = { position = [0.0, 0.2, 0.8] }\n\n[[wta]]",
         1,
     )
     (tmp_path / "hit.toml").write_text(
@@ -141,6 +147,7 @@ def test_start_in_collision_names_the_pair(tmp_path):
     assert not (tmp_path / "rec").exists()  # refused before any run was written
 
 
+@pytest.mark.integration
 def test_obstacle_overlapping_the_base_is_refused_at_load(tmp_path):
     text = BOWL.read_text().replace("pose = { position = [0.30, 0.0, 0.97] }", "pose = { position = [0.0, 0.05, 0.6] }")
     assert text != BOWL.read_text()
@@ -158,6 +165,7 @@ def test_unknown_planner_is_one_line():
     assert result.exit_code == 2 and "unknown planner 'prm'" in result.output
 
 
+@pytest.mark.integration
 def test_ompl_without_goals_names_the_wta(tmp_path):
     text = BOWL.read_text().replace(
         'name = "bowl_left"\nhand = "left"\nreference = { position = [0.40, 0.0, 0.93] }',

@@ -13,12 +13,15 @@ from scipy.spatial.transform import Rotation
 
 from dualarm.errors import StageError
 from dualarm.model.robot import load_robot
-from dualarm.plan.collision import BOX_ROUNDING_M, CollisionChecker, PyBulletChecker, bisection_order, inflated_urdf
+from dualarm.plan.checker import bisection_order, inflated_urdf
+from dualarm.plan.collision import CollisionChecker
 from dualarm.plan.distances import distance_functions
+from dualarm.plan.pybullet_checker import PyBulletChecker
+from dualarm.plan.shapes import BOX_ROUNDING_M
 from dualarm.sim.world import TOUCHING_M, add_environment, load_pybullet_robot, pb
 from dualarm.tasks import load_task
 from dualarm.tasks.schema import EnvironmentObject
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 #: Configurations whose nearest distance is this close to a threshold are boundary cases [m].
 BOUNDARY_M = 1e-4
@@ -138,6 +141,7 @@ def allowed_pairs(task) -> set[tuple[str, str]]:
 # --- the checker against getClosestPoints on the un-inflated robot -------------------------------
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("margin_m", [0.0, 0.01])
 def test_checker_agrees_with_closest_points_on_the_uninflated_robot(task, names, reference, margin_m):
     sim, objects = reference
@@ -171,6 +175,7 @@ def test_checker_agrees_with_closest_points_on_the_uninflated_robot(task, names,
     assert kinds == {"self", "object"}
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("margin_m", [0.0, 0.01, 0.02])
 def test_unchecked_pairs_are_parents_and_touching_neighbours(task, names, reference, margin_m):
     """The unchecked pairs, rebuilt from the URDF tree and the un-inflated distances at the zero
@@ -229,10 +234,11 @@ def random_configurations(task, names, count: int, seed: int) -> np.ndarray:
 
 
 def near_contact(checker, Q: np.ndarray, count: int) -> np.ndarray:
-    """``count`` configurations on the boundary of the free space: bisection (50 halvings) on the segments from free configurations of ``Q`` to colliding ones."""
+    """``count`` configurations on the boundary of the free space: bisection (50 halvings) on the segments from free
+    configurations of ``Q`` to colliding ones."""
     free = checker.free_many(Q)
     out = []
-    for a, b in zip(Q[free][:count], Q[~free][:count]):
+    for a, b in zip(Q[free][:count], Q[~free][:count], strict=False):
         for _ in range(50):
             mid = (a + b) / 2
             a, b = (mid, b) if checker.free(mid) else (a, mid)
@@ -240,9 +246,12 @@ def near_contact(checker, Q: np.ndarray, count: int) -> np.ndarray:
     return np.array(out)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("margin_m", [0.0, 0.01])
 def test_distances_agree_with_closest_points(task, names, margin_m):
-    """Every pair the broad phase keeps has PyBullet's distance (un-inflated robot) to DISTANCE_M, over random configurations and configurations on the boundary of contact; a pair it drops is at least its threshold apart; a cylinder's bounding capsule is no nearer than the cylinder."""
+    """Every pair the broad phase keeps has PyBullet's distance (un-inflated robot) to DISTANCE_M, over random
+    configurations and configurations on the boundary of contact; a pair it drops is at least its threshold apart; a
+    cylinder's bounding capsule is no nearer than the cylinder."""
     environment = [*task.spec.environment, *EXTRA]
     sim = load_pybullet_robot(task.robot.urdf.path)
     bodies = {name: body for body, name in add_environment(sim, environment).items()}
@@ -258,9 +267,9 @@ def test_distances_agree_with_closest_points(task, names, margin_m):
             )  # distances are not checks
             threshold = np.array([2 * margin_m if b in sim.link_index else margin_m for _, b in checker.pairs])
             compared, penetrating, at_contact = 0, 0, 0
-            for q, d in zip(Q, D):
+            for q, d in zip(Q, D, strict=True):
                 sim.set_positions(names, q)
-                for (a, b), mine, limit in zip(checker.pairs, d, threshold):
+                for (a, b), mine, limit in zip(checker.pairs, d, threshold, strict=True):
                     theirs = pybullet_distance(sim, bodies, a, b)
                     if not np.isfinite(mine):
                         assert theirs >= limit - DISTANCE_M, (a, b)
@@ -286,8 +295,10 @@ def test_distances_agree_with_closest_points(task, names, margin_m):
         sim.close()
 
 
+@pytest.mark.integration
 def test_verdicts_equal_free_and_the_pybullet_checker(task, names):
-    """free_many is free of each configuration, on random configurations and on the boundary of contact; and the reference checker's verdict on the random ones, but for those within DISTANCE_M of a threshold."""
+    """free_many is free of each configuration, on random configurations and on the boundary of contact; and the
+    reference checker's verdict on the random ones, but for those within DISTANCE_M of a threshold."""
     environment = [*task.spec.environment, *EXTRA]
     args = (task.robot, names, {}, environment, task.spec.expected_contacts)
     with CollisionChecker(*args, margin_m=0.01) as checker, PyBulletChecker(*args, margin_m=0.01) as reference:
@@ -306,8 +317,11 @@ def test_verdicts_equal_free_and_the_pybullet_checker(task, names):
         assert checker.free_many(np.empty((0, len(names)))).shape == (0,)
 
 
+@pytest.mark.integration
 def test_cylinders_are_checked_by_pybullet_where_their_capsule_is_near(task, names, reference):
-    """Without allowed contacts, the palms reach the bowl (a cylinder): in every configuration where a bounding capsule comes within the margin, the bowl's contacts are PyBullet's closest points on the un-inflated robot, and the verdict the reference checker's."""
+    """Without allowed contacts, the palms reach the bowl (a cylinder): in every configuration where a bounding capsule
+    comes within the margin, the bowl's contacts are PyBullet's closest points on the un-inflated robot, and the verdict
+    the reference checker's."""
     sim, objects = reference
     bowl_body = {name: body for body, name in objects.items()}["bowl"]
     args = (task.robot, names, {}, task.spec.environment, ())
@@ -320,7 +334,7 @@ def test_cylinders_are_checked_by_pybullet_where_their_capsule_is_near(task, nam
         others = np.array([b != "bowl" for _, b in checker.pairs])
         limits = np.array([0.01 if b in objects.values() else 0.02 for _, b in checker.pairs])[others]
         touching = 0
-        for q, free_q in zip(Q, free):
+        for q, free_q in zip(Q, free, strict=True):
             mine = {c.a: c.depth_m for c in checker.contacts(q) if c.b == "bowl"}
             sim.set_positions(names, q)
             on_boundary = np.abs(checker.distances(q[None])[0, others] - limits).min() < BOUNDARY_M
@@ -337,8 +351,10 @@ def test_cylinders_are_checked_by_pybullet_where_their_capsule_is_near(task, nam
         assert 10 <= touching < len(Q)
 
 
+@pytest.mark.integration
 def test_a_link_without_capsules_is_checked_by_pybullet(task, names, reference, tmp_path):
-    """The head as a box: every pair of the head is PyBullet's, in every configuration; the verdicts and contacts are the reference checker's."""
+    """The head as a box: every pair of the head is PyBullet's, in every configuration; the verdicts and contacts are
+    the reference checker's."""
     text = (HUMANOID / "humanoid.urdf").read_text()
     head = text.index("<collision>", text.index('<link name="head">'))
     end = text.index("</collision>", head)
@@ -361,8 +377,10 @@ def test_a_link_without_capsules_is_checked_by_pybullet(task, names, reference, 
         assert heads >= 3
 
 
+@pytest.mark.integration
 def test_an_object_on_a_link_no_joint_moves_collides_everywhere(task, names, reference):
-    """A block inside the pelvis (which no planned joint moves): every configuration collides, with the block's depth, computed once."""
+    """A block inside the pelvis (which no planned joint moves): every configuration collides, with the block's depth,
+    computed once."""
     sim, _ = reference
     block = EnvironmentObject(name="block", shape="box", size_m=(0.1, 0.1, 0.1), pose={"position": (0.05, 0.0, 0.5)})
     with CollisionChecker(
@@ -381,8 +399,10 @@ def test_an_object_on_a_link_no_joint_moves_collides_everywhere(task, names, ref
         pb.removeBody(next(iter(bodies)), physicsClientId=sim.client)
 
 
+@pytest.mark.integration
 def test_pybullet_rounds_box_edges_by_its_margin():
-    """PyBullet's box is its half-extents less BOX_ROUNDING_M grown by a ball of that radius: capsules and spheres around and into a box, at PyBullet's distances."""
+    """PyBullet's box is its half-extents less BOX_ROUNDING_M grown by a ball of that radius: capsules and spheres
+    around and into a box, at PyBullet's distances."""
     f = distance_functions()
     client = pb.connect(pb.DIRECT)
     try:
@@ -482,6 +502,7 @@ def capsule_axis(sim, shapes, link):
     return ends[0], ends[1], attrs["radius"]
 
 
+@pytest.mark.integration
 def test_closest_points_equal_analytic_capsule_distances(task, names, reference):
     sim, _ = reference
     shapes = urdf_collisions(task)
@@ -512,6 +533,7 @@ def test_closest_points_equal_analytic_capsule_distances(task, names, reference)
 # --- the bowl grasp's scene ----------------------------------------------------------------------
 
 
+@pytest.mark.integration
 def test_start_configuration_is_free(task, names, reference):
     sim, objects = reference
     q = np.array([task.initial_q[n] for n in names])
@@ -521,6 +543,7 @@ def test_start_configuration_is_free(task, names, reference):
     assert expected == {} and not near
 
 
+@pytest.mark.integration
 def test_left_hand_into_the_table_is_named(task, names, reference):
     """Random configurations until the checker names the left palm or forearm against the
     table; that pair is really closer than the margin, by the reported depth, and the nearest
@@ -550,6 +573,7 @@ def test_left_hand_into_the_table_is_named(task, names, reference):
         assert np.all(on_table <= np.array([0.25, 0.5, 0.02]) + 1e-6)
 
 
+@pytest.mark.integration
 def test_expected_contacts_are_not_checked(task, names, reference):
     """A palm inside the bowl (the grasp's expected contact) is free; the same pose against a
     checker without allowed contacts is not."""
@@ -582,13 +606,14 @@ def shapes_of(text: str, element: str) -> list[tuple[str, dict[str, str]]]:
     return [(s.tag, dict(s.attrib)) for e in root.iter(element) for s in e.find("geometry")]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("margin_m", [0.0, 0.01, 0.035])
 def test_inflated_urdf_grows_the_humanoids_collision_shapes(task, margin_m):
     text = task.robot.urdf.path.read_text()
     out = inflated_urdf(text, margin_m)
     before, after = shapes_of(text, "collision"), shapes_of(out, "collision")
     assert len(before) == len(after) == 9
-    for (tag, a), (tag2, b) in zip(before, after):
+    for (tag, a), (tag2, b) in zip(before, after, strict=True):
         assert tag == tag2
         assert float(b["radius"]) == pytest.approx(float(a["radius"]) + margin_m, abs=1e-12)
         if tag == "capsule":  # the radius already lengthens the capsule at both ends
@@ -638,6 +663,7 @@ def test_bisection_order_is_a_permutation(n):
         assert order[0] == n // 2  # the middle first
 
 
+@pytest.mark.integration
 def test_segment_configurations_are_spaced_by_the_resolution(task, names):
     resolution = 0.05
     lower, upper = task.robot.lower_upper(names)
@@ -669,6 +695,7 @@ def test_segment_configurations_are_spaced_by_the_resolution(task, names):
                 assert span / (len(steps) - 1) > resolution - 1e-9
 
 
+@pytest.mark.integration
 def test_checks_count_every_configuration(task, names, reference):
     sim, objects = reference
     q0 = np.array([task.initial_q[n] for n in names])
@@ -691,6 +718,7 @@ def test_checks_count_every_configuration(task, names, reference):
         assert checker.checks == 3 + k
 
 
+@pytest.mark.integration
 def test_checker_rejects_bad_settings(task, names):
     with pytest.raises(StageError, match="margin"):
         make_checker(task, names, -0.01)
@@ -700,9 +728,12 @@ def test_checker_rejects_bad_settings(task, names):
         CollisionChecker(task.robot, ("no_such_joint",), {}, task.spec.environment)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(("gap_m", "contact"), [(0.005, False), (-0.001, True)])
 def test_a_point_pybullet_reports_across_a_gap_is_not_a_contact(gap_m, contact):
-    """Two convex hulls (the shape PyBullet gives a mesh) 5 mm apart: PyBullet still returns a contact point, at a positive distance; in_contact, the rule of the checker and of the execution, counts it only when the hulls overlap."""
+    """Two convex hulls (the shape PyBullet gives a mesh) 5 mm apart: PyBullet still returns a contact point, at a
+    positive distance; in_contact, the rule of the checker and of the execution, counts it only when the hulls
+    overlap."""
     from dualarm.sim.world import in_contact
 
     client = pb.connect(pb.DIRECT)

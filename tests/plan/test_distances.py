@@ -110,12 +110,15 @@ def test_segment_box_apart_against_dense_sampling():
 
 
 def penetration_by_directions(p: np.ndarray, q: np.ndarray, h: np.ndarray, directions: np.ndarray) -> float:
-    """The smallest overlap of the segment and the box along any of ``directions`` (unit, (M, 3)): the shortest separating translation among them."""
+    """The smallest overlap of the segment and the box along any of ``directions`` (unit, (M, 3)): the shortest
+    separating translation among them."""
     return float(np.min(np.abs(directions) @ h - np.minimum(directions @ p, directions @ q)))
 
 
 def test_segment_box_overlapping_against_every_direction():
-    """Overlapping: minus the penetration depth, the smallest overlap along any direction: no larger than along each of a dense set of directions, and equal to the overlap along one of the box's axes or their cross products with the segment (the polytope's face normals)."""
+    """Overlapping: minus the penetration depth, the smallest overlap along any direction: no larger than along each of
+    a dense set of directions, and equal to the overlap along one of the box's axes or their cross products with the
+    segment (the polytope's face normals)."""
     rng = np.random.default_rng(4)
     directions = rng.normal(size=(200_000, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from dualarm.model.poses import pose_matrix
 from dualarm.plan.wta import Wta, displacement, pose_vector, sample_hand_pose, sampling_weights
 from dualarm.tasks import load_task
-from tests.conftest import TASKS
+from tests.helpers import TASKS
 
 PI = np.pi
 
@@ -220,12 +220,13 @@ def test_sample_hand_pose_single_area(area):
 # --- Wta.of on a task file -----------------------------------------------------------------------
 
 
+@pytest.mark.integration
 def test_wta_of_bowl_grasp_matches_the_file():
     path = TASKS / "bowl_grasp.toml"
     tables = tomllib.loads(path.read_text())["wta"]
     areas = [Wta.of(spec) for spec in load_task(path).spec.wta]
     assert [a.name for a in areas] == [t["name"] for t in tables] == ["bowl_left", "bowl_right"]
-    for wta, table in zip(areas, tables):
+    for wta, table in zip(areas, tables, strict=True):
         assert wta.hand == table["hand"]
         for attr in ("reference", "offset"):
             pose = table[attr]

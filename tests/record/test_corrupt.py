@@ -26,7 +26,7 @@ from dualarm.record.run_dir import new_run_id
 from dualarm.record.verify import RUN_ID, TASK_NAME
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 runner = CliRunner()
 TRIANGLE = TASKS / "triangle.toml"
@@ -108,6 +108,7 @@ def _read_error(run: Path) -> str:
 # --- the pristine runs read, and the rules accept what the writer makes ----------------------------
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["triangle", "triangle_twice", "pinv", "circle", "failed"])
 def test_real_runs_read_with_the_files_contents(name, request):
     run = request.getfixturevalue(name)
@@ -120,6 +121,7 @@ def test_real_runs_read_with_the_files_contents(name, request):
         assert manifest["status"] == "failed" and dict(data.metrics) == {}
 
 
+@pytest.mark.integration
 def test_run_ids_and_task_names_the_writer_makes_are_accepted(triangle, circle):
     for _ in range(20):
         assert re.fullmatch(RUN_ID, new_run_id())
@@ -161,6 +163,7 @@ def _flip(mcap: Path, original: bytes, byte: int, bit: int) -> None:
     mcap.write_bytes(bytes(data))
 
 
+@pytest.mark.integration
 def test_every_bit_flip_in_run_mcap_is_refused_naming_the_file(triangle, tmp_path):
     """No flipped bit is read silently: every one, in data or summary, is a one-line RecordingError
     naming run.mcap (the format leaves no byte of the file outside a CRC or a checked field)."""
@@ -184,6 +187,7 @@ def test_every_bit_flip_in_run_mcap_is_refused_naming_the_file(triangle, tmp_pat
     assert read_run(run).metrics == read_run(triangle).metrics  # the copy itself is fine
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("section", ["data", "summary", "data_end", "footer"])
 @pytest.mark.parametrize("command", ["inspect", "report", "compare"])
 def test_a_flipped_bit_through_the_cli_is_one_line_and_exit_2(triangle, tmp_path, section, command):
@@ -314,6 +318,7 @@ def _case_id(case) -> str:
     return f"{file}-{damage.__name__.strip('_')}"
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("case", CASES, ids=_case_id)
 def test_a_damaged_file_is_a_recording_error_naming_it(triangle, tmp_path, case):
     file, damage = case
@@ -323,6 +328,7 @@ def test_a_damaged_file_is_a_recording_error_naming_it(triangle, tmp_path, case)
     assert f"{file}: " in message and fault in message, message
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("command", ["inspect", "report", "compare"])
 @pytest.mark.parametrize("case", CASES, ids=_case_id)
 def test_a_damaged_file_through_the_cli_is_one_line_and_exit_2(triangle, tmp_path, case, command):
@@ -352,6 +358,7 @@ def _cli_error(command: str, run: Path, good: Path, tmp_path: Path) -> str:
 # --- 3. files of different runs in one directory ---------------------------------------------------
 
 
+@pytest.mark.integration
 def test_metrics_json_of_another_run_of_the_same_task_is_refused(triangle, triangle_twice, tmp_path):
     run = _copy(triangle, tmp_path)
     shutil.copy(triangle_twice / "metrics.json", run / "metrics.json")
@@ -360,6 +367,7 @@ def test_metrics_json_of_another_run_of_the_same_task_is_refused(triangle, trian
     assert "metrics.json: " in message and "not this run's metrics" in message
 
 
+@pytest.mark.integration
 def test_metrics_json_differing_in_one_value_is_refused(triangle, tmp_path):
     run = _copy(triangle, tmp_path)
     metrics = _json(run / "metrics.json")
@@ -370,6 +378,7 @@ def test_metrics_json_differing_in_one_value_is_refused(triangle, tmp_path):
     assert "metrics.json: " in message and key in message
 
 
+@pytest.mark.integration
 def test_a_deleted_metrics_json_of_a_complete_or_violated_run_is_refused(triangle, pinv, tmp_path):
     statuses = set()
     for run in (triangle, pinv):
@@ -382,6 +391,7 @@ def test_a_deleted_metrics_json_of_a_complete_or_violated_run_is_refused(triangl
     assert statuses == {"complete", "violated"}
 
 
+@pytest.mark.integration
 def test_metrics_json_beside_a_failed_run_is_refused(failed, triangle, tmp_path):
     run = _copy(failed, tmp_path)
     shutil.copy(triangle / "metrics.json", run / "metrics.json")
@@ -389,6 +399,7 @@ def test_metrics_json_beside_a_failed_run_is_refused(failed, triangle, tmp_path)
     assert "metrics.json: " in message and "records no metrics" in message
 
 
+@pytest.mark.integration
 def test_run_mcap_of_another_task_is_refused(triangle, circle, tmp_path):
     run = _copy(triangle, tmp_path)
     shutil.copy(circle / "run.mcap", run / "run.mcap")
@@ -396,6 +407,7 @@ def test_run_mcap_of_another_task_is_refused(triangle, circle, tmp_path):
     assert "run.mcap: " in message and "task 'circle'" in message and "'triangle'" in message
 
 
+@pytest.mark.integration
 def test_manifest_json_of_another_run_is_refused(triangle, triangle_twice, tmp_path):
     run = _copy(triangle, tmp_path)
     shutil.copy(triangle_twice / "manifest.json", run / "manifest.json")
@@ -403,6 +415,7 @@ def test_manifest_json_of_another_run_is_refused(triangle, triangle_twice, tmp_p
     assert "run.mcap: " in message and triangle.name in message and triangle_twice.name in message
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("status", ["failed", "violated", "running"])
 def test_a_status_the_recording_does_not_hold_is_refused(triangle, tmp_path, status):
     run = _copy(triangle, tmp_path)
@@ -413,6 +426,7 @@ def test_a_status_the_recording_does_not_hold_is_refused(triangle, tmp_path, sta
     assert "run.mcap: " in message and "status 'complete'" in message and repr(status) in message
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("case", ["metrics", "mcap", "manifest", "rrd"])
 @pytest.mark.parametrize("command", ["inspect", "report", "compare"])
 def test_a_mixed_run_through_the_cli_is_one_line_and_exit_2(triangle, triangle_twice, circle, tmp_path, case, command):

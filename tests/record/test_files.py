@@ -36,7 +36,9 @@ from dualarm.record.readback import read_run
 from dualarm.report.run_report import run_label
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
+
+pytestmark = pytest.mark.integration
 
 URDF = HUMANOID / "humanoid.urdf"
 RERUN = Path(sys.executable).parent / "rerun"
@@ -340,7 +342,8 @@ def _world_position(frames: dict[str, tuple[str, np.ndarray, np.ndarray]], frame
 
 
 def test_tf_is_one_robot_under_its_urdf_link_names_rooted_at_world(run, mcap_file, urdf):
-    """/tf holds the executed robot alone, under the URDF's own link names (Foxglove's URDF layer places links by them), from t = 0."""
+    """/tf holds the executed robot alone, under the URDF's own link names (Foxglove's URDF layer places links by them),
+    from t = 0."""
     channel_schema = mcap_file.schema("/tf")
     assert channel_schema.name == "foxglove.FrameTransforms"
     expected_parent = {urdf.root: "world", **urdf.parent}
@@ -362,7 +365,8 @@ def test_tf_is_one_robot_under_its_urdf_link_names_rooted_at_world(run, mcap_fil
 
 
 def test_tf_puts_the_hands_where_pybullet_measured_them(run, mcap_file):
-    """Composing /tf down to each hand gives the hand positions PyBullet measured (/execute/sample) at the same instant, and the hands move."""
+    """Composing /tf down to each hand gives the hand positions PyBullet measured (/execute/sample) at the same instant,
+    and the hands move."""
     tips = hand_tips()
     samples = {m.log_time: json.loads(m.data)["hand_position"] for m in mcap_file.messages["/execute/sample"]}
     hands = set(next(iter(samples.values())))
@@ -391,7 +395,8 @@ def test_tf_puts_the_hands_where_pybullet_measured_them(run, mcap_file):
 
 
 def test_robot_description_is_the_urdf(mcap_file, urdf):
-    """The URDF as URDF 1.0 viewers read it: the same links and joints, no <capsule> (checked with PyBullet in tests/model/test_urdf.py)."""
+    """The URDF as URDF 1.0 viewers read it: the same links and joints, no <capsule> (checked with PyBullet in
+    tests/model/test_urdf.py)."""
     (message,) = mcap_file.messages["/robot_description"]
     text = json.loads(message.data)["data"]
     assert "<capsule" in URDF.read_text() and "<capsule" not in text
@@ -483,8 +488,14 @@ class RrdListing:
 
 
 _STORE = r'StoreInfo \{\s*store_id: StoreId\(\s*(?P<kind>\w+),\s*"(?P<app>[^"]*)",\s*"(?P<sid>[^"]*)"'
-_CHUNK = r"^Chunk\(chunk_(?P<cid>\w+)\) with (?P<rows>\d+) rows \([^)]*\) - (?P<entity>\S+) - data columns: \[(?P<columns>[^\]]*)\]"
-_ACTIVATION = r'BlueprintActivationCommand\(StoreId\((?P<akind>\w+), "(?P<aapp>[^"]*)", "(?P<aid>[^"]*)"\), make_active: (?P<active>\w+), make_default: (?P<default>\w+)\)'
+_CHUNK = (
+    r"^Chunk\(chunk_(?P<cid>\w+)\) with (?P<rows>\d+) rows \([^)]*\) - (?P<entity>\S+)"
+    r" - data columns: \[(?P<columns>[^\]]*)\]"
+)
+_ACTIVATION = (
+    r'BlueprintActivationCommand\(StoreId\((?P<akind>\w+), "(?P<aapp>[^"]*)", "(?P<aid>[^"]*)"\),'
+    r" make_active: (?P<active>\w+), make_default: (?P<default>\w+)\)"
+)
 _FOOTER_CHUNK_ID = r"┆\s*([0-9a-f]{32})\s*┆"
 
 

@@ -17,7 +17,7 @@ from dualarm.errors import InvalidArgumentError
 from dualarm.record.foxglove_layout import STAGES, foxglove_layout
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import SHIPPED
+from tests.helpers import SHIPPED
 
 LAYOUT_FILE = "foxglove-layout.json"
 
@@ -65,15 +65,18 @@ def _missing(layout: dict, mcap: Path, environment: bool) -> list[str]:
     return missing
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("task", list(SHIPPED))
 def test_every_path_of_a_shipped_runs_layout_is_in_its_mcap(shipped_runs, task):
-    """The layout for the run's stages and hands: each plot path holds a number in some message, each 3D topic and its frame exist."""
+    """The layout for the run's stages and hands: each plot path holds a number in some message, each 3D topic and its
+    frame exist."""
     run = shipped_runs[task]
     spec = load_task(task, 1)
     layout = foxglove_layout(spec.robot, json.loads((run / "manifest.json").read_text())["stages"], spec.spec.hands)
     assert _missing(layout, run / "run.mcap", bool(spec.spec.environment)) == []
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("task", list(SHIPPED))
 def test_each_shipped_run_carries_its_layout(shipped_runs, task):
     """The recorder writes foxglove-layout.json beside run.mcap, naming only what that run.mcap holds."""
@@ -83,6 +86,7 @@ def test_each_shipped_run_carries_its_layout(shipped_runs, task):
     assert _missing(layout, run / "run.mcap", bool(load_task(task, 1).spec.environment)) == []
 
 
+@pytest.mark.integration
 def test_a_path_and_ik_run_gets_panels_for_its_topics_only(tmp_path):
     task = load_task("triangle", 1)
     run = record_run(task, "mc-inverse", stages=("path", "ik"), out_dir=tmp_path)

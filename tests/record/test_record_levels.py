@@ -1,8 +1,9 @@
-"""Recording levels (``record_run(..., record=...)``, ``dualarm run --record``): what each writes, and reading each back.
+"""Recording levels (``record_run(..., record=...)``, ``dualarm run --record``): what each writes, and reading each
+back.
 
-The runs are real: the triangle through every stage, one repetition, same seed, at each level.
-The MCAP is read with the ``mcap`` library, the files are listed from the file system; the metrics of the three runs are compared with each
-other, not with figures of ours.
+The runs are real: the triangle through every stage, one repetition, same seed, at each level. The MCAP is read with the
+``mcap`` library, the files are listed from the file system; the metrics of the three runs are compared with each other,
+not with figures of ours.
 """
 
 import json
@@ -21,10 +22,11 @@ from dualarm.record.sink import RECORD_LEVELS
 from dualarm.report.compare import WALL_CLOCK
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 runner = CliRunner()
-#: The files every recorded run holds, and those only a run with recordings holds (a Foxglove layout may come beside them).
+#: The files every recorded run holds, and those only a run with recordings holds (a Foxglove layout may come beside
+#: them).
 ALWAYS, RECORDINGS, LAYOUT = {"manifest.json", "metrics.json"}, {"run.mcap", "run.rrd"}, "foxglove-layout.json"
 #: Topic families of the stages an ``ik`` run leaves out.
 LATER = ("/retime", "/smooth", "/approach", "/execute")
@@ -32,7 +34,8 @@ LATER = ("/retime", "/smooth", "/approach", "/execute")
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict[str, Path]:
-    """Level -> the run directory of the triangle (MC-Inverse, every stage, one repetition, seed 0) recorded at that level."""
+    """Level -> the run directory of the triangle (MC-Inverse, every stage, one repetition, seed 0) recorded at that
+    level."""
     out = tmp_path_factory.mktemp("levels")
     return {
         level: record_run(
@@ -54,6 +57,7 @@ def _files(run: Path) -> set[str]:
     return {p.name for p in run.iterdir()}
 
 
+@pytest.mark.integration
 def test_each_level_writes_exactly_its_files_and_records_its_level(runs):
     full, ik, metrics = (_files(runs[level]) for level in ("full", "ik", "metrics"))
     assert metrics == ALWAYS
@@ -71,6 +75,7 @@ def test_each_level_writes_exactly_its_files_and_records_its_level(runs):
         ]  # every stage ran, whatever was recorded
 
 
+@pytest.mark.integration
 def test_an_ik_run_records_the_path_and_ik_stages_only(runs):
     full, ik = _topics(runs["full"] / "run.mcap"), _topics(runs["ik"] / "run.mcap")
     assert {"/task/joint_state", "/ik/sample", "/ik/limits", "/tf", "/metrics"} <= ik
@@ -78,6 +83,7 @@ def test_an_ik_run_records_the_path_and_ik_stages_only(runs):
     assert [t for t in full if t.startswith(LATER)]  # the full run of the same task has them
 
 
+@pytest.mark.integration
 def test_every_level_has_the_same_metrics_and_verdict(runs):
     """Every stage runs whatever the level: the metrics (wall-clock times aside) and verdicts are the full run's."""
     metrics = {level: json.loads((run / "metrics.json").read_text()) for level, run in runs.items()}
@@ -91,6 +97,7 @@ def test_every_level_has_the_same_metrics_and_verdict(runs):
     )
 
 
+@pytest.mark.integration
 def test_a_metrics_run_reads_back_with_no_topics_and_names_its_level(runs):
     data = read_run(runs["metrics"])
     assert data.record == "metrics" and dict(data.topics) == {}
@@ -100,6 +107,7 @@ def test_a_metrics_run_reads_back_with_no_topics_and_names_its_level(runs):
     assert "\n" not in str(exc.value)
 
 
+@pytest.mark.integration
 def test_an_ik_run_reads_back_its_topics_and_names_its_level_for_the_others(runs):
     data = read_run(runs["ik"])
     assert data.record == "ik" and data.recorded_stages == ["path", "ik"]
@@ -113,12 +121,14 @@ def test_an_ik_run_reads_back_its_topics_and_names_its_level_for_the_others(runs
         data["/nonsense"]
 
 
+@pytest.mark.integration
 def test_read_runs_concatenates_the_runs_that_hold_a_topic(runs):
     frames = read_runs(runs.values(), topics=["/ik/sample", "/execute/sample"])
     assert set(frames["/ik/sample"]["run"]) == {runs["full"].name, runs["ik"].name}
     assert set(frames["/execute/sample"]["run"]) == {runs["full"].name}
 
 
+@pytest.mark.integration
 def test_inspect_and_compare_take_runs_of_every_level(runs):
     for level, run in runs.items():
         result = runner.invoke(app, ["inspect", str(run)])
@@ -146,6 +156,7 @@ def _edit_manifest(run: Path, **changes) -> None:
     (run / "manifest.json").write_text(json.dumps({**manifest, **changes}))
 
 
+@pytest.mark.integration
 def test_a_recording_beside_a_metrics_run_is_refused(runs, tmp_path):
     for name in ("run.mcap", "run.rrd"):
         copy = _copy(runs["metrics"], tmp_path / name)
@@ -156,6 +167,7 @@ def test_a_recording_beside_a_metrics_run_is_refused(runs, tmp_path):
             read_run(copy)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     ("level", "claimed", "needle"),
     [
@@ -173,6 +185,7 @@ def test_a_manifest_claiming_another_level_is_refused(runs, tmp_path, level, cla
     assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1
 
 
+@pytest.mark.integration
 def test_a_metrics_run_without_its_metrics_is_refused(runs, tmp_path):
     copy = _copy(runs["metrics"], tmp_path)
     (copy / "metrics.json").unlink()
@@ -191,6 +204,7 @@ def test_an_unknown_level_is_refused_before_anything_is_written(tmp_path):
     assert not (tmp_path / "api").exists() and not (tmp_path / "cli").exists()
 
 
+@pytest.mark.integration
 def test_cli_run_records_at_the_level_asked(tmp_path):
     result = runner.invoke(app, ["run", "triangle", "--reps", "1", "--record", "metrics", "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
@@ -198,8 +212,10 @@ def test_cli_run_records_at_the_level_asked(tmp_path):
     assert _files(run) == ALWAYS and json.loads((run / "manifest.json").read_text())["record"] == "metrics"
 
 
+@pytest.mark.integration
 def test_a_failed_metrics_run_is_kept_with_its_manifest_only(tmp_path):
-    """A circle whose far side is out of reach: the path stage fails; the run is kept as failed, its manifest alone, and reads back."""
+    """A circle whose far side is out of reach: the path stage fails; the run is kept as failed, its manifest alone, and
+    reads back."""
     text = (
         (TASKS / "circle.toml")
         .read_text()

@@ -20,7 +20,7 @@ from dualarm.record.recorder import Recorder
 from dualarm.run import record_run
 from dualarm.sim.world import load_pybullet_robot
 from dualarm.tasks import load_task
-from tests.conftest import TASKS, still_path_fields
+from tests.helpers import TASKS, still_path_fields
 
 
 def read_topics(path, prefix: str) -> tuple[dict[str, dict], dict[str, list[dict]]]:
@@ -36,7 +36,8 @@ def read_topics(path, prefix: str) -> tuple[dict[str, dict], dict[str, list[dict
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """pinv on one box carry in position task space: the hands' orientation is measured, not solved (errors of ~2 rad)."""
+    """pinv on one box carry in position task space: the hands' orientation is measured, not solved (errors of ~2
+    rad)."""
     task = load_task(TASKS / "carry_box.toml", 1)
     run = record_run(
         task,
@@ -48,6 +49,7 @@ def recorded(tmp_path_factory):
     return task, run.directory / "run.mcap"
 
 
+@pytest.mark.integration
 def test_ik_samples_carry_the_orientation_error_pybullet_measures(recorded):
     task, mcap = recorded
     _, ik = read_topics(mcap, "/ik/sample")
@@ -73,6 +75,7 @@ def test_ik_samples_carry_the_orientation_error_pybullet_measures(recorded):
     assert worst > 1.0  # position task space: the orientation is far off, and recorded so
 
 
+@pytest.mark.integration
 def test_ik_sample_schema_describes_the_field_and_every_message_matches(recorded):
     _, mcap = recorded
     schemas, messages = read_topics(mcap, "/ik/sample")
@@ -87,7 +90,8 @@ def test_ik_sample_schema_describes_the_field_and_every_message_matches(recorded
 
 
 def test_a_path_without_orientation_records_none(tmp_path, humanoid):
-    """A planner's path measures no orientation (NaN): its samples leave the field out instead of writing NaN, which is not JSON."""
+    """A planner's path measures no orientation (NaN): its samples leave the field out instead of writing NaN, which is
+    not JSON."""
     N = 4
     path = JointPath(**still_path_fields(N, joint="left_elbow", method="mcikrrt"))
     recorder = Recorder(tmp_path, "test", humanoid, {})

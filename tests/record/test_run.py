@@ -19,7 +19,7 @@ from dualarm.errors import TaskFileError, UnreachablePoseError
 from dualarm.record.readback import read_run, read_runs
 from dualarm.run import record_run
 from dualarm.sim.world import load_pybullet_robot
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 TRIANGLE = TASKS / "triangle.toml"
 
@@ -44,6 +44,7 @@ def _messages(run: Path) -> dict[str, list[bytes]]:
     return out
 
 
+@pytest.mark.integration
 def test_run_directory_contract(triangle_run, out_dir):
     assert triangle_run.parent == out_dir / "triangle"
     assert sorted(p.name for p in triangle_run.iterdir()) == [
@@ -56,6 +57,7 @@ def test_run_directory_contract(triangle_run, out_dir):
     assert not [p for p in triangle_run.parent.iterdir() if p.name.startswith(".")]
 
 
+@pytest.mark.integration
 def test_manifest(triangle_run):
     manifest = json.loads((triangle_run / "manifest.json").read_text())
     assert manifest["status"] == "complete" and manifest["error"] is None
@@ -73,6 +75,7 @@ def test_manifest(triangle_run):
     assert manifest["started_at"] <= manifest["finished_at"]
 
 
+@pytest.mark.integration
 def test_metrics_match_the_task_file(triangle_run):
     spec = tomllib.loads(TRIANGLE.read_text())
     steps = sum(round(m["duration_s"] / spec["control_period_s"]) for m in spec["moves"])
@@ -87,6 +90,7 @@ def test_metrics_match_the_task_file(triangle_run):
     assert metrics["path.length_max_m"] == pytest.approx(spec["repetitions"] * perimeter, rel=1e-9)
 
 
+@pytest.mark.integration
 def test_mcap_schemas_metadata_and_attachments(triangle_run):
     with (triangle_run / "run.mcap").open("rb") as f:
         reader = make_reader(f)
@@ -119,12 +123,14 @@ def test_mcap_schemas_metadata_and_attachments(triangle_run):
     assert attachments["robot.toml"] == (HUMANOID / "robot.toml").read_bytes()
 
 
+@pytest.mark.integration
 def test_log_time_is_motion_time(triangle_run):
     with (triangle_run / "run.mcap").open("rb") as f:
-        for _, channel, message in make_reader(f).iter_messages(topics=["/task/reference/left"]):
+        for _, _channel, message in make_reader(f).iter_messages(topics=["/task/reference/left"]):
             assert message.log_time == round(json.loads(message.data)["t"] * 1e9)
 
 
+@pytest.mark.integration
 def test_readback_reference_equals_the_task_waypoints(triangle_run):
     ref = read_run(triangle_run)["/task/reference/left"]
     assert list(ref.columns[:3]) == ["t", "rep", "stage"]
@@ -145,13 +151,14 @@ def test_readback_reference_equals_the_task_waypoints(triangle_run):
         assert angle < 1e-9
 
 
+@pytest.mark.integration
 def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
-    """Composing /tf from world to left_hand (a run of the path stage alone shows the path robot) gives PyBullet's hand pose at the initial configuration
-    (triangle.toml's ``[initial]`` table read with tomllib, the joints it does not name at 0), which
-    puts the hand on waypoint A."""
+    """Composing /tf from world to left_hand (a run of the path stage alone shows the path robot) gives PyBullet's hand
+    pose at the initial configuration (triangle.toml's ``[initial]`` table read with tomllib, the joints it does not
+    name at 0), which puts the hand on waypoint A."""
     tf = read_run(triangle_run)["/tf"]
     assert set(tf["child_frame_id"]) == set(humanoid.urdf.links)
-    parent = dict(zip(tf["child_frame_id"], tf["parent_frame_id"]))
+    parent = dict(zip(tf["child_frame_id"], tf["parent_frame_id"], strict=True))
     rows = tf.set_index("child_frame_id")
     T = np.eye(4)
     link = "left_hand"
@@ -175,6 +182,7 @@ def test_tf_places_the_hand_where_pybullet_does(triangle_run, humanoid):
     )  # frame = "left.shoulder" (scale 1 here)
 
 
+@pytest.mark.integration
 def test_rerun_file_verifies_with_the_rerun_cli(triangle_run):
     rerun = Path(sys.executable).parent / "rerun"
     result = subprocess.run(
@@ -186,12 +194,14 @@ def test_rerun_file_verifies_with_the_rerun_cli(triangle_run):
     assert result.returncode == 0, result.stderr
 
 
+@pytest.mark.integration
 def test_same_command_gives_identical_messages(triangle_run, out_dir):
     again = record_run(TRIANGLE, stages=["path"], out_dir=out_dir, seed=0).directory
     assert again != triangle_run
     assert _messages(again) == _messages(triangle_run)
 
 
+@pytest.mark.integration
 def test_read_runs_concatenates_with_run_column(triangle_run, out_dir):
     runs = sorted(p for p in (out_dir / "triangle").iterdir())
     frames = read_runs(runs)
@@ -207,6 +217,7 @@ def _task_copy(tmp_path: Path, text: str) -> Path:
     return path
 
 
+@pytest.mark.integration
 def test_failed_stage_leaves_a_failed_run(tmp_path):
     """A circle whose far side is out of reach: the path stage fails mid-way, the run is kept as failed."""
     text = (
@@ -231,6 +242,7 @@ def test_malformed_task_writes_nothing(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.integration
 def test_cli_run_prints_the_run_directory_last_and_inspect_reads_it(tmp_path):
     runner = CliRunner()
     result = runner.invoke(app, ["run", str(TRIANGLE), "--stages", "path", "--out", str(tmp_path)])
@@ -242,6 +254,7 @@ def test_cli_run_prints_the_run_directory_last_and_inspect_reads_it(tmp_path):
     assert "/task/reference/left" in shown.stdout and "path.samples" in shown.stdout
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("damage", ["garbage", "truncated", "no manifest"])
 def test_cli_inspect_refuses_a_corrupt_recording(triangle_run, tmp_path, damage):
     broken = tmp_path / "run"
@@ -257,6 +270,7 @@ def test_cli_inspect_refuses_a_corrupt_recording(triangle_run, tmp_path, damage)
     assert "Traceback" not in result.output
 
 
+@pytest.mark.integration
 def test_ik_run_records_joints_bounds_and_robot(tmp_path, humanoid):
     run = record_run(TASKS / "ball_game.toml", "tvgdd", stages=("path", "ik"), out_dir=tmp_path).directory
     data = read_run(run)

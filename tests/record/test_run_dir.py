@@ -1,4 +1,5 @@
-"""Output directories: made and marked, reused only when dualarm wrote everything in them, locked, refused in one message naming the path and the cause; whole writes."""
+"""Output directories: made and marked, reused only when dualarm wrote everything in them, locked, refused in one
+message naming the path and the cause; whole writes."""
 
 import errno
 import fcntl

@@ -1,4 +1,5 @@
-"""``dualarm view``: a recorded run opened in Rerun's viewer (web: the real one, answering over HTTP), the Foxglove instructions, and every refusal as one line.
+"""``dualarm view``: a recorded run opened in Rerun's viewer (web: the real one, answering over HTTP), the Foxglove
+instructions, and every refusal as one line.
 
 The web viewer is Rerun's own command line, started by the command and fetched with urllib. The
 native viewer needs a display, so its launch is checked with a stand-in ``rerun`` that keeps what
@@ -22,7 +23,7 @@ from typer.testing import CliRunner
 from dualarm.cli import app
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 runner = CliRunner()
 BIN = Path(sys.executable).parent
@@ -53,6 +54,7 @@ def _sigint_default() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+@pytest.mark.integration
 def test_web_serves_rerun_s_viewer_until_ctrl_c(ik_run):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}  # headless, as this machine
     process = subprocess.Popen(
@@ -102,10 +104,12 @@ def test_a_directory_that_is_not_a_run_is_one_line(tmp_path):
     _one_line_error([str(tmp_path / "nothing")], "no such run directory")
 
 
+@pytest.mark.integration
 def test_a_metrics_run_has_nothing_to_view(metrics_run):
     _one_line_error([str(metrics_run), "--web"], "recorded with --record metrics: nothing to view")
 
 
+@pytest.mark.integration
 def test_an_unknown_stage_names_the_run_s_stages(ik_run):
     _one_line_error(
         [str(ik_run), "--web", "--stage", "bogus"], "--stage 'bogus': the run has no such stage (stages: path, ik)"
@@ -116,6 +120,7 @@ def test_an_unknown_stage_names_the_run_s_stages(ik_run):
     )
 
 
+@pytest.mark.integration
 def test_no_display_points_to_web(ik_run, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
@@ -126,6 +131,7 @@ def test_no_display_points_to_web(ik_run, monkeypatch):
     )
 
 
+@pytest.mark.integration
 def test_no_viewer_executable_is_one_line(ik_run, tmp_path, monkeypatch):
     monkeypatch.setattr(sys, "executable", str(tmp_path / "bin" / "python"))
     monkeypatch.setenv("PATH", str(tmp_path))
@@ -133,14 +139,16 @@ def test_no_viewer_executable_is_one_line(ik_run, tmp_path, monkeypatch):
 
 
 def _stand_in(tmp_path: Path, monkeypatch, exit_code: int = 0) -> Path:
-    """A ``rerun`` beside a pretend Python that writes its arguments to ``kept/args`` and copies the files it is handed into ``kept/``; a display."""
+    """A ``rerun`` beside a pretend Python that writes its arguments to ``kept/args`` and copies the files it is handed
+    into ``kept/``; a display."""
     kept = tmp_path / "kept"
     kept.mkdir()
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     script = bin_dir / "rerun"
     script.write_text(
-        f'#!/bin/sh\nprintf "%s\\n" "$@" > {kept}/args\nfor f in "$@"; do cp "$f" {kept}/; done\necho "something went wrong" >&2\nexit {exit_code}\n'
+        f'#!/bin/sh\nprintf "%s\\n" "$@" > {kept}/args\nfor f in "$@"; do cp "$f" {kept}/; done\n'
+        f'echo "something went wrong" >&2\nexit {exit_code}\n'
     )
     script.chmod(0o755)
     monkeypatch.setattr(sys, "executable", str(bin_dir / "python"))
@@ -149,7 +157,8 @@ def _stand_in(tmp_path: Path, monkeypatch, exit_code: int = 0) -> Path:
 
 
 def _as_rerun_reads_it(rbl: Path) -> str:
-    """``rerun rrd print -vvv`` of a blueprint file, without what differs between two writes of one blueprint (row, chunk and store ids, times, sizes, table widths)."""
+    """``rerun rrd print -vvv`` of a blueprint file, without what differs between two writes of one blueprint (row,
+    chunk and store ids, times, sizes, table widths)."""
     printed = subprocess.run(
         [str(BIN / "rerun"), "rrd", "print", "-vvv", str(rbl)], capture_output=True, text=True, check=True
     ).stdout
@@ -159,8 +168,10 @@ def _as_rerun_reads_it(rbl: Path) -> str:
     return re.sub(r"[\s│┆─┌┐└┘├┤┬┴┼╞╡╪═╌┃━]+", " ", printed)
 
 
+@pytest.mark.integration
 def test_stage_hands_the_native_viewer_the_recording_and_a_blueprint_rerun_reads(ik_run, tmp_path, monkeypatch):
-    """The viewer gets run.rrd and a .rbl that Rerun reads as a blueprint of app 'dualarm', the one focused on the stage asked for.
+    """The viewer gets run.rrd and a .rbl that Rerun reads as a blueprint of app 'dualarm', the one focused on the stage
+    asked for.
 
     Blueprint ids are random; they are drawn from one counter for each blueprint here, so that two
     writes of one blueprint print alike.
@@ -190,6 +201,7 @@ def test_stage_hands_the_native_viewer_the_recording_and_a_blueprint_rerun_reads
     assert handed != expected["path"]
 
 
+@pytest.mark.integration
 def test_a_viewer_that_fails_is_one_line_naming_its_last_words(ik_run, tmp_path, monkeypatch):
     _stand_in(tmp_path, monkeypatch, exit_code=3)
     result = runner.invoke(app, ["view", str(ik_run)])

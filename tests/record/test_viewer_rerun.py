@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tests.conftest import HUMANOID, SHIPPED
+from tests.helpers import HUMANOID, SHIPPED
 
 RERUN = str(Path(sys.executable).with_name("rerun"))
 #: The 3D view's target frame (the blueprint's origin "/").
@@ -27,11 +27,16 @@ TARGET = "tf#/"
 #: Robot pixels must stay this far from the 3D view's edges (the whole robot in frame) [px].
 MARGIN_PX = 4
 
-pytestmark = pytest.mark.skipif(
-    not any(Path(d).is_dir() and any(Path(d).glob("*.json")) for d in ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"))
-    or shutil.which(RERUN) is None,
-    reason="the Rerun viewer tests need a Vulkan driver: apt-get install mesa-vulkan-drivers",
-)
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(
+        not any(
+            Path(d).is_dir() and any(Path(d).glob("*.json")) for d in ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d")
+        )
+        or shutil.which(RERUN) is None,
+        reason="the Rerun viewer tests need a Vulkan driver: apt-get install mesa-vulkan-drivers",
+    ),
+]
 
 
 def _free_port() -> int:
@@ -56,7 +61,8 @@ def _until(check, what: str, timeout_s: float = 120.0, period_s: float = 0.1):
 
 @pytest.fixture(scope="module", params=sorted(SHIPPED))
 def opened(request, shipped_runs):
-    """Each shipped task's run through every stage, opened in a headless viewer; (client, manifest stages, end of the execution [s])."""
+    """Each shipped task's run through every stage, opened in a headless viewer; (client, manifest stages, end of the
+    execution [s])."""
     from rerun.experimental import ViewerClient
 
     run = shipped_runs[request.param]
@@ -127,12 +133,14 @@ def test_every_stage_robot_is_joined_to_the_3d_views_frame(opened):
         for stage in stages:
             missing = sorted(f"{stage}/{link}" for link in links if f"{stage}/{link}" not in joined)
             assert not missing, (
-                f"t = {t:g} s: {len(missing)} frames of the {stage} robot are not joined to {TARGET}, e.g. {missing[:3]}"
+                f"t = {t:g} s: {len(missing)} frames of the {stage} robot are not joined to {TARGET},"
+                f" e.g. {missing[:3]}"
             )
 
 
 def test_the_3d_view_draws_the_whole_robot(opened):
-    """In the view the run opens on, hiding the executed robot changes at least 1 % of the pixels, none near the edges."""
+    """In the view the run opens on, hiding the executed robot changes at least 1 % of the pixels, none near the
+    edges."""
     client, stages, end = opened
     view = next(v.view_id for v in client.get_state().views if v.name == "execute: robot and hand paths")
 

@@ -24,7 +24,9 @@ from dualarm.record.readback import RunData, read_run
 from dualarm.report.compare import COLUMNS, compare_runs
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
+
+pytestmark = pytest.mark.integration
 
 runner = CliRunner()
 TRIANGLE = TASKS / "triangle.toml"
@@ -52,7 +54,8 @@ def triangle_reruns(runs_dir) -> tuple[Path, Path]:
 
 @pytest.fixture(scope="module")
 def full_reruns(runs_dir) -> tuple[Path, Path]:
-    """The same command twice through every stage (MC-Inverse, 1 repetition: a cheap full run whose trajectory passes validation)."""
+    """The same command twice through every stage (MC-Inverse, 1 repetition: a cheap full run whose trajectory passes
+    validation)."""
     return tuple(
         record_run(load_task(TRIANGLE, 1), "mc-inverse", out_dir=runs_dir / "full").directory for _ in range(2)
     )
@@ -317,7 +320,7 @@ def test_beyond_lists_the_fields_over_the_tolerance_with_where_they_first_exceed
     expected = {key for key, (_, gap) in differences.items() if (gap > tol).any()} | {
         key for key, value in files.items() if value > tol
     }
-    assert set(zip(beyond["topic"], beyond["field"])) == expected
+    assert set(zip(beyond["topic"], beyond["field"], strict=True)) == expected
     assert comparison.within == (not expected)
     for _, row in beyond.iterrows():
         if (row["topic"], row["field"]) in files:  # a metric: no time
@@ -335,7 +338,7 @@ def test_beyond_lists_the_fields_over_the_tolerance_with_where_they_first_exceed
 
 
 def _row_counts(df: pd.DataFrame) -> Counter:
-    return Counter(zip(df["rep"].to_numpy().tolist(), np.round(df["t"].to_numpy(), 9).tolist()))
+    return Counter(zip(df["rep"].to_numpy().tolist(), np.round(df["t"].to_numpy(), 9).tolist(), strict=True))
 
 
 def test_rows_in_one_run_only_are_counted_and_beyond_any_tolerance(repetitions_pair):
@@ -382,7 +385,7 @@ def test_rows_in_one_run_only_are_counted_and_beyond_any_tolerance(repetitions_p
 
     # rows in one run only are beyond any tolerance: with a huge one, only they (and fields of one run only) remain
     comparison = compare_runs(run_data(a), run_data(b), 1e300)
-    assert set(zip(comparison.beyond["topic"], comparison.beyond["field"])) == expected_beyond
+    assert set(zip(comparison.beyond["topic"], comparison.beyond["field"], strict=True)) == expected_beyond
     result = runner.invoke(app, ["compare", str(a), str(b), "--tol", "1e300"])
     assert result.exit_code == 1, result.output
     count = COUNT_BEYOND.search(result.stdout)

@@ -12,7 +12,7 @@ from dualarm.cli import app
 from dualarm.model.robot import load_robot
 from dualarm.record.readback import read_run
 from dualarm.report.consistency import COLUMNS
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 
 runner = CliRunner()
 
@@ -25,6 +25,7 @@ def short_circle(tmp_path_factory):
     return path
 
 
+@pytest.mark.integration
 def test_consistency_writes_the_runs_metrics_and_figures(short_circle, tmp_path):
     result = runner.invoke(
         app,
@@ -70,6 +71,7 @@ def test_an_unknown_method_writes_nothing(short_circle, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.integration
 def test_a_failing_method_is_a_row_not_the_end(short_circle, tmp_path):
     """MC-Inverse held to psi in (-0.1, 0.1) cannot draw the circle: its row says so, and the
     other method still runs."""

@@ -1,4 +1,5 @@
-"""``dualarm consistency`` on a robot that is not S-R-S (the Panda): a table and figures, its arm angle the SEW angle, no KeyError."""
+"""``dualarm consistency`` on a robot that is not S-R-S (the Panda): a table and figures, its arm angle the SEW angle,
+no KeyError."""
 
 from pathlib import Path
 
@@ -22,6 +23,7 @@ ARM = [f"panda_joint{i}" for i in range(1, 8)]
 runner = CliRunner()
 
 
+@pytest.mark.integration
 def test_consistency_on_the_panda_with_two_methods_and_two_repetitions(tmp_path):
     result = runner.invoke(
         app, ["consistency", str(TASK), "--methods", "tvgdd,dls-svd", "--reps", "2", "--out", str(tmp_path)]

@@ -1,4 +1,5 @@
-"""``dualarm consistency`` shows each method's orientation error beside the joint deviations, and marks a method that solved positions only.
+"""``dualarm consistency`` shows each method's orientation error beside the joint deviations, and marks a method that
+solved positions only.
 
 The orientation errors are checked against PyBullet's forward kinematics of the recorded IK samples
 and scipy's rotations, the asked orientations read from the recorded reference.
@@ -19,7 +20,9 @@ from dualarm.contracts.verdict import Checks
 from dualarm.record.readback import read_run
 from dualarm.report.consistency import COLUMNS, POSITION_ONLY
 from dualarm.sim.world import load_pybullet_robot
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
+
+pytestmark = pytest.mark.integration
 
 runner = CliRunner()
 
@@ -34,7 +37,9 @@ def position_circle(tmp_path_factory):
 
 
 def pybullet_orientation_errors(run: Path) -> np.ndarray:
-    """Per IK sample of a circle run: the angle of R_asked^T R_reached of the left hand [rad], R_reached by PyBullet at the recorded joints (the others at circle.toml's ``initial``, read with tomllib), R_asked the recorded reference's."""
+    """Per IK sample of a circle run: the angle of R_asked^T R_reached of the left hand [rad], R_reached by PyBullet at
+    the recorded joints (the others at circle.toml's ``initial``, read with tomllib), R_asked the recorded
+    reference's."""
     data = read_run(run)
     samples, reference = data["/ik/sample"], data["/task/reference/left"]
     assert np.array_equal(samples["t"].to_numpy(), reference["t"].to_numpy())
@@ -45,7 +50,7 @@ def pybullet_orientation_errors(run: Path) -> np.ndarray:
     angles = np.empty(len(samples))
     with load_pybullet_robot(HUMANOID / "humanoid.urdf") as sim:
         for k, row in enumerate(joints):
-            q = {**initial, **dict(zip(names, row))}
+            q = {**initial, **dict(zip(names, row, strict=True))}
             sim.set_positions(list(q), list(q.values()))
             angles[k] = (asked[k].inv() * Rotation.from_matrix(sim.link_pose("left_hand")[:3, :3])).magnitude()
     return angles
@@ -63,7 +68,7 @@ def test_orientation_error_stands_beside_the_joint_deviations_and_position_only_
     assert result.exit_code == 0, result.output
     assert COLUMNS.index("orientation_error_max_rad") == COLUMNS.index("rep_arm_angle_deviation_max_rad") + 1
     table = pd.read_csv(tmp_path / "consistency.csv").set_index("method")
-    for method, row in table.iterrows():
+    for _method, row in table.iterrows():
         metrics = json.loads((Path(row["run"]) / "metrics.json").read_text())
         assert row["orientation_error_max_rad"] == metrics["ik.orientation_error_max_rad"]
         assert row["orientation_solved"] == metrics["ik.orientation_solved"]

@@ -8,7 +8,9 @@ from pathlib import Path
 import pytest
 
 from dualarm.report.consistency import run_consistency
-from tests.conftest import TASKS
+from tests.helpers import TASKS
+
+pytestmark = pytest.mark.integration
 
 README = Path(__file__).resolve().parents[2] / "reports" / "README.md"
 DOCUMENTED_RUNS = 'Path("reports/reproduction/consistency/triangle/runs/triangle")'

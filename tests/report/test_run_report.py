@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from dualarm.cli import app
@@ -13,7 +14,9 @@ from dualarm.record.readback import read_run
 from dualarm.report.run_report import excursions, write_report
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
+
+pytestmark = pytest.mark.integration
 
 
 def test_report_of_a_pinv_run(tmp_path):
@@ -35,11 +38,11 @@ def test_report_of_a_pinv_run(tmp_path):
     path = solve_pinv(task.robot, build_reference(task), task.initial_q, settings_for(task))
     lo, hi = path.extras["theta_lower"], path.extras["theta_upper"]
     outside = np.maximum(lo - path.q, path.q - hi).max(axis=0)
-    expected = {n: v for n, v in zip(path.joint_names, outside) if v > 1e-9}
+    expected = {n: v for n, v in zip(path.joint_names, outside, strict=True) if v > 1e-9}
     data = read_run(run)
     table = excursions(data["/ik/sample"], data["/ik/bounds"], "position")
-    assert dict(zip(table["joint"], table["max_outside"])).keys() == expected.keys()
-    for joint, value in zip(table["joint"], table["max_outside"]):
+    assert dict(zip(table["joint"], table["max_outside"], strict=True)).keys() == expected.keys()
+    for joint, value in zip(table["joint"], table["max_outside"], strict=True):
         assert abs(value - expected[joint]) < 1e-12
 
 
@@ -56,11 +59,11 @@ def test_report_lists_joints_leaving_their_physical_limits(tmp_path):
     task = load_task(task_file)
     path = solve_pinv(task.robot, build_reference(task), task.initial_q, settings_for(task))
     fastest = np.abs(path.qd).max(axis=0) - 0.05
-    expected = {n: v for n, v in zip(path.joint_names, fastest) if v > 1e-9}
+    expected = {n: v for n, v in zip(path.joint_names, fastest, strict=True) if v > 1e-9}
     assert expected, "the limit should be exceeded"
     table = pd.read_csv(out / "velocity_limit_excursions.csv")
-    assert dict(zip(table["joint"], table["max_outside"])).keys() == expected.keys()
-    for joint, value in zip(table["joint"], table["max_outside"]):
+    assert dict(zip(table["joint"], table["max_outside"], strict=True)).keys() == expected.keys()
+    for joint, value in zip(table["joint"], table["max_outside"], strict=True):
         assert abs(value - expected[joint]) < 1e-9
     summary = (out / "summary.md").read_text()
     assert "Joint velocities outside their physical limits:" in summary

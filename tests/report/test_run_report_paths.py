@@ -16,7 +16,9 @@ from dualarm.record.readback import read_run
 from dualarm.report.run_report import write_report, write_runs_report
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import TASKS
+from tests.helpers import TASKS
+
+pytestmark = pytest.mark.integration
 
 runner = CliRunner()
 
@@ -50,7 +52,8 @@ def _hostile_fields(victim: Path) -> list[dict[str, str]]:
 
 @pytest.fixture
 def sandbox(tmp_path, monkeypatch) -> tuple[Path, Path]:
-    """(the tree watched, a victim directory in it holding a user's report files); the working directory is three levels down."""
+    """(the tree watched, a victim directory in it holding a user's report files); the working directory is three levels
+    down."""
     victim = tmp_path / "victim"
     victim.mkdir()
     (victim / "summary.md").write_text("my notes\n")

@@ -18,7 +18,9 @@ from dualarm.cli import app
 from dualarm.report.run_report import RUN_COLUMNS
 from dualarm.run import record_run
 from dualarm.tasks import load_task
-from tests.conftest import TASKS
+from tests.helpers import TASKS
+
+pytestmark = pytest.mark.integration
 
 runner = CliRunner()
 TRIANGLE = TASKS / "triangle.toml"
@@ -99,7 +101,7 @@ def test_runs_csv_has_a_row_per_run_with_its_metrics_json(report):
     keys = sorted(set().union(*metrics))
     assert list(table.columns) == [*RUN_COLUMNS, *keys]
     assert table["label"].is_unique
-    for (_, row), run, metric, manifest in zip(table.iterrows(), runs, metrics, manifests):
+    for (_, row), run, metric, manifest in zip(table.iterrows(), runs, metrics, manifests, strict=True):
         assert row["run"] == manifest["run_id"] == run.name
         assert row["task"] == manifest["task"]
         assert row["method"] == manifest["settings"]["ik"]["method"]

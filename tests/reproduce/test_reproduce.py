@@ -26,7 +26,7 @@ from typer.testing import CliRunner
 from dualarm.cli import app
 from dualarm.errors import DualarmError
 from dualarm.record.readback import read_run
-from tests.conftest import HUMANOID, REPO, TASKS
+from tests.helpers import HUMANOID, REPO, TASKS
 
 runner = CliRunner()
 
@@ -140,7 +140,11 @@ def pybullet_limits(sim, joints) -> tuple[np.ndarray, np.ndarray]:
     return np.array([i[8] for i in info]), np.array([i[9] for i in info])
 
 
-def arm_angle_eq1(S: np.ndarray, E: np.ndarray, W: np.ndarray, V=np.array([0.0, 0.0, 1.0])) -> float:
+#: The vertical that spans eq (1)'s reference plane with SW.
+VERTICAL = np.array([0.0, 0.0, 1.0])
+
+
+def arm_angle_eq1(S: np.ndarray, E: np.ndarray, W: np.ndarray, V=VERTICAL) -> float:
     """MC-Inverse eq (1): psi = atan2(-(n_ref x n_arm) . SW/|SW|, n_ref . n_arm), with the
     reference plane spanned by SW and the vertical V and the arm plane by S, E, W (normals
     n_ref = SW x V, n_arm = SE x SW)."""
@@ -173,7 +177,8 @@ def wrapped(a) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def repro(tmp_path_factory):
-    """`dualarm reproduce --only table-i,ball-game-pinv,ball-game-tvgdd --jobs 2` (a Dask LocalCluster of two workers)."""
+    """`dualarm reproduce --only table-i,ball-game-pinv,ball-game-tvgdd --jobs 2` (a Dask LocalCluster of two
+    workers)."""
     out = tmp_path_factory.mktemp("reproduce") / "reproduction"
     result = reproduce(out, ",".join(CHOSEN), 2)
     assert result.exit_code == 0, (result.output, result.exception)
@@ -187,6 +192,7 @@ def _run_of(repro, part: str):
     return read_run(repro.out / repro.parts[part]["outputs"]["runs"][0])
 
 
+@pytest.mark.integration
 def test_exit_0_report_path_last_parts_json_and_time_table(repro):
     out, result = repro.out, repro.result
     lines = [line for line in result.stdout.splitlines() if line.strip()]
@@ -219,6 +225,7 @@ def test_exit_0_report_path_last_parts_json_and_time_table(repro):
         assert len(row) == 1 and "complete" in row[0] and f"{p['seconds']:.1f}" in row[0], (p["name"], row)
 
 
+@pytest.mark.integration
 def test_report_sections_not_available_commands_and_links(repro):
     out, report = repro.out, repro.report
     headings = [line[3:] for line in report.splitlines() if line.startswith("## ")]
@@ -289,6 +296,7 @@ def test_report_sections_not_available_commands_and_links(repro):
 # --- TV-GDD ---------------------------------------------------------------------------------------
 
 
+@pytest.mark.integration
 def test_tvgdd_hand_error_and_time_claims_from_the_recording(repro):
     rows = claim_rows(repro.report)["TV-GDD"]
     run = _run_of(repro, "ball-game-tvgdd")
@@ -322,6 +330,7 @@ def test_tvgdd_hand_error_and_time_claims_from_the_recording(repro):
     assert run.metrics["ik.solve_time_mean_s"] == pytest.approx(solve.mean(), rel=1e-9)
 
 
+@pytest.mark.integration
 def test_tvgdd_recorded_hand_errors_are_pybullets(repro):
     """The hand_error_m columns behind Fig. 8's claims: |reference - f(q)| with f from PyBullet."""
     from dualarm.sim.world import load_pybullet_robot
@@ -347,6 +356,7 @@ def test_tvgdd_recorded_hand_errors_are_pybullets(repro):
     assert worst < 5e-7  # PyBullet's single precision
 
 
+@pytest.mark.integration
 def test_tvgdd_bound_execution_claims_from_the_recording(repro):
     from dualarm.sim.world import load_pybullet_robot
 
@@ -401,6 +411,7 @@ def test_tvgdd_bound_execution_claims_from_the_recording(repro):
     assert row["verdict"] == verdict(contacts == 0 and tracking < 1e-3)
 
 
+@pytest.mark.integration
 def test_pinv_excursion_claims_equal_the_solvers_arrays(repro):
     from dualarm.ik.velocity.pinv import settings_for, solve_pinv
     from dualarm.paths import build_reference
@@ -428,6 +439,7 @@ def test_pinv_excursion_claims_equal_the_solvers_arrays(repro):
 # --- MC-Inverse, Table I --------------------------------------------------------------------------
 
 
+@pytest.mark.integration
 def test_table_i_candidates_reach_the_analogue_pose_in_pybullet(repro):
     from dualarm.reproduce.claims import PAPER_TABLE_I as QUOTED
     from dualarm.reproduce.experiments import TABLE_I_SOLUTION_1
@@ -468,6 +480,7 @@ def test_table_i_candidates_reach_the_analogue_pose_in_pybullet(repro):
     assert np.ptp(np.abs(q[:, 3])) < 1e-9
 
 
+@pytest.mark.integration
 def test_table_i_rows_of_the_report_count_what_the_table_holds(repro):
     data = json.loads((repro.out / "table_i.json").read_text())
     rows = claim_rows(repro.report)["MC-Inverse"]
@@ -513,7 +526,8 @@ def test_table_i_rows_of_the_report_count_what_the_table_holds(repro):
     assert row["paper"] == "28 values"
     assert (
         row["ours"]
-        == f"{equal} of 28 equal to 5 decimals; {len(sign_only)} equal but for the sign ({', '.join(sign_only)}); {others} others"
+        == f"{equal} of 28 equal to 5 decimals; {len(sign_only)} equal but for the sign ({', '.join(sign_only)});"
+        f" {others} others"
     ), row
     assert row["verdict"] == verdict(others == 0)
 
@@ -531,6 +545,7 @@ def _table_i_command(repro) -> list[str]:
     return shlex.split(row["command"].strip("`"))[1:]
 
 
+@pytest.mark.integration
 def test_table_i_command_of_the_report_reproduces_the_table(repro, monkeypatch):
     monkeypatch.chdir(REPO)  # the command names robots/humanoid relative to the repository
     result = runner.invoke(app, [*_table_i_command(repro), "--json"])
@@ -544,6 +559,7 @@ def test_table_i_command_of_the_report_reproduces_the_table(repro, monkeypatch):
     )
 
 
+@pytest.mark.integration
 def test_table_i_command_of_the_report_runs_the_parts_exact_pose(repro):
     command = _table_i_command(repro)
     data = json.loads((repro.out / "table_i.json").read_text())
@@ -586,6 +602,7 @@ def test_out_that_is_not_a_reproduction_is_refused_and_left_alone(tmp_path):
     assert result.exit_code == 2 and len(error_lines(result)) == 1 and a_file.read_text() == "x"
 
 
+@pytest.mark.integration
 def test_second_reproduction_replaces_the_first(repro, tmp_path):
     out = tmp_path / "again"
     shutil.copytree(repro.out, out)
@@ -623,6 +640,7 @@ def failed_repro(tmp_path_factory):
     return out, result
 
 
+@pytest.mark.integration
 def test_a_failing_part_exits_1_and_is_reported_failed(failed_repro):
     out, result = failed_repro
     assert result.exit_code == 1, (result.output, result.exception)
@@ -658,12 +676,14 @@ def test_a_failing_part_exits_1_and_is_reported_failed(failed_repro):
     assert time_rows["ball-game-tvgdd"][2] == "failed"
 
 
+@pytest.mark.integration
 def test_the_completed_pinv_part_keeps_its_claims_when_tvgdd_fails(failed_repro):
     out, _ = failed_repro
     rows = claim_rows((out / "report.md").read_text())["TV-GDD"]
     assert {r["where"] for r in rows if r["command"] == f"`{PINV_COMMAND}`"} == {"Fig. 3", "Fig. 4"}
 
 
+@pytest.mark.integration
 def test_one_at_a_time_is_not_said_to_share_the_machine(failed_repro):
     out, _ = failed_repro
     report = (out / "report.md").read_text()
@@ -671,6 +691,7 @@ def test_one_at_a_time_is_not_said_to_share_the_machine(failed_repro):
     assert "measured with another part running" not in report
 
 
+@pytest.mark.integration
 def test_report_rewritten_from_a_copy_is_the_same(repro, tmp_path):
     from dualarm.reproduce.report import write_reproduction_report
 
@@ -724,6 +745,7 @@ def _deviations(run, task_file: Path) -> tuple[float, float]:
     return float(dq), float(dpsi)
 
 
+@pytest.mark.integration
 def test_consistency_claims_show_the_deviations_of_the_recordings(carry_box_runs):
     from dualarm.reproduce.claims import consistency_claims
 
@@ -753,6 +775,7 @@ def test_consistency_claims_show_the_deviations_of_the_recordings(carry_box_runs
     assert box.agrees == (0.01 < found["ikfast-style"][1] < found["trac-ik"][1])
 
 
+@pytest.mark.integration
 def test_recorded_arm_angles_are_eq1_of_pybullets_frames(carry_box_runs):
     """The arm_angle_rad columns behind the Δψ figures, against eq (1) implemented here."""
     from dualarm.sim.world import load_pybullet_robot
@@ -773,6 +796,7 @@ def test_recorded_arm_angles_are_eq1_of_pybullets_frames(carry_box_runs):
     assert worst < 1e-6
 
 
+@pytest.mark.integration
 def test_consistency_claims_survive_a_failed_method_run(carry_box_runs, tmp_path):
     from dualarm.reproduce.claims import consistency_claims
     from dualarm.run import record_run
@@ -829,6 +853,7 @@ def test_an_interrupted_reproduction_is_recognised_and_emptied(tmp_path):
     assert [p.name for p in out.iterdir()] == [MARKER]
 
 
+@pytest.mark.integration
 def test_a_claim_resting_on_a_violated_mc_inverse_run_is_contradicted(carry_box_runs, tmp_path):
     """The box lifted in 0.2 s instead of 2 s: MC-Inverse still repeats, but at the task's timing
     its joints outrun their velocity limits (finite differences of the recorded joints), so the
@@ -856,8 +881,10 @@ def test_a_claim_resting_on_a_violated_mc_inverse_run_is_contradicted(carry_box_
     assert not box.contradicted and box.verdict == "mc-inverse: complete"
 
 
+@pytest.mark.integration
 def test_on_a_separately_started_cluster_the_parts_are_those_of_a_local_one(repro, tmp_path):
-    """`--scheduler`: a scheduler and two `dask worker` processes started apart on 127.0.0.1 (two nodes sharing the file system) run the parts; Table I and the pinv run's metrics are the shared reproduction's (a LocalCluster)."""
+    """`--scheduler`: a scheduler and two `dask worker` processes started apart on 127.0.0.1 (two nodes sharing the file
+    system) run the parts; Table I and the pinv run's metrics are the shared reproduction's (a LocalCluster)."""
     from dualarm.bench.study import loopback_cluster
     from dualarm.study.run import VARYING
 
@@ -879,8 +906,10 @@ def test_on_a_separately_started_cluster_the_parts_are_those_of_a_local_one(repr
     assert {k: v for k, v in ours.items() if k not in VARYING} == {k: v for k, v in local.items() if k not in VARYING}
 
 
+@pytest.mark.integration
 def test_a_worker_that_does_not_see_out_is_refused_in_one_line(tmp_path):
-    """A worker in its own mount namespace, where a tmpfs hides ``out``'s directory (a node without the shared file system): exit 2, one line naming the worker and why."""
+    """A worker in its own mount namespace, where a tmpfs hides ``out``'s directory (a node without the shared file
+    system): exit 2, one line naming the worker and why."""
     import subprocess
     import sys
 
@@ -893,7 +922,10 @@ def test_a_worker_that_does_not_see_out_is_refused_in_one_line(tmp_path):
     if subprocess.run(["unshare", "--mount", "true"], capture_output=True).returncode != 0:
         pytest.skip("needs unshare --mount (root, Linux)")
     with loopback_cluster(0, tmp_path) as address:
-        worker = f"mount -t tmpfs none {shlex.quote(str(hidden))} && exec {shlex.quote(sys.executable)} -m distributed.cli.dask_worker {address} --nthreads 1 --name elsewhere --no-dashboard"
+        worker = (
+            f"mount -t tmpfs none {shlex.quote(str(hidden))} && exec {shlex.quote(sys.executable)}"
+            f" -m distributed.cli.dask_worker {address} --nthreads 1 --name elsewhere --no-dashboard"
+        )
         process = subprocess.Popen(
             ["unshare", "--mount", "--propagation", "private", "sh", "-c", worker],
             stdout=subprocess.DEVNULL,
@@ -910,6 +942,7 @@ def test_a_worker_that_does_not_see_out_is_refused_in_one_line(tmp_path):
             process.wait(timeout=30)
     assert result.exit_code == 2, result.output
     assert error_lines(result) == [
-        f"error: worker elsewhere does not see {hidden / 'repro'}: with --scheduler, --out must be on a file system the workers share"
+        f"error: worker elsewhere does not see {hidden / 'repro'}: with --scheduler, --out must be on a file system"
+        " the workers share"
     ]
     assert not (hidden / "repro" / "parts.json").exists()

@@ -1,20 +1,26 @@
-"""`dualarm reproduce --robot`: the papers' experiments on a robot nobody here wrote them for; the parts it cannot run reported as not available, with the reason."""
+"""`dualarm reproduce --robot`: the papers' experiments on a robot nobody here wrote them for; the parts it cannot run
+reported as not available, with the reason."""
 
 import json
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from tests.conftest import REPO, pybullet_urdf
+from tests.helpers import REPO, pybullet_urdf
 
 runner = CliRunner()
 DUAL_IIWA = REPO / "robots" / "dual_iiwa"
 
 
+@pytest.mark.integration
 def test_the_paper_experiments_run_on_the_dual_iiwa_and_the_bowl_grasp_is_not_available(tmp_path):
-    """Table I's analogue, the pinv ball game and the bowl grasp on the dual iiwa: the first two run (every valid Table I candidate puts the iiwa's hand on the asked pose by PyBullet's FK), the bowl grasp is reported as not available because the robot has no waist; exit 0; the report names the robot and the reason; each command to reproduce a part alone carries --robot."""
+    """Table I's analogue, the pinv ball game and the bowl grasp on the dual iiwa: the first two run (every valid Table
+    I candidate puts the iiwa's hand on the asked pose by PyBullet's FK), the bowl grasp is reported as not available
+    because the robot has no waist; exit 0; the report names the robot and the reason; each command to reproduce a part
+    alone carries --robot."""
     out = tmp_path / "repro"
     result = runner.invoke(
         app,
@@ -60,7 +66,8 @@ def test_the_paper_experiments_run_on_the_dual_iiwa_and_the_bowl_grasp_is_not_av
 
 
 def test_a_robot_that_runs_no_part_exits_2_and_the_report_says_why(tmp_path):
-    """The Panda (one arm, not S-R-S): Table I needs an S-R-S left arm, the carried box S-R-S arms, the triangle a left hand; each is named in one line, nothing runs, exit 2."""
+    """The Panda (one arm, not S-R-S): Table I needs an S-R-S left arm, the carried box S-R-S arms, the triangle a left
+    hand; each is named in one line, nothing runs, exit 2."""
     out = tmp_path / "repro"
     result = runner.invoke(
         app, ["reproduce", "--robot", "panda", "--only", "table-i,carry-box,triangle", "--jobs", "1", "--out", str(out)]

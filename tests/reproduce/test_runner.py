@@ -52,8 +52,11 @@ def test_an_unknown_part_is_quoted_short():
     assert len(message) < 250 and "x" * 38 + "..." in message and "table-i" in message
 
 
+@pytest.mark.integration
 def test_a_part_that_takes_its_workers_down_is_failed_and_the_others_go_on(tmp_path, monkeypatch):
-    """On a scheduler and two `dask worker`s started apart: each worker that starts ball-game-pinv is killed (SIGKILL) as the part reports progress; Dask retries it on another until its allowed failures are spent, then it is a failed part (KilledWorker); table-i completes.
+    """On a scheduler and two `dask worker`s started apart: each worker that starts ball-game-pinv is killed (SIGKILL)
+    as the part reports progress; Dask retries it on another until its allowed failures are spent, then it is a failed
+    part (KilledWorker); table-i completes.
 
     The scheduler allows one failure (Dask's default is 3): one retry shows the retry, and each
     further one costs a worker's restart.

@@ -1,6 +1,7 @@
-"""The jerk-limited timing (`[retime] timing = "jerk-limited"`, dualarm.retime.jerk): within every velocity, acceleration and
-jerk limit, on the path, rest to rest, repetitions identical, near TOPP-RA's time. Facts are computed from the timing's
-samples by finite differences, from the analytic curve the path samples, and from toppra, independently of the method."""
+"""The jerk-limited timing (`[retime] timing = "jerk-limited"`, dualarm.retime.jerk): within every velocity,
+acceleration and jerk limit, on the path, rest to rest, repetitions identical, near TOPP-RA's time. Facts are computed
+from the timing's samples by finite differences, from the analytic curve the path samples, and from toppra,
+independently of the method."""
 
 import re
 import shutil
@@ -17,7 +18,7 @@ from dualarm.retime.timing import path_deviation_max_rad
 from dualarm.run import run_task
 from dualarm.tasks import load_task
 from dualarm.tasks.schema import Retime
-from tests.conftest import HUMANOID, TASKS
+from tests.helpers import HUMANOID, TASKS
 from tests.retime.test_topp import ARMS, joint_path
 
 V = np.tile([1.0, 0.9, 1.2, 1.1, 1.5, 0.8, 1.3], 2)  # rad/s
@@ -43,7 +44,8 @@ def _edge(k: int, sigma: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def loop():
-    """A closed curve of three bent edges through 14 joints, sampled densely near its corners (where a task brings the hand to rest), 3 repetitions."""
+    """A closed curve of three bent edges through 14 joints, sampled densely near its corners (where a task brings the
+    hand to rest), 3 repetitions."""
     sigma = (1 - np.cos(np.linspace(0.0, np.pi, EDGE_SAMPLES)))[:-1] / 2
     one = np.concatenate([_edge(k, sigma) for k in range(3)])
     q = np.concatenate([np.tile(one, (REPS, 1)), one[:1]])
@@ -54,7 +56,9 @@ def loop():
 
 
 def _distance_to_polyline(x: np.ndarray, points: np.ndarray, nearest: bool = False):
-    """Each point of x (M, n) to the polyline through ``points`` (P, n): to the segments either side of its 8 nearest points (near a corner the nearest may be on the other edge); with ``nearest``, also the nearest point of the polyline (M, n)."""
+    """Each point of x (M, n) to the polyline through ``points`` (P, n): to the segments either side of its 8 nearest
+    points (near a corner the nearest may be on the other edge); with ``nearest``, also the nearest point of the
+    polyline (M, n)."""
     close = cKDTree(points).query(x, k=8)[1]
     best, where = np.full(len(x), np.inf), np.array(x, dtype=float)
     for a, b in [pair for k in range(8) for pair in ((close[:, k] - 1, close[:, k]), (close[:, k], close[:, k] + 1))]:
@@ -69,7 +73,8 @@ def _distance_to_polyline(x: np.ndarray, points: np.ndarray, nearest: bool = Fal
 
 
 def test_every_limit_holds_by_finite_differences(loop):
-    """Sampled every 0.25 ms, the first, second and third differences of q (each a mean of qd, qdd, the jerk) stay within the limits (1 + 1e-6)."""
+    """Sampled every 0.25 ms, the first, second and third differences of q (each a mean of qd, qdd, the jerk) stay
+    within the limits (1 + 1e-6)."""
     _, timing, _ = loop
     q = timing.evaluate(np.arange(0.0, timing.duration_s, STEP_S))[0]
     for order, limit in ((1, V), (2, A), (3, J)):
@@ -79,7 +84,9 @@ def test_every_limit_holds_by_finite_differences(loop):
 
 
 def test_the_trajectory_stays_on_the_curve_and_passes_every_sample(loop):
-    """Every 1 ms the joints lie on the analytic curve the path samples (1e-6 rad, to the polyline through 20,001 of its points per edge), and at its passing times within 1e-6 rad of each sample (the issue's budget); rest at both ends."""
+    """Every 1 ms the joints lie on the analytic curve the path samples (1e-6 rad, to the polyline through 20,001 of its
+    points per edge), and at its passing times within 1e-6 rad of each sample (the issue's budget); rest at both
+    ends."""
     path, timing, _ = loop
     dense = np.concatenate([_edge(k, np.linspace(0.0, 1.0, 20001)) for k in range(3)])
     q = timing.evaluate(np.arange(0.0, timing.duration_s, 1e-3))[0]
@@ -90,7 +97,8 @@ def test_the_trajectory_stays_on_the_curve_and_passes_every_sample(loop):
 
 
 def test_repetitions_repeat_and_it_is_deterministic(loop):
-    """Each repetition, shifted to its start (when it passes its first sample), equals the first to 1e-9 rad; timing the path again gives the same samples bit for bit."""
+    """Each repetition, shifted to its start (when it passes its first sample), equals the first to 1e-9 rad; timing the
+    path again gives the same samples bit for bit."""
     path, timing, per_rep = loop
     starts = timing.sample_times_s[np.arange(REPS) * per_rep]
     t = np.linspace(0.0, starts[1] - starts[0], 3001)
@@ -101,7 +109,8 @@ def test_repetitions_repeat_and_it_is_deterministic(loop):
 
 
 def test_it_takes_at_most_ten_percent_longer_than_topp_ra_without_jerk_limit(loop):
-    """The duration is at most 1.10 times TOPP-RA's (toppra, full velocity and acceleration limits, jerk unlimited): the price of a finite jerk."""
+    """The duration is at most 1.10 times TOPP-RA's (toppra, full velocity and acceleration limits, jerk unlimited): the
+    price of a finite jerk."""
     path, timing, _ = loop
     assert timing.duration_s <= 1.10 * plan(path, V, A).duration_s
 
@@ -113,7 +122,8 @@ def test_a_bad_jerk_limit_is_refused_in_one_line(loop):
 
 
 def test_the_retime_stage_reports_and_checks_the_jerk():
-    """The shipped triangle with `[retime] timing = "jerk-limited"`: the retime stage's velocity, acceleration and (mean, per sample period) jerk ratios are within 1 + 1e-6 and it has no violation."""
+    """The shipped triangle with `[retime] timing = "jerk-limited"`: the retime stage's velocity, acceleration and
+    (mean, per sample period) jerk ratios are within 1 + 1e-6 and it has no violation."""
     result = run_task(
         TASKS / "triangle.toml", "mc-inverse", stages=("path", "ik", "retime"), retime=Retime(timing="jerk-limited")
     )
@@ -123,18 +133,19 @@ def test_the_retime_stage_reports_and_checks_the_jerk():
 
 
 def _fd_ratios(timing, limits=(V, A, J)) -> list[float]:
-    """Velocity, acceleration and jerk ratios of the timing's positions every :data:`STEP_S` by first, second and third differences."""
+    """Velocity, acceleration and jerk ratios of the timing's positions every :data:`STEP_S` by first, second and third
+    differences."""
     q = timing.evaluate(np.arange(0.0, timing.duration_s, STEP_S))[0]
     return [
         float((np.abs(np.diff(q, order, axis=0)) / STEP_S**order / limit).max())
-        for order, limit in zip((1, 2, 3), limits)
+        for order, limit in zip((1, 2, 3), limits, strict=True)
     ]
 
 
 def test_rounding_noise_in_the_samples_neither_breaks_a_limit_nor_slows_it_down(loop):
     """The loop's samples with the IK's rounding noise added (uniform, 1e-7 rad per joint): within the limits by finite
-    differences, within 1e-6 rad of every sample, and as fast as without noise (0.5 %); an interpolating spline would put
-    the noise into the jerk."""
+    differences, within 1e-6 rad of every sample, and as fast as without noise (0.5 %); an interpolating spline would
+    put the noise into the jerk."""
     path, clean, _ = loop
     noise = np.random.default_rng(0).uniform(-1e-7, 1e-7, path.q.shape)
     noisy = joint_path(path.q + noise, path.t, ARMS, path.rep)
@@ -146,8 +157,8 @@ def test_rounding_noise_in_the_samples_neither_breaks_a_limit_nor_slows_it_down(
 
 def test_a_reversal_where_the_samples_crowd_and_wander_is_followed_within_the_limits():
     """Out along one line, to rest, and back along another, the samples crowding near the turn (as the task slows down)
-    with 1e-6 rad of noise where they are closer than that (the IK at rest): within the limits by finite differences, and
-    within 1e-6 rad of every sample."""
+    with 1e-6 rad of noise where they are closer than that (the IK at rest): within the limits by finite differences,
+    and within 1e-6 rad of every sample."""
     rng = np.random.default_rng(3)
     turn, out, back = rng.uniform(-0.5, 0.5, (3, 14))
     sigma = 1 - np.cos(np.linspace(0.0, np.pi / 2, 150))  # 0 .. 1, dense near 0 (the turn)
@@ -160,8 +171,8 @@ def test_a_reversal_where_the_samples_crowd_and_wander_is_followed_within_the_li
 
 
 def test_the_shipped_triangles_repetitions_repeat_to_1e_9_rad():
-    """Three repetitions of the triangle by MC-Inverse, timed jerk-limited: each repetition's motion, from when it leaves
-    corner A, equals the first's to 1e-9 rad."""
+    """Three repetitions of the triangle by MC-Inverse, timed jerk-limited: each repetition's motion, from when it
+    leaves corner A, equals the first's to 1e-9 rad."""
     task = load_task(TASKS / "triangle.toml", 3)
     path = run_task(task, "mc-inverse", stages=("path", "ik")).joint_path
     v, a, j = (task.robot.limit_array(kind, path.joint_names) for kind in ("velocity", "acceleration", "jerk"))
@@ -175,6 +186,7 @@ def test_the_shipped_triangles_repetitions_repeat_to_1e_9_rad():
         assert np.abs(timing.evaluate(start + t)[0] - first).max() <= 1e-9
 
 
+@pytest.mark.integration
 def test_the_task_timing_is_checked_against_the_jerk_limit_in_one_line(tmp_path):
     """The triangle at its own timing (2 s per edge) on a copy of the humanoid whose left elbow's jerk limit is 0.5
     rad/s^3: the run fails in one line naming the joint and the jerk limit (exit 1)."""
@@ -204,8 +216,8 @@ def test_the_task_timing_is_checked_against_the_jerk_limit_in_one_line(tmp_path)
 
 @pytest.mark.parametrize("value", ["0.0", "-40.0", "inf"])
 def test_an_infeasible_jerk_limit_is_refused_in_one_line_before_running(tmp_path, value):
-    """A jerk limit no motion can keep (0, negative, infinite) in robot.toml: `dualarm run` prints one line naming the key,
-    exits 2, and leaves no run directory."""
+    """A jerk limit no motion can keep (0, negative, infinite) in robot.toml: `dualarm run` prints one line naming the
+    key, exits 2, and leaves no run directory."""
     robot = tmp_path / "humanoid"
     shutil.copytree(HUMANOID, robot)
     text = (robot / "robot.toml").read_text()

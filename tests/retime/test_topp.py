@@ -246,7 +246,10 @@ def test_a_bad_limit_is_named(arm, kind, bad):
     limits[kind][3] = bad
     with pytest.raises(
         InvalidArgumentError,
-        match=rf"^{kind}: the limit of joint 3 \(left_j4\) is [-\w.]+ rad/s(\^2)? in retime; every limit must be a positive finite number$",
+        match=(
+            rf"^{kind}: the limit of joint 3 \(left_j4\) is [-\w.]+ rad/s(\^2)? in retime;"
+            r" every limit must be a positive finite number$"
+        ),
     ):
         retime_path(path, limits["velocity"], limits["acceleration"])
 

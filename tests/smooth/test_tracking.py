@@ -52,7 +52,7 @@ def trapezoid(d: float, v: float, a: float, t: np.ndarray):
 
 def reference(profile, dt: float = DT, duration: float = DURATION) -> JointTrajectory:
     t = np.arange(round(duration / dt) + 1) * dt
-    q, qd, qdd = (np.column_stack(c) for c in zip(*(profile(d, t) for d in DISTANCES)))
+    q, qd, qdd = (np.column_stack(c) for c in zip(*(profile(d, t) for d in DISTANCES), strict=True))
     return JointTrajectory("retime", NAMES, t, START + q, qd, qdd, rep=(t >= duration / 2).astype(int), fixed=FIXED)
 
 
@@ -236,7 +236,10 @@ def test_bad_limits_name_the_joint(kind, bad):
     scalar = {"velocity": V, "acceleration": A, "jerk": J, kind: bad}
     with pytest.raises(
         InvalidArgumentError,
-        match=rf"^{kind}: the limit of joint 0 \(arm_j1\) is \S+ rad/s(\^[23])? in smooth; every limit must be a positive finite number$",
+        match=(
+            rf"^{kind}: the limit of joint 0 \(arm_j1\) is \S+ rad/s(\^[23])? in smooth;"
+            r" every limit must be a positive finite number$"
+        ),
     ):
         smooth_trajectory(ref, scalar["velocity"], scalar["acceleration"], scalar["jerk"])
 

@@ -125,6 +125,7 @@ def test_the_report_is_written_from_trials_parquet_alone(tmp_path):
     pd.testing.assert_frame_equal(pd.read_csv(out / "methods.csv"), method_rates(read_trials(out)), check_dtype=False)
 
 
+@pytest.mark.integration
 def test_a_report_without_a_table_is_one_line(tmp_path):
     with pytest.raises(RecordingError, match="no such file"):
         write_study_report(tmp_path)

@@ -1,6 +1,6 @@
-"""The study spec (dualarm.study.spec) and the trials it draws (dualarm.study.trials): bad specs in one line, trials the same
-whatever the order they are drawn in, and every trial a valid task whose path is the shape it names (checked from the
-Cartesian reference the path stage makes of it, independently of the generator)."""
+"""The study spec (dualarm.study.spec) and the trials it draws (dualarm.study.trials): bad specs in one line, trials the
+same whatever the order they are drawn in, and every trial a valid task whose path is the shape it names (checked from
+the Cartesian reference the path stage makes of it, independently of the generator)."""
 
 from pathlib import Path
 
@@ -61,11 +61,12 @@ def test_a_missing_spec_file_is_one_line(tmp_path):
 
 
 def test_trials_are_the_same_whatever_order_they_are_drawn_in():
-    """Trial i depends only on (seed, i): drawn forwards, backwards, or alone, the tasks are equal; another seed draws others."""
+    """Trial i depends only on (seed, i): drawn forwards, backwards, or alone, the tasks are equal; another seed draws
+    others."""
     spec, _ = load_study(EXAMPLE)
     forwards = [trial(spec, i) for i in range(40)]
     backwards = [trial(spec, i) for i in reversed(range(40))][::-1]
-    assert all(a.task == b.task and a.features == b.features for a, b in zip(forwards, backwards))
+    assert all(a.task == b.task and a.features == b.features for a, b in zip(forwards, backwards, strict=True))
     assert trial(spec, 17).task == forwards[17].task
     other = spec.model_copy(update={"seed": 1})
     assert sum(trial(other, i).task == forwards[i].task for i in range(40)) == 0
@@ -85,7 +86,8 @@ def test_trials_are_the_same_whatever_order_they_are_drawn_in():
 
 
 def _circle_fit(points: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """The circle through planar points (M, 2) by least squares on |x - c|^2 = r^2: its centre, radius and largest miss."""
+    """The circle through planar points (M, 2) by least squares on |x - c|^2 = r^2: its centre, radius and largest
+    miss."""
     A = np.column_stack([2 * points, np.ones(len(points))])
     solution = np.linalg.lstsq(A, (points**2).sum(axis=1), rcond=None)[0]
     centre = solution[:2]
@@ -102,10 +104,10 @@ def _matrix(rotation, position) -> np.ndarray:
 @pytest.mark.parametrize("index", range(12))
 def test_each_trial_is_a_valid_task_drawing_its_shape(index):
     """The path stage's reference of one repetition (the hand's positions, robot base frame), split by the task's moves:
-    closed, in one plane (1e-9 m) whose normal is within tilt_rad of x; a circle's samples on one circle; a polygon's edges
-    straight and its vertices on one circle; a figure-eight's two loops circles of equal radius touching at its start,
-    crossed without turning back. In a carry (``both``), the left hand draws and the right hand's every pose is the left's
-    times the spec's master_to_object and inverse(slave_to_object) (eq 11, composed here with scipy)."""
+    closed, in one plane (1e-9 m) whose normal is within tilt_rad of x; a circle's samples on one circle; a polygon's
+    edges straight and its vertices on one circle; a figure-eight's two loops circles of equal radius touching at its
+    start, crossed without turning back. In a carry (``both``), the left hand draws and the right hand's every pose is
+    the left's times the spec's master_to_object and inverse(slave_to_object) (eq 11, composed here with scipy)."""
     spec, base = load_study(EXAMPLE)
     t = trial(spec, index)
     f = t.features
@@ -138,7 +140,7 @@ def test_each_trial_is_a_valid_task_drawing_its_shape(index):
     assert np.arccos(abs(normal[0])) <= spec.shape.tilt_rad + 1e-9
     planar = np.column_stack([centred @ a, centred @ b])
     ends = np.searchsorted(reference.t, np.cumsum([0.0] + [move["duration_s"] for move in t.task["moves"]]) - 1e-9)
-    moves = [planar[start : end + 1] for start, end in zip(ends[:-1], ends[1:])]
+    moves = [planar[start : end + 1] for start, end in zip(ends[:-1], ends[1:], strict=True)]
     if f["kind"] == "circle":
         assert _circle_fit(planar)[2] < 1e-9
     elif f["kind"] == "polygon":

@@ -1,4 +1,5 @@
-"""Tasks stated in a frame of the robot and scaled by its arm: the paper tasks resolve to the paper's poses on the humanoid, and to the same shape about the shoulder of the dual iiwa (PyBullet)."""
+"""Tasks stated in a frame of the robot and scaled by its arm: the paper tasks resolve to the paper's poses on the
+humanoid, and to the same shape about the shoulder of the dual iiwa (PyBullet)."""
 
 import tomllib
 
@@ -6,7 +7,7 @@ import numpy as np
 import pybullet as pb
 import pytest
 from scipy.spatial.transform import Rotation
-from tests.conftest import HUMANOID, REPO, TASKS, PyBulletURDF, pybullet_urdf
+from tests.helpers import HUMANOID, REPO, TASKS, PyBulletURDF, pybullet_urdf
 from typer.testing import CliRunner
 
 from dualarm.cli import app
@@ -27,7 +28,8 @@ HUMANOID_ARC_CENTRES_M = {"circle": [(0.31, 0.09, 1.05)]}
 
 
 def _as_written_for_the_humanoid(name: str) -> dict:
-    """The shipped task's keys with its waypoints and arc centres back in the humanoid's base frame, and no frame, scale or transfer."""
+    """The shipped task's keys with its waypoints and arc centres back in the humanoid's base frame, and no frame, scale
+    or transfer."""
     data = tomllib.loads((TASKS / f"{name}.toml").read_text())
     for key in ("frame", "scale", "transfer"):
         data.pop(key, None)
@@ -43,7 +45,8 @@ def _as_written_for_the_humanoid(name: str) -> dict:
 
 @pytest.mark.parametrize("name", sorted(HUMANOID_POSITIONS_M))
 def test_converted_tasks_resolve_to_the_papers_poses_on_the_humanoid(name):
-    """Every waypoint and every sample of the path (positions to 1e-12 m, rotations to 1e-12) equals that of the task written in the base frame."""
+    """Every waypoint and every sample of the path (positions to 1e-12 m, rotations to 1e-12) equals that of the task
+    written in the base frame."""
     from dualarm.model.poses import pose_matrix
     from dualarm.paths import build_reference
     from dualarm.tasks import load_task
@@ -65,7 +68,8 @@ def test_converted_tasks_resolve_to_the_papers_poses_on_the_humanoid(name):
 
 
 class _Iiwa(PyBulletURDF):
-    """The dual iiwa's URDF in PyBullet (:class:`tests.conftest.PyBulletURDF`, the root at the world origin): link frames and the S-R-S points from the joint axes (independent of dualarm's kinematics)."""
+    """The dual iiwa's URDF in PyBullet (:class:`tests.helpers.PyBulletURDF`, the root at the world origin): link
+    frames and the S-R-S points from the joint axes (independent of dualarm's kinematics)."""
 
     def axis(self, joint: str) -> tuple[np.ndarray, np.ndarray]:
         """(a point, the unit direction) of ``joint``'s axis: the joint's frame is its child link's frame."""
@@ -99,9 +103,11 @@ def _shoulder_and_scale(sim: _Iiwa, hand: str) -> tuple[np.ndarray, float]:
     return S, (np.linalg.norm(E - S) + np.linalg.norm(W - E)) / 0.60
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["triangle", "circle"])
 def test_relative_waypoints_are_about_the_dual_iiwas_left_shoulder(name, iiwa_ready):
-    """On the dual iiwa each resolved waypoint, taken back to the left shoulder (PyBullet) and divided by the arm ratio, is the file's numbers; the rpy are the file's; arcs likewise; the initial configuration is its `ready`."""
+    """On the dual iiwa each resolved waypoint, taken back to the left shoulder (PyBullet) and divided by the arm ratio,
+    is the file's numbers; the rpy are the file's; arcs likewise; the initial configuration is its `ready`."""
     from dualarm.tasks import load_task
 
     data = tomllib.loads((TASKS / f"{name}.toml").read_text())
@@ -113,14 +119,16 @@ def test_relative_waypoints_are_about_the_dual_iiwas_left_shoulder(name, iiwa_re
         T = task.waypoint_pose(wp)
         assert np.abs((T[:3, 3] - S) / scale - written["position"]).max() < 1e-6
         assert np.abs(T[:3, :3] - Rotation.from_euler("xyz", written["rpy"]).as_matrix()).max() < 1e-12
-    for move, resolved in zip(data["moves"], task.spec.moves):
+    for move, resolved in zip(data["moves"], task.spec.moves, strict=True):
         if "arc_center" in move.get("left", {}):
             assert resolved.left is not None and resolved.left.arc_center is not None
             assert np.abs((np.asarray(resolved.left.arc_center) - S) / scale - move["left"]["arc_center"]).max() < 1e-6
 
 
+@pytest.mark.integration
 def test_a_link_frame_turns_and_moves_the_waypoints(tmp_path, iiwa_ready):
-    """frame = a link of the iiwa's base (rotated against the robot base): the resolved waypoint in that link's PyBullet frame is the file's pose, displacements are turned by the link's rotation."""
+    """frame = a link of the iiwa's base (rotated against the robot base): the resolved waypoint in that link's PyBullet
+    frame is the file's pose, displacements are turned by the link's rotation."""
     from dualarm.model.poses import pose_matrix
     from dualarm.tasks import load_task
 
@@ -172,8 +180,11 @@ def test_task_check_passes_on_the_dual_iiwa(name):
     assert "NOT reachable" not in result.stdout
 
 
+@pytest.mark.integration
 def test_the_triangle_runs_on_the_dual_iiwa_and_its_hand_draws_the_triangle_about_its_shoulder(tmp_path, iiwa_ready):
-    """`dualarm run triangle --robot robots/dual_iiwa --ik mc-inverse --stages path,ik` completes; PyBullet's FK of the recorded IK joints puts the hand on A, B, C, A (the file's numbers about the PyBullet shoulder, scaled) at 0, 2, 4, 6 s times the file's [transfer] duration_scale, and on the reference throughout."""
+    """`dualarm run triangle --robot robots/dual_iiwa --ik mc-inverse --stages path,ik` completes; PyBullet's FK of the
+    recorded IK joints puts the hand on A, B, C, A (the file's numbers about the PyBullet shoulder, scaled) at 0, 2, 4,
+    6 s times the file's [transfer] duration_scale, and on the reference throughout."""
     from dualarm.record.readback import read_run
 
     result = runner.invoke(
@@ -225,7 +236,8 @@ def test_the_triangle_runs_on_the_dual_iiwa_and_its_hand_draws_the_triangle_abou
 
 
 def test_a_waypoint_scaled_beyond_the_coordinate_range_is_one_line_naming_it():
-    """On the dual iiwa (scale 1.367) a waypoint 99 m from the shoulder lands beyond the 100 m every coordinate is bounded by: refused naming the waypoint, not a traceback."""
+    """On the dual iiwa (scale 1.367) a waypoint 99 m from the shoulder lands beyond the 100 m every coordinate is
+    bounded by: refused naming the waypoint, not a traceback."""
     from dualarm.errors import TaskFileError
     from dualarm.tasks.load import task_from_dict
 
@@ -244,10 +256,13 @@ def test_a_waypoint_scaled_beyond_the_coordinate_range_is_one_line_naming_it():
         )
 
 
+@pytest.mark.integration
 def test_the_ball_game_runs_on_the_dual_iiwa_through_every_stage_from_its_ready_pose_at_its_own_limits(
     tmp_path, iiwa_ready
 ):
-    """`dualarm run ball_game --robot dual_iiwa --ik tvgdd` completes through execution; the IK starts at robot.toml's ready (PyBullet FK of both hands), the first stroke lifts both hands by 0.10 m times the arm's scale (from PyBullet's joint axes), and the joints are held to KUKA's data-sheet velocities, not the paper's 6 rad/s."""
+    """`dualarm run ball_game --robot dual_iiwa --ik tvgdd` completes through execution; the IK starts at robot.toml's
+    ready (PyBullet FK of both hands), the first stroke lifts both hands by 0.10 m times the arm's scale (from
+    PyBullet's joint axes), and the joints are held to KUKA's data-sheet velocities, not the paper's 6 rad/s."""
     import math
 
     from dualarm.record.readback import read_run
@@ -285,7 +300,8 @@ def test_the_ball_game_runs_on_the_dual_iiwa_through_every_stage_from_its_ready_
 
 
 def test_the_circle_takes_its_transfer_duration_on_another_robot():
-    """circle.toml's [transfer] duration_scale = 1.5: one circle takes 4 s on the humanoid and 6 s on the dual iiwa (the reference's own clock)."""
+    """circle.toml's [transfer] duration_scale = 1.5: one circle takes 4 s on the humanoid and 6 s on the dual iiwa (the
+    reference's own clock)."""
     from dualarm.paths import build_reference
     from dualarm.tasks import load_task
 

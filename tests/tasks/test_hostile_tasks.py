@@ -213,7 +213,8 @@ CASES = [
 
 
 def assert_names(message: str, path: str, reason: str) -> None:
-    """``message`` is one line that names ``path`` (quoted at about 80 characters: its start and its end) and ``reason``."""
+    """``message`` is one line that names ``path`` (quoted at about 80 characters: its start and its end) and
+    ``reason``."""
     assert "\n" not in message and len(message) <= MAX_LINE_CHARS, message[:2000]
     assert path[:20] in message, message
     tail = path.rsplit("\x00", 1)[-1][-20:]
@@ -250,7 +251,8 @@ def test_urdf_path_error_is_one_line(hostile_paths, case: str):
 
 @pytest.mark.parametrize("case", CASES)
 def test_robot_directory_path_error_is_one_line(hostile_paths, case: str):
-    """A robot directory that is none of these: the message names the directory and the OS's reason for robot.toml beneath it."""
+    """A robot directory that is none of these: the message names the directory and the OS's reason for robot.toml
+    beneath it."""
     path = hostile_paths[case]
     with pytest.raises(RobotModelError) as info:
         load_robot(path)
@@ -287,7 +289,8 @@ def test_cli_run_on_a_hostile_path(tmp_path: Path, hostile_paths, case: str):
 
 
 def test_task_on_a_file_without_read_permission(tmp_path: Path, monkeypatch):
-    """Permission denied, as the OS reports it when opening (simulated: the tests may run as root, whom no mode stops)."""
+    """Permission denied, as the OS reports it when opening (simulated: the tests may run as root, whom no mode
+    stops)."""
     path = write(tmp_path, shipped_text("triangle"), "locked.toml")
     real_open = os.open
 
@@ -373,6 +376,7 @@ def run_subprocess(args: list[str]) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.integration
 def test_subprocess_fifo_and_long_path_no_traceback_no_hang(tmp_path: Path, hostile_paths):
     for case in ("fifo", "10000_characters"):
         out = tmp_path / f"out_{case}"
@@ -383,6 +387,7 @@ def test_subprocess_fifo_and_long_path_no_traceback_no_hang(tmp_path: Path, host
         assert not out.exists() or not any(out.rglob("manifest.json"))
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "edit",
     [
@@ -392,7 +397,8 @@ def test_subprocess_fifo_and_long_path_no_traceback_no_hang(tmp_path: Path, host
     ids=["nesting_beyond_the_stack", "terminal_codes_in_a_key"],
 )
 def test_subprocess_hostile_content_no_traceback(tmp_path: Path, edit):
-    """Hostile content, on the real stderr: one line, no traceback, no escape sequence or bidi override printed raw (in carry_box, whose ``initial`` is the one-line ``"ready"``)."""
+    """Hostile content, on the real stderr: one line, no traceback, no escape sequence or bidi override printed raw (in
+    carry_box, whose ``initial`` is the one-line ``"ready"``)."""
     path = write(tmp_path, shipped_text("carry_box", edit))
     result = run_subprocess(["run", str(path), "--stages", "path", "--out", str(tmp_path / "out")])
     assert result.returncode == 2, result.stderr[-3000:]
@@ -626,8 +632,10 @@ def test_margin_at_half_the_narrowest_arm_joint_range(tmp_path: Path):
     assert bound == pytest.approx(half, abs=1e-3)
 
 
+@pytest.mark.integration
 def test_cli_margin_1e300_exits_2_at_once(tmp_path: Path):
-    """The case that hung the IK stage past 60 s: now refused at load, before any stage, through the CLI in a fresh process."""
+    """The case that hung the IK stage past 60 s: now refused at load, before any stage, through the CLI in a fresh
+    process."""
     path = write(tmp_path, shipped_text("triangle", (ARM_ANGLE, ARM_ANGLE + "\nmargin_rad = 1e300")))
     out = tmp_path / "out"
     result = run_subprocess(["run", str(path), "--ik", "mc-inverse", "--out", str(out)])
@@ -642,7 +650,8 @@ SAMPLES_PER_TRIANGLE_REPETITION = round(3 * 2.0 / 0.01)  # three 2 s edges at 0.
 
 
 def test_sample_budget(tmp_path: Path):
-    """The path's samples, 1 + repetitions * periods per repetition, are bounded: 166 repetitions of the triangle fit in 100,000, 167 do not."""
+    """The path's samples, 1 + repetitions * periods per repetition, are bounded: 166 repetitions of the triangle fit in
+    100,000, 167 do not."""
     fits = 1 + 166 * SAMPLES_PER_TRIANGLE_REPETITION
     over = 1 + 167 * SAMPLES_PER_TRIANGLE_REPETITION
     assert fits <= 100_000 < over
@@ -673,7 +682,8 @@ def test_repetitions_override_is_bounded(tmp_path: Path):
 
 
 def test_arc_axis_of_any_length_gives_the_same_circle(tmp_path: Path):
-    """arc_axis is normalised without overflow: [1e6, 0, 0] and [1e-5, 0, 0] draw the circle [1, 0, 0] does, radius 0.15 m about [0.31, 0.09, 1.05]."""
+    """arc_axis is normalised without overflow: [1e6, 0, 0] and [1e-5, 0, 0] draw the circle [1, 0, 0] does, radius 0.15
+    m about [0.31, 0.09, 1.05]."""
     references = {}
     for axis in ("1.0", "1e6", "1e-5"):
         text = shipped_text(
@@ -703,8 +713,10 @@ def test_zero_or_tiny_directions_refused(tmp_path: Path):
         )
 
 
+@pytest.mark.integration
 def test_a_huge_obstacle_around_the_robot_overlaps_its_base(tmp_path: Path):
-    """Within the size range, a 100 m box centred on the robot is refused by PyBullet's overlap check (it holds the base)."""
+    """Within the size range, a 100 m box centred on the robot is refused by PyBullet's overlap check (it holds the
+    base)."""
     path = write(
         tmp_path,
         shipped_text(
@@ -845,7 +857,8 @@ def at(data: object, path: tuple) -> object:
 
 @st.composite
 def mutated_tasks(draw) -> dict:
-    """A shipped task with one to three mutations: a value replaced (by a hostile value or the old one scaled to an extreme), a key deleted, a key or item added."""
+    """A shipped task with one to three mutations: a value replaced (by a hostile value or the old one scaled to an
+    extreme), a key deleted, a key or item added."""
     data = copy.deepcopy(SHIPPED[draw(st.sampled_from(sorted(SHIPPED)))])
     for _ in range(draw(st.integers(1, 3))):
         where = draw(st.sampled_from(list(locations(data))))
@@ -872,12 +885,14 @@ def mutated_tasks(draw) -> dict:
 
 
 def mostly(valid: st.SearchStrategy, other: st.SearchStrategy) -> st.SearchStrategy:
-    """``valid`` 19 times in 20, else ``other``: a task of many values then often has all of them valid, and gets past the schema to the checks against the robot and to the path stage."""
+    """``valid`` 19 times in 20, else ``other``: a task of many values then often has all of them valid, and gets past
+    the schema to the checks against the robot and to the path stage."""
     return st.integers(0, 19).flatmap(lambda i: other if i == 0 else valid)
 
 
 def strategy_for(annotation: object, metadata: tuple = ()) -> st.SearchStrategy:
-    """Values for a schema annotation: mostly of its type and within its :class:`Range`, sometimes at or beyond the range's ends or hostile."""
+    """Values for a schema annotation: mostly of its type and within its :class:`Range`, sometimes at or beyond the
+    range's ends or hostile."""
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)
     if origin is typing.Annotated:
         return strategy_for(args[0], (*metadata, *annotation.__metadata__))  # type: ignore[attr-defined]
@@ -958,20 +973,24 @@ def run_generated(scratch: Path, data: dict) -> None:
     assert_outcome(result, out)
 
 
+@pytest.mark.integration
 @PROPERTY
 @given(data=mutated_tasks())
 def test_mutated_shipped_tasks_complete_or_fail_in_one_line(scratch: Path, data: dict):
     run_generated(scratch, data)
 
 
+@pytest.mark.integration
 @PROPERTY
 @given(data=schema_tasks())
 def test_schema_generated_tasks_complete_or_fail_in_one_line(scratch: Path, data: dict):
     run_generated(scratch, data)
 
 
+@pytest.mark.integration
 def test_generators_reach_both_outcomes(scratch: Path):
-    """The mutations are not all refused: a sample of them, drawn as the property test draws, has complete runs and refusals."""
+    """The mutations are not all refused: a sample of them, drawn as the property test draws, has complete runs and
+    refusals."""
     codes = []
 
     @settings(max_examples=40, derandomize=True, database=None, deadline=None, suppress_health_check=list(HealthCheck))

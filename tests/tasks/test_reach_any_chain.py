@@ -1,4 +1,5 @@
-"""The loader's reach test on an arm that is not S-R-S (the Panda): numeric IK inside the joint limits, cross-checked by PyBullet."""
+"""The loader's reach test on an arm that is not S-R-S (the Panda): numeric IK inside the joint limits, cross-checked by
+PyBullet."""
 
 from pathlib import Path
 
@@ -6,7 +7,7 @@ import numpy as np
 import pybullet as pb
 import pybullet_data
 import pytest
-from tests.conftest import TASKS
+from tests.helpers import TASKS
 
 from dualarm.errors import UnreachablePoseError
 from dualarm.model.kinematics import hand_pose
@@ -26,7 +27,8 @@ def _task_with_b_at(tmp_path: Path, position: list[float], rpy: list[float]) -> 
 
 
 def _pybullet_reach(seeds: int) -> float:
-    """The farthest any of ``seeds`` random configurations within the limits puts the Panda's grasp target from its base [m], by PyBullet on pybullet_data's URDF (a lower bound of the true reach)."""
+    """The farthest any of ``seeds`` random configurations within the limits puts the Panda's grasp target from its base
+    [m], by PyBullet on pybullet_data's URDF (a lower bound of the true reach)."""
     client = pb.connect(pb.DIRECT)
     try:
         body = pb.loadURDF(
@@ -57,7 +59,8 @@ def test_the_panda_gets_the_numeric_test_and_the_humanoid_keeps_the_closed_form(
 
 
 def test_a_pose_outside_the_workspace_is_refused_naming_the_key(tmp_path):
-    # 1.2 m above the base's joint-2 centre at z = 0.333 m: the arm's links add up to 0.316 + 0.0825 + 0.384 + 0.0825 + 0.088 + 0.107 + 0.105 = 1.165 m
+    # 1.2 m above the base's joint-2 centre at z = 0.333 m: the arm's links add up to 0.316 + 0.0825 + 0.384 + 0.0825 +
+    # 0.088 + 0.107 + 0.105 = 1.165 m
     with pytest.raises(UnreachablePoseError) as caught:
         load_task(_task_with_b_at(tmp_path, [0.0, 0.0, 1.55], [3.14, 0.0, 0.0]))
     message = str(caught.value)
@@ -68,11 +71,12 @@ def test_a_pose_outside_the_workspace_is_refused_naming_the_key(tmp_path):
     )
 
 
+@pytest.mark.integration
 def test_a_pose_made_by_forward_kinematics_inside_the_limits_is_accepted_and_pybullet_reaches_it(tmp_path):
     task = load_task(TASK)
     lower, upper = task.robot.lower_upper(ARM)
     q = np.random.default_rng(5).uniform(lower + 0.1, upper - 0.1)
-    T = hand_pose(task.robot, "right", dict(zip(ARM, q)))  # reachable by construction
+    T = hand_pose(task.robot, "right", dict(zip(ARM, q, strict=True)))  # reachable by construction
     reach = arm_reach(task, "right")
     assert reach.within(T[None]).all()
     x, _, _ = reach.solve(T)
@@ -96,5 +100,6 @@ def test_a_pose_made_by_forward_kinematics_inside_the_limits_is_accepted_and_pyb
     assert np.abs(reached_R - T[:3, :3]).max() < 1e-3
 
 
+@pytest.mark.integration
 def test_the_refused_height_is_beyond_every_sampled_configuration():
     assert _pybullet_reach(seeds=2000) < 1.55

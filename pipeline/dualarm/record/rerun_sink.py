@@ -115,6 +115,7 @@ class RerunSink(NullSink):
             self._rr = rr.RecordingStream("dualarm", recording_id=run_id)
             self._rr.save(directory / "run.rrd")
             self._rr.send_blueprint(blueprint(robot, self.stages), make_active=True, make_default=True)
+            self._rr.flush()  # in the file before any data, whatever Rerun's batcher does next
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
         self._closed = False
         self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
