@@ -2,18 +2,24 @@
 
 The URDF is parsed by ``urdf_parser_py`` (ROS's urdfdom-py). That parser rejects the ``<capsule>``
 collision geometry PyBullet and Rerun understand, and kinematics needs no collision geometry, so
-``<collision>`` elements are removed before parsing.
+``<collision>`` elements are removed before parsing. So are the ROS extensions no part of dualarm
+reads (:data:`IGNORED`: ``<transmission>``, ``<gazebo>``), which makers ship in forms the parser
+refuses (the PR2's differential transmissions) or reports line by line on stderr (TALOS's
+``<role>`` tags); what the parser still reports of the rest is not printed.
 """
 
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from urdf_parser_py.urdf import URDF
+from urdf_parser_py.xml_reflection import core as xml_reflection
 
 from dualarm.errors import RobotModelError, excerpt
 from dualarm.files import listing, read_text
@@ -123,6 +129,21 @@ def _finite(value: float | None, default: float) -> float:
     return default if value is None else float(value)
 
 
+#: Top-level URDF elements removed before parsing: ROS control's and Gazebo's, which dualarm does not read.
+IGNORED = ("transmission", "gazebo")
+
+
+@contextmanager
+def _parser_warnings_silenced() -> Iterator[None]:
+    """Drop the messages ``urdf_parser_py`` prints on stderr (unknown tags and attributes of valid extensions)."""
+    printed = xml_reflection.on_error
+    xml_reflection.on_error = lambda message: None
+    try:
+        yield
+    finally:
+        xml_reflection.on_error = printed
+
+
 def _parse(path: Path, text: str) -> tuple[URDF, str]:
     """The URDF of ``text`` and its XML without <collision> elements.
 
@@ -137,13 +158,16 @@ def _parse(path: Path, text: str) -> tuple[URDF, str]:
                 "contact"
             ):  # <contact>: PyBullet's, which urdf_parser_py reports on stderr
                 link.remove(element)
+        for element in [e for e in root if e.tag in IGNORED]:
+            root.remove(element)
         kinematic_xml = ET.tostring(root, encoding="unicode")
     except ET.ParseError as exc:
         raise RobotModelError(f"{excerpt(path)}: not valid XML ({exc})") from None
     except RecursionError:
         raise RobotModelError(f"{excerpt(path)}: not a valid URDF (elements nested too deeply)") from None
     try:
-        return URDF.from_xml_string(kinematic_xml), kinematic_xml
+        with _parser_warnings_silenced():
+            return URDF.from_xml_string(kinematic_xml), kinematic_xml
     except Exception as exc:  # urdf_parser_py raises bare Exception on schema errors
         raise RobotModelError(f"{excerpt(path)}: not a valid URDF ({excerpt(exc, 200)})") from None
 
