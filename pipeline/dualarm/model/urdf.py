@@ -135,7 +135,7 @@ IGNORED = ("transmission", "gazebo")
 
 @contextmanager
 def _parser_warnings_silenced() -> Iterator[None]:
-    """Drop the messages ``urdf_parser_py`` prints on stderr (unknown tags and attributes of valid extensions)."""
+    """Drop what ``urdf_parser_py`` prints on stderr (unknown tags and attributes of valid extensions)."""
     printed = xml_reflection.on_error
     xml_reflection.on_error = lambda message: None
     try:
