@@ -42,6 +42,8 @@ _IK: Mapping[str, str] = {
 #: The module of each planner.
 _PLANNERS: Mapping[str, str] = {"mcikrrt": "dualarm.plan.problem", "ompl-rrtconnect": "dualarm.plan.problem"}
 
+_MODULES: Mapping[str, str] = {**_IK, **_PLANNERS}
+
 #: The IK methods' names.
 IK_METHODS = tuple(_IK)
 #: The planners' names.
@@ -52,8 +54,7 @@ class _Registry(Mapping[str, Method[Any]]):
     """Every method by name, its module imported when it is first asked for."""
 
     def __getitem__(self, name: str) -> Method[Any]:
-        module = {**_IK, **_PLANNERS}[name]
-        return importlib.import_module(module).METHODS[name]
+        return importlib.import_module(_MODULES[name]).METHODS[name]
 
     def __iter__(self) -> Iterator[str]:
         return iter((*IK_METHODS, *PLANNERS))

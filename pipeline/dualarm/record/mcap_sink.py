@@ -120,7 +120,6 @@ class McapSink(NullSink):
         self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
         self._channels: dict[str, foxglove.Channel] = {}
         self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
-        self._closed = False
         for name, text in attachments.items():
             media = "application/xml" if name.endswith(".urdf") else "application/toml"
             self._mcap.attach(log_time=0, create_time=0, name=name, media_type=media, data=text.encode())
@@ -497,9 +496,6 @@ class McapSink(NullSink):
 
         The layout: ``foxglove-layout.json``.
         """
-        if self._closed:
-            return
-        self._closed = True
         layout = foxglove_layout(self.robot, self.stages, self._hands, self._joint_names)
         (self.directory / FOXGLOVE_LAYOUT).write_text(json.dumps(layout, indent=1) + "\n")
         self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})

@@ -41,7 +41,8 @@ class Recorder(Tee):
         stages: Sequence[str] = ALL_STAGES,
         on_begin: Callable[[str], None] | None = None,
     ) -> None:
-        mcap = McapSink(directory, robot, attachments, stages)
-        super().__init__(mcap, RerunSink(directory, run_id, robot, stages), on_begin=on_begin)
-        self.stages = mcap.stages
-        self.shown = mcap.shown
+        super().__init__(
+            McapSink(directory, robot, attachments, stages),
+            RerunSink(directory, run_id, robot, stages),
+            on_begin=on_begin,
+        )

@@ -117,7 +117,6 @@ class RerunSink(NullSink):
             self._rr.send_blueprint(blueprint(robot, self.stages), make_active=True, make_default=True)
             self._rr.flush()  # in the file before any data, whatever Rerun's batcher does next
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
-        self._closed = False
         self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
@@ -335,8 +334,5 @@ class RerunSink(NullSink):
 
     def close(self, manifest: Mapping[str, object]) -> None:
         """Finish the file."""
-        if self._closed:
-            return
-        self._closed = True
         self._rr.flush()
         self._rr.disconnect()

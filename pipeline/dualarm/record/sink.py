@@ -204,6 +204,7 @@ class Tee(NullSink):
     def __init__(self, *sinks: NullSink, on_begin: Callable[[str], None] | None = None) -> None:
         super().__init__(on_begin)
         self.sinks = sinks
+        self._closed = False
 
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
         """Handed to each sink."""
@@ -249,7 +250,10 @@ class Tee(NullSink):
             sink.metrics(values, t)
 
     def close(self, manifest: Mapping[str, object]) -> None:
-        """Close each sink, then note the end of the last stage."""
+        """Close each sink once (a second call does nothing), then note the end of the last stage."""
+        if self._closed:
+            return
+        self._closed = True
         for sink in self.sinks:
             sink.close(manifest)
         self.finish()
