@@ -90,7 +90,10 @@ def test_chains_fk_equals_pybullet_on_the_source_urdf(made, name):
 @pytest.mark.integration
 def test_chain_choice(made):
     assert [(a.hand, a.base, a.tip) for a in made["iiwa"][1].arms] == [("left", "lbr_iiwa_link_0", "lbr_iiwa_link_7")]
-    assert [(a.hand, a.tip) for a in made["panda"][1].arms] == [("left", "panda_hand")]  # above the prismatic fingers
+    # the tool frame hung below the hand by a fixed joint, above the prismatic fingers
+    assert [(a.hand, a.tip) for a in made["panda"][1].arms] == [("left", "panda_grasptarget")]
+    urdf = made["panda"][1].robot.urdf
+    assert [(j.parent, j.type) for j in urdf.joints if j.child == "panda_grasptarget"] == [("panda_hand", "fixed")]
     arms = made["dual_iiwa"][1].arms
     assert [(a.hand, a.base, a.tip) for a in arms] == [
         ("left", "torso", "left_lbr_iiwa_link_7"),
@@ -170,9 +173,14 @@ def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
                 )
 
             first = {arm.hand: robot.chains[arm.chain].joint_names[0] for arm in result.arms}
-            stretched = {
-                arm.hand: np.linalg.norm(position(tip_joint(arm)) - position(first[arm.hand])) for arm in result.arms
-            }  # at the zero pose, as robot init measures an arm
+
+            def stretched_length(arm) -> float:
+                """The link frames' distances added up from the first joint's to the tip's, at the zero pose."""
+                joints = [j.name for j in robot.chains[arm.chain].joints]
+                points = [position(j) for j in joints[joints.index(first[arm.hand]) :]]
+                return sum(np.linalg.norm(b - a) for a, b in zip(points, points[1:], strict=False))
+
+            stretched = {arm.hand: stretched_length(arm) for arm in result.arms}  # as robot init measures an arm
             for joint, value in ready.items():
                 info = pb.getJointInfo(body, index[joint], physicsClientId=client)
                 assert info[8] <= value <= info[9], joint
@@ -181,7 +189,7 @@ def test_ready_is_inside_limits_collision_free_and_in_front(made, name):
             penetrating = [p for p in pb.getContactPoints(body, body, physicsClientId=client) if p[8] < 0]
             # a pair joined through links without geometry (a Panda's hand and link 7) is not an ancestor pair to
             # PyBullet's flag when the link between has none
-            touching = {tuple(sorted((a, b))) for a, b in result.touching_pairs}
+            touching = {tuple(sorted((a, b))) for a, b in result.touching_pairs} | set(result.disabled_pairs)
             names = {i: pb.getJointInfo(body, i, physicsClientId=client)[12].decode() for i in index.values()}
             assert not [p for p in penetrating if tuple(sorted((names[p[3]], names[p[4]]))) not in touching]
             for arm in result.arms:
@@ -353,3 +361,31 @@ def test_committed_dual_iiwa_is_what_build_py_makes(made):
     assert sorted(p.name for p in (DUAL_IIWA / "meshes").iterdir()) == sorted(
         p.name for p in (built / "meshes").iterdir()
     )
+
+
+@pytest.mark.integration
+def test_an_arm_of_eight_joints_starts_at_its_seven_nearest_the_hand(tmp_path):
+    """pybullet_data's iiwa hung from a 'clavicle' joint: 8 movable joints from the root. The 7 nearest the hand are
+    the iiwa (S-R-S: PyBullet's axes of joints 1-3 meet), so the arm starts at the iiwa's base and the clavicle is
+    held; --left-base above it keeps all 8."""
+    text = IIWA.read_text().replace('filename="meshes/', f'filename="{IIWA.parent}/meshes/')
+    clavicle = (
+        '<link name="torso"/>\n'
+        '<joint name="clavicle" type="revolute"><parent link="torso"/><child link="lbr_iiwa_link_0"/>'
+        '<origin xyz="0 0.2 0.5" rpy="0 0 0"/><axis xyz="1 0 0"/>'
+        '<limit lower="-0.5" upper="0.5" effort="10" velocity="1"/></joint>\n'
+    )
+    at = text.index('<link name="lbr_iiwa_link_0">')
+    (tmp_path / "clavicle.urdf").write_text(text[:at] + clavicle + text[at:])
+    result = init_robot(tmp_path / "clavicle.urdf", tmp_path / "out")
+    assert [(a.base, a.tip, a.srs) for a in result.arms] == [("lbr_iiwa_link_0", "lbr_iiwa_link_7", None)]
+    assert dict(result.locked) == {"clavicle": 0.0}
+    assert any("the 7 nearest the hand are S-R-S" in n and "clavicle are held" in n for n in result.notes)
+    with load_pybullet_robot(tmp_path / "clavicle.urdf") as sim:  # axes 1-3 of the arm meet (PyBullet's frames)
+        lines = [_axis_line(sim, f"lbr_iiwa_joint_{i}") for i in (1, 2, 3)]
+    (p0, d0), (p1, d1), (p2, d2) = lines
+    for (pa, da), (pb_, db) in (((p0, d0), (p1, d1)), ((p1, d1), (p2, d2))):
+        n = np.cross(da, db)
+        assert abs(np.dot(pb_ - pa, n)) / np.linalg.norm(n) < 1e-6
+    whole = init_robot(tmp_path / "clavicle.urdf", tmp_path / "all", left_tip="lbr_iiwa_link_7", left_base="torso")
+    assert whole.arms[0].base == "torso" and whole.robot.chains["left_arm"].dof == 8

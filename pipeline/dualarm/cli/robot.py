@@ -12,7 +12,7 @@ from rich.table import Table
 from dualarm.cli.app import err, out, robot_app, user_errors
 from dualarm.cli.ik import _sew_line
 from dualarm.cli.options import MAX_SAMPLES, _out_path, _robot, _seed, _within
-from dualarm.errors import NotSRSError
+from dualarm.errors import InvalidArgumentError, NotSRSError, excerpt
 
 
 @robot_app.command("check")
@@ -146,6 +146,13 @@ def robot_init(
             help="Jerk limit of every chain joint [rad/s^3]; default: an assumed 50, marked so in robot.toml."
         ),
     ] = None,
+    allow: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="LINK_A,LINK_B",
+            help="Two links never to check for collision against each other (repeatable); robot.toml [collision].",
+        ),
+    ] = None,
 ) -> None:
     """Write a robot directory from a URDF; print every choice (robots/README.md).
 
@@ -167,6 +174,7 @@ def robot_init(
             torso=torso,
             acceleration=acceleration,
             jerk=jerk,
+            allow=[_link_pair(text) for text in allow or ()],
         )
     for line in result.notes:
         out.print(line, markup=False, soft_wrap=True)
@@ -176,6 +184,14 @@ def robot_init(
         markup=False,
         soft_wrap=True,
     )
+
+
+def _link_pair(text: str) -> tuple[str, str]:
+    """``LINK_A,LINK_B`` as two names; InvalidArgumentError otherwise."""
+    parts = text.split(",")
+    if len(parts) != 2 or not all(parts):
+        raise InvalidArgumentError("--allow", f"expected LINK_A,LINK_B, got {excerpt(repr(text))}")
+    return parts[0], parts[1]
 
 
 @robot_app.command("poses")

@@ -21,6 +21,7 @@ from dualarm.errors import RobotModelError, excerpt
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.poses import pose_errors
 from dualarm.model.robot import Chain, Robot, random_configurations
+from dualarm.model.urdf import parser_warnings_silenced
 from dualarm.sim.world import load_pybullet_robot
 
 FK_TOLERANCE = 1e-9
@@ -95,16 +96,16 @@ def require_limits(robot: Robot) -> None:
 
 
 def _adam_xml(xml: str) -> str:
-    """``xml`` with an explicit identity ``<origin>`` in every ``<inertial>`` that has none.
+    """``xml`` with an identity ``<origin>`` in every ``<inertial>`` and ``<joint>`` that has none.
 
-    URDF makes it optional; adam-robotics needs it.
+    URDF makes it optional (a PR2's joints leave it out); adam-robotics needs it.
     """
     import xml.etree.ElementTree as ET
 
     root = ET.fromstring(xml)
-    for inertial in root.iter("inertial"):
-        if inertial.find("origin") is None:
-            ET.SubElement(inertial, "origin", {"xyz": "0 0 0", "rpy": "0 0 0"})
+    for element in [*root.iter("inertial"), *root.findall("joint")]:
+        if element.find("origin") is None:
+            ET.SubElement(element, "origin", {"xyz": "0 0 0", "rpy": "0 0 0"})
     return ET.tostring(root, encoding="unicode")
 
 
@@ -112,7 +113,8 @@ def adam_poses(robot: Robot, chain: Chain, Q: np.ndarray) -> np.ndarray:
     """Tip poses in the chain base frame computed by adam-robotics; (N, 4, 4)."""
     from adam.casadi import KinDynComputations
 
-    kd = KinDynComputations(_adam_xml(robot.urdf.kinematic_xml), list(chain.joint_names))
+    with parser_warnings_silenced():  # adam-robotics parses with urdf_parser_py too
+        kd = KinDynComputations(_adam_xml(robot.urdf.kinematic_xml), list(chain.joint_names))
     base = kd.forward_kinematics_fun(chain.base)
     tip = kd.forward_kinematics_fun(chain.tip)
     H = cs.DM.eye(4)

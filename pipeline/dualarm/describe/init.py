@@ -25,26 +25,28 @@ from the URDF, and every choice is returned as a line of :attr:`RobotInit.notes`
   and jerk from the caller or :data:`DEFAULT_ACCELERATION_RAD_S2` / :data:`DEFAULT_JERK_RAD_S3`,
   written with the comment ``# assumed``.
 - home poses ``zero`` and ``ready`` (:func:`ready_pose`).
-- collision pairs in contact at every sampled configuration. dualarm already skips the pairs that
-  touch by construction (:func:`dualarm.sim.world.disable_touching_pairs`, a Panda's hand and
-  link 7 among them) in the planners and the execution; robot.toml gets no key for them. A pair in
-  contact everywhere that this rule does not skip is refused (:class:`RobotModelError` naming it).
+- the collision matrix (:mod:`dualarm.describe.collisions`): pairs joined through fixed joints only,
+  pairs in contact at every sampled configuration and the pairs of ``--allow`` are written to
+  robot.toml's ``[collision] disabled`` with their reasons. dualarm already skips the pairs that
+  touch by construction (:func:`dualarm.sim.world.disable_unchecked_pairs`, a Panda's hand and
+  link 7 among them) in the planners and the execution; robot.toml lists them as a comment.
 """
 
 from __future__ import annotations
 
 import shutil
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
 
+from dualarm.describe.collisions import allowed_pairs, disabled_pairs
 from dualarm.describe.layout import ArmPlan, _Layout, _layout, _srs_verdict, lock_value
 from dualarm.describe.meshes import copy_urdf, resolve_mesh
-from dualarm.describe.ready import SAMPLES, _collision_world, always_in_contact, held_values, ready_pose
+from dualarm.describe.ready import SAMPLES, _collision_world, held_values, ready_pose
 from dualarm.describe.robot_toml import (
     DEFAULT_ACCELERATION_RAD_S2,
     DEFAULT_JERK_RAD_S3,
@@ -69,6 +71,7 @@ class RobotInit:
         locked: joints in no chain held by the home poses [rad], by name.
         ready: the ``ready`` home pose [rad], by joint.
         touching_pairs: link pairs dualarm skips as touching by construction (sorted names).
+        disabled_pairs: the pairs robot.toml's ``[collision] disabled`` lists, with their reasons.
         notes: the lines ``robot init`` prints: every choice and assumption.
     """
 
@@ -79,6 +82,7 @@ class RobotInit:
     locked: Mapping[str, float]
     ready: Mapping[str, float]
     touching_pairs: frozenset[tuple[str, str]]
+    disabled_pairs: Mapping[tuple[str, str], str]
     notes: tuple[str, ...]
 
 
@@ -104,6 +108,7 @@ def init_robot(
     acceleration: float | None = None,
     jerk: float | None = None,
     name: str | None = None,
+    allow: Sequence[tuple[str, str]] = (),
 ) -> RobotInit:
     """Write a robot directory ``out`` (robot.toml, the URDF and its meshes) for ``urdf_path``.
 
@@ -119,10 +124,11 @@ def init_robot(
             :data:`DEFAULT_ACCELERATION_RAD_S2`, assumed).
         jerk: every chain joint's jerk limit [rad/s^3] (None: :data:`DEFAULT_JERK_RAD_S3`, assumed).
         name: the robot's name (None: the directory's name).
+        allow: link pairs never to check for collision (written with the reason ``user``).
 
     Raises:
         RobotModelError: not a URDF, an unknown link, tips that are not on separate branches below a
-            common root, a mesh not found, a pair in contact everywhere that dualarm does not skip.
+            common root, a mesh not found, an ``allow`` link the URDF does not have.
         OutputError: ``out`` exists and is not an empty directory.
     """
     from dualarm.model.robot import LIMIT_RANGES
@@ -135,18 +141,26 @@ def init_robot(
     _out_directory(out)
     urdf = load_urdf(source)
     layout = _layout(urdf, {"left": left_tip, "right": right_tip}, {"left": left_base, "right": right_base}, torso)
+    allowed_pairs(urdf, allow)
     for filename in (e.get("filename", "") for e in ET.fromstring(urdf.kinematic_xml).iter("mesh")):
         resolve_mesh(filename, source)  # refused before anything is written (collision meshes are checked by copy_urdf)
     out.mkdir(parents=True, exist_ok=True)
     try:
-        return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name)
+        return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name, allow)
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
         raise
 
 
 def _write(
-    source: Path, out: Path, urdf: UrdfModel, layout: _Layout, acceleration: float | None, jerk: float | None, name: str
+    source: Path,
+    out: Path,
+    urdf: UrdfModel,
+    layout: _Layout,
+    acceleration: float | None,
+    jerk: float | None,
+    name: str,
+    allow: Sequence[tuple[str, str]],
 ) -> RobotInit:
     notes = list(layout.notes)
     copy = copy_urdf(source, out)
@@ -192,7 +206,9 @@ def _write(
                 "marked '# assumed' in robot.toml"
             )
     homes: dict[str, Mapping[str, float]] = {"zero": {j.name: lock_value(j) for j in layout.locked}}
-    (out / "robot.toml").write_text(robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, frozenset()))
+    (out / "robot.toml").write_text(
+        robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, frozenset(), {})
+    )
     robot = load_robot(out)
     sim, touching = _collision_world(robot)
     with sim:
@@ -203,23 +219,22 @@ def _write(
                     f"held: {joint} = {value:g} "
                     f"(in no chain; at {lock_value(urdf.joint(joint)):g} its links touch another link)"
                 )
-        everywhere = always_in_contact(robot, sim, held)
-        if everywhere:
-            a, b = sorted(everywhere)[0]
-            raise RobotModelError(
-                f"{excerpt(copy)}: links '{excerpt(a, 40)}' and '{excerpt(b, 40)}' collide at every sampled "
-                "configuration and do not touch by construction (dualarm checks them): fix their collision shapes"
-            )
+        disabled = disabled_pairs(robot, sim, touching, held, allow)
         ready = ready_pose(robot, sim, held)
     homes["zero"] = {k: v for k, v in held.items() if v != 0.0 or k in homes["zero"]}
     homes["ready"] = {k: v for k, v in ready.items() if v != 0.0 or k in homes["zero"]}
     notes.append("home ready: " + ", ".join(f"{k} = {v:g}" for k, v in homes["ready"].items()))
+    counts = {reason: list(disabled.values()).count(reason) for reason in ("rigid", "always", "user")}
     notes.append(
-        f"collision: {len(touching)} link pairs touch by construction and are skipped by dualarm itself "
-        "(execute.world.disable_touching_pairs); "
-        f"no other pair is in contact at all {SAMPLES} sampled configurations, so robot.toml needs no key for them"
+        f"collision: {len(touching)} link pairs touch by construction (skipped by dualarm itself); "
+        f"robot.toml [collision] disables {counts['rigid']} joined through fixed joints only, "
+        f"{counts['always']} in contact at all {SAMPLES} sampled configurations"
+        + (f", {counts['user']} given by --allow" if counts["user"] else "")
+        + "; every other pair is checked"
     )
-    (out / "robot.toml").write_text(robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, touching))
+    (out / "robot.toml").write_text(
+        robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, touching, disabled)
+    )
     robot = load_robot(out)
     arms = tuple(
         ArmPlan(chain=f"{hand}_arm", hand=hand, base=base, tip=tip, srs=srs[hand]) for hand, base, tip in layout.arms
@@ -232,5 +247,6 @@ def _write(
         locked=MappingProxyType({j.name: lock_value(j) for j in layout.locked}),
         ready=MappingProxyType(dict(robot.home("ready"))),
         touching_pairs=touching,
+        disabled_pairs=MappingProxyType(disabled),
         notes=tuple(notes),
     )

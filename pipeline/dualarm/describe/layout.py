@@ -79,6 +79,9 @@ def _layout(
                 f"--{hand}-tip '{excerpt(given[hand], 40)}' is not below its base '{excerpt(base, 40)}'"
             )
         _first_movable(urdf, base, given[hand])
+        if not bases.get(hand):
+            base, note = _seven_nearest_the_hand(urdf, hand, base, given[hand])
+            notes += [note] if note else []
         arms.append((hand, base, given[hand]))
     if len(arms) == 2:
         shared = {j.name for j in urdf.chain(arms[0][1], arms[0][2]) if j.movable} & {
@@ -93,6 +96,32 @@ def _layout(
     waist = (waist_joints[0].parent, torso_link) if waist_joints else None
     locked = tuple(j for _, base, _ in arms for j in urdf.chain(torso_link, base) if j.movable)
     return _Layout(arms=tuple(arms), torso=torso_link, waist=waist, locked=locked, notes=tuple(notes))
+
+
+def _seven_nearest_the_hand(urdf: UrdfModel, hand: str, base: str, tip: str) -> tuple[str, str | None]:
+    """The base of an arm of over 7 movable joints: where its 7 nearest the hand start, if S-R-S or SEW.
+
+    A clavicle above a 7-joint arm. Else ``base``. With the line to print, or None.
+    """
+    from dualarm.model.sew import sew_chain
+
+    movable = [j for j in urdf.chain(base, tip) if j.movable]
+    if len(movable) <= 7:
+        return base, None
+    sub = movable[-7].parent
+    chain = Chain(name=f"{hand}_arm", base=sub, tip=tip, joints=urdf.chain(sub, tip))
+    if _srs_verdict(urdf, chain.name, sub, tip) is None:
+        family = "S-R-S"
+    else:
+        try:
+            family = f"SEW family {sew_chain(chain).family}"
+        except NotSRSError:
+            return base, None
+    held = ", ".join(j.name for j in movable[:-7])
+    return sub, (
+        f"chain {hand}_arm: {len(movable)} movable joints from '{base}'; the 7 nearest the hand are {family}, so the "
+        f"arm starts at '{sub}' and {held} are held like a clavicle (give --{hand}-base to choose)"
+    )
 
 
 def lock_value(joint: JointSpec) -> float:

@@ -1,4 +1,4 @@
-"""The pairs of links in contact at every sampled configuration, and the ``ready`` home pose."""
+"""Contacts at a configuration, the values of joints in no chain, and the ``ready`` home pose."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 from dualarm.describe.layout import lock_value
 from dualarm.describe.tips import _ancestors, _zero_position
 from dualarm.errors import RobotModelError
-from dualarm.model.robot import Robot
+from dualarm.model.robot import Chain, Robot
 
 #: Configurations sampled (fixed seed) to find pairs in contact everywhere and the ``ready`` pose.
 SAMPLES = 400
@@ -36,10 +36,10 @@ READY_TARGET = (0.55, 0.0, -0.25)
 
 def _collision_world(robot: Robot):
     """PyBullet with self-collision and dualarm's touching pairs off; (sim, the skipped pairs)."""
-    from dualarm.sim.world import disable_touching_pairs, load_pybullet_robot
+    from dualarm.sim.world import disable_unchecked_pairs, load_pybullet_robot
 
     sim = load_pybullet_robot(robot.urdf.path, self_collision=True)
-    return sim, disable_touching_pairs(sim)
+    return sim, disable_unchecked_pairs(sim, robot.disabled_pairs)
 
 
 def contact_pairs(sim, q: Mapping[str, float]) -> set[tuple[str, str]]:
@@ -51,7 +51,7 @@ def contact_pairs(sim, q: Mapping[str, float]) -> set[tuple[str, str]]:
 
     sim.set_positions(list(q), list(q.values()))
     pb.performCollisionDetection(physicsClientId=sim.client)
-    name = {i: n for n, i in sim.link_index.items()}
+    name = sim.link_name
     pairs = set()
     for point in pb.getContactPoints(bodyA=sim.body, bodyB=sim.body, physicsClientId=sim.client):
         if point[8] < 0:
@@ -89,21 +89,14 @@ def held_values(robot: Robot, sim, chain_joints: Sequence[str]) -> dict[str, flo
     return held
 
 
-def always_in_contact(
-    robot: Robot, sim, base: Mapping[str, float], samples: int = SAMPLES, seed: int = SEED
-) -> set[tuple[str, str]]:
-    """Link pairs PyBullet finds penetrating at every one of ``samples`` random configurations.
+def arm_length(arm: Chain) -> float:
+    """An arm's length [m]: the offsets of its joints from its first movable joint's to its tip, added up.
 
-    Configurations of the chains' joints (the others at ``base``), after dualarm's touching pairs are skipped.
+    Its reach when stretched out straight, whatever its zero pose (a Kinova Jaco's is folded).
     """
-    joints = sorted({n for c in robot.chains.values() for n in c.joint_names})
-    always: set[tuple[str, str]] | None = None
-    for q in _samples(robot, joints, samples, seed):
-        pairs = contact_pairs(sim, {**base, **dict(zip(joints, q, strict=True))})
-        always = pairs if always is None else always & pairs
-        if not always:
-            break
-    return always or set()
+    joints = list(arm.joints)
+    first = [j.movable for j in joints].index(True)
+    return float(sum(np.linalg.norm(j.origin_xyz) for j in joints[first + 1 :]))
 
 
 def ready_pose(
@@ -125,13 +118,10 @@ def ready_pose(
     candidates = []
     for k, arm in enumerate(c for c in robot.chains.values() if c.hand):
         to_tip = robot.chain_between(robot.urdf.root, arm.tip)
-        shoulder = _zero_position(robot.urdf, arm.joints[[j.movable for j in arm.joints].index(True)].child)
-        length = float(
-            np.linalg.norm(
-                ChainKinematics.of(to_tip).pose(np.array([base.get(n, 0.0) for n in to_tip.joint_names]))[:3, 3]
-                - shoulder
-            )
-        )
+        first = arm.joints[[j.movable for j in arm.joints].index(True)]
+        shoulder = _zero_position(robot.urdf, first.child)
+        length = arm_length(arm)
+        moved = {link for link in robot.urdf.links if first.child in _ancestors(robot.urdf, link)}
         Q = np.round(_samples(robot, arm.joint_names, samples, seed + k, READY_LIMIT_MARGIN), 3)
         full = np.array([[base.get(n, 0.0) for n in to_tip.joint_names]] * len(Q))
         columns = [to_tip.joint_names.index(n) for n in arm.joint_names]
@@ -152,9 +142,9 @@ def ready_pose(
         ) / length + 0.01 * np.linalg.norm(Q, axis=1)
         order = [i for i in np.argsort(score, kind="stable") if ok[i]]
         free = []
-        for i in order:
+        for i in order:  # the other arm is checked with it below: here only the pairs this arm moves
             q = dict(zip(arm.joint_names, Q[i], strict=True))
-            if not contact_pairs(sim, {**base, **q}):
+            if not any(a in moved or b in moved for a, b in contact_pairs(sim, {**base, **q})):
                 free.append(q)
             if len(free) == 8:
                 break

@@ -47,10 +47,12 @@ def robot_toml(
     limits: Mapping[str, Mapping[str, tuple[float, bool]]],
     homes: Mapping[str, Mapping[str, float]],
     touching: frozenset[tuple[str, str]],
+    disabled: Mapping[tuple[str, str], str],
 ) -> str:
     """The text of robot.toml.
 
-    ``limits`` is kind -> joint -> (value, assumed), ``homes`` name -> joint -> value [rad].
+    ``limits`` is kind -> joint -> (value, assumed), ``homes`` name -> joint -> value [rad], ``disabled`` the
+    ``[collision] disabled`` pairs with their reasons.
     """
     lines = [
         (
@@ -120,10 +122,20 @@ def robot_toml(
         lines.append(f"[home.{home}]{comment}")
         lines += [f"{_key(joint)} = {_number(value)}" for joint, value in values.items()]
         lines.append("")
+    lines += [
+        "# Link pairs not checked for collision: [link, link, reason]. Reasons: 'rigid' (joined through fixed",
+        "# joints only), 'always' (in contact at every configuration robot init sampled), 'user' (robot init",
+        "# --allow, or written here). Delete a line to check that pair; add one to stop checking a pair.",
+        "[collision]",
+        "disabled = [",
+        *(f"  [{_string(a)}, {_string(b)}, {_string(reason)}]," for (a, b), reason in disabled.items()),
+        "]",
+        "",
+    ]
     if touching:
         lines.append(
-            "# Link pairs dualarm never checks for collision "
-            "(touching by construction, see dualarm.sim.world.disable_touching_pairs; no key needed):"
+            "# Link pairs dualarm never checks for collision, listed or not "
+            "(touching by construction, see dualarm.sim.world.disable_unchecked_pairs):"
         )
         lines += [f"#   {a} - {b}" for a, b in sorted(touching)]
     return "\n".join(lines).rstrip() + "\n"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from itertools import combinations
 
@@ -59,24 +60,86 @@ def _zero_position(urdf: UrdfModel, link: str) -> np.ndarray:
     return T[:3, 3]
 
 
-def arm_tips(urdf: UrdfModel) -> list[str]:
-    """Candidate arm tips: per leaf link, the link below the last revolute joint above it.
+#: Link or joint names of a branch that is no arm: legs, wheels, fingers, heads (matched as words of the name).
+NOT_ARM = re.compile(
+    r"(^|[^a-z])(leg|foot|feet|ankle|knee|hip|toe|sole|wheel|caster|finger|thumb|knuckle|index|middle|ring|"
+    r"pinky|little|head|neck|camera|eye)",
+    re.IGNORECASE,
+)
+#: Names of the joints of a hand (its fingers, a gripper's jaw): an arm ends above the first of them.
+HAND_JOINT = re.compile(r"gripper|finger|thumb|knuckle|claw|jaw", re.IGNORECASE)
+#: Names of frames that end an arm: a tool frame below the hand is preferred to the hand.
+TOOL_FRAME = re.compile(r"tool|tcp|eef|end_?effector|ee_link|grasp", re.IGNORECASE)
 
-    Followed down through fixed joints while the branch does not split.
+
+def _moving_below(urdf: UrdfModel) -> dict[str, bool]:
+    """Per link: whether a movable joint hangs anywhere below it."""
+    children = _children(urdf)
+    out: dict[str, bool] = {}
+
+    def visit(link: str) -> bool:
+        if link not in out:
+            out[link] = any(j.movable or visit(j.child) for j in children.get(link, []))
+        return out[link]
+
+    for link in urdf.links:
+        visit(link)
+    return out
+
+
+def arm_tips(urdf: UrdfModel) -> list[str]:
+    """Candidate arm tips, one per leaf link: where the leaf's longest serial run of revolute joints ends.
+
+    The path from the root to the leaf, up to its first hand joint (:data:`HAND_JOINT`: a gripper's jaw),
+    is cut at every link below which two or more branches move (a torso, a gripper's palm); the arm is the
+    piece with the most revolute joints. It ends at the link where
+    the path next splits (the palm, above its fingers), or else at the link below its last revolute joint,
+    followed down through fixed joints while the branch does not split; in both cases a tool frame hung by
+    fixed joints below it (:data:`TOOL_FRAME`) is preferred. Leaves whose piece, down to the tip, names a
+    leg, wheel, finger or head (:data:`NOT_ARM`) give none.
     """
     children = _children(urdf)
+    moving = _moving_below(urdf)
+
+    def splits(link: str) -> bool:
+        return sum(j.movable or moving[j.child] for j in children.get(link, [])) >= 2
+
     tips: list[str] = []
     for leaf in (link for link in urdf.links if not children.get(link)):
         path = urdf.chain(urdf.root, leaf)
-        revolute = [i for i, j in enumerate(path) if j.type in REVOLUTE]
+        hand = [i for i, j in enumerate(path) if j.movable and HAND_JOINT.search(j.name)]
+        path = path[: hand[0]] if hand else path
+        pieces: list[list[JointSpec]] = [[]]
+        for j in path:
+            pieces[-1].append(j)
+            if splits(j.child):
+                pieces.append([])
+        piece = max(pieces, key=_revolute_count)
+        revolute = [j for j in piece if j.type in REVOLUTE]
         if not revolute:
             continue
-        tip = path[revolute[-1]].child
-        while len(children.get(tip, [])) == 1 and children[tip][0].type == "fixed":
+        tip = piece[-1].child if splits(piece[-1].child) else revolute[-1].child
+        while not splits(tip) and len(children.get(tip, [])) == 1 and children[tip][0].type == "fixed":
             tip = children[tip][0].child
+        arm = urdf.chain(piece[0].parent, tip)
+        if any(NOT_ARM.search(j.name) or NOT_ARM.search(j.child) for j in arm):
+            continue
+        tip = _tool_frame(urdf, tip) or tip
         if tip not in tips:
             tips.append(tip)
     return tips
+
+
+def _tool_frame(urdf: UrdfModel, link: str) -> str | None:
+    """The first link named like a tool frame hung below ``link`` by fixed joints (breadth first), or None."""
+    children = _children(urdf)
+    queue = [j.child for j in children.get(link, []) if j.type == "fixed"]
+    while queue:
+        child = queue.pop(0)
+        if TOOL_FRAME.search(child):
+            return child
+        queue += [j.child for j in children.get(child, []) if j.type == "fixed"]
+    return None
 
 
 def _common_root(urdf: UrdfModel, a: str, b: str) -> str:

@@ -2,9 +2,10 @@
 
 The robot is loaded in DIRECT mode with a fixed base and self-collision on, with the task's fixed
 objects (:class:`~dualarm.tasks.schema.EnvironmentObject`) as static bodies. Link pairs that touch
-by construction are not collision-checked, as MoveIt disables "adjacent" pairs; the list is the
-planners' own (:func:`~dualarm.sim.world.disable_touching_pairs`), so the upper arms are
-checked against the torso here as there.
+by construction are not collision-checked, as MoveIt disables "adjacent" pairs, nor the pairs the
+robot's ``[collision] disabled`` lists; the list is the planners' own
+(:func:`~dualarm.sim.world.disable_unchecked_pairs`), so the upper arms are checked against the
+torso here as there.
 
 Each physics step (``step_s``, 1 kHz by default) the joints are driven by PyBullet's position
 motors with the robot's effort limits. PyBullet's motor asks for the joint velocity
@@ -36,7 +37,7 @@ from dualarm.model.robot import Robot
 from dualarm.sim.world import (
     PyBulletRobot,
     add_environment,
-    disable_touching_pairs,
+    disable_unchecked_pairs,
     in_contact,
     load_pybullet_robot,
     pb,
@@ -98,7 +99,7 @@ def execute_trajectory(
         missing = [n for n in (*trajectory.joint_names, *trajectory.fixed) if n not in sim.joint_index]
         if missing:
             raise StageError(f"execute: the robot has no joint {missing[0]}")
-        disable_touching_pairs(sim)
+        disable_unchecked_pairs(sim, robot.disabled_pairs)
         player = _Player(
             sim,
             robot,
@@ -147,7 +148,7 @@ class _Player:
         hand_poses = {h: np.empty((K, 4, 4)) for h in self.hands}
         self_contacts, environment_contacts, expected_contacts = (np.zeros(K, int) for _ in range(3))
         events: list[ContactEvent] = []
-        link_name = {i: n for n, i in sim.link_index.items()}
+        link_name = sim.link_name
         targets = np.hstack(
             [command, np.broadcast_to(held, (K, len(held)))]
         ).tolist()  # one list per step, made at once

@@ -17,6 +17,10 @@ from dualarm.errors import InvalidArgumentError, RobotModelError, excerpt
 from dualarm.files import listing, read_text
 from dualarm.model.urdf import JointSpec, UrdfModel, load_urdf
 
+#: The reasons robot.toml's ``[collision] disabled`` pairs may give: joined through fixed joints only (they never
+#: move relative to each other), in contact at every configuration ``robot init`` sampled, or the user's word.
+COLLISION_REASONS = ("rigid", "always", "user")
+
 #: The range robot.toml's ``[limits]`` accept, per kind: (lowest, highest) [rad/s], [rad/s^2] and [rad/s^3].
 #: The lowest keeps a retimed motion's duration (path length / limit) bounded, the highest is
 #: beyond any actuator; both are far from the humanoid's (velocity 2-3, acceleration 4-12, jerk 40-150).
@@ -89,6 +93,9 @@ class Robot:
         limits: limits of every movable joint, by joint name.
         homes: named home poses, each a full joint-name -> value map [rad].
         description: free text from robot.toml.
+        disabled_pairs: link pairs (sorted names) never checked for collision, with the reason
+            (:data:`COLLISION_REASONS`; robot.toml's ``[collision] disabled``), besides those that touch by
+            construction (:func:`dualarm.sim.world.disable_unchecked_pairs`).
     """
 
     name: str
@@ -98,6 +105,7 @@ class Robot:
     limits: Mapping[str, JointLimits]
     homes: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     description: str = ""
+    disabled_pairs: Mapping[tuple[str, str], str] = field(default_factory=dict)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -279,7 +287,7 @@ def robot_from_urdf(urdf_path: str | Path, base: str, tip: str) -> Robot:
     )
 
 
-_TOP_KEYS = {"name", "urdf", "description", "chains", "limits", "home"}
+_TOP_KEYS = {"name", "urdf", "description", "chains", "limits", "home", "collision"}
 _CHAIN_KEYS = {"base", "tip", "hand"}
 
 
@@ -428,7 +436,35 @@ def load_robot(directory: str | Path) -> Robot:
         limits=MappingProxyType(limits),
         homes=MappingProxyType(homes),
         description=str(data.get("description", "")).strip(),
+        disabled_pairs=MappingProxyType(_disabled_pairs(data.get("collision", {}), f"{where}:collision", urdf)),
     )
+
+
+def _disabled_pairs(data: object, where: str, urdf: UrdfModel) -> dict[tuple[str, str], str]:
+    """robot.toml's ``[collision] disabled``: ``[[link, link, reason], ...]`` as sorted pair -> reason."""
+    table = _table(data, where)
+    _unknown(table, {"disabled"}, where)
+    entries = table.get("disabled", [])
+    if not isinstance(entries, list):
+        raise RobotModelError(f"{where}.disabled: expected an array of [link, link, reason]")
+    pairs = {}
+    for k, entry in enumerate(entries):
+        at = f"{where}.disabled[{k}]"
+        if not (isinstance(entry, list) and len(entry) == 3 and all(isinstance(x, str) for x in entry)):
+            raise RobotModelError(f"{at}: expected [link, link, reason], got {excerpt(repr(entry))}")
+        a, b, reason = entry
+        for link in (a, b):
+            if link not in urdf.links:
+                raise RobotModelError(f"{at}: no link '{excerpt(link, 40)}' in the URDF")
+        if a == b:
+            raise RobotModelError(f"{at}: a link paired with itself ('{excerpt(a, 40)}')")
+        if reason not in COLLISION_REASONS:
+            raise RobotModelError(
+                f"{at}: reason {excerpt(repr(reason), 40)} is not one of {', '.join(COLLISION_REASONS)}"
+            )
+        first, second = sorted((a, b))
+        pairs[(first, second)] = reason
+    return pairs
 
 
 def random_configurations(robot: Robot, chain: Chain, n: int, seed: int) -> np.ndarray:

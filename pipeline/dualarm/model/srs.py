@@ -19,8 +19,9 @@ from dualarm.errors import NotSRSError
 from dualarm.model.kinematics import chain_frames
 from dualarm.model.robot import Chain
 
-#: Largest distance between axes that "intersect" [m].
-INTERSECTION_TOLERANCE_M = 1e-9
+#: Largest distance between axes that "intersect" [m]: far below any real offset (millimetres), above the
+#: rounding of URDFs that write pi/2 as 1.5708 (an xArm7 misses by 5.4e-7 m).
+INTERSECTION_TOLERANCE_M = 1e-5
 
 
 @dataclass(frozen=True)

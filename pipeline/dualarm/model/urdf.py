@@ -129,12 +129,12 @@ def _finite(value: float | None, default: float) -> float:
     return default if value is None else float(value)
 
 
-#: Top-level URDF elements removed before parsing: ROS control's and Gazebo's, which dualarm does not read.
-IGNORED = ("transmission", "gazebo")
+#: Top-level URDF elements removed before parsing: ROS (2) control's and Gazebo's, which dualarm does not read.
+IGNORED = ("transmission", "gazebo", "ros2_control")
 
 
 @contextmanager
-def _parser_warnings_silenced() -> Iterator[None]:
+def parser_warnings_silenced() -> Iterator[None]:
     """Drop what ``urdf_parser_py`` prints on stderr (unknown tags and attributes of valid extensions)."""
     printed = xml_reflection.on_error
     xml_reflection.on_error = lambda message: None
@@ -166,7 +166,7 @@ def _parse(path: Path, text: str) -> tuple[URDF, str]:
     except RecursionError:
         raise RobotModelError(f"{excerpt(path)}: not a valid URDF (elements nested too deeply)") from None
     try:
-        with _parser_warnings_silenced():
+        with parser_warnings_silenced():
             return URDF.from_xml_string(kinematic_xml), kinematic_xml
     except Exception as exc:  # urdf_parser_py raises bare Exception on schema errors
         raise RobotModelError(f"{excerpt(path)}: not a valid URDF ({excerpt(exc, 200)})") from None

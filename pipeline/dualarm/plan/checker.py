@@ -99,7 +99,8 @@ class _Checker:
         resolution_rad: largest joint step between the configurations checked along a segment [rad].
         checks: configurations checked so far.
         check_time_s: time spent in checks so far [s].
-        unchecked_pairs: the robot's link pairs (sorted names) that touch by construction.
+        unchecked_pairs: the robot's link pairs (sorted names) not checked
+            (:func:`~dualarm.sim.world.disable_unchecked_pairs`).
     """
 
     unchecked_pairs: frozenset[tuple[str, str]]

@@ -2,8 +2,9 @@
 
 A configuration is free exactly when every checked robot link keeps ``margin_m`` from every
 object of the task and ``2 margin_m`` from every other checked link. Pairs not checked: those that
-touch by construction, one list shared with the execute stage
-(:func:`~dualarm.sim.world.disable_touching_pairs`), and the task's expected contacts.
+touch by construction and those the robot's ``[collision] disabled`` lists, one list shared with
+the execute stage (:func:`~dualarm.sim.world.disable_unchecked_pairs`), and the task's expected
+contacts.
 
 :class:`CollisionChecker` computes the distances in closed form, many configurations at once. The
 humanoid's collision shapes are capsules (arms, torso, pelvis) and a sphere (head), a task's

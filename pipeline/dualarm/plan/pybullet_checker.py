@@ -16,7 +16,7 @@ import numpy as np
 from dualarm.errors import StageError
 from dualarm.model.robot import Robot
 from dualarm.plan.checker import Contact, _Checker, inflated_urdf
-from dualarm.sim.world import add_environment, disable_touching_pairs, in_contact, load_pybullet_robot, pb
+from dualarm.sim.world import add_environment, disable_unchecked_pairs, in_contact, load_pybullet_robot, pb
 
 
 class PyBulletChecker(_Checker):
@@ -52,10 +52,10 @@ class PyBulletChecker(_Checker):
             self.close()
             raise StageError(f"collision checking: the robot has no joint {missing[0]}")
         self._index = [sim.joint_index[n] for n in self.joint_names]
-        self.unchecked_pairs = disable_touching_pairs(sim, self.margin_m)
+        self.unchecked_pairs = disable_unchecked_pairs(sim, robot.disabled_pairs, self.margin_m)
         sim.set_positions(list(fixed), list(fixed.values()))
         self._objects = add_environment(sim, environment)
-        self._link_name = {i: n for n, i in sim.link_index.items()}
+        self._link_name = sim.link_name
         self._bodies = {name: body for body, name in self._objects.items()}
         for a, b in allowed_contacts:
             link, other = (a, b) if a in sim.link_index else (b, a)

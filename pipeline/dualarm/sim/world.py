@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -32,13 +32,18 @@ class PyBulletRobot:
         client: the physics client id (passed to every PyBullet call).
         body: the robot's body id.
         joint_index: joint name -> PyBullet joint index.
-        link_index: link name -> PyBullet link index (-1 for the root link).
+        link_index: link name -> PyBullet link index (-1 for the root link); a link merged into an ancestor
+            (see :func:`load_pybullet_robot`) has the ancestor's.
+        link_name: PyBullet link index -> the name of the link PyBullet holds there.
+        merged: a link merged into an ancestor -> (that ancestor, the link's pose in its frame (4, 4)).
     """
 
     client: int
     body: int
     joint_index: dict[str, int]
     link_index: dict[str, int]
+    link_name: dict[int, str]
+    merged: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
 
     def set_positions(self, names: Sequence[str], q: Sequence[float] | np.ndarray) -> None:
         """Teleport joints ``names`` to positions ``q`` [rad] (no dynamics)."""
@@ -47,6 +52,9 @@ class PyBulletRobot:
 
     def link_pose(self, link: str) -> np.ndarray:
         """World pose of ``link``'s URDF frame (not its centre of mass) as a 4x4 array [m]."""
+        if link in self.merged:
+            ancestor, offset = self.merged[link]
+            return self.link_pose(ancestor) @ offset
         index = self.link_index[link]
         if index == -1:  # PyBullet places the base at its centre of mass: undo the inertial offset
             com_pos, com_quat = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
@@ -109,14 +117,18 @@ def in_contact(point: Sequence) -> bool:
 
 
 #: Two links joined only through links without collision geometry and closer than this at the zero
-#: configuration touch by construction and are not checked [m] (see :func:`disable_touching_pairs`).
+#: configuration touch by construction and are not checked [m] (see :func:`disable_unchecked_pairs`).
 TOUCHING_M = 1e-3
 
 
-def disable_touching_pairs(sim: PyBulletRobot, margin_m: float = 0.0) -> frozenset[tuple[str, str]]:
-    """Turn off the self-collision pairs that touch by construction; returns them by name (sorted pairs).
+def disable_unchecked_pairs(
+    sim: PyBulletRobot, listed: Iterable[tuple[str, str]] = (), margin_m: float = 0.0
+) -> frozenset[tuple[str, str]]:
+    """Turn off the self-collision pairs dualarm does not check; returns them by name (sorted pairs).
 
-    The one list of pairs not checked, shared by the planners' checker and the execute stage: a
+    The one list of pairs not checked, shared by the planners' checker, the execute stage and
+    ``robot init``: the pairs ``listed`` (a robot's :attr:`~dualarm.model.robot.Robot.disabled_pairs`:
+    rigidly joined, in contact everywhere, or the user's), and those that touch by construction: a
     link and its nearest ancestor with collision geometry when they are joined directly (PyBullet's
     own rule for a parent), or when they are joined through links without geometry and are within
     :data:`TOUCHING_M` of each other at the zero configuration, ``margin_m`` aside (the shapes of
@@ -127,7 +139,7 @@ def disable_touching_pairs(sim: PyBulletRobot, margin_m: float = 0.0) -> frozens
     The robot must be at the zero configuration (as loaded).
     """
     body, client = sim.body, sim.client
-    name = {i: n for n, i in sim.link_index.items()}
+    name = sim.link_name
     skipped: set[tuple[str, str]] = set()
     for link, (up, through_bare) in sim.solid_parents().items():
         points = pb.getClosestPoints(body, body, 1.0, link, up, physicsClientId=client)
@@ -136,14 +148,33 @@ def disable_touching_pairs(sim: PyBulletRobot, margin_m: float = 0.0) -> frozens
         )  # the distance before the margin
         if through_bare and not touching:
             continue
-        pb.setCollisionFilterPair(body, body, link, up, enableCollision=0, physicsClientId=client)
         first, second = sorted((name[link], name[up]))
         skipped.add((first, second))
-    return frozenset(skipped)
+    return frozenset(disable_pairs(sim, skipped | set(listed)))
+
+
+def disable_pairs(sim: PyBulletRobot, pairs: Iterable[tuple[str, str]]) -> set[tuple[str, str]]:
+    """Turn off self-collision between each pair of links named; returns them as sorted pairs."""
+    done = set()
+    for a, b in pairs:
+        pb.setCollisionFilterPair(
+            sim.body, sim.body, sim.link_index[a], sim.link_index[b], enableCollision=0, physicsClientId=sim.client
+        )
+        done.add((a, b) if a < b else (b, a))
+    return done
+
+
+#: The most links PyBullet reports the state of (its ``MAX_DEGREE_OF_FREEDOM``): ``getLinkState`` fails on every
+#: link of a body with more (a TIAGo dual with its two five-finger hands has 129).
+MAX_LINKS = 128
 
 
 def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: bool = False) -> PyBulletRobot:
     """Start a client (DIRECT, or a window with ``gui``) and load ``urdf`` with a fixed base at the origin.
+
+    A robot of more than :data:`MAX_LINKS` links is loaded with the links hung by fixed joints merged into
+    their parents (``URDF_MERGE_FIXED_LINKS``): their collision shapes move with the parent, which contacts
+    name, and their poses are the parent's times the fixed joints' origins.
 
     Raises:
         StageError: ``gui`` on a Linux machine without a display.
@@ -160,13 +191,41 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
             raise StageError("execute: PyBullet could not open its window")
         flags = pb.URDF_USE_INERTIA_FROM_FILE | (pb.URDF_USE_SELF_COLLISION if self_collision else 0)
         body = pb.loadURDF(str(urdf), useFixedBase=True, flags=flags, physicsClientId=client)
+        if pb.getNumJoints(body, physicsClientId=client) > MAX_LINKS:
+            pb.removeBody(body, physicsClientId=client)
+            flags |= pb.URDF_MERGE_FIXED_LINKS
+            body = pb.loadURDF(str(urdf), useFixedBase=True, flags=flags, physicsClientId=client)
     joint_index: dict[str, int] = {}
     link_index: dict[str, int] = {pb.getBodyInfo(body, physicsClientId=client)[0].decode(): -1}
     for i in range(pb.getNumJoints(body, physicsClientId=client)):
         info = pb.getJointInfo(body, i, physicsClientId=client)
         joint_index[info[1].decode()] = i
         link_index[info[12].decode()] = i
-    return PyBulletRobot(client=client, body=body, joint_index=joint_index, link_index=link_index)
+    link_name = {i: n for n, i in link_index.items()}
+    merged = _merged_links(urdf, link_index) if flags & pb.URDF_MERGE_FIXED_LINKS else {}
+    link_index |= {link: link_index[ancestor] for link, (ancestor, _) in merged.items()}
+    return PyBulletRobot(
+        client=client, body=body, joint_index=joint_index, link_index=link_index, link_name=link_name, merged=merged
+    )
+
+
+def _merged_links(urdf: str | Path, kept: dict[str, int]) -> dict[str, tuple[str, np.ndarray]]:
+    """Each link PyBullet merged away -> (its ancestor PyBullet kept, its pose in that ancestor's frame)."""
+    from dualarm.model.kinematics import origin_matrix
+    from dualarm.model.urdf import load_urdf
+
+    model = load_urdf(urdf)
+    by_child = {j.child: j for j in model.joints}
+    out = {}
+    for link in model.links:
+        if link in kept:
+            continue
+        T, up = np.eye(4), link
+        while up not in kept:
+            T = origin_matrix(by_child[up]) @ T
+            up = by_child[up].parent
+        out[link] = (up, T)
+    return out
 
 
 def add_environment(sim: PyBulletRobot, objects) -> dict[int, str]:

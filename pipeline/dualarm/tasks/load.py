@@ -153,7 +153,7 @@ def _check_environment(task: Task) -> None:
             info = pb.getJointInfo(sim.body, i, physicsClientId=client)
             moved[i] = moved[info[16]] or info[2] != pb.JOINT_FIXED
         base = [i for i in sim.collision_links() if not moved[i]]
-        name = {i: n for n, i in sim.link_index.items()}
+        name = sim.link_name
         for index, (body, obj) in enumerate(add_environment(sim, task.spec.environment).items()):  # in the file's order
             for link in base:
                 points = pb.getClosestPoints(sim.body, body, 0.0, linkIndexA=link, physicsClientId=client)

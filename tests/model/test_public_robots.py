@@ -1,0 +1,154 @@
+"""``dualarm robot init`` and ``robot check`` on robot descriptions as their makers ship them.
+
+TALOS, the PR2 and the TIAGo dual of ``example-robot-data`` 6.0.0 (PyPI), none of their files edited. The
+wheel is downloaded once into a cache (``DUALARM_TEST_CACHE``, default ``~/.cache/dualarm-tests``); without a
+package index the tests are skipped, saying so. Every fact is checked with PyBullet on the source URDF or with
+the URDF's own joints, never with what init wrote.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from dualarm.cli import app
+from dualarm.describe.init import init_robot
+from dualarm.model.urdf import load_urdf
+from dualarm.sim.world import MAX_LINKS, load_pybullet_robot, pb
+
+pytestmark = pytest.mark.integration
+runner = CliRunner()
+WHEEL = "example-robot-data==6.0.0"
+SHARE = "cmeel.prefix/share/example-robot-data/robots"
+ROBOTS = {
+    "talos": "talos_data/robots/talos_reduced.urdf",
+    "pr2": "pr2_description/urdf/pr2.urdf",
+    "tiago_dual": "tiago_description/robots/tiago_dual.urdf",
+}
+
+
+@pytest.fixture(scope="session")
+def robots_share() -> Path:
+    """The ``robots`` folder of example-robot-data 6.0.0 (the three robots' packages), downloaded once."""
+    cache = Path(os.environ.get("DUALARM_TEST_CACHE", Path.home() / ".cache" / "dualarm-tests")) / "erd-6.0.0"
+    done = cache / "unpacked"
+    if not done.exists():
+        cache.mkdir(parents=True, exist_ok=True)
+        wheels = list(cache.glob("example_robot_data-6.0.0-*.whl"))
+        if not wheels:
+            result = subprocess.run(
+                [sys.executable, "-m", "pip", "download", "--no-deps", "--quiet", "-d", str(cache), WHEEL],
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
+            wheels = list(cache.glob("example_robot_data-6.0.0-*.whl"))
+            if result.returncode or not wheels:
+                pytest.skip(f"{WHEEL} could not be downloaded (no package index?): {result.stderr.strip()[-300:]}")
+        packages = {f"{SHARE}/{path.split('/')[0]}/" for path in ROBOTS.values()}
+        with zipfile.ZipFile(wheels[0]) as wheel:
+            wheel.extractall(cache, [n for n in wheel.namelist() if any(n.startswith(p) for p in packages)])
+        done.touch()
+    return cache / SHARE
+
+
+@pytest.fixture(scope="module")
+def made(robots_share, tmp_path_factory) -> dict:
+    """name -> RobotInit, for each robot (meshes through ROS_PACKAGE_PATH)."""
+    root = tmp_path_factory.mktemp("public")
+    with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(robots_share)}):
+        return {name: init_robot(robots_share / path, root / name) for name, path in ROBOTS.items()}
+
+
+def _between(urdf, a: str, b: str) -> list:
+    """The joints on the tree path between links ``a`` and ``b``."""
+    up_a, up_b = urdf.chain(urdf.root, a), urdf.chain(urdf.root, b)
+    shared = 0
+    while shared < min(len(up_a), len(up_b)) and up_a[shared].name == up_b[shared].name:
+        shared += 1
+    return list(up_a[shared:]) + list(up_b[shared:])
+
+
+@pytest.mark.parametrize(
+    ("name", "tips"),
+    [
+        ("talos", ("gripper_left_base_link", "gripper_right_base_link")),  # above the one-joint gripper
+        ("pr2", ("l_gripper_tool_frame", "r_gripper_tool_frame")),  # the tool frame below the palm
+        ("tiago_dual", ("hand_left_tool_link", "hand_right_tool_link")),  # not a finger of the five-finger hand
+    ],
+)
+def test_the_arms_end_at_the_hands(made, robots_share, name, tips):
+    """Two 7-joint arms, all revolute (or continuous), named as arm joints by their maker, ending at the hands."""
+    result = made[name]
+    assert tuple(a.tip for a in result.arms) == tips
+    source = load_urdf(robots_share / ROBOTS[name])
+    for arm in result.arms:
+        movable = [j for j in source.chain(arm.base, arm.tip) if j.movable]
+        assert len(movable) == 7 and all(j.type in ("revolute", "continuous") for j in movable)
+        names = [j.name for j in movable]
+        assert all(arm.hand in n or n.startswith(arm.hand[0] + "_") for n in names), names
+
+
+@pytest.mark.parametrize("name", ["talos", "pr2", "tiago_dual"])
+def test_disabled_pairs_are_rigid_or_always_in_contact_by_pybullet(made, robots_share, name):
+    """PyBullet on the source URDF: a 'rigid' pair keeps its relative pose and an 'always' pair is in contact at
+    random configurations of every joint init moves (seed and count not init's)."""
+    result = made[name]
+    robot = result.robot
+    joints = sorted({n for c in robot.chains.values() for n in c.joint_names})
+    held = {k: v for k, v in robot.home("zero").items() if k not in joints}
+    with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(robots_share)}):
+        sim = load_pybullet_robot(robots_share / ROBOTS[name], self_collision=True)
+    with sim:
+        lower, upper = robot.lower_upper(tuple(joints))
+        lower, upper = np.where(np.isfinite(lower), lower, -np.pi), np.where(np.isfinite(upper), upper, np.pi)
+        relative: dict[tuple[str, str], list[np.ndarray]] = {}
+        for q in np.random.default_rng(12345).uniform(lower, upper, size=(40, len(joints))):
+            sim.set_positions([*held, *joints], [*held.values(), *q])
+            pb.performCollisionDetection(physicsClientId=sim.client)
+            for (a, b), reason in robot.disabled_pairs.items():
+                if reason == "rigid":
+                    relative.setdefault((a, b), []).append(np.linalg.solve(sim.link_pose(a), sim.link_pose(b)))
+                elif reason == "always":
+                    ia, ib = sim.link_index[a], sim.link_index[b]
+                    points = pb.getClosestPoints(sim.body, sim.body, 0.0, ia, ib, physicsClientId=sim.client)
+                    assert points and min(p[8] for p in points) < 0, (a, b, q)
+    for (a, b), poses in relative.items():
+        assert np.allclose(poses, poses[0], atol=1e-5), (a, b)
+    assert "always" in robot.disabled_pairs.values()
+    source = load_urdf(robots_share / ROBOTS[name])
+    for (a, b), reason in robot.disabled_pairs.items():
+        assert (reason == "rigid") == all(not j.movable for j in _between(source, a, b)), (a, b, reason)
+
+
+@pytest.mark.parametrize("name", ["talos", "pr2", "tiago_dual"])
+def test_robot_check_passes(made, name):
+    """FK against adam-robotics (a PR2's joints without <origin>) and PyBullet (the TIAGo dual has more links than
+    PyBullet reports: its fixed links merged)."""
+    result = runner.invoke(app, ["robot", "check", str(made[name].directory), "--samples", "50"])
+    assert result.exit_code == 0, result.output
+    assert "Unknown tag" not in result.output and "Unknown attribute" not in result.output
+
+
+def test_tiago_dual_has_more_links_than_pybullet_reports(robots_share):
+    assert len(load_urdf(robots_share / ROBOTS["tiago_dual"]).links) - 1 > MAX_LINKS
+
+
+def test_allow_adds_a_user_pair_and_unknown_links_are_refused(robots_share, tmp_path):
+    source = robots_share / ROBOTS["talos"]
+    with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(robots_share)}):
+        pair = "arm_left_4_link,arm_right_4_link"
+        result = runner.invoke(app, ["robot", "init", str(source), "--out", str(tmp_path / "t"), "--allow", pair])
+        assert result.exit_code == 0, result.output
+        assert '["arm_left_4_link", "arm_right_4_link", "user"]' in (tmp_path / "t" / "robot.toml").read_text()
+        result = runner.invoke(app, ["robot", "init", str(source), "--out", str(tmp_path / "u"), "--allow", "x,y"])
+    assert result.exit_code == 2 and "--allow 'x': no such link" in result.output
+    assert not (tmp_path / "u").exists()
