@@ -362,3 +362,18 @@ def test_a_task_without_moves_runs_every_stage_at_rest(tmp_path):
     assert data.metrics["retime.duration_s"] == 0 and data.metrics["smooth.velocity_ratio_max"] == 0
     assert data.metrics["execute.self_collisions"] == 0 == data.metrics["execute.environment_collisions"]
     assert data.metrics["execute.tracking_error_max_m"] <= 2e-3
+
+
+def test_a_method_whose_every_sample_failed_fails_at_its_stage(tmp_path):
+    """PyBullet's IK allowed one iteration and a 1e-12 m tolerance (below its single precision) fails every sample of
+    the triangle: the run ends failed at ik, naming the count, not violated after every stage."""
+    from dualarm.errors import StageError
+    from dualarm.ik.pose_level.pointwise import PyBulletIkSettings
+
+    settings = PyBulletIkSettings(max_iterations=1, position_tolerance_m=1e-12)
+    with pytest.raises(StageError, match=r"ik \(pybullet\): every one of the 601 samples failed"):
+        record_run(load_task(TRIANGLE, 1), "pybullet", settings=settings, out_dir=tmp_path, record="ik")
+    (directory,) = (tmp_path / "triangle").iterdir()
+    run = read_run(directory)
+    assert run.status == "failed" and run.manifest["error"].startswith("ik (pybullet): every one of the 601")
+    assert len(run["/ik/sample"]) == 601 and (run["/ik/sample"]["status"] != 0).all()

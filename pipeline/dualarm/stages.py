@@ -154,6 +154,13 @@ class IkStage:
         path = self.method.solve(robot, reference, self.task.initial_q, self.settings)
         angles = arm_angles(path, robot, self.task.spec.arm_angle.vertical)
         sink.joint_path(path, robot.limit_array("velocity", path.joint_names), angles)
+        if len(path.status) and (path.status != 0).all():  # nothing for the later stages to move along
+            error = np.nanmin(path.hand_error_m.max(axis=1)) if path.hand_error_m.size else float("nan")
+            raise StageError(
+                f"ik ({self.method.name}): every one of the {len(path.status)} samples failed "
+                f"(its hands came no closer than {error:.3g} m to the asked poses)",
+                stage="ik",
+            )
         recorded = self.method.record(path, robot, self.settings)
         metrics = {
             **ik_metrics(path, robot),

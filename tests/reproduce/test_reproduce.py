@@ -946,3 +946,20 @@ def test_a_worker_that_does_not_see_out_is_refused_in_one_line(tmp_path):
         " the workers share"
     ]
     assert not (hidden / "repro" / "parts.json").exists()
+
+
+@pytest.mark.integration
+def test_a_consistency_claim_whose_metric_a_robot_cannot_give_says_why(carry_box_runs):
+    """On an arm that is not S-R-S no arm angle is recorded: the claims needing it are not available, naming the
+    metric, and judge nothing (``reproduce --robot`` crashed with a KeyError here)."""
+    from dataclasses import replace
+
+    from dualarm.reproduce.claims import consistency_claims
+
+    angle = "ik.rep_arm_angle_deviation_max_rad"
+    runs = [replace(r, metrics={k: v for k, v in r.metrics.items() if k != angle}) for r in carry_box_runs]
+    claims = consistency_claims("carry_box", runs)
+    assert len(claims) == 2
+    for claim in claims:
+        assert claim.ours == f"not available: {angle} was not computed: the arm angle needs an S-R-S arm"
+        assert claim.agrees is None

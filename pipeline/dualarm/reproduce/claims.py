@@ -336,6 +336,13 @@ def _by_method(runs: list[RunData]) -> dict[str, RunData]:
     }
 
 
+#: Why a consistency metric a claim needs may be missing from a run's metrics (on a robot other than the humanoid).
+UNCOMPUTED = {
+    "ik.rep_joint_deviation_max_rad": "was not computed: no sample was solved in two repetitions",
+    "ik.rep_arm_angle_deviation_max_rad": "was not computed: the arm angle needs an S-R-S arm",
+}
+
+
 def _deviation(metrics: Mapping[str, float]) -> str:
     return (
         f"Δq {metrics['ik.rep_joint_deviation_max_rad']:.2g} rad, "
@@ -354,8 +361,13 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
     m = {method: run.metrics for method, run in finished.items()}
     where = {"triangle": "V.B, Figs 9-10", "circle": "V.C, Figs 12-13", "carry_box": "V.D, Fig. 16"}[task]
     part = {"carry_box": "carry-box"}.get(task, task)
-    dq = {k: v["ik.rep_joint_deviation_max_rad"] for k, v in m.items()}
-    dpsi = {k: v["ik.rep_arm_angle_deviation_max_rad"] for k, v in m.items()}
+
+    def dq(method: str) -> float:  # a KeyError naming the metric when the run could not compute it (UNCOMPUTED)
+        return m[method]["ik.rep_joint_deviation_max_rad"]
+
+    def dpsi(method: str) -> float:
+        return m[method]["ik.rep_arm_angle_deviation_max_rad"]
+
 
     def claim(
         text: str,
@@ -382,17 +394,22 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
                 if "mc-inverse" in failed
                 else made
             )
-        made = Claim(
-            "MC-Inverse",
-            where,
-            text,
-            theirs,
-            ours(),
-            comparison(),
-            agrees(),
-            part,
-            "; ".join(run_verdict(method, finished[method]) for method in methods),
-        )
+        try:
+            made = Claim(
+                "MC-Inverse",
+                where,
+                text,
+                theirs,
+                ours(),
+                comparison(),
+                agrees(),
+                part,
+                "; ".join(run_verdict(method, finished[method]) for method in methods),
+            )
+        except KeyError as missing:  # a metric the runs could not compute on this robot
+            metric = str(missing.args[0])
+            why = UNCOMPUTED.get(metric, "not among the runs' metrics")
+            return Claim("MC-Inverse", where, text, theirs, f"not available: {metric} {why}", "", None, part)
         return _needing(made, "mc-inverse", finished["mc-inverse"]) if methods == ("mc-inverse",) else made
 
     claims = [
@@ -401,7 +418,7 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
             "identical (drawn)",
             ("mc-inverse",),
             lambda: _deviation(m["mc-inverse"]),
-            lambda: max(dq["mc-inverse"], dpsi["mc-inverse"]) <= ZERO,
+            lambda: max(dq("mc-inverse"), dpsi("mc-inverse")) <= ZERO,
         )
     ]
     if task == "triangle":
@@ -411,8 +428,8 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
                 "change (drawn)",
                 ("trac-ik",),
                 lambda: _deviation(m["trac-ik"]),
-                lambda: dq["trac-ik"] > CHANGES_RAD,
-                lambda: f"changes by more than {CHANGES_RAD} rad" if dq["trac-ik"] > CHANGES_RAD else "no change",
+                lambda: dq("trac-ik") > CHANGES_RAD,
+                lambda: f"changes by more than {CHANGES_RAD} rad" if dq("trac-ik") > CHANGES_RAD else "no change",
             ),
             claim(
                 "triangle: TRAC-IK fails the 4th and 5th repetitions (joint limit)",
@@ -430,7 +447,7 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
                     f"{m['ikfast-style']['ik.max_joint_step_rad']:.2g} rad"
                 ),
                 lambda: (
-                    dq["ikfast-style"] > CHANGES_RAD
+                    dq("ikfast-style") > CHANGES_RAD
                     and m["ikfast-style"]["ik.max_joint_step_rad"] > 10 * m["mc-inverse"]["ik.max_joint_step_rad"]
                 ),
                 lambda: f"MC-Inverse's largest step {m['mc-inverse']['ik.max_joint_step_rad']:.2g} rad",
@@ -443,14 +460,14 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
                 "change (drawn)",
                 ("trac-ik",),
                 lambda: _deviation(m["trac-ik"]),
-                lambda: dq["trac-ik"] > CHANGES_RAD,
+                lambda: dq("trac-ik") > CHANGES_RAD,
             ),
             claim(
                 "circle: ikfast is more consistent than TRAC-IK, but its arm angle still changes",
                 "changes on the 3rd circle",
                 ("ikfast-style", "trac-ik"),
-                lambda: f"ikfast-style Δψ {dpsi['ikfast-style']:.2g} rad, TRAC-IK Δψ {dpsi['trac-ik']:.2g} rad",
-                lambda: CHANGES_RAD < dpsi["ikfast-style"] < dpsi["trac-ik"],
+                lambda: f"ikfast-style Δψ {dpsi('ikfast-style'):.2g} rad, TRAC-IK Δψ {dpsi('trac-ik'):.2g} rad",
+                lambda: CHANGES_RAD < dpsi("ikfast-style") < dpsi("trac-ik"),
             ),
         ]
     if task == "carry_box":
@@ -460,7 +477,7 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
                 "change (drawn)",
                 ("trac-ik", "ikfast-style"),
                 lambda: f"TRAC-IK {_deviation(m['trac-ik'])}; ikfast-style {_deviation(m['ikfast-style'])}",
-                lambda: CHANGES_RAD < dpsi["ikfast-style"] < dpsi["trac-ik"],
+                lambda: CHANGES_RAD < dpsi("ikfast-style") < dpsi("trac-ik"),
             )
         )
     return claims
