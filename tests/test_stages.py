@@ -377,3 +377,34 @@ def test_a_method_whose_every_sample_failed_fails_at_its_stage(tmp_path):
     run = read_run(directory)
     assert run.status == "failed" and run.manifest["error"].startswith("ik (pybullet): every one of the 601")
     assert len(run["/ik/sample"]) == 601 and (run["/ik/sample"]["status"] != 0).all()
+
+
+def test_a_limit_robot_init_assumed_says_so_in_the_message_it_causes(tmp_path):
+    """The triangle timed by the task on a humanoid whose robot.toml holds velocity limits of 0.05 rad/s listed as
+    assumed (as robot init writes them): the refusal names the limit as assumed; with the task's own [limits] instead,
+    nothing is said to be assumed."""
+    import shutil
+
+    from dualarm.model.robot import load_robot
+
+    robot_dir = tmp_path / "humanoid"
+    shutil.copytree(HUMANOID, robot_dir)
+    slow = "\n".join(f"{n} = 0.05" for n in load_robot(HUMANOID).joint_names)
+    toml = robot_dir / "robot.toml"
+    toml.write_text(
+        toml.read_text().replace(
+            "[limits.acceleration]",
+            f'[limits]\nassumed = ["velocity"]\n\n[limits.velocity]\n{slow}\n\n[limits.acceleration]',
+            1,
+        )
+    )
+    text = TRIANGLE.read_text().replace('robot = "../robots/humanoid"', f'robot = "{robot_dir}"')
+    for limits, assumed in (("", True), ("[limits]\nvelocity = 0.05\n\n", False)):
+        task_file = tmp_path / "triangle.toml"
+        task_file.write_text(text + f'\n{limits}[retime]\ntiming = "task"\n')
+        result = CliRunner().invoke(
+            app, ["run", str(task_file), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")]
+        )
+        assert result.exit_code == 1 and "velocity limit" in result.output, result.output
+        said = "an assumed velocity limit: robot init's default, not the robot's data" in result.output
+        assert said == assumed, result.output

@@ -262,7 +262,13 @@ class RetimeStage:
             )
         else:
             result = retime_path(
-                path, v, a, sample_period_s=CONTROL_PERIOD_S, keep_timing=settings.timing == "task", jerk=j
+                path,
+                v,
+                a,
+                sample_period_s=CONTROL_PERIOD_S,
+                keep_timing=settings.timing == "task",
+                jerk=j,
+                assumed=robot.assumed,
             )
         traj = result.trajectory
         samples, limits = {"velocity": traj.qd, "acceleration": traj.qdd}, {"velocity": v, "acceleration": a}

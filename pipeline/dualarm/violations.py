@@ -68,15 +68,26 @@ def position_limit_violations(
 
 
 def ratio_violations(
-    stage: str, t: np.ndarray, names: Sequence[str], samples: Mapping[str, np.ndarray], limits: Mapping[str, np.ndarray]
+    stage: str,
+    t: np.ndarray,
+    names: Sequence[str],
+    samples: Mapping[str, np.ndarray],
+    limits: Mapping[str, np.ndarray],
+    robot: Robot | None = None,
 ) -> list[Violation]:
     """A violation for each kind whose largest limit ratio exceeds 1 + :data:`LIMIT_TOLERANCE`.
 
-    The kinds: velocity, acceleration, jerk.
+    The kinds: velocity, acceleration, jerk. With ``robot``, a limit it assumed says so (:meth:`Robot.assumed`).
     """
     ratios = limit_ratios(t, names, samples, limits, stage)
     return [
-        Violation("limit", stage, f"{stage}: {r.kind} of {r.joint} at {r.ratio:.4g}x its limit at {_at(r.t_s)}", r.t_s)
+        Violation(
+            "limit",
+            stage,
+            f"{stage}: {r.kind} of {r.joint} at {r.ratio:.4g}x its limit at {_at(r.t_s)}"
+            + (robot.assumed(r.kind) if robot else ""),
+            r.t_s,
+        )
         for r in ratios.values()
         if r.exceeded
     ]
@@ -95,7 +106,7 @@ def trajectory_violations(traj: JointTrajectory, robot: Robot, *, jerk: bool) ->
     }  # the jerk as the smooth stage reports it
     limits = {kind: robot.limit_array(kind, names) for kind in samples}
     return position_limit_violations(traj.stage, traj.t, names, traj.q, robot) + ratio_violations(
-        traj.stage, traj.t, names, samples, limits
+        traj.stage, traj.t, names, samples, limits, robot
     )
 
 
@@ -148,6 +159,7 @@ def ik_violations(path: JointPath, robot: Robot, checks: Checks, *, retimed: boo
             path.joint_names,
             {"velocity": path.qd},
             {"velocity": robot.limit_array("velocity", path.joint_names)},
+            robot,
         )
     return out
 

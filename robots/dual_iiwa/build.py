@@ -6,8 +6,10 @@ hanging 0.50 m below), and one iiwa on each side of the torso at that height, it
 pointing out sideways (+y left, -y right) and its x axis forward. So each arm's first joint turns
 about the lateral axis, like a shoulder's pitch, and at the zero pose the arms stretch out sideways
 (a T pose) with the shoulder centres S 0.46 m out. Every iiwa link and joint is copied from
-pybullet_data (inertias, origins, axes, limits, and the licence comment), renamed ``left_...`` /
-``right_...``; visuals and collisions use the STL meshes (the OBJ visuals would double the size for
+pybullet_data (inertias, origins, axes, position limits, and the licence comment), renamed ``left_...`` /
+``right_...``, but for the velocity limits: KUKA's data sheet's (:data:`DATASHEET_VELOCITY_DEG_S`) replace
+pybullet_data's 10 rad/s, so that ``robot init`` scales its assumed acceleration and jerk limits from the
+arm's real speeds; visuals and collisions use the STL meshes (the OBJ visuals would double the size for
 a colour the URDF's materials give), referenced as ``package://kuka_iiwa/meshes/...`` and found
 through ``ROS_PACKAGE_PATH`` = pybullet_data's folder.
 
@@ -96,6 +98,10 @@ def _arm(robot: ET.Element, iiwa: ET.Element, side: str) -> None:
             ref.set("link", f"{side}_{ref.get('link')}")
         for mesh in element.iter("mesh"):
             mesh.set("filename", "package://kuka_iiwa/" + mesh.get("filename", "").replace(".obj", ".stl"))
+        limit = element.find("limit")
+        if element.tag == "joint" and limit is not None:
+            axis = int(element.get("name", "").rsplit("_", 1)[1])
+            limit.set("velocity", f"{DATASHEET_VELOCITY_DEG_S[axis - 1] * 3.141592653589793 / 180:.4f}")
         robot.append(element)
 
 
@@ -117,21 +123,6 @@ def assemble() -> str:
     return '<?xml version="1.0"?>\n' + note + "\n" + header + "\n" + ET.tostring(robot, encoding="unicode") + "\n"
 
 
-def _velocity_table() -> str:
-    lines = [
-        "",
-        "# Velocity limits from KUKA's LBR iiwa 14 R820 data sheet (A1..A7 in deg/s: "
-        + ", ".join(map(str, DATASHEET_VELOCITY_DEG_S))
-        + "; the same in lbr_fri_ros2_stack's iiwa14/joint_limits.yaml),",
-        "# replacing the URDF's 10 rad/s; written by build.py.",
-        "[limits.velocity]  # [rad/s]",
-    ]
-    for side in ("left", "right"):
-        for axis, deg in enumerate(DATASHEET_VELOCITY_DEG_S, start=1):
-            lines.append(f"{side}_lbr_iiwa_joint_{axis} = {deg * 3.141592653589793 / 180:.4f}")
-    return "\n".join(lines) + "\n"
-
-
 def main() -> None:
     """Assemble the URDF, run ``dualarm robot init`` on it, and put its outputs here."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -142,8 +133,6 @@ def main() -> None:
         env = {**os.environ, "ROS_PACKAGE_PATH": pybullet_data.getDataPath()}
         dualarm = Path(sys.executable).parent / "dualarm"
         subprocess.run([str(dualarm), "robot", "init", str(source), "--out", str(out)], env=env, check=True)
-        with (out / "robot.toml").open("a") as toml:
-            toml.write(_velocity_table())
         for name in OUTPUTS:
             target = HERE / name
             if target.is_dir():

@@ -236,15 +236,25 @@ def test_init_prints_every_choice_and_assumption(tmp_path):
     done = runner.invoke(app, ["robot", "init", str(IIWA), "--out", str(tmp_path / "kuka"), "--jerk", "80"])
     assert done.exit_code == 0, done.output
     assert "tip 'lbr_iiwa_link_7'" in done.stdout and "S-R-S" in done.stdout and "home ready:" in done.stdout
-    assert "assumed acceleration limit 5 rad/s^2" in done.stdout and "assumed jerk" not in done.stdout
+    assert "assumed acceleration limits for 7 joints: 2.5/s times the velocity limit" in done.stdout
+    assert "assumed jerk" not in done.stdout
     import tomllib
 
     text = (tmp_path / "kuka" / "robot.toml").read_text()
     data = tomllib.loads(text)
-    assert set(data["limits"]["jerk"].values()) == {80.0} and set(data["limits"]["acceleration"].values()) == {5.0}
-    assert text.count("5.0  # assumed") == 7 and "80.0  # assumed" not in text
+    with load_pybullet_robot(IIWA) as sim:  # the URDF's velocity limits, as PyBullet reads them
+        velocity = {
+            n: pb.getJointInfo(sim.body, i, physicsClientId=sim.client)[11]
+            for n, i in sim.joint_index.items()
+            if n in data["limits"]["acceleration"]
+        }
+    assert len(velocity) == 7 and data["limits"]["acceleration"] == {n: 2.5 * v for n, v in velocity.items()}
+    assert set(data["limits"]["jerk"].values()) == {80.0} and data["limits"]["assumed"] == ["acceleration"]
+    assert text.count("  # assumed") == 7 and "80.0  # assumed" not in text
     robot = load_robot(tmp_path / "kuka")
     assert {robot.limits[n].jerk for n in robot.chain("left_arm").joint_names} == {80.0}
+    assert robot.assumed_limits == {"acceleration"} and robot.assumed("jerk") == ""
+    assert "an assumed acceleration limit" in robot.assumed("acceleration")
     assert (tmp_path / "kuka" / "meshes" / "link_0.stl").is_file()
 
 
@@ -255,14 +265,19 @@ def test_dual_iiwa_loads_and_passes_robot_check():
     done = runner.invoke(app, ["robot", "check", str(DUAL_IIWA), "--samples", "200"])
     assert done.exit_code == 0, done.output
     assert done.stdout.count("pass") == 2 and done.stdout.count("S-R-S: shoulder") == 2
-    # its velocity limits are robot.toml's, not the URDF's 10 rad/s
+    # its velocity limits are KUKA's data sheet's (85 deg/s for A1), written into its URDF, not pybullet_data's 10
+    # rad/s; its assumed acceleration and jerk limits are 2.5/s and 25/s times them
     with load_pybullet_robot(robot.urdf.path) as sim:
         urdf_velocity = pb.getJointInfo(sim.body, sim.joint_index["left_lbr_iiwa_joint_1"], physicsClientId=sim.client)[
             11
         ]
-    assert urdf_velocity == 10 and robot.limits["left_lbr_iiwa_joint_1"].velocity == pytest.approx(
-        np.radians(85), abs=1e-4
-    )
+    with load_pybullet_robot(IIWA) as sim:
+        source_velocity = pb.getJointInfo(sim.body, sim.joint_index["lbr_iiwa_joint_1"], physicsClientId=sim.client)[11]
+    limits = robot.limits["left_lbr_iiwa_joint_1"]
+    assert source_velocity == 10 and urdf_velocity == limits.velocity == pytest.approx(np.radians(85), abs=1e-4)
+    assert limits.acceleration == pytest.approx(2.5 * limits.velocity, abs=1e-3)
+    assert limits.jerk == pytest.approx(25 * limits.velocity, abs=1e-2)
+    assert robot.assumed_limits == {"acceleration", "jerk"}
 
 
 def _one_line(args, needle):
@@ -351,12 +366,10 @@ def test_robot_toml_overrides_velocity(tmp_path):
 
 @pytest.mark.integration
 def test_committed_dual_iiwa_is_what_build_py_makes(made):
-    """robots/dual_iiwa holds build.py's outputs: init on the URDF it assembles writes the same robot.toml (plus
-    build.py's velocity table) and the same meshes."""
+    """robots/dual_iiwa holds build.py's outputs: init on the URDF it assembles writes the same robot.toml and the
+    same meshes."""
     built = made["dual_iiwa"][1].directory
-    assert (DUAL_IIWA / "robot.toml").read_text() == (
-        built / "robot.toml"
-    ).read_text() + _build_module()._velocity_table()
+    assert (DUAL_IIWA / "robot.toml").read_text() == (built / "robot.toml").read_text()
     assert (DUAL_IIWA / "dual_iiwa.urdf").read_text() == (built / "dual_iiwa.urdf").read_text()
     assert sorted(p.name for p in (DUAL_IIWA / "meshes").iterdir()) == sorted(
         p.name for p in (built / "meshes").iterdir()

@@ -22,8 +22,9 @@ from the URDF, and every choice is returned as a line of :attr:`RobotInit.notes`
   and are held at :data:`lock_value` (0 clipped into the limits) by every home pose.
 - S-R-S or not, per arm (:func:`dualarm.model.srs.srs_geometry`'s verdict, with the miss distance).
 - limits: velocity from the URDF (:data:`DEFAULT_VELOCITY_RAD_S` where it gives none), acceleration
-  and jerk from the caller or :data:`DEFAULT_ACCELERATION_RAD_S2` / :data:`DEFAULT_JERK_RAD_S3`,
-  written with the comment ``# assumed``.
+  and jerk from the caller or else :data:`ACCELERATION_PER_S` times the velocity limit and
+  :data:`JERK_PER_S` times that, written with the comment ``# assumed`` and listed in
+  ``[limits] assumed`` (so that every message a limit causes says it was assumed).
 - home poses ``zero`` and ``ready`` (:func:`ready_pose`).
 - the collision matrix (:mod:`dualarm.describe.collisions`): pairs joined through fixed joints only,
   pairs in contact at every sampled configuration and the pairs of ``--allow`` are written to
@@ -47,12 +48,7 @@ from dualarm.describe.collisions import allowed_pairs, disabled_pairs
 from dualarm.describe.layout import ArmPlan, _Layout, _layout, _srs_verdict, lock_value
 from dualarm.describe.meshes import copy_urdf, resolve_mesh
 from dualarm.describe.ready import SAMPLES, _collision_world, held_values, ready_pose
-from dualarm.describe.robot_toml import (
-    DEFAULT_ACCELERATION_RAD_S2,
-    DEFAULT_JERK_RAD_S3,
-    DEFAULT_VELOCITY_RAD_S,
-    robot_toml,
-)
+from dualarm.describe.robot_toml import ACCELERATION_PER_S, DEFAULT_VELOCITY_RAD_S, JERK_PER_S, robot_toml
 from dualarm.errors import OutputError, RobotModelError, excerpt
 from dualarm.files import DIRECTORY, kind
 from dualarm.model.robot import Robot, load_robot
@@ -84,6 +80,36 @@ class RobotInit:
     touching_pairs: frozenset[tuple[str, str]]
     disabled_pairs: Mapping[tuple[str, str], str]
     notes: tuple[str, ...]
+
+
+def _limits(
+    urdf: UrdfModel, joints: Sequence[str], acceleration: float | None, jerk: float | None
+) -> dict[str, dict[str, tuple[float, bool]]]:
+    """Kind -> joint -> (limit, assumed) for ``joints``: given, from the URDF, or scaled from the velocity."""
+    from dualarm.model.robot import LIMIT_RANGES
+
+    limits: dict[str, dict[str, tuple[float, bool]]] = {"velocity": {}, "acceleration": {}, "jerk": {}}
+    for joint in joints:
+        v = urdf.joint(joint).velocity
+        if not np.isfinite(v):
+            v = DEFAULT_VELOCITY_RAD_S
+            limits["velocity"][joint] = (v, True)
+        v = float(np.clip(v, *LIMIT_RANGES["velocity"]))
+        a = (
+            (acceleration, False)
+            if acceleration is not None
+            else (_scaled("acceleration", ACCELERATION_PER_S * v), True)
+        )
+        limits["acceleration"][joint] = a
+        limits["jerk"][joint] = (jerk, False) if jerk is not None else (_scaled("jerk", JERK_PER_S * a[0]), True)
+    return limits
+
+
+def _scaled(kind: str, value: float) -> float:
+    """A scaled limit within robot.toml's range, to 3 decimals."""
+    from dualarm.model.robot import LIMIT_RANGES
+
+    return round(float(np.clip(value, *LIMIT_RANGES[kind])), 3)
 
 
 def _out_directory(out: Path) -> None:
@@ -120,9 +146,10 @@ def init_robot(
         left_tip, right_tip: the arms' tip links (None: proposed from the tree).
         left_base, right_base: the arms' base links (None: the torso).
         torso: the link the arms hang from (None: their common root).
-        acceleration: every chain joint's acceleration limit [rad/s^2] (None:
-            :data:`DEFAULT_ACCELERATION_RAD_S2`, assumed).
-        jerk: every chain joint's jerk limit [rad/s^3] (None: :data:`DEFAULT_JERK_RAD_S3`, assumed).
+        acceleration: every chain joint's acceleration limit [rad/s^2] (None: :data:`ACCELERATION_PER_S` times its
+            velocity limit, assumed).
+        jerk: every chain joint's jerk limit [rad/s^3] (None: :data:`JERK_PER_S` times its acceleration limit,
+            assumed).
         name: the robot's name (None: the directory's name).
         allow: link pairs never to check for collision (written with the reason ``user``).
 
@@ -185,25 +212,17 @@ def _write(
     chain_joints = [j.name for hand, base, tip in layout.arms for j in urdf.chain(base, tip) if j.movable]
     if layout.waist:
         chain_joints = [j.name for j in urdf.chain(*layout.waist) if j.movable] + chain_joints
-    limits: dict[str, dict[str, tuple[float, bool]]] = {"velocity": {}, "acceleration": {}, "jerk": {}}
-    for joint in chain_joints:
-        if not np.isfinite(urdf.joint(joint).velocity):
-            limits["velocity"][joint] = (DEFAULT_VELOCITY_RAD_S, True)
-        limits["acceleration"][joint] = (
-            (acceleration, False) if acceleration is not None else (DEFAULT_ACCELERATION_RAD_S2, True)
-        )
-        limits["jerk"][joint] = (jerk, False) if jerk is not None else (DEFAULT_JERK_RAD_S3, True)
-    for kind_, default, unit in (
-        ("velocity", DEFAULT_VELOCITY_RAD_S, "rad/s"),
-        ("acceleration", DEFAULT_ACCELERATION_RAD_S2, "rad/s^2"),
-        ("jerk", DEFAULT_JERK_RAD_S3, "rad/s^3"),
+    limits = _limits(urdf, chain_joints, acceleration, jerk)
+    for kind_, rule, unit in (
+        ("velocity", f"{DEFAULT_VELOCITY_RAD_S:g} rad/s (the URDF gives none)", "rad/s"),
+        ("acceleration", f"{ACCELERATION_PER_S:g}/s times the velocity limit (give --acceleration)", "rad/s^2"),
+        ("jerk", f"{JERK_PER_S:g}/s times the acceleration limit (give --jerk)", "rad/s^3"),
     ):
-        assumed = [j for j, (_, a) in limits[kind_].items() if a]
+        assumed = [value for value, a in limits[kind_].values() if a]
         if assumed:
             notes.append(
-                f"assumed {kind_} limit {default:g} {unit} for {len(assumed)} joints "
-                f"({'the URDF gives none' if kind_ == 'velocity' else f'give --{kind_}'}); "
-                "marked '# assumed' in robot.toml"
+                f"assumed {kind_} limits for {len(assumed)} joints: {rule}, {min(assumed):.3g} to {max(assumed):.3g} "
+                f"{unit}; marked '# assumed' in robot.toml, and every message they cause says so"
             )
     homes: dict[str, Mapping[str, float]] = {"zero": {j.name: lock_value(j) for j in layout.locked}}
     (out / "robot.toml").write_text(

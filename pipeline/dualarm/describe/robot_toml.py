@@ -15,10 +15,12 @@ from dualarm.model.urdf import UrdfModel
 
 #: Velocity written for a chain joint whose URDF gives none [rad/s] (marked ``# assumed``).
 DEFAULT_VELOCITY_RAD_S = 1.0
-#: Acceleration written for every chain joint when none is given [rad/s^2] (``# assumed``; the humanoid's are 4-12).
-DEFAULT_ACCELERATION_RAD_S2 = 5.0
-#: Jerk written for every chain joint when none is given [rad/s^3] (``# assumed``; the humanoid's are 40-150).
-DEFAULT_JERK_RAD_S3 = 50.0
+#: Acceleration written for a chain joint when none is given: this times its velocity limit [1/s] (``# assumed``; full
+#: speed in 0.4 s; the humanoid's are 2 to 4 times its velocity limits of 2-3 rad/s).
+ACCELERATION_PER_S = 2.5
+#: Jerk written for a chain joint when none is given: this times its acceleration limit [1/s] (``# assumed``; full
+#: acceleration in 0.1 s; the humanoid's are 10 to 12.5 times its accelerations).
+JERK_PER_S = 10.0
 _BARE = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
@@ -99,6 +101,13 @@ def robot_toml(
                 f"# Locked: {', '.join(f'{j.name} = {lock_value(j):g}' for j in layout.locked)} "
                 "(between the torso and an arm's base, in no chain; every home pose holds them)"
             ),
+            "",
+        ]
+    assumed_kinds = [k for k in ("velocity", "acceleration", "jerk") if any(a for _, a in limits.get(k, {}).values())]
+    if assumed_kinds:
+        lines += [
+            "[limits]  # the kinds holding values marked '# assumed': delete a kind here when you replace its values",
+            f"assumed = [{', '.join(_string(k) for k in assumed_kinds)}]",
             "",
         ]
     for kind_, unit in (("velocity", "rad/s"), ("acceleration", "rad/s^2"), ("jerk", "rad/s^3")):

@@ -93,6 +93,8 @@ class Robot:
         limits: limits of every movable joint, by joint name.
         homes: named home poses, each a full joint-name -> value map [rad].
         description: free text from robot.toml.
+        assumed_limits: the limit kinds (``velocity``, ``acceleration``, ``jerk``) whose values are ``robot init``'s
+            assumptions, not the robot's data (robot.toml's ``[limits] assumed``): messages they cause say so.
         disabled_pairs: link pairs (sorted names) never checked for collision, with the reason
             (:data:`COLLISION_REASONS`; robot.toml's ``[collision] disabled``), besides those that touch by
             construction (:func:`dualarm.sim.world.disable_unchecked_pairs`).
@@ -106,6 +108,14 @@ class Robot:
     homes: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     description: str = ""
     disabled_pairs: Mapping[tuple[str, str], str] = field(default_factory=dict)
+    assumed_limits: frozenset[str] = frozenset()
+
+    def assumed(self, kind: str) -> str:
+        """What a message about a ``kind`` limit adds: that the limit was assumed, or ""."""
+        if kind not in self.assumed_limits:
+            return ""
+        where = f"{self.directory / 'robot.toml'} " if self.directory else ""
+        return f" (an assumed {kind} limit: robot init's default, not the robot's data; replace it in {where}[limits])"
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -169,7 +179,8 @@ class Robot:
         ``jerk``; None keeps the robot's).
 
         A task's ``[limits]`` table is applied so. With nothing to replace (every override None) it is
-        this robot itself, so that what a process builds for it once is found again.
+        this robot itself, so that what a process builds for it once is found again. A kind replaced is no longer
+        :attr:`assumed_limits`.
 
         Raises:
             InvalidArgumentError: an unknown kind or joint, or a value that is not a positive finite number.
@@ -193,7 +204,8 @@ class Robot:
                 if v <= 0:
                     raise InvalidArgumentError(f"{kind}.{name}", f"must be positive, got {v:g}")
                 limits[name] = replace(limits[name], **{kind: v})
-        return replace(self, limits=MappingProxyType(limits))
+        given = {kind for kind, value in overrides.items() if value is not None}
+        return replace(self, limits=MappingProxyType(limits), assumed_limits=self.assumed_limits - given)
 
     def configuration(self, q: Mapping[str, float] | str | None = None, name: str = "q") -> Mapping[str, float]:
         """Every movable joint's value [rad].
@@ -405,7 +417,13 @@ def load_robot(directory: str | Path) -> Robot:
         )
 
     limits_data = _table(data.get("limits", {}), f"{where}:limits")
-    _unknown(limits_data, set(LIMIT_RANGES), f"{where}:limits")
+    _unknown(limits_data, {*LIMIT_RANGES, "assumed"}, f"{where}:limits")
+    assumed = limits_data.get("assumed", [])
+    if not (isinstance(assumed, list) and all(kind in LIMIT_RANGES for kind in assumed)):
+        raise RobotModelError(
+            f"{where}:limits.assumed: expected a list of limit kinds ({', '.join(LIMIT_RANGES)}), "
+            f"got {excerpt(repr(assumed))}"
+        )
     given = {kind: _joint_values(limits_data.get(kind, {}), f"{where}:limits.{kind}", movable) for kind in LIMIT_RANGES}
     for kind, values in given.items():
         low, high = LIMIT_RANGES[kind]
@@ -437,6 +455,7 @@ def load_robot(directory: str | Path) -> Robot:
         homes=MappingProxyType(homes),
         description=str(data.get("description", "")).strip(),
         disabled_pairs=MappingProxyType(_disabled_pairs(data.get("collision", {}), f"{where}:collision", urdf)),
+        assumed_limits=frozenset(assumed),
     )
 
 

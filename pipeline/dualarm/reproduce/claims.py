@@ -368,7 +368,6 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
     def dpsi(method: str) -> float:
         return m[method]["ik.rep_arm_angle_deviation_max_rad"]
 
-
     def claim(
         text: str,
         theirs: str,

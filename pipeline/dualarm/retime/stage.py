@@ -22,7 +22,7 @@ Units: joint positions [rad], velocities [rad/s], accelerations [rad/s^2], times
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,6 +65,7 @@ def retime_path(
     sample_period_s: float = 0.001,
     keep_timing: bool = False,
     jerk: np.ndarray | None = None,
+    assumed: Callable[[str], str] = lambda kind: "",
 ) -> Retimed:
     """Time a joint path within joint limits and sample it.
 
@@ -79,6 +80,8 @@ def retime_path(
         jerk: jerk limit per active joint (n,) [rad/s^3] (or one for all): given, the timing is
             jerk-limited (:mod:`dualarm.retime.jerk`) instead of TOPP-RA's, or the task's own
             timing is checked against it.
+        assumed: what a ``keep_timing`` refusal adds about a limit of a kind
+            (:meth:`dualarm.model.robot.Robot.assumed`: that it was assumed).
 
     Returns:
         The trajectory, rest to rest, sampled every ``sample_period_s`` plus its final time, with
@@ -95,7 +98,7 @@ def retime_path(
     timing = plan(path, velocity, acceleration, keep_timing=keep_timing, jerk=jerk)
     traj = timing.sample(sample_period_s)
     if keep_timing:
-        check_limits(traj, velocity, acceleration, jerk)
+        check_limits(traj, velocity, acceleration, jerk, assumed)
     else:
         timing, traj = _within_limits(timing, traj, velocity, acceleration, sample_period_s)
     at_samples = timing.evaluate(timing.sample_times_s)[0]
@@ -157,7 +160,11 @@ def _within_limits(
 
 
 def check_limits(
-    traj: JointTrajectory, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray | None = None
+    traj: JointTrajectory,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    jerk: np.ndarray | None = None,
+    assumed: Callable[[str], str] = lambda kind: "",
 ) -> None:
     """Raise a StageError naming the joint, time and ratio if ``traj`` exceeds a limit.
 
@@ -168,6 +175,7 @@ def check_limits(
         velocity: velocity limit per joint (n,) [rad/s] (or one for all).
         acceleration: acceleration limit per joint (n,) [rad/s^2] (or one for all).
         jerk: jerk limit per joint (n,) [rad/s^3] (or one for all), or None: not checked.
+        assumed: what the message adds about a limit of this kind (:meth:`dualarm.model.robot.Robot.assumed`).
     """
     ratios = _sample_ratios(traj, velocity, acceleration)
     if jerk is not None:
@@ -176,7 +184,7 @@ def check_limits(
     if worst.exceeded:
         raise StageError(
             f"{STAGE}: keep_timing: {worst.joint} reaches {worst.ratio:.3g}x its {worst.kind} limit "
-            f"at t = {worst.t_s:.3f} s (the task's timing is too fast for the joint limits)",
+            f"at t = {worst.t_s:.3f} s (the task's timing is too fast for the joint limits){assumed(worst.kind)}",
             stage=STAGE,
             t_s=worst.t_s,
             joint=worst.joint,
