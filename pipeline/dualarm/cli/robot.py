@@ -137,13 +137,19 @@ def robot_init(
     acceleration: Annotated[
         float | None,
         typer.Option(
-            help="Acceleration limit of every chain joint [rad/s^2]; default: an assumed 5, marked so in robot.toml."
+            help=(
+                "Acceleration limit of every chain joint [rad/s^2]; default: assumed, 2.5/s times its velocity limit, "
+                "marked so in robot.toml."
+            )
         ),
     ] = None,
     jerk: Annotated[
         float | None,
         typer.Option(
-            help="Jerk limit of every chain joint [rad/s^3]; default: an assumed 50, marked so in robot.toml."
+            help=(
+                "Jerk limit of every chain joint [rad/s^3]; default: assumed, 10/s times its acceleration limit, "
+                "marked so in robot.toml."
+            )
         ),
     ] = None,
     allow: Annotated[
