@@ -12,13 +12,19 @@ the waist at the task's initial configuration:
   that do not need S-R-S;
 - any other arm: that numeric reach test.
 
-A waypoint the loader's own reach test refuses is reported like any other unreachable one.
+A waypoint the loader's own reach test refuses is reported like any other unreachable one. Waypoints
+are the poses a run uses: the task's ``frame`` and ``scale`` applied.
+
+When every waypoint is reached, the path is sampled as the run's path stage samples it
+(:func:`dualarm.paths.build.build_reference`: every move, arcs and ``by`` moves included, both hands,
+a carried object's slave hand, each repetition's closure) and its reach test run on every sample: a
+task this passes never fails a run for reach, and one it refuses names the move and the time.
 """
 
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +32,7 @@ import numpy as np
 from dualarm.errors import NotSRSError, UnreachablePoseError, excerpt
 from dualarm.ik.analytic.mc_inverse import SWEEP_STEP_RAD, McInverse, sweep_arm_angle
 from dualarm.model.kinematics import to_arm_frame
+from dualarm.paths.build import build_reference
 from dualarm.tasks.load import load_task, load_task_unmoved
 from dualarm.tasks.reach import numeric_reach
 from dualarm.tasks.schema import unit_vector
@@ -63,16 +70,27 @@ class WaypointReach:
 
 @dataclass(frozen=True)
 class TaskCheck:
-    """The result of checking a task: its name, where it was read, and every waypoint's reach."""
+    """The result of checking a task: its name, where it was read, every waypoint's reach, and the path's.
+
+    ``path``: None when every sample of the path is within reach (or the waypoints already are not), else
+    the path stage's refusal (the move, the time and why); ``samples``: the samples checked.
+    """
 
     name: str
     source: str
     waypoints: tuple[WaypointReach, ...]
+    path: str | None = None
+    samples: int = 0
 
     @property
     def unreachable(self) -> tuple[WaypointReach, ...]:
         """The waypoints no method the task can use reaches."""
         return tuple(w for w in self.waypoints if not w.reachable)
+
+    @property
+    def passed(self) -> bool:
+        """Every waypoint and every sample of the path within reach."""
+        return not self.unreachable and self.path is None
 
 
 def _load(file: Path, robot: Path | None) -> tuple[Task, dict]:
@@ -109,14 +127,12 @@ def check_task(path: str | Path, robot: str | Path | None = None, step_rad: floa
     from scipy.spatial.transform import Rotation
 
     from dualarm.data import find_task
-    from dualarm.model.poses import pose_matrix
 
     file = find_task(path)
     task, data = _load(file, Path(robot) if robot is not None else None)
     results = []
     for hand, name in _targets(task, data):
-        wp = task.spec.waypoints[name]
-        T = pose_matrix(wp.position, wp.rpy)
+        T = task.waypoint_pose(name)
         branches: dict[int, list[tuple[float, float]]] = {}
         srs = True
         try:
@@ -127,10 +143,17 @@ def check_task(path: str | Path, robot: str | Path | None = None, step_rad: floa
             sweep = sweep_arm_angle(solver, to_arm_frame(task.robot, hand, T, task.initial_q), step_rad)
             branches = {b: iv for b in range(8) if (iv := sweep.intervals(b))}
         numeric = None if branches else bool(numeric_reach(task, hand).within(T[None])[0])
-        x, y, z = (float(v) for v in wp.position)
+        x, y, z = (float(v) for v in T[:3, 3])
         roll, pitch, yaw = (float(v) for v in Rotation.from_matrix(T[:3, :3]).as_euler("xyz"))
         results.append(WaypointReach(f"waypoints.{name}", hand, (x, y, z), (roll, pitch, yaw), branches, srs, numeric))
-    return TaskCheck(name=task.name, source=excerpt(file), waypoints=tuple(results))
+    check = TaskCheck(name=task.name, source=excerpt(file), waypoints=tuple(results))
+    if check.unreachable:
+        return check
+    try:
+        reference = build_reference(task)
+    except UnreachablePoseError as exc:
+        return replace(check, path=str(exc))
+    return replace(check, samples=len(reference))
 
 
 def report_lines(check: TaskCheck) -> list[str]:
@@ -165,10 +188,10 @@ def report_lines(check: TaskCheck) -> list[str]:
 
 
 def unreachable_lines(check: TaskCheck) -> list[str]:
-    """One line per unreachable waypoint, naming its key: ``tasks/x.toml:waypoints.A: ...``."""
+    """One line per unreachable waypoint (``x.toml:waypoints.A: ...``), and the path's refusal."""
     return [
         f"{check.source}:{w.key}: the {w.hand} hand cannot reach it within the joint limits ("
         + ("no MC-Inverse branch at any arm angle, " if w.srs else "")
         + "numeric IK did not reach it); move the waypoint or change its orientation"
         for w in check.unreachable
-    ]
+    ] + ([check.path] if check.path else [])

@@ -81,3 +81,25 @@ def test_a_relative_robot_path_is_taken_from_the_working_directory(tmp_path, mon
     by_absolute = runner.invoke(app, ["task", "check", str(TASKS / "triangle.toml"), "--robot", str(robot)])
     assert by_relative.exit_code == by_absolute.exit_code == 0, by_relative.output
     assert by_relative.stdout == by_absolute.stdout
+
+
+@pytest.mark.integration
+def test_a_task_whose_path_leaves_reach_is_refused_as_the_run_refuses_it(tmp_path):
+    """The circle with its centre moved 0.5 m right: its start is within reach, the arc is not. task check refuses it
+    (exit 3) with the very line ``dualarm run`` refuses it with (exit 2, before any stage), naming the move and time;
+    it passed before (it checked waypoints only)."""
+    text = (TASKS / "circle.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    path = tmp_path / "circle.toml"
+    path.write_text(text.replace("arc_center = [0.31, -0.11, -0.35]", "arc_center = [0.31, -0.61, -0.35]"))
+    checked = runner.invoke(app, ["task", "check", str(path)])
+    assert checked.exit_code == 3, checked.output
+    assert "waypoints.P0 (left hand)" in checked.stdout and "NOT reachable" not in checked.stdout
+    (line,) = checked.stderr.strip().splitlines()
+    assert ":moves[0]: at t = " in line and "the left hand cannot reach" in line
+    ran = runner.invoke(app, ["run", str(path), "--ik", "mc-inverse", "--reps", "1", "--out", str(tmp_path / "runs")])
+    assert ran.exit_code == 2 and ran.stderr.strip() == f"error: {line}", ran.output
+
+
+def test_a_task_check_that_passes_says_how_many_samples_it_checked():
+    result = runner.invoke(app, ["task", "check", str(TASKS / "circle.toml")])
+    assert result.exit_code == 0 and "path: all 2001 samples within reach" in result.stdout, result.output

@@ -311,3 +311,56 @@ def test_the_circle_takes_its_transfer_duration_on_another_robot():
     reps = data["repetitions"]
     assert humanoid.duration_s == pytest.approx(reps * 4.0)
     assert iiwa.duration_s == pytest.approx(reps * 6.0)
+
+
+@pytest.mark.parametrize("robot_dir", [HUMANOID, REPO / "robots" / "dual_iiwa"])
+def test_the_shoulder_and_length_of_any_arm_are_the_srs_ones_on_an_srs_arm(robot_dir):
+    """The fallback for an arm of no family (nearest points of the first and the last two axes, the polyline between)
+    gives an S-R-S arm's closed-form S and L2 + L3 (:func:`dualarm.model.srs.srs_geometry`)."""
+    from dualarm.model.robot import load_robot
+    from dualarm.model.srs import srs_geometry
+    from dualarm.tasks.frames import _nearest_axes
+
+    robot = load_robot(robot_dir)
+    for hand in robot.hands:
+        arm = robot.hand_chain(hand)
+        shoulder, length = _nearest_axes(arm)
+        geometry = srs_geometry(arm)
+        assert np.allclose(shoulder, geometry.shoulder, atol=1e-9) and length == pytest.approx(geometry.reach, abs=1e-9)
+
+
+@pytest.mark.integration
+def test_the_triangle_transfers_to_an_arm_of_no_family(tmp_path):
+    """The offset humanoid with its left wrist axis moved off the forearm (no SEW family, ``scale = "arm"`` and the
+    ``left.shoulder`` frame refused before): waypoint A lies at S + s p, S where PyBullet's joint 1 and 2 axes come
+    nearest, s the polyline from S through joints 2-6 to the wrist over 0.60 m."""
+    from tests.helpers import wrist_offset_robot
+
+    from dualarm.tasks.load import load_task_unmoved
+
+    robot_dir = wrist_offset_robot(tmp_path)
+    task = load_task_unmoved(TASKS / "triangle.toml", robot=robot_dir)  # its C is out of this wrist's reach
+    names = task.robot.hand_chain("left").joint_names
+    with pybullet_urdf(robot_dir / "offset_wrist.urdf") as sim:
+        sim.set(list(task.initial_q), list(task.initial_q.values()))
+        sim.set(names, [0.0] * len(names))  # the shoulder is found at the arm's zero pose, in its base frame
+
+        def axis(joint: str) -> tuple[np.ndarray, np.ndarray]:
+            index, client = sim.joint[joint], sim.client
+            info = pb.getJointInfo(sim.body, index, physicsClientId=client)
+            state = pb.getLinkState(sim.body, index, computeForwardKinematics=True, physicsClientId=client)
+            R = np.asarray(pb.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+            return np.asarray(state[4]), R @ np.asarray(info[13])
+
+        def nearest(a, b) -> np.ndarray:  # the foot on line a of the common perpendicular (least squares)
+            (p, d), (r, e) = a, b
+            t = np.linalg.lstsq(np.stack([d, -e], axis=1), r - p, rcond=None)[0]
+            return p + t[0] * d
+
+        lines = [axis(n) for n in names]
+    shoulder, wrist = nearest(lines[0], lines[1]), nearest(lines[-1], lines[-2])
+    points = [shoulder, *(p for p, _ in lines[1:-1]), wrist]
+    scale = sum(np.linalg.norm(b - a) for a, b in zip(points, points[1:], strict=False)) / 0.60
+    written = tomllib.loads((TASKS / "triangle.toml").read_text())["waypoints"]["A"]["position"]
+    A = task.waypoint_pose("A")[:3, 3]
+    assert np.allclose(A, shoulder + scale * np.asarray(written), atol=2e-6)  # PyBullet's single precision

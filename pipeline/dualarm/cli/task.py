@@ -18,11 +18,11 @@ def task_check(
         Path | None, typer.Option("--robot", help="Robot directory to check the task on instead of the one it names.")
     ] = None,
 ) -> None:
-    """Validate a task without running it: schema, robot, and every waypoint's reach.
+    """Validate a task without running it: schema, robot, every waypoint's reach and the sampled path's.
 
     Reach within the joint limits (per waypoint the hand pose and, for an S-R-S arm, the MC-Inverse
-    branches and psi intervals that reach it); exits 3 when a waypoint is unreachable, 2 for a
-    malformed task.
+    branches and psi intervals that reach it), then every sample of the path as a run samples it;
+    exits 3 when a waypoint or a sample is unreachable, 2 for a malformed task.
     """
     from dualarm.task_check import check_task, report_lines, unreachable_lines
 
@@ -36,7 +36,13 @@ def task_check(
         )
     for line in report_lines(result):
         out.print(line, markup=False, soft_wrap=True)
+    if result.samples:
+        out.print(
+            f"path: all {result.samples} samples within reach (the run's path-stage check)",
+            markup=False,
+            soft_wrap=True,
+        )
     for line in unreachable_lines(result):
         err.print(line, markup=False, soft_wrap=True)
-    if result.unreachable:
+    if not result.passed:
         raise typer.Exit(EXIT_CODES["violated"])

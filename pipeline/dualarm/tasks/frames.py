@@ -29,7 +29,7 @@ def frame_pose(robot: Robot, name: str, q: Mapping[str, float]) -> np.ndarray:
     A link: its frame, the joints between the root and it at ``q``.
 
     Raises:
-        NotSRSError: an arm without a shoulder centre for a shoulder role; KeyError: an unknown name.
+        NotSRSError: an arm of fewer than two movable joints for a shoulder role; KeyError: an unknown name.
     """
     if name in FRAME_ROLES:
         hands = ("left", "right") if name == "shoulders" else (name.split(".")[0],)
@@ -47,10 +47,7 @@ def shoulder_position(robot: Robot, hand: str, q: Mapping[str, float]) -> np.nda
 
     Where an S-R-S arm's joints 1-3 meet, else the SEW angle's S on joint 1's axis
     (:mod:`dualarm.ik.analytic.sew`: where joints 1-3 meet, or the point of joint 1's axis nearest where joints 2
-    and 3 meet).
-
-    Raises:
-        NotSRSError: the arm is neither S-R-S nor of a SEW family (the SEW solver's one line).
+    and 3 meet), else the point of joint 1's axis nearest joint 2's (:func:`_nearest_axes`).
     """
     arm = robot.hand_chain(hand)
     to_arm = robot.chain_between(robot.urdf.root, arm.base)
@@ -61,8 +58,8 @@ def shoulder_position(robot: Robot, hand: str, q: Mapping[str, float]) -> np.nda
 def arm_scale(robot: Robot, hands: Sequence[str]) -> float:
     """``scale = "arm"``'s factor: the mean arm length of ``hands``' arms over the reference arm's.
 
-    Arm length: S-R-S: upper arm + forearm, L2 + L3; else |SE| + |EW| at q = 0 of the SEW angle's points. Over
-    :data:`~dualarm.tasks.schema.REFERENCE_ARM_M` (the humanoid's).
+    Arm length: S-R-S: upper arm + forearm, L2 + L3; else |SE| + |EW| at q = 0 of the SEW angle's points; else
+    :func:`_nearest_axes`'. Over :data:`~dualarm.tasks.schema.REFERENCE_ARM_M` (the humanoid's).
     """
     return float(np.mean([_shoulder_and_length(robot.hand_chain(hand))[1] for hand in hands])) / REFERENCE_ARM_M
 
@@ -71,10 +68,7 @@ def _shoulder_and_length(arm: Chain) -> tuple[np.ndarray, float]:
     """The shoulder centre S [m] (3,) in the arm's base frame and the arm's length [m].
 
     An S-R-S arm's S and L2 + L3; else those of the SEW angle's points at q = 0 (S, and |SE| + |EW|), which on an
-    S-R-S arm are the same.
-
-    Raises:
-        NotSRSError: the arm is neither S-R-S nor of a SEW family (the SEW solver's one line).
+    S-R-S arm are the same; else (any other arm: a Baxter's, a 6-joint arm) :func:`_nearest_axes`'.
     """
     from dualarm.model.sew import sew_chain
 
@@ -82,8 +76,39 @@ def _shoulder_and_length(arm: Chain) -> tuple[np.ndarray, float]:
         geometry = srs_geometry(arm)
         return geometry.shoulder, geometry.reach
     except NotSRSError:
+        pass
+    try:
         sew = sew_chain(arm)
-        return sew.shoulder, float(np.linalg.norm(sew.elbow - sew.shoulder) + np.linalg.norm(sew.wrist - sew.elbow))
+    except NotSRSError:
+        return _nearest_axes(arm)
+    return sew.shoulder, float(np.linalg.norm(sew.elbow - sew.shoulder) + np.linalg.norm(sew.wrist - sew.elbow))
+
+
+def _nearest_axes(arm: Chain) -> tuple[np.ndarray, float]:
+    """The shoulder and length of any arm at q = 0, in its base frame [m].
+
+    S: the point of joint 1's axis nearest joint 2's (on a parallel axis: nearest joint 2's origin), as the SEW
+    angle's S is on joint 1's axis; W likewise on the last axis, nearest the one before. The length: the polyline
+    from S through the origins of the joints between to W (L2 + L3 on an S-R-S arm whose joint origins lie at S,
+    E and W).
+    """
+    from dualarm.model.srs import _axis_lines
+
+    lines = _axis_lines(arm, np.zeros(arm.dof))
+    if len(lines) < 2:
+        raise NotSRSError(f"chain '{arm.name}' has {len(lines)} movable joint: no shoulder")
+
+    def nearest(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        (p, d), (r, e) = a, b
+        n = np.cross(d, e)
+        if np.linalg.norm(n) < 1e-9:
+            return p + d * np.dot(r - p, d)
+        # the foot on line a of the common perpendicular: (r - p) . (e x n) / |n|^2 along d
+        return p + d * np.dot(np.cross(r - p, e), n) / np.dot(n, n)
+
+    shoulder, wrist = nearest(lines[0], lines[1]), nearest(lines[-1], lines[-2])
+    points = [shoulder, *(p for p, _ in lines[1:-1]), wrist]
+    return shoulder, float(sum(np.linalg.norm(b - a) for a, b in zip(points, points[1:], strict=False)))
 
 
 def _in_frame(spec: TaskSpec, robot: Robot, q: Mapping[str, float], source: str) -> TaskSpec:
