@@ -317,3 +317,9 @@ def test_ik_sew_command_refuses_in_one_line(tmp_path):
         assert result.exit_code == 2, result.output
         lines = [line for line in result.stderr.splitlines() if line.strip()]
         assert len(lines) == 1 and needle in lines[0] and "Traceback" not in result.output
+
+
+def test_no_pose_has_no_solutions():
+    """A search left with no candidate asks for none (the ball game on TALOS with mode auto ended in a traceback)."""
+    arm = sew_chain(load_robot(OFFSET).hand_chain("left"))
+    assert solve_many(arm, np.zeros((0, 4, 4)), np.zeros(0)) == []

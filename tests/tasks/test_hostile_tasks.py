@@ -327,7 +327,7 @@ def test_task_file_not_utf8(tmp_path: Path):
     "value", ["[" * 100_000 + "]" * 100_000, "{ a = " * 5_000 + "1" + " }" * 5_000], ids=["arrays", "tables"]
 )
 def test_task_file_nested_deeply(tmp_path: Path, value: str):
-    path = write(tmp_path, shipped_text("carry_box", ('initial = "ready"', f"initial = {value}")))
+    path = write(tmp_path, shipped_text("carry_box", ('initial = "ready"\nframe', f"initial = {value}\nframe")))
     with pytest.raises(TaskFileError) as info:
         load_task(path)
     message = str(info.value)
@@ -391,7 +391,7 @@ def test_subprocess_fifo_and_long_path_no_traceback_no_hang(tmp_path: Path, host
 @pytest.mark.parametrize(
     "edit",
     [
-        ('initial = "ready"', "initial = " + "[" * 100_000 + "]" * 100_000),
+        ('initial = "ready"\nframe', "initial = " + "[" * 100_000 + "]" * 100_000 + "\nframe"),
         ('waist = "locked"', 'waist = "locked"\n' + toml_string("\x1b[2J\u202e" * 2000) + " = 1"),
     ],
     ids=["nesting_beyond_the_stack", "terminal_codes_in_a_key"],
@@ -594,7 +594,7 @@ ABSURD = [
     (
         "initial_joint_1e300",
         "carry_box",
-        ('initial = "ready"', "initial = { left_elbow = 1e300 }"),
+        ('initial = "ready"\nframe', "initial = { left_elbow = 1e300 }\nframe"),
         "initial.left_elbow",
         "[-100, 100]",
     ),

@@ -179,8 +179,9 @@ def _transferred(spec: TaskSpec, robot: Robot) -> TaskSpec:
     """``spec`` transferred to ``robot``, when it is not the one ``transfer.written_for`` names.
 
     ``transfer.initial``, ``transfer.gesture`` and ``transfer.limits`` in place of ``initial``, ``gesture`` and
-    ``limits``, and its moves' durations times ``transfer.duration_scale``, when ``robot`` is not the one
-    ``transfer.written_for`` names (by robot.toml's ``name``).
+    ``limits``, ``transfer.arm_angle`` (when given) in place of ``arm_angle``, and its moves' durations times
+    ``transfer.duration_scale``, when ``robot`` is not the one ``transfer.written_for`` names (by robot.toml's
+    ``name``).
     """
     if spec.transfer is None or robot.name == spec.transfer.written_for:
         return spec
@@ -196,5 +197,6 @@ def _transferred(spec: TaskSpec, robot: Robot) -> TaskSpec:
             "gesture": spec.transfer.gesture,
             "limits": spec.transfer.limits,
             "moves": moves,
+            **({"arm_angle": spec.transfer.arm_angle} if spec.transfer.arm_angle is not None else {}),
         }
     )

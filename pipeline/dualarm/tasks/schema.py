@@ -519,6 +519,8 @@ class Transfer(_Model):
         duration_scale: every move's ``duration_s`` there is multiplied by this (in
             :data:`DURATION_SCALE_RANGE`, rounded to whole control periods), for a task whose
             paper gives no timing and whose pace asks more speed than other robots' joints have.
+        arm_angle: the ``[arm_angle]`` table there (an arm angle held at the humanoid's ``initial`` value need not
+            keep another robot's joints within their limits: ``mode = "auto"`` searches); default: ``[arm_angle]``.
     """
 
     written_for: str
@@ -526,6 +528,7 @@ class Transfer(_Model):
     gesture: Gesture | None = None
     limits: Limits = Limits()
     duration_scale: Annotated[float, FINITE, Range(*DURATION_SCALE_RANGE)] = 1.0
+    arm_angle: ArmAngleTable | None = None
 
 
 class TaskSpec(_Model):

@@ -260,6 +260,8 @@ def solve_many(
     ``psi`` is (N,) [rad]. See the module docstring; limits not applied; one :class:`SewSolutions` per pose.
     """
     T = np.asarray(T, dtype=float).reshape(-1, 4, 4)
+    if not len(T):  # nothing to solve (a search with no candidate left)
+        return []
     psi = np.broadcast_to(np.asarray(psi, dtype=float), len(T))
     solver = arm.cached(("solver", sew, samples), lambda: _Solver.of(arm, sew, samples))
     G = solver.goal(T, psi)[0]
