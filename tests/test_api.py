@@ -226,3 +226,27 @@ def test_every_stage_has_the_one_shape():
         assert callable(stage) and isinstance(stage.settings_record(), dict)
     with pytest.raises(DualarmError, match="mc-inverse takes ArmAngle settings, not TvgddSettings"):
         build_stages(task, "mc-inverse", settings=dualarm.TvgddSettings())
+
+
+def test_a_reference_of_ones_own_with_repetitions_is_laid_out_as_a_tasks(robot):
+    """The triangle's reference over two repetitions, rebuilt with from_poses and its own rep, is solved by MC-Inverse
+    (auto) into joints that repeat; repetition_deviation is the largest |q_r - q_0| at the same places, computed here
+    from the joints; a layout whose repetitions are as long as the first (which also holds the start pose) is refused
+    naming rep (it raised IndexError deep in the arm-angle search)."""
+    task = dualarm.load_task("triangle", 2)
+    reference = dualarm.build_reference(task)
+    poses = {h: reference.hands[h].poses for h in reference.hands}
+    own = dualarm.CartesianReference.from_poses(reference.period_s, poses, rep=reference.rep)
+    path = dualarm.solve_mc_inverse(robot, own, task.initial_q, dualarm.ArmAngle(mode="auto"))
+    first, second = np.flatnonzero(own.rep == 0), np.flatnonzero(own.rep == 1)
+    assert len(second) == len(first) - 1
+    expected = np.abs(path.q[second] - path.q[first[1:]]).max()
+    assert dualarm.repetition_deviation(path, own) == pytest.approx(expected, abs=0.0)
+    once = dualarm.CartesianReference.from_poses(reference.period_s, {h: T[first] for h, T in poses.items()})
+    single = dualarm.solve_mc_inverse(robot, once, task.initial_q, dualarm.ArmAngle(mode="auto"))
+    assert np.isnan(dualarm.repetition_deviation(single, once))  # one repetition: nothing to compare
+    naive = np.r_[np.zeros(len(first) - 1, int), np.ones(len(first), int)]  # the start pose not in the first
+    with pytest.raises(InvalidArgumentError, match="^rep: repetition 1 has .* one sample fewer than the first"):
+        dualarm.CartesianReference.from_poses(reference.period_s, poses, rep=naive)
+    with pytest.raises(InvalidArgumentError, match="^rep: repetition 0 is followed by 2: no gaps"):
+        dualarm.CartesianReference.from_poses(reference.period_s, poses, rep=np.where(own.rep == 1, 2, 0))

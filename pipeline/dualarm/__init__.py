@@ -13,7 +13,8 @@ References:
 IK, each ``solve_*(robot, reference, q0, settings) -> JointPath``
     :func:`solve_tvgdd` (:class:`TvgddSettings`), :func:`solve_pinv`, :func:`solve_mc_inverse`
     and :func:`solve_sew` (:class:`ArmAngle`), :func:`solve_trac_ik`, :func:`solve_pybullet`, :func:`solve_dls_svd`,
-    :func:`solve_ikfast_style`; one pose: :func:`mc_inverse` -> :class:`McSolution` (``.nearest``).
+    :func:`solve_ikfast_style`; one pose: :func:`mc_inverse` -> :class:`McSolution` (``.nearest``);
+    consistency across repetitions: :func:`repetition_deviation`.
     Every method and planner is in the registry :data:`METHODS`.
 Planning, timing, execution
     :func:`plan_task`, :func:`retime_path`, :func:`smooth_trajectory`, :func:`approach_trajectory`

@@ -26,6 +26,7 @@ from .ik.analytic.mc_inverse import McSolution as McSolution
 from .ik.analytic.mc_inverse import mc_inverse as mc_inverse
 from .ik.analytic.mc_path import solve_mc_inverse as solve_mc_inverse
 from .ik.analytic.sew_path import solve_sew as solve_sew
+from .ik.metrics import repetition_deviation as repetition_deviation
 from .ik.pose_level.dls import DlsSettings as DlsSettings
 from .ik.pose_level.pointwise import IkfastStyleSettings as IkfastStyleSettings
 from .ik.pose_level.pointwise import PyBulletIkSettings as PyBulletIkSettings

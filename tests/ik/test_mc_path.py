@@ -64,9 +64,11 @@ def test_a_scheduled_arm_angle_repeats_with_the_repetitions(tmp_path):
     text = (TASKS / "carry_box.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
     path = tmp_path / "carry_box.toml"
     path.write_text(
-        text.replace('mode = "initial"\n', "")
-        + 'mode = "schedule"\nschedule = { left = [[0.0, 0.0], [2.0, 0.1], [4.0, 0.0]],'
-        " right = [[0.0, 0.0], [2.0, -0.1], [4.0, 0.0]] }\n"
+        text.replace(
+            '[arm_angle]\nmode = "initial"\n',
+            '[arm_angle]\nmode = "schedule"\nschedule = { left = [[0.0, 0.0], [2.0, 0.1], [4.0, 0.0]],'
+            " right = [[0.0, 0.0], [2.0, -0.1], [4.0, 0.0]] }\n",
+        )
     )
     task = load_task(path)
     ref = build_reference(task)

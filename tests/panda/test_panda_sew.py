@@ -69,15 +69,16 @@ def test_the_sew_angle_is_held_along_the_path_as_pybullet_measures_it(compared):
 
 
 def test_sew_on_an_arm_of_no_family_is_refused_in_one_line(tmp_path):
-    """The offset humanoid with its left wrist offset too (no SEW family): `dualarm run triangle --robot` with sew exits
-    2 with one line naming the chain, and leaves no run behind."""
+    """The offset humanoid with its left wrist offset too (no SEW family): `dualarm run ball_game --robot` with sew
+    exits 2 with one line naming the chain, and leaves no run behind (the triangle's C is out of that wrist's
+    reach)."""
     (tmp_path / "robot").mkdir()
     robot = wrist_offset_robot(tmp_path / "robot")
     result = runner.invoke(
         app,
         [
             "run",
-            "triangle",
+            "ball_game",
             "--robot",
             str(robot),
             "--ik",

@@ -47,7 +47,7 @@ task_app = typer.Typer(help="Author and validate task files.", no_args_is_help=T
 app.add_typer(task_app, name="task")
 # Text is printed as it is: no markup, no emoji codes (":robot:" stays), in messages and table cells.
 out = Console(
-    highlight=False, markup=False, emoji=False, width=None if sys.stdout.isatty() else 120
+    highlight=False, markup=False, emoji=False, width=None if sys.stdout.isatty() else 160
 )  # tables unwrapped in pipes and files
 err = Console(stderr=True, highlight=False, markup=False, emoji=False)
 #: The longest line an error prints [characters] (a message quotes a user's string in ~80).

@@ -111,6 +111,7 @@ class CartesianReference:
         )
         if n and ((np.diff(self.rep) < 0).any() or self.rep[0] < 0):
             raise InvalidArgumentError("rep", "repetition indices must start at 0 or more and never decrease")
+        _check_repetitions(self.rep)
         object.__setattr__(self, "hands", MappingProxyType(dict(self.hands)))
 
     @classmethod
@@ -131,12 +132,15 @@ class CartesianReference:
         Args:
             period_s: sample period [s].
             poses: hand name -> (N, 4, 4) poses [m], in ``frame``.
-            rep: repetition index per sample (N,) (default all 0).
+            rep: repetition index per sample (N,) (default all 0): 0 for the start pose and the first repetition's
+                samples, then each further repetition's samples (one fewer than the first's), as the path stage
+                lays out a task's.
             frame: the frame the poses are in ("" = the robot's base frame).
 
         Raises:
             InvalidArgumentError: a pose array of the wrong shape, not rigid, with a NaN; hands with
-                different sample counts; a non-positive period.
+                different sample counts; a non-positive period; repetitions with gaps, or after the first not of one
+                sample fewer than it (the first also holds the start pose).
         """
         _check_period(period_s)
         hands = {}
@@ -200,6 +204,27 @@ def _angular_velocity(R: np.ndarray, period_s: float) -> np.ndarray:
     before = np.concatenate([R[:1], R[:-1]])
     steps = np.r_[1.0, np.full(len(R) - 2, 2.0), 1.0] * period_s
     return Rotation.from_matrix(after @ before.transpose(0, 2, 1)).as_rotvec() / steps[:, None]
+
+
+def _check_repetitions(rep: np.ndarray) -> None:
+    """Refuse a repetition layout whose samples cannot be matched with the first repetition's.
+
+    The layout the path stage builds and every consistency measure reads: repetitions numbered without gaps, the
+    first holding the start pose (t = 0) and the others one sample fewer, the same places of the motion.
+    """
+    values, counts = np.unique(rep, return_counts=True)
+    if len(values) < 2:
+        return
+    if (np.diff(values) != 1).any():
+        gap = int(values[np.flatnonzero(np.diff(values) != 1)[0]])
+        raise InvalidArgumentError("rep", f"repetition {gap} is followed by {int(values[values > gap][0])}: no gaps")
+    for value, count in zip(values[1:], counts[1:], strict=True):
+        if count != counts[0] - 1:
+            raise InvalidArgumentError(
+                "rep",
+                f"repetition {int(value)} has {int(count)} samples and the first {int(counts[0])}: each repetition "
+                "after the first must have one sample fewer than the first, which also holds the start pose at t = 0",
+            )
 
 
 def time_in_repetition(t: np.ndarray, rep: np.ndarray) -> np.ndarray:

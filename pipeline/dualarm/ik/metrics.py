@@ -158,3 +158,13 @@ def consistency_metrics(
     if np.abs(poses - poses[:, :1]).max() < CLOSED_TOLERANCE_M:
         metrics["ik.closure_error_max_rad"] = float(np.abs(np.diff(path.q[ends], axis=0)).max())
     return metrics
+
+
+def repetition_deviation(path: JointPath, reference: CartesianReference) -> float:
+    """The largest change of any joint between a repetition and the first, at the same place [rad].
+
+    ``ik.rep_joint_deviation_max_rad`` of :func:`consistency_metrics` (what ``dualarm run`` records and the MC-Inverse
+    paper's consistency claims compare): over the samples solved in both; NaN for fewer than two repetitions or
+    when no sample was solved in two.
+    """
+    return consistency_metrics(path, reference, {}).get("ik.rep_joint_deviation_max_rad", float("nan"))
