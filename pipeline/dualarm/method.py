@@ -63,6 +63,8 @@ class Method(Generic[S]):
         recorded: what it chose along a joint path, ``(path, robot, settings) -> Recorded``.
         options: the run command's options applied to its settings, ``(settings, options) ->
             settings`` (``options``: option name -> value, e.g. ``scheme``, ``timeout``).
+        clearance: its ``auto`` arm angle can keep each arm clear of collisions: ``solve`` takes a
+            ``clearance`` keyword (:class:`dualarm.plan.clearance.ArmClearance`), which the IK stage gives it.
     """
 
     name: str
@@ -75,6 +77,7 @@ class Method(Generic[S]):
     orientation: bool = True
     recorded: Callable[[JointPath, Robot, S], Recorded] | None = None
     options: Callable[[S, Mapping[str, Any]], S] | None = None
+    clearance: bool = False
 
     @property
     def needs_srs(self) -> bool:

@@ -151,7 +151,13 @@ class IkStage:
 
         sink.begin(self.name)
         robot = self.task.robot
-        path = self.method.solve(robot, reference, self.task.initial_q, self.settings)
+        if self.method.clearance and self.settings.mode == "auto":
+            from dualarm.plan.clearance import ArmClearance
+
+            with ArmClearance(self.task) as clearance:
+                path = self.method.solve(robot, reference, self.task.initial_q, self.settings, clearance=clearance)
+        else:
+            path = self.method.solve(robot, reference, self.task.initial_q, self.settings)
         angles = arm_angles(path, robot, self.task.spec.arm_angle.vertical)
         sink.joint_path(path, robot.limit_array("velocity", path.joint_names), angles)
         if len(path.status) and (path.status != 0).all():  # nothing for the later stages to move along

@@ -99,6 +99,7 @@ def test_orientation_metrics_of_a_pose_level_method_and_of_an_unmeasured_path(ca
     assert "ik.orientation_error_max_rad" not in unmeasured and "ik.orientation_error_mean_rad" not in unmeasured
 
 
+@pytest.mark.integration  # the ik stage's auto arm angle checks collisions in a PyBullet world
 def test_condition_metrics_against_finite_differences_and_the_limits():
     """The least joint-limit margin, from the robot's limits sample by sample, and the least manipulability sqrt(det(J
     J^T)), from the singular values of Jacobians by central differences of the arm's forward kinematics

@@ -121,6 +121,7 @@ def test_a_bad_jerk_limit_is_refused_in_one_line(loop):
         retime_path(path, V, A, jerk=np.append(J[:-1], -1.0))
 
 
+@pytest.mark.integration  # the ik stage's auto arm angle checks collisions in a PyBullet world
 def test_the_retime_stage_reports_and_checks_the_jerk():
     """The shipped triangle with `[retime] timing = "jerk-limited"`: the retime stage's velocity, acceleration and
     (mean, per sample period) jerk ratios are within 1 + 1e-6 and it has no violation."""
@@ -170,6 +171,7 @@ def test_a_reversal_where_the_samples_crowd_and_wander_is_followed_within_the_li
     assert path_deviation_max_rad(timing, path) <= 1e-6
 
 
+@pytest.mark.integration  # the ik stage's auto arm angle checks collisions in a PyBullet world
 def test_the_shipped_triangles_repetitions_repeat_to_1e_9_rad():
     """Three repetitions of the triangle by MC-Inverse, timed jerk-limited: each repetition's motion, from when it
     leaves corner A, equals the first's to 1e-9 rad."""

@@ -9,7 +9,8 @@ manifest). Shares are of the run's total. Runs go to a temporary directory, remo
 For each MC-Inverse run whose task chooses the arm angle with ``mode = "auto"``, the arm-angle
 search alone (:func:`dualarm.ik.analytic.mc_path._auto`, inside the ik stage) is timed again per arm on the
 same inputs, after one call that loads its compiled Function: the median of
-:data:`SEARCH_REPEATS` calls.
+:data:`SEARCH_REPEATS` calls, without and with the collision check the ik stage gives it
+(:class:`~dualarm.plan.clearance.ArmClearance`, built once before the timed calls; its build timed apart).
 
 Never used by the test suite: wall-clock numbers depend on the machine.
 """
@@ -42,15 +43,15 @@ SEARCH_REPEATS = 5
 class PipelineTiming:
     """One run's time per part [s] and its motion's duration [s].
 
-    For an MC-Inverse run with ``auto`` arm angles, each arm's search: hand -> (median time [s],
-    samples of the first repetition, grid angles).
+    For an MC-Inverse run with ``auto`` arm angles, each arm's search: hand -> (median time [s], the same with
+    the collision check [s], the check's build [s], samples of the first repetition, grid angles).
     """
 
     task: str
     ik: str
     seconds: dict[str, float]
     motion_s: float
-    search: dict[str, tuple[float, int, int]] = field(default_factory=dict)
+    search: dict[str, tuple[float, float, float, int, int]] = field(default_factory=dict)
 
     @property
     def total_s(self) -> float:
@@ -80,14 +81,16 @@ def bench_pipeline(
     return timings
 
 
-def search_seconds(task) -> dict[str, tuple[float, int, int]]:
+def search_seconds(task) -> dict[str, tuple[float, float, float, int, int]]:
     """Each arm's ``auto`` arm-angle search on ``task``'s path.
 
     None unless its ``[arm_angle]`` mode is ``auto``. hand -> (median of :data:`SEARCH_REPEATS`
-    calls [s], samples of the first repetition, grid angles).
+    calls [s], the same with the collision check [s], the check's build [s], samples of the first
+    repetition, grid angles).
     """
     from dualarm.ik.analytic import mc_path
     from dualarm.paths.build import build_reference
+    from dualarm.plan.clearance import ArmClearance
 
     spec = mc_path.settings_for(task)
     if spec.mode != "auto":
@@ -100,10 +103,25 @@ def search_seconds(task) -> dict[str, tuple[float, int, int]]:
     ):
         inputs = (solver, arm.targets, reference, initial, arm.q0, spec, arm.hand)
         mc_path._auto(*inputs)  # loads the compiled Function
-        times = []
-        for _ in range(SEARCH_REPEATS):
+        with ArmClearance(task) as clearance:
             start = time.perf_counter()
-            mc_path._auto(*inputs)
-            times.append(time.perf_counter() - start)
-        searches[arm.hand] = (float(np.median(times)), samples, len(mc_path.AUTO_GRID))
+            clearance(arm.hand, arm.q0[None])  # builds the arm's checker
+            build = time.perf_counter() - start
+
+            def clear(Q: np.ndarray, hand: str = arm.hand) -> np.ndarray:
+                return clearance(hand, Q)
+
+            times: dict[bool, list[float]] = {False: [], True: []}
+            for _ in range(SEARCH_REPEATS):
+                for checked in (False, True):
+                    start = time.perf_counter()
+                    mc_path._auto(*inputs, clear if checked else None)
+                    times[checked].append(time.perf_counter() - start)
+        searches[arm.hand] = (
+            float(np.median(times[False])),
+            float(np.median(times[True])),
+            build,
+            samples,
+            len(mc_path.AUTO_GRID),
+        )
     return searches

@@ -20,7 +20,7 @@ value, because MC-Inverse solves 7-DOF arms (see :mod:`dualarm.ik.arms`). One po
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -48,6 +48,13 @@ AUTO_MAX_CELLS = 2
 START_STRIDE = 2
 #: Weight of the start's distance from the preferred arm angle and the initial joints: a tie-break.
 START_WEIGHT = 0.1
+#: Most times the ``auto`` search plans again around the samples where its profile collided.
+CLEARANCE_ROUNDS = 30
+
+#: Whether configurations of one arm's joints keep it clear of the robot and the task's objects: (hand, Q (M, 7)
+#: [rad], the arm's joints in chain order) -> (M,) bool. The IK stage makes one from the planners' closed-form
+#: collision checker (:func:`dualarm.stages.arm_clearance`); ``auto`` keeps to the configurations it passes.
+Clearance = Callable[[str, np.ndarray], np.ndarray]
 
 
 def settings_for(task: Task, **overrides: object) -> ArmAngle:
@@ -83,6 +90,7 @@ def solve_mc_inverse(
     reference: CartesianReference,
     q0: Mapping[str, float] | str | None = None,
     settings: ArmAngle = DEFAULT_ARM_ANGLE,
+    clearance: Clearance | None = None,
 ) -> JointPath:
     """Joint path of every hand of ``reference`` by MC-Inverse, each arm an S-R-S chain.
 
@@ -93,6 +101,7 @@ def solve_mc_inverse(
             the branch kept is the one nearest it at the first sample, and the joints between the
             reference's frame and the arms (a waist) hold their values.
         settings: how the arm angle is chosen (the task file's ``[arm_angle]`` table).
+        clearance: for ``auto``, which configurations of an arm keep it clear of collisions (None: any).
 
     Raises:
         NotSRSError: an arm is not S-R-S.
@@ -109,7 +118,8 @@ def solve_mc_inverse(
         start = time.perf_counter()
         branch = None
         if spec.mode == "auto":
-            psi, branch = _auto(solver, arm.targets, reference, psi[0], arm.q0, spec, arm.hand)
+            clear = (lambda Q, hand=arm.hand: clearance(hand, Q)) if clearance is not None else None
+            psi, branch = _auto(solver, arm.targets, reference, psi[0], arm.q0, spec, arm.hand, clear)
         candidates, reasons = solver.solve_many(arm.targets, psi)
         elapsed = time.perf_counter() - start
         q = _kept_branch(arm.hand, solver, arm.q0, reference, psi, candidates, reasons, spec.max_joint_step_rad, branch)
@@ -239,6 +249,7 @@ def _auto(
     q0: np.ndarray,
     spec: ArmAngle,
     hand: str,
+    clear: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, int]:
     """The arm angle per sample (N,) [rad] and the branch (0-7) for the ``auto`` mode.
 
@@ -252,8 +263,14 @@ def _auto(
     from ``q0`` [rad]. On a closed path the profile must end on the angle it began with, so that
     every repetition repeats it and gives the same joints. The least-cost branch is kept.
 
+    With ``clear`` (which arm configurations are free of collisions), the search is lazy: the cheapest profile's
+    configurations are checked, and where one collides every cell and branch of that sample is checked and those
+    that collide are taken out of the graph; then it plans again, up to :data:`CLEARANCE_ROUNDS` times. A profile
+    clear of collisions from the start costs one check of its samples.
+
     Raises:
-        StageError: no branch has such a path; names the sample where the longest one ends.
+        StageError: no branch has such a path; names the sample where the longest one ends (and whether
+            collisions ended it).
     """
     first = np.flatnonzero(reference.rep == reference.rep[0])
     n = len(first)
@@ -268,23 +285,43 @@ def _auto(
             np.abs(_wrap(grid - preferred))[:, None] + np.abs(candidates[0] - q0).max(axis=-1)
         )  # (G, 8)
     closed = bool(np.abs(targets[first[0]] - targets[first[-1]]).max() < 1e-9)
-    best, reached = None, 0
-    for branch in range(8):
-        node = nodes[:, :, branch]
-        dead = np.flatnonzero(~np.isfinite(node).any(axis=1))  # no profile gets past the first sample without a node
-        alive = int(dead[0]) + 1 if dead.size else n
-        steps = _step_costs(candidates[:alive, :, branch], spec.max_joint_step_rad)
-        plan = _cheapest_profile(node[:alive], steps, starts[:, branch], closed, n)
-        if isinstance(plan, int):
-            reached = max(reached, plan)
-        elif best is None or plan[0] < best[0]:
-            best = (plan[0], plan[1], branch)
+    steps: dict[tuple[int, int], np.ndarray] = {}  # (branch, samples) -> step costs, kept between rounds
+    collided = 0
+    for _ in range(CLEARANCE_ROUNDS + 1):
+        best, reached = None, 0
+        for branch in range(8):
+            node = nodes[:, :, branch]
+            dead = np.flatnonzero(~np.isfinite(node).any(axis=1))  # no profile gets past a sample without a node
+            alive = int(dead[0]) + 1 if dead.size else n
+            if (branch, alive) not in steps:
+                steps[branch, alive] = _step_costs(candidates[:alive, :, branch], spec.max_joint_step_rad)
+            plan = _cheapest_profile(node[:alive], steps[branch, alive], starts[:, branch], closed, n)
+            if isinstance(plan, int):
+                reached = max(reached, plan)
+            elif best is None or plan[0] < best[0]:
+                best = (plan[0], plan[1], branch)
+        if best is None or clear is None:
+            break
+        _, cells, branch = best
+        hit = np.flatnonzero(~clear(candidates[np.arange(n), cells, branch]))
+        if not hit.size:
+            break
+        collided += hit.size
+        Q = candidates[hit]  # (h, G, 8, 7): every cell and branch of the samples that collided
+        checkable = np.isfinite(nodes[hit])
+        free = np.zeros(checkable.shape, bool)
+        free[checkable] = clear(Q[checkable])
+        nodes[hit] = np.where(free, nodes[hit], np.inf)
+        starts = np.where(np.isfinite(nodes[0]), starts, np.inf)
+    else:
+        best = None
     if best is None:
         k = first[reached]
         raise StageError(
             f"MC-Inverse, {hand} arm: no arm angle in arm_angle.range_rad keeps any branch inside the joint limits "
             f"with joint steps within arm_angle.max_joint_step_rad = {spec.max_joint_step_rad} "
-            f"beyond sample {k} (t = {reference.t[k]:.3f} s)"
+            + ("and the arm clear of collisions " if collided else "")
+            + f"beyond sample {k} (t = {reference.t[k]:.3f} s)"
         )
     _, cells, branch = best
     profile = grid[cells]
@@ -532,5 +569,6 @@ METHODS: Mapping[str, Method[ArmAngle]] = {
         settings_for,
         arm="srs",
         recorded=recorded,
+        clearance=True,
     )
 }

@@ -24,7 +24,7 @@ branches; ``range_rad``, an interval of MC-Inverse's arm angle (another angle), 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -74,10 +74,12 @@ def solve_sew(
     reference: CartesianReference,
     q0: Mapping[str, float] | str | None = None,
     settings: ArmAngle = DEFAULT_ARM_ANGLE,
+    clearance: mc_path.Clearance | None = None,
 ) -> JointPath:
     """Joint path of every hand of ``reference`` by SEW IK (module docstring).
 
-    Each arm is a 7R chain of a family :mod:`dualarm.ik.analytic.sew` solves.
+    Each arm is a 7R chain of a family :mod:`dualarm.ik.analytic.sew` solves. ``clearance``: for ``auto``, which
+    configurations of an arm keep it clear of collisions (None: any; see :func:`_auto`).
 
     Raises:
         NotSewError: an arm is of no such family (one line).
@@ -98,7 +100,8 @@ def solve_sew(
         limits = (lower, upper, robot.limit_array("velocity", problem.chain.joint_names))
         found: dict[int, SewSolutions] = {}
         if spec.mode == "auto":
-            psi, found = _auto(arm, sew, problem, reference, initial, limits, spec)
+            clear = (lambda Q, hand=problem.hand: clearance(hand, Q)) if clearance is not None else None
+            psi, found = _auto(arm, sew, problem, reference, initial, limits, spec, clear)
         else:
             psi = mc_path.arm_angles(spec, problem.hand, reference, initial)
         rest = [k for k in range(len(reference)) if k not in found]
@@ -131,6 +134,7 @@ def _auto(
     initial: float,
     limits: tuple[np.ndarray, np.ndarray, np.ndarray],
     spec: ArmAngle,
+    clear: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, dict[int, SewSolutions]]:
     """``auto``: the SEW angle per sample (N,) [rad] and the solutions there of the first repetition.
 
@@ -147,7 +151,9 @@ def _auto(
     to the planned samples around it; and the profile is planned again, up to
     :data:`AUTO_ROUNDS` times. Later repetitions repeat the first one's profile.
 
-    ``limits``: the arm's lower and upper position limits [rad] and its velocity limits [rad/s].
+    ``limits``: the arm's lower and upper position limits [rad] and its velocity limits [rad/s]. With ``clear``
+    (which arm configurations are free of collisions), a planned sample's solutions that collide are dropped,
+    and a followed sample that collides fails as one without a solution would.
 
     Raises:
         StageError: no profile, or the last round's failure.
@@ -168,7 +174,7 @@ def _auto(
                 sew,
             )
             for i, k in enumerate(new):
-                solutions[k] = _inside(found[i * AUTO_ANGLES : (i + 1) * AUTO_ANGLES], lower, upper)
+                solutions[k] = _inside(found[i * AUTO_ANGLES : (i + 1) * AUTO_ANGLES], lower, upper, clear)
         picked = np.array(sorted(planned))
         cells, nodes = _plan(solutions, picked, angles, problem, initial, limits, closed, reference, spec)
         profile = np.interp(first, picked, np.unwrap(angles[cells]))
@@ -185,6 +191,8 @@ def _auto(
             spec.max_joint_step_rad,
             speed,
         )
+        if clear is not None:
+            failure = _collision(problem.hand, q, clear, reference, failure)
         end = len(first) if failure is None else _where(failure)
         with np.errstate(invalid="ignore"):
             apart = np.abs(np.angle(np.exp(1j * (q[picked] - nodes)))).max(axis=1) > SAME_SOLUTION_RAD
@@ -217,18 +225,47 @@ def _where(failure: StageError) -> int:
     return int(failure.sample)
 
 
-def _inside(found: list, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+def _inside(
+    found: list, lower: np.ndarray, upper: np.ndarray, clear: Callable[[np.ndarray], np.ndarray] | None = None
+) -> np.ndarray:
     """The solutions of one sample at each angle moved into the limits where they can be, those inside.
 
-    ``found`` holds one :class:`SewSolutions` per angle; the result is (angles, M, 7) [rad] padded
-    with NaN.
+    And clear of collisions, given ``clear``. ``found`` holds one :class:`SewSolutions` per angle; the result is
+    (angles, M, 7) [rad] padded with NaN.
     """
     rows = [into_limits(f.q, lower, upper) for f in found]
     rows = [q[np.all((q >= lower) & (q <= upper), axis=1)] for q in rows]
     Q = np.full((len(rows), max(1, max(len(q) for q in rows)), 7), np.nan)
     for g, q in enumerate(rows):
         Q[g, : len(q)] = q
+    if clear is not None:
+        solved = np.isfinite(Q).all(axis=-1)
+        blocked = np.zeros(solved.shape, bool)
+        blocked[solved] = ~clear(Q[solved])
+        Q[blocked] = np.nan
     return Q
+
+
+def _collision(
+    hand: str,
+    q: np.ndarray,
+    clear: Callable[[np.ndarray], np.ndarray],
+    reference: CartesianReference,
+    failure: StageError | None,
+) -> StageError | None:
+    """``failure``, or an earlier one: the first followed sample of ``q`` (N, 7) [rad] that collides."""
+    end = len(q) if failure is None else _where(failure)
+    hit = np.flatnonzero(~clear(q[:end]))
+    if not hit.size:
+        return failure
+    k = int(hit[0])
+    return NoSolutionFound(
+        f"sew, {hand} arm: sample {k} (t = {reference.t[k]:.3f} s, rep {reference.rep[k]}) collides "
+        "(the arm within the clearance margin of the robot or an object)",
+        stage="ik",
+        sample=k,
+        t_s=float(reference.t[k]),
+    )
 
 
 def _plan(
@@ -437,5 +474,6 @@ METHODS: Mapping[str, Method[ArmAngle]] = {
         ArmAngle,
         settings_for,
         arm="sew",
+        clearance=True,
     )
 }
