@@ -402,3 +402,28 @@ def test_an_arm_of_eight_joints_starts_at_its_seven_nearest_the_hand(tmp_path):
         assert abs(np.dot(pb_ - pa, n)) / np.linalg.norm(n) < 1e-6
     whole = init_robot(tmp_path / "clavicle.urdf", tmp_path / "all", left_tip="lbr_iiwa_link_7", left_base="torso")
     assert whole.arms[0].base == "torso" and whole.robot.chains["left_arm"].dof == 8
+
+
+@pytest.mark.integration
+def test_a_y_up_root_is_refused_naming_the_axis_and_turned_z_up_with_up(tmp_path):
+    """The humanoid's URDF hung from a y-up root (its z turned to y, its y to -z): init refuses, naming y; with
+    --up y, the copy's new root is z-up with the left arm on +y, and every link sits where PyBullet puts it in the
+    original humanoid at the zero pose (the turn undone exactly)."""
+    text = (HUMANOID / "humanoid.urdf").read_text()
+    at = text.index('<link name="base_link"/>')
+    turned = (
+        '<link name="y_up"/>\n<joint name="y_up_joint" type="fixed"><parent link="y_up"/><child link="base_link"/>'
+        '<origin xyz="0 0 0" rpy="-1.5707963267948966 0 0"/></joint>\n'
+    )
+    (tmp_path / "y_up.urdf").write_text(text[:at] + turned + text[at:])
+    done = runner.invoke(app, ["robot", "init", str(tmp_path / "y_up.urdf"), "--out", str(tmp_path / "refused")])
+    assert done.exit_code == 2 and "does not look z-up" in done.stderr and "give --up y" in done.stderr, done.output
+    assert not (tmp_path / "refused").exists()
+    result = init_robot(tmp_path / "y_up.urdf", tmp_path / "turned", up="y")
+    robot = result.robot
+    assert robot.urdf.root == "dualarm_base" and [a.hand for a in result.arms] == ["left", "right"]
+    links = ["left_hand", "right_hand", "torso", "head"]
+    original = _pybullet_link_poses(HUMANOID / "humanoid.urdf", {}, links)
+    for link in links:
+        chain = robot.chain_between(robot.urdf.root, link)
+        assert np.allclose(ChainKinematics.of(chain).pose(np.zeros(chain.dof)), original[link], atol=1e-6), link

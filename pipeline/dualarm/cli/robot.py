@@ -152,6 +152,15 @@ def robot_init(
             )
         ),
     ] = None,
+    up: Annotated[
+        str | None,
+        typer.Option(
+            help=(
+                "The axis of the URDF's root frame that points up (x, -x, y, -y, z, -z); other than z, a new root "
+                "turned z-up (y towards the left arm) holds it. Default z, refused when the arms say otherwise."
+            )
+        ),
+    ] = None,
     allow: Annotated[
         list[str] | None,
         typer.Option(
@@ -181,6 +190,7 @@ def robot_init(
             acceleration=acceleration,
             jerk=jerk,
             allow=[_link_pair(text) for text in allow or ()],
+            up=up,
         )
     for line in result.notes:
         out.print(line, markup=False, soft_wrap=True)

@@ -49,6 +49,8 @@ from dualarm.describe.layout import ArmPlan, _Layout, _layout, _srs_verdict, loc
 from dualarm.describe.meshes import copy_urdf, resolve_mesh
 from dualarm.describe.ready import SAMPLES, _collision_world, held_values, ready_pose
 from dualarm.describe.robot_toml import ACCELERATION_PER_S, DEFAULT_VELOCITY_RAD_S, JERK_PER_S, robot_toml
+from dualarm.describe.tips import _first_movable, _zero_position
+from dualarm.describe.up import TURNED_JOINT, TURNED_ROOT, looks_turned, turn_root, turning
 from dualarm.errors import OutputError, RobotModelError, excerpt
 from dualarm.files import DIRECTORY, kind
 from dualarm.model.robot import Robot, load_robot
@@ -112,6 +114,21 @@ def _scaled(kind: str, value: float) -> float:
     return round(float(np.clip(value, *LIMIT_RANGES[kind])), 3)
 
 
+def _turning(source: Path, urdf: UrdfModel, layout: _Layout, up: str | None) -> np.ndarray | None:
+    """The rotation turning the root z-up for ``up``, or None (the root already is)."""
+    shoulders = [_zero_position(urdf, _first_movable(urdf, base, tip).child) for _, base, tip in layout.arms]
+    left, right = (shoulders[0], shoulders[1]) if len(shoulders) == 2 else (None, None)
+    if up is None:
+        why = looks_turned(left, right) if left is not None and right is not None else None
+        if why:
+            raise RobotModelError(
+                f"{excerpt(source)}: its root link '{excerpt(urdf.root, 40)}' does not look z-up (x forward, y left): "
+                f"{why}"
+            )
+        return None
+    return None if up == "z" else turning(up, left, right)
+
+
 def _out_directory(out: Path) -> None:
     k = kind(out)
     if k is None:
@@ -135,6 +152,7 @@ def init_robot(
     jerk: float | None = None,
     name: str | None = None,
     allow: Sequence[tuple[str, str]] = (),
+    up: str | None = None,
 ) -> RobotInit:
     """Write a robot directory ``out`` (robot.toml, the URDF and its meshes) for ``urdf_path``.
 
@@ -152,6 +170,9 @@ def init_robot(
             assumed).
         name: the robot's name (None: the directory's name).
         allow: link pairs never to check for collision (written with the reason ``user``).
+        up: the axis of the URDF's root frame that points up (:data:`dualarm.describe.up.AXES`); other than ``z``,
+            the copy gets a root turned z-up (:func:`dualarm.describe.up.turn_root`). None: z, refused when the
+            shoulders say otherwise (:func:`dualarm.describe.up.looks_turned`).
 
     Raises:
         RobotModelError: not a URDF, an unknown link, tips that are not on separate branches below a
@@ -169,11 +190,12 @@ def init_robot(
     urdf = load_urdf(source)
     layout = _layout(urdf, {"left": left_tip, "right": right_tip}, {"left": left_base, "right": right_base}, torso)
     allowed_pairs(urdf, allow)
+    turn = _turning(source, urdf, layout, up)
     for filename in (e.get("filename", "") for e in ET.fromstring(urdf.kinematic_xml).iter("mesh")):
         resolve_mesh(filename, source)  # refused before anything is written (collision meshes are checked by copy_urdf)
     out.mkdir(parents=True, exist_ok=True)
     try:
-        return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name, allow)
+        return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name, allow, turn)
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
         raise
@@ -188,6 +210,7 @@ def _write(
     jerk: float | None,
     name: str,
     allow: Sequence[tuple[str, str]],
+    turn: np.ndarray | None,
 ) -> RobotInit:
     notes = list(layout.notes)
     copy = copy_urdf(source, out)
@@ -195,6 +218,12 @@ def _write(
         f"URDF copied to {copy} with its meshes under {out / 'meshes'} "
         "(the directory is self-contained: it works when moved or shipped)"
     )
+    if turn is not None:
+        turn_root(copy, urdf.root, turn)
+        notes.append(
+            f"root turned: a new root link '{TURNED_ROOT}' (x forward, y left, z up) holds '{urdf.root}' by the fixed "
+            f"joint '{TURNED_JOINT}'; task poses are in '{TURNED_ROOT}'"
+        )
     urdf = load_urdf(copy)
     srs = {hand: _srs_verdict(urdf, f"{hand}_arm", base, tip) for hand, base, tip in layout.arms}
     for hand, base, tip in layout.arms:

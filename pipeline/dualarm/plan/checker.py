@@ -45,6 +45,12 @@ def inflated_urdf(text: str, margin_m: float) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def mesh_collisions(text: str) -> bool:
+    """Whether the URDF ``text`` has a ``<collision>`` mesh (which :func:`inflated_urdf` cannot grow)."""
+    root = ET.fromstring(text)
+    return any(collision.find(".//mesh") is not None for collision in root.iter("collision"))
+
+
 def _attribute(shape: ET.Element, name: str) -> str:
     """The attribute ``name`` of a URDF collision shape, which URDF requires of it."""
     value = shape.get(name)

@@ -8,7 +8,9 @@ arm through it. :class:`ArmClearance` gives the search the planners' closed-form
 Each arm's checker moves that arm's joints, the others held at the task's initial configuration, and checks
 the pairs between a link the arm moves and every other link and object of the task, but not the other driven
 arms' links (they move too, and their motion is solved apart) nor the task's expected contacts; pairs that no
-joint of the arm moves are not its business. The margin is :data:`CLEARANCE_MARGIN_M` (half the planners').
+joint of the arm moves are not its business. The margin is :data:`CLEARANCE_MARGIN_M` (half the planners'); on
+a robot with collision meshes, which no margin grows (:func:`~dualarm.plan.checker.inflated_urdf`), it is 0:
+no contact.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dualarm.plan.checker import mesh_collisions
 from dualarm.plan.collision import CollisionChecker
 
 if TYPE_CHECKING:
@@ -34,7 +37,8 @@ class ArmClearance:
     """
 
     def __init__(self, task: Task, margin_m: float = CLEARANCE_MARGIN_M):
-        self.task, self.margin_m = task, margin_m
+        meshes = mesh_collisions(task.robot.urdf.path.read_text())
+        self.task, self.margin_m = task, 0.0 if meshes else margin_m
         self._checkers: dict[str, CollisionChecker] = {}
 
     def __call__(self, hand: str, Q: np.ndarray) -> np.ndarray:
