@@ -67,3 +67,42 @@ def test_a_broken_joint_is_still_refused_in_one_line(tmp_path):
     path.write_text(ARM.format(extensions=PR2_WRIST).replace('<parent link="upper"/>', ""))
     with pytest.raises(RobotModelError, match="not a valid URDF"):
         load_urdf(path)
+
+
+def test_a_schema_error_is_one_line_naming_the_element_its_line_and_column(tmp_path):
+    """urdf_parser_py's two-line 'ParseError in /robot/joint[@name=...]:' becomes one line with the start tag's line and
+    column, found here in the text independently (the PR2's error printed a literal backslash-n)."""
+    text = ARM.format(extensions="").replace('type="revolute"', 'type="spinning"', 1)
+    path = tmp_path / "arm.urdf"
+    path.write_text(text)
+    with pytest.raises(RobotModelError) as info:
+        load_urdf(path)
+    message = str(info.value)
+    lines = text.splitlines()
+    row = next(i for i, line in enumerate(lines) if 'type="spinning"' in line)
+    name = ET.fromstring(text).find("joint").get("name")
+    column = lines[row].index("<joint") + 1
+    assert "\n" not in message and "\\n" not in message
+    assert f"not a valid URDF: joint '{name}' (line {row + 1}, column {column}): " in message
+    assert "spinning" in message
+
+
+@pytest.mark.integration
+def test_a_file_pybullet_cannot_load_is_one_line_naming_it(tmp_path):
+    """A revolute joint without <limit> (URDF requires one; urdf_parser_py lets it pass, PyBullet refuses): robot init
+    exits 2 with one line naming the user's file, not a traceback, and writes nothing."""
+    from typer.testing import CliRunner
+
+    from dualarm.cli import app
+
+    text = ARM.format(extensions="")
+    start = text.index("<limit")
+    path = tmp_path / "arm.urdf"
+    path.write_text(text[:start] + text[text.index("/>", start) + 2 :])
+    result = CliRunner().invoke(app, ["robot", "init", str(path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.strip().splitlines()
+    assert line == f"error: {path}: PyBullet cannot load it " + (
+        "(a revolute or prismatic joint without <limit>, which URDF requires, or a mesh it cannot read)"
+    )
+    assert not (tmp_path / "out").exists()

@@ -258,7 +258,10 @@ def _write(
         robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, frozenset(), {})
     )
     robot = load_robot(out)
-    sim, touching = _collision_world(robot)
+    try:
+        sim, touching = _collision_world(robot)
+    except RobotModelError as exc:  # name the user's file, not the copy removed with the directory
+        raise RobotModelError(str(exc).replace(excerpt(copy), excerpt(source))) from None
     with sim:
         held = held_values(robot, sim, chain_joints)
         for joint, value in held.items():

@@ -11,6 +11,7 @@ refuses (the PR2's differential transmissions) or reports line by line on stderr
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -169,7 +170,25 @@ def _parse(path: Path, text: str) -> tuple[URDF, str]:
         with parser_warnings_silenced():
             return URDF.from_xml_string(kinematic_xml), kinematic_xml
     except Exception as exc:  # urdf_parser_py raises bare Exception on schema errors
-        raise RobotModelError(f"{excerpt(path)}: not a valid URDF ({excerpt(exc, 200)})") from None
+        raise RobotModelError(f"{excerpt(path)}: not a valid URDF: {_where_in(text, str(exc))}") from None
+
+
+def _where_in(text: str, error: str) -> str:
+    """urdf_parser_py's error as ``joint 'j' (line L, column C): why``, when it names an element.
+
+    urdf_parser_py says ``ParseError in /robot[...]/joint[@name='j']:`` and the reason on the next line; the line
+    and column are of the element's start tag in ``text``. Otherwise its message, on one line.
+    """
+    match = re.match(r"ParseError in (\S*?)(\w+)\[@name='([^']*)'\]:\s*(.*)", error, re.DOTALL)
+    if match is None:
+        return excerpt(error, 200)
+    tag, name, why = match.group(2), match.group(3), " ".join(match.group(4).split())
+    start = re.search(rf"<{tag}\b[^>]*\bname\s*=\s*[\"']{re.escape(name)}[\"']", text)
+    where = ""
+    if start is not None:
+        line = text.count("\n", 0, start.start()) + 1
+        where = f" (line {line}, column {start.start() - text.rfind(chr(10), 0, start.start())})"
+    return f"{tag} '{excerpt(name, 40)}'{where}: {excerpt(why, 160)}"
 
 
 def load_urdf(path: str | Path) -> UrdfModel:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dualarm.errors import StageError
+from dualarm.errors import RobotModelError, StageError, excerpt
 from dualarm.model.poses import pose_matrix
 from dualarm.quiet import c_output_silenced
 
@@ -190,7 +190,14 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
         if client < 0:
             raise StageError("execute: PyBullet could not open its window")
         flags = pb.URDF_USE_INERTIA_FROM_FILE | (pb.URDF_USE_SELF_COLLISION if self_collision else 0)
-        body = pb.loadURDF(str(urdf), useFixedBase=True, flags=flags, physicsClientId=client)
+        try:
+            body = pb.loadURDF(str(urdf), useFixedBase=True, flags=flags, physicsClientId=client)
+        except pb.error:
+            pb.disconnect(physicsClientId=client)
+            raise RobotModelError(
+                f"{excerpt(urdf)}: PyBullet cannot load it (a revolute or prismatic joint without <limit>, which "
+                "URDF requires, or a mesh it cannot read)"
+            ) from None
         if pb.getNumJoints(body, physicsClientId=client) > MAX_LINKS:
             pb.removeBody(body, physicsClientId=client)
             flags |= pb.URDF_MERGE_FIXED_LINKS
