@@ -4,8 +4,9 @@ As MoveIt Setup Assistant's, from the URDF and sampled configurations:
 
 - ``adjacent``: a link and its nearest ancestor with geometry, when they touch by construction. dualarm
   skips these itself (:func:`dualarm.sim.world.disable_unchecked_pairs`); robot.toml lists them as a comment.
-- ``rigid``: two links joined through fixed joints only, which never move relative to each other (a TALOS
-  wrist's force sensor and its hand).
+- ``rigid``: two links joined only through fixed joints and joints in no chain (every motion holds those),
+  which never move relative to each other in a task (a TALOS wrist's force sensor and its hand; Romeo's head,
+  held, on its torso, which PyBullet's motors let sag 0.015 mm into it).
 - ``always``: in contact at every one of :data:`~dualarm.describe.ready.SAMPLES` random configurations of
   the chains' joints (a forearm shell that overlaps the wrist at any angle): checking them would only
   report them.
@@ -26,8 +27,8 @@ from dualarm.model.robot import Robot
 from dualarm.model.urdf import UrdfModel
 
 
-def rigid_pairs(urdf: UrdfModel, solid: Iterable[str]) -> set[tuple[str, str]]:
-    """Pairs of links of ``solid`` (those with geometry) joined through fixed joints only (sorted names)."""
+def rigid_pairs(urdf: UrdfModel, solid: Iterable[str], moving: Iterable[str] = ()) -> set[tuple[str, str]]:
+    """Pairs of links of ``solid`` (those with geometry) joined through no joint of ``moving`` (sorted names)."""
     group = {link: link for link in urdf.links}
 
     def find(link: str) -> str:
@@ -36,8 +37,9 @@ def rigid_pairs(urdf: UrdfModel, solid: Iterable[str]) -> set[tuple[str, str]]:
             link = group[link]
         return link
 
+    moving = set(moving)
     for j in urdf.joints:
-        if not j.movable:
+        if j.name not in moving:
             group[find(j.child)] = find(j.parent)
     members: dict[str, list[str]] = {}
     for link in sorted(solid):
@@ -93,7 +95,8 @@ def disabled_pairs(
 
     solid = {sim.link_name[i] for i in sim.collision_links()}
     out = dict.fromkeys(sorted(allowed_pairs(robot.urdf, allow) - touching), "user")
-    out |= dict.fromkeys(sorted(rigid_pairs(robot.urdf, solid) - touching - set(out)), "rigid")
+    chains = {n for chain in robot.chains.values() for n in chain.joint_names}
+    out |= dict.fromkeys(sorted(rigid_pairs(robot.urdf, solid, chains) - touching - set(out)), "rigid")
     disable_pairs(sim, out)
     out |= dict.fromkeys(sorted(always_in_contact(robot, sim, held)), "always")
     disable_pairs(sim, out)

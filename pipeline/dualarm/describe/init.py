@@ -26,7 +26,7 @@ from the URDF, and every choice is returned as a line of :attr:`RobotInit.notes`
   :data:`JERK_PER_S` times that, written with the comment ``# assumed`` and listed in
   ``[limits] assumed`` (so that every message a limit causes says it was assumed).
 - home poses ``zero`` and ``ready`` (:func:`ready_pose`).
-- the collision matrix (:mod:`dualarm.describe.collisions`): pairs joined through fixed joints only,
+- the collision matrix (:mod:`dualarm.describe.collisions`): pairs joined through no chain's joint,
   pairs in contact at every sampled configuration and the pairs of ``--allow`` are written to
   robot.toml's ``[collision] disabled`` with their reasons. dualarm already skips the pairs that
   touch by construction (:func:`dualarm.sim.world.disable_unchecked_pairs`, a Panda's hand and
@@ -278,7 +278,7 @@ def _write(
     counts = {reason: list(disabled.values()).count(reason) for reason in ("rigid", "always", "user")}
     notes.append(
         f"collision: {len(touching)} link pairs touch by construction (skipped by dualarm itself); "
-        f"robot.toml [collision] disables {counts['rigid']} joined through fixed joints only, "
+        f"robot.toml [collision] disables {counts['rigid']} joined through no chain's joint, "
         f"{counts['always']} in contact at all {SAMPLES} sampled configurations"
         + (f", {counts['user']} given by --allow" if counts["user"] else "")
         + "; every other pair is checked"

@@ -132,9 +132,10 @@ def robot_toml(
         lines += [f"{_key(joint)} = {_number(value)}" for joint, value in values.items()]
         lines.append("")
     lines += [
-        "# Link pairs not checked for collision: [link, link, reason]. Reasons: 'rigid' (joined through fixed",
-        "# joints only), 'always' (in contact at every configuration robot init sampled), 'user' (robot init",
-        "# --allow, or written here). Delete a line to check that pair; add one to stop checking a pair.",
+        "# Link pairs not checked for collision: [link, link, reason]. Reasons: 'rigid' (joined only through",
+        "# fixed joints and joints in no chain, which every motion holds), 'always' (in contact at every",
+        "# configuration robot init sampled), 'user' (robot init --allow, or written here). Delete a line to",
+        "# check that pair; add one to stop checking a pair.",
         "[collision]",
         "disabled = [",
         *(f"  [{_string(a)}, {_string(b)}, {_string(reason)}]," for (a, b), reason in disabled.items()),

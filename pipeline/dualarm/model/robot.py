@@ -17,8 +17,9 @@ from dualarm.errors import InvalidArgumentError, RobotModelError, excerpt
 from dualarm.files import listing, read_text
 from dualarm.model.urdf import JointSpec, UrdfModel, load_urdf
 
-#: The reasons robot.toml's ``[collision] disabled`` pairs may give: joined through fixed joints only (they never
-#: move relative to each other), in contact at every configuration ``robot init`` sampled, or the user's word.
+#: The reasons robot.toml's ``[collision] disabled`` pairs may give: joined through fixed joints and joints in no chain
+#: only (they never move relative to each other in a task), in contact at every configuration ``robot init``
+#: sampled, or the user's word.
 COLLISION_REASONS = ("rigid", "always", "user")
 
 #: The range robot.toml's ``[limits]`` accept, per kind: (lowest, highest) [rad/s], [rad/s^2] and [rad/s^3].
