@@ -28,7 +28,7 @@ from dualarm.model.urdf import UrdfModel
 
 
 def rigid_pairs(urdf: UrdfModel, solid: Iterable[str], moving: Iterable[str] = ()) -> set[tuple[str, str]]:
-    """Pairs of links of ``solid`` (those with geometry) joined through no joint of ``moving`` (sorted names)."""
+    """Pairs of links of ``solid`` (those with geometry) joined through no joint of ``moving`` (sorted)."""
     group = {link: link for link in urdf.links}
 
     def find(link: str) -> str:
@@ -91,9 +91,16 @@ def disabled_pairs(
 
     ``touching``: the pairs ``sim`` already skips (not listed again).
     """
+    import xml.etree.ElementTree as ET
+
     from dualarm.sim.world import disable_pairs
 
-    solid = {sim.link_name[i] for i in sim.collision_links()}
+    # from the URDF, not PyBullet: a robot of more links than PyBullet reports has its fixed links merged there
+    solid = {
+        link.get("name", "")
+        for link in ET.parse(robot.urdf.path).getroot().iter("link")
+        if link.find("collision") is not None
+    }
     out = dict.fromkeys(sorted(allowed_pairs(robot.urdf, allow) - touching), "user")
     chains = {n for chain in robot.chains.values() for n in chain.joint_names}
     out |= dict.fromkeys(sorted(rigid_pairs(robot.urdf, solid, chains) - touching - set(out)), "rigid")

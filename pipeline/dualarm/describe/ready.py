@@ -108,20 +108,54 @@ def ready_pose(
     :data:`READY_FORWARD` of the arm's length in front of its first joint, :data:`READY_MIN_HEIGHT_M` above the
     root, at :data:`READY_REACH` of the arm's length from its first joint and at most :data:`READY_OUTWARD` of it
     further out sideways, the hand nearest :data:`READY_TARGET` first; the first combination of the arms clear of
-    self-collision in PyBullet.
+    self-collision in PyBullet. The joints of no arm (a waist) at :func:`lock_value`, or where none is found there,
+    at the middle, the top or the bottom of their ranges (a TIAGo's torso lift at 0 sinks the arms' first links
+    into its column); the joints of ``base`` (in no chain) as given.
 
     Raises:
-        RobotModelError: no such configuration among the samples (naming the arm).
+        RobotModelError: no such configuration among the samples at any of them (naming the arm).
     """
+    arm_joints = {n for c in robot.chains.values() if c.hand for n in c.joint_names}
+    waist = [j for j in robot.urdf.joints if j.movable and j.name not in arm_joints and j.name not in base]
+    options = [lock_value] + [
+        lambda j, f=f: float(j.lower + f * (j.upper - j.lower)) if np.isfinite(j.lower + j.upper) else lock_value(j)
+        for f in (0.5, 1.0, 0.0)
+    ]
+    refusal = None
+    for value in options:
+        held = {**{j.name: value(j) for j in waist}, **base}
+        try:
+            return _ready_pose(robot, sim, held, samples, seed)
+        except RobotModelError as exc:
+            refusal = refusal or exc
+            if not waist:
+                break
+    assert refusal is not None
+    raise refusal
+
+
+def _ready_pose(robot: Robot, sim, base: Mapping[str, float], samples: int, seed: int) -> dict[str, float]:
+    """:func:`ready_pose` with every joint of no arm at ``base``."""
     from dualarm.model.kinematics import ChainKinematics
 
+    base = {**{j.name: lock_value(j) for j in robot.urdf.joints if j.movable}, **base}
+    arms = [c for c in robot.chains.values() if c.hand]
+    moved_by = {
+        arm.name: {
+            link
+            for link in robot.urdf.links
+            if next(j for j in arm.joints if j.movable).child in _ancestors(robot.urdf, link)
+        }
+        for arm in arms
+    }
     candidates = []
-    for k, arm in enumerate(c for c in robot.chains.values() if c.hand):
+    for k, arm in enumerate(arms):
         to_tip = robot.chain_between(robot.urdf.root, arm.tip)
         first = arm.joints[[j.movable for j in arm.joints].index(True)]
         shoulder = _zero_position(robot.urdf, first.child)
         length = arm_length(arm)
-        moved = {link for link in robot.urdf.links if first.child in _ancestors(robot.urdf, link)}
+        moved = moved_by[arm.name]
+        others = set().union(*(links for name, links in moved_by.items() if name != arm.name))
         Q = np.round(_samples(robot, arm.joint_names, samples, seed + k, READY_LIMIT_MARGIN), 3)
         full = np.array([[base.get(n, 0.0) for n in to_tip.joint_names]] * len(Q))
         columns = [to_tip.joint_names.index(n) for n in arm.joint_names]
@@ -142,9 +176,12 @@ def ready_pose(
         ) / length + 0.01 * np.linalg.norm(Q, axis=1)
         order = [i for i in np.argsort(score, kind="stable") if ok[i]]
         free = []
-        for i in order:  # the other arm is checked with it below: here only the pairs this arm moves
+        for i in order:  # the other arm is checked with it below: here only the pairs this arm moves, not with it
             q = dict(zip(arm.joint_names, Q[i], strict=True))
-            if not any(a in moved or b in moved for a, b in contact_pairs(sim, {**base, **q})):
+            if not any(
+                (a in moved or b in moved) and not (a in others or b in others)
+                for a, b in contact_pairs(sim, {**base, **q})
+            ):
                 free.append(q)
             if len(free) == 8:
                 break

@@ -117,10 +117,20 @@ class CollisionChecker(_Checker):
             ),
             q,
         )
+        sim = self._pybullet._sim
+
+        def kept(link: str) -> str:  # a link PyBullet merged into its parent (a robot of many links): the parent
+            return sim.link_name[sim.link_index[link]]
+
+        skipped = {tuple(sorted((kept(a), kept(b)))) for a, b in self.unchecked_pairs}
+
+        def unchecked(a: str, b: str) -> bool:
+            return kept(a) == kept(b) or tuple(sorted((kept(a), kept(b)))) in skipped
+
         checked: list[tuple[tuple[str, str], float, list[_Segment] | None, Sequence[_Segment | _Box] | None]] = [
             ((a, b), 2 * self.margin_m, shapes[a], shapes[b])
             for a, b in itertools.combinations(sorted(shapes), 2)
-            if (a, b) not in self.unchecked_pairs and frozenset((a, b)) not in allowed
+            if not unchecked(a, b) and frozenset((a, b)) not in allowed
         ]
         checked += [
             ((link, obj.owner), self.margin_m, shapes[link], [obj])
