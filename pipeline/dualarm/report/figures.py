@@ -50,7 +50,10 @@ def joints_against_bounds(sample: pd.DataFrame, bounds: pd.DataFrame, kind: str,
             ax.fill_between(t, v, np.clip(v, lo, hi), where=out, color="tab:red", alpha=0.6, lw=0)
         ax.set_ylabel(joint.replace("_", " "), fontsize=7)
         ax.tick_params(labelsize=7)
-        span = np.concatenate([v, np.clip(lo, v.min() - 1, None), np.clip(hi, None, v.max() + 1)])
+        # unbounded (a continuous joint: inf, or NaN as recorded) bounds leave the axis to the values
+        shown_lo = np.where(np.isfinite(lo), np.maximum(lo, v.min() - 1), v.min())
+        shown_hi = np.where(np.isfinite(hi), np.minimum(hi, v.max() + 1), v.max())
+        span = np.concatenate([v, shown_lo, shown_hi])
         pad = 0.1 * (span.max() - span.min() + 1e-6)
         ax.set_ylim(span.min() - pad, span.max() + pad)
     for ax in axes[len(joints) :]:
