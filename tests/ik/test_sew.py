@@ -323,3 +323,13 @@ def test_no_pose_has_no_solutions():
     """A search left with no candidate asks for none (the ball game on TALOS with mode auto ended in a traceback)."""
     arm = sew_chain(load_robot(OFFSET).hand_chain("left"))
     assert solve_many(arm, np.zeros((0, 4, 4)), np.zeros(0)) == []
+
+
+def test_into_limits_keeps_a_continuous_joints_angle():
+    """A joint without limits (a PR2's forearm and wrist roll: -inf, inf) keeps its angle; it came back -inf, and SEW's
+    auto search found no solution at the ball game's first sample. A bounded one turns by 2 pi into its limits."""
+    from dualarm.ik.analytic.sew import into_limits
+
+    Q = np.array([[0.5, -3.0, 3.0]])
+    lower, upper = np.array([-np.inf, 0.0, -1.0]), np.array([np.inf, 2 * np.pi, 1.0])
+    assert np.array_equal(into_limits(Q, lower, upper), [[0.5, -3.0 + 2 * np.pi, 3.0]])

@@ -325,10 +325,12 @@ def solve(
 def into_limits(Q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Each angle of Q (M, 7) moved by a multiple of 2 pi into [lower, upper] where one lands there.
 
-    For limits that reach past +-pi.
+    For limits that reach past +-pi. A joint without limits (continuous: -inf, inf) keeps its angle.
     """
-    shifted = Q + 2 * np.pi * np.ceil((lower - Q) / (2 * np.pi))  # the smallest equivalent angle >= lower
-    return np.where(shifted <= upper, shifted, Q)
+    bounded = np.isfinite(lower)
+    with np.errstate(invalid="ignore"):
+        shifted = Q + 2 * np.pi * np.ceil((lower - Q) / (2 * np.pi))  # the smallest equivalent angle >= lower
+    return np.where(bounded & (shifted <= upper), shifted, Q)
 
 
 def candidate_table(robot: Robot, chain: Chain, T: np.ndarray, psi: float, sew: SewAngle) -> list[dict]:
