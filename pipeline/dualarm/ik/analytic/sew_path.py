@@ -101,7 +101,14 @@ def solve_sew(
         found: dict[int, SewSolutions] = {}
         if spec.mode == "auto":
             clear = (lambda Q, hand=problem.hand: clearance(hand, Q)) if clearance is not None else None
-            psi, found = _auto(arm, sew, problem, reference, initial, limits, spec, clear)
+            try:
+                psi, found = _auto(arm, sew, problem, reference, initial, limits, spec, clear)
+            except StageError as exc:
+                if clear is None:
+                    raise
+                raise type(exc)(
+                    f"{exc}, with the arm kept clear of collisions", stage="ik", sample=exc.sample, t_s=exc.t_s
+                ) from None
         else:
             psi = mc_path.arm_angles(spec, problem.hand, reference, initial)
         rest = [k for k in range(len(reference)) if k not in found]
