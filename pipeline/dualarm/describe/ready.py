@@ -8,7 +8,7 @@ from itertools import product
 import numpy as np
 
 from dualarm.describe.layout import lock_value
-from dualarm.describe.tips import _ancestors, _zero_position
+from dualarm.describe.tips import _zero_position
 from dualarm.errors import RobotModelError
 from dualarm.model.robot import Chain, Robot
 
@@ -76,7 +76,7 @@ def held_values(robot: Robot, sim, chain_joints: Sequence[str]) -> dict[str, flo
     urdf = robot.urdf
     held = {j.name: lock_value(j) for j in urdf.joints if j.movable and j.name not in chain_joints}
     for joint in list(held):
-        below = {link for link in urdf.links if urdf.joint(joint).child in _ancestors(urdf, link)}
+        below = urdf.subtree(urdf.joint(joint).child)
         j = urdf.joint(joint)
         options = [held[joint]] + [v for v in (j.upper, j.lower, (j.lower + j.upper) / 2) if np.isfinite(v)]
         for value in options:
@@ -140,14 +140,7 @@ def _ready_pose(robot: Robot, sim, base: Mapping[str, float], samples: int, seed
 
     base = {**{j.name: lock_value(j) for j in robot.urdf.joints if j.movable}, **base}
     arms = [c for c in robot.chains.values() if c.hand]
-    moved_by = {
-        arm.name: {
-            link
-            for link in robot.urdf.links
-            if next(j for j in arm.joints if j.movable).child in _ancestors(robot.urdf, link)
-        }
-        for arm in arms
-    }
+    moved_by = {arm.name: robot.urdf.subtree(next(j for j in arm.joints if j.movable).child) for arm in arms}
     candidates = []
     for k, arm in enumerate(arms):
         to_tip = robot.chain_between(robot.urdf.root, arm.tip)

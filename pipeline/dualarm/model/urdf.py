@@ -117,6 +117,16 @@ class UrdfModel:
             link = path[-1].parent
         return tuple(reversed(path))
 
+    def subtree(self, link: str) -> frozenset[str]:
+        """``link`` and every link below it (what a joint whose child is ``link`` moves)."""
+        below, todo = {link}, [link]
+        while todo:
+            parent = todo.pop()
+            children = [j.child for j in self.joints if j.parent == parent]
+            below.update(children)
+            todo += children
+        return frozenset(below)
+
 
 def _vector3(values, what: str) -> tuple[float, float, float]:
     """Three finite numbers as a tuple of floats; RobotModelError naming ``what`` otherwise."""

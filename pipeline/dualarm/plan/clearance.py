@@ -79,16 +79,7 @@ class ArmClearance:
         self.close()
 
 
-def _moved_links(task: Task, hand: str) -> set[str]:
+def _moved_links(task: Task, hand: str) -> frozenset[str]:
     """The links below the first movable joint of ``hand``'s arm."""
-    urdf = task.robot.urdf
     arm = task.robot.hand_chain(hand)
-    first = next(j for j in arm.joints if j.movable)
-    parent = {j.child: j.parent for j in urdf.joints}
-
-    def below(link: str) -> bool:
-        while link != first.child and link in parent:
-            link = parent[link]
-        return link == first.child
-
-    return {link for link in urdf.links if below(link)}
+    return task.robot.urdf.subtree(next(j for j in arm.joints if j.movable).child)

@@ -53,7 +53,7 @@ CLEARANCE_ROUNDS = 30
 
 #: Whether configurations of one arm's joints keep it clear of the robot and the task's objects: (hand, Q (M, 7)
 #: [rad], the arm's joints in chain order) -> (M,) bool. The IK stage makes one from the planners' closed-form
-#: collision checker (:func:`dualarm.stages.arm_clearance`); ``auto`` keeps to the configurations it passes.
+#: collision checker (:class:`dualarm.plan.clearance.ArmClearance`); ``auto`` keeps to the configurations it passes.
 Clearance = Callable[[str, np.ndarray], np.ndarray]
 
 
