@@ -55,6 +55,23 @@ def test_home_poses_are_within_limits(humanoid):
             "missing.urdf: cannot read the URDF: No such file or directory",
         ),
         (lambda t: t + "\n[home.bad]\nnot_a_joint = 1.0\n", "home.bad.not_a_joint: no such joint"),
+        (
+            lambda t: t + '\n[collision]\ndisabled = [["torso", "head"]]\n',
+            "collision.disabled[0]: expected [link, link, reason], got ['torso', 'head']",
+        ),
+        (
+            lambda t: t + '\n[collision]\ndisabled = [["torso", "tail", "rigid"]]\n',
+            "collision.disabled[0]: no link 'tail' in the URDF",
+        ),
+        (
+            lambda t: t + '\n[collision]\ndisabled = [["torso", "head", "because"]]\n',
+            "collision.disabled[0]: reason 'because' is not one of rigid, always, user",
+        ),
+        (lambda t: t + "\n[collision]\nenabled = []\n", "collision.enabled: unknown key"),
+        (
+            lambda t: t.replace("[limits.acceleration]", '[limits]\nassumed = ["speed"]\n\n[limits.acceleration]', 1),
+            "limits.assumed: expected a list of limit kinds (velocity, acceleration, jerk), got ['speed']",
+        ),
     ],
 )
 def test_malformed_robot_toml(tmp_path, edit, message):
