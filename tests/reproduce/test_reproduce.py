@@ -684,6 +684,34 @@ def test_the_completed_pinv_part_keeps_its_claims_when_tvgdd_fails(failed_repro)
 
 
 @pytest.mark.integration
+def test_a_run_that_fails_at_its_stage_is_kept_and_contradicts_its_claims(tmp_path, monkeypatch):
+    """The ball game with 0.01 rad/s velocity limits: TV-GDD is infeasible at a step (a run recorded as
+    failed, as a robot it cannot move would give). The part still ends, its failed run is listed,
+    the claim resting on it is contradicted with the run's own error, and the command exits 3 (not
+    1, which is for a part that could not run)."""
+    from dualarm.reproduce import experiments
+
+    tasks = tmp_path / "tasks"
+    tasks.mkdir()
+    text = (TASKS / "ball_game.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    assert "\nvelocity = 6.0\n" in text
+    (tasks / "ball_game.toml").write_text(text.replace("\nvelocity = 6.0\n", "\nvelocity = 0.01\n"))
+    monkeypatch.setattr(experiments, "TASKS", tasks)
+    out = tmp_path / "reproduction"
+    result = reproduce(out, "ball-game-tvgdd", 1)
+    assert result.exit_code == 3, (result.output, result.exception)
+    parts = {p["name"]: p for p in json.loads((out / "parts.json").read_text())["parts"]}
+    (run_path,) = parts["ball-game-tvgdd"]["outputs"]["runs"]
+    run = read_run(out / run_path)
+    assert parts["ball-game-tvgdd"]["status"] == "complete" and run.status == "failed"
+    assert "TV-GDD step" in run.error and "infeasible" in run.error
+    (row,) = claim_rows((out / "report.md").read_text())["TV-GDD"]
+    assert row["ours"] == "not available: the tvgdd run failed (see its manifest)"
+    assert row["runs"].startswith("**contradicted:** tvgdd: failed (TV-GDD step 22 (t = 0.220 s) is infeasible")
+    assert any(line.startswith("contradicted: TV-GDD Figs 5-8") for line in error_lines(result))
+
+
+@pytest.mark.integration
 def test_one_at_a_time_is_not_said_to_share_the_machine(failed_repro):
     out, _ = failed_repro
     report = (out / "report.md").read_text()

@@ -72,9 +72,10 @@ def reproduce(
     The report: each paper claim against ours (read back from the recordings), the figures, the runs
     and the time of each part.
 
-    Exits 1 if a part failed (the report says which and why), else 3 if a claim rests on a run whose
-    verdict is not complete (MC-Inverse's runs, TV-GDD's executed ball game, the carried box, the
-    planner's executed plan; a baseline's violations are reported, not fatal), else 2 if no part is
+    Exits 1 if a part failed to produce its runs (the report says which and why), else 3 if a claim
+    rests on a run whose verdict is not complete, failed at a stage included (MC-Inverse's runs,
+    TV-GDD's executed ball game, the carried box, the planner's executed plan; a baseline's
+    violations are reported, not fatal), else 2 if no part is
     available on the robot, else 0. A part not available on the robot is reported, not fatal.
     """
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn

@@ -78,6 +78,12 @@ def _needing(claim: Claim, label: str, run: RunData | None) -> Claim:
     )
 
 
+def _failed_run(paper: str, where: str, claim: str, theirs: str, part: str, label: str, run: RunData) -> Claim:
+    """The one claim left of a part whose run failed: that the run completes, contradicted, with its error."""
+    made = Claim(paper, where, claim, theirs, f"not available: the {label} run failed (see its manifest)", "", None, part)
+    return _needing(made, label, run)
+
+
 def _g(value: float, unit: str = "", digits: int = 3) -> str:
     return f"{value:.{digits}g}{' ' + unit if unit else ''}"
 
@@ -122,7 +128,22 @@ def pinv_claims(pinv: RunData) -> list[Claim]:
 
 
 def tvgdd_claims(tvgdd: RunData) -> list[Claim]:
-    """Zhang, Kong, Niu, section 4: the ball game with TV-GDD (Figs 5-8, the computing times)."""
+    """Zhang, Kong, Niu, section 4: the ball game with TV-GDD (Figs 5-8, the computing times).
+
+    A failed run gives one claim, contradicted: that the motion runs.
+    """
+    if tvgdd.status == "failed":
+        return [
+            _failed_run(
+                "TV-GDD",
+                "Figs 5-8",
+                "TV-GDD generates the ball game and it runs on the robot",
+                "done on the physical robot",
+                "ball-game-tvgdd",
+                "tvgdd",
+                tvgdd,
+            )
+        ]
     claims = []
     sample, bounds = tvgdd["/ik/sample"], tvgdd["/ik/bounds"]
     value, ours = _largest(excursions(sample, bounds, "position"), "rad")
@@ -483,7 +504,22 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
 
 
 def carry_box_claims(executed: RunData) -> list[Claim]:
-    """Zou, Min, Xu, eq (11) and Fig. 14: the box carried, executed."""
+    """Zou, Min, Xu, eq (11) and Fig. 14: the box carried, executed.
+
+    A failed run gives one claim, contradicted: that the box is carried.
+    """
+    if executed.status == "failed":
+        return [
+            _failed_run(
+                "MC-Inverse",
+                "eq (11), Fig. 14",
+                "the two hands carry the box with MC-Inverse, executed",
+                "done",
+                "carry-box",
+                "mc-inverse, executed",
+                executed,
+            )
+        ]
     sample = executed["/execute/sample"]
     left = sample[[f"hand_position.left.{a}" for a in "xyz"]].to_numpy()
     right = sample[[f"hand_position.right.{a}" for a in "xyz"]].to_numpy()

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
 
 from dualarm.data import robots_dir, tasks_dir
+from dualarm.errors import StageError
 
 if TYPE_CHECKING:
     from dualarm.model.robot import Robot
@@ -76,14 +77,19 @@ def _run(task: str, ik: str, stages: tuple[str, ...] | None, out: Path, robot: P
         *(["--stages", ",".join(stages)] if stages else []),
         *robot_option(robot),
     ]
-    run = record_run(
-        load_task(TASKS / f"{task}.toml", robot=robot),
-        ik,
-        stages=chosen,
-        out_dir=out / "runs",
-        command=command,
-        progress=lambda stage: progress(chosen.index(stage) / len(chosen) if stage in chosen else 0.95, stage),
-    )
+    try:
+        run = record_run(
+            load_task(TASKS / f"{task}.toml", robot=robot),
+            ik,
+            stages=chosen,
+            out_dir=out / "runs",
+            command=command,
+            progress=lambda stage: progress(chosen.index(stage) / len(chosen) if stage in chosen else 0.95, stage),
+        )
+    except StageError as exc:  # the run is recorded as failed: a verdict the claims resting on it report
+        if exc.run_directory is None:
+            raise
+        return {"runs": [_relative(exc.run_directory, out)]}
     assert run.directory is not None  # record_run always returns its run directory
     return {"runs": [_relative(run.directory, out)]}
 
