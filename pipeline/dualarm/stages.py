@@ -395,7 +395,8 @@ class ApproachStage:
         return {
             "method": (
                 "straight line in joint space, jerk-limited timing (ruckig on the path parameter), "
-                "time-optimal, rest to rest"
+                "time-optimal, rest to rest; where the line collides, through the waypoints of a "
+                "collision-free path (RRT-Connect, seed 0), each segment so"
             ),
             "limits": "the task's full limits",
             "sample_period_s": CONTROL_PERIOD_S,
@@ -403,12 +404,13 @@ class ApproachStage:
 
     def __call__(self, traj: JointTrajectory, sink: Sink) -> tuple[JointTrajectory, dict[str, float]]:
         """Plan the approach: JointTrajectory -> the same JointTrajectory with its ``approach``."""
-        from dualarm.smooth.approach import approach_trajectory
+        from dualarm.smooth.approach import approach_trajectory, approach_waypoints
 
         sink.begin(self.name)
         names, robot = traj.joint_names, self.task.robot
         initial = np.array([self.task.initial_q[n] for n in names])
         limits = {kind: robot.limit_array(kind, names) for kind in ("velocity", "acceleration", "jerk")}
+        waypoints = approach_waypoints(self.task, names, initial, traj.q[0], dict(traj.fixed))
         approach = approach_trajectory(
             names,
             initial,
@@ -418,6 +420,7 @@ class ApproachStage:
             limits["jerk"],
             CONTROL_PERIOD_S,
             dict(traj.fixed),
+            via=list(waypoints[1:-1]),
         )
         sink.trajectory(approach, limits, hand_positions(self.task, approach), {"jerk": approach.mean_jerk()})
         return replace(traj, approach=approach), {

@@ -153,3 +153,36 @@ def test_allow_adds_a_user_pair_and_unknown_links_are_refused(robots_share, tmp_
         result = runner.invoke(app, ["robot", "init", str(source), "--out", str(tmp_path / "u"), "--allow", "x,y"])
     assert result.exit_code == 2 and "--allow 'x': no such link" in result.output
     assert not (tmp_path / "u").exists()
+
+
+def test_the_velocity_methods_start_where_ipopt_from_the_initial_configuration_finds_none(made, robots_share):
+    """The circle on the PR2: IPOPT from the task's initial configuration ends infeasible (checked here), so the start
+    is searched from more starts; the one found is within the limits and puts the hand on the path's first pose by
+    PyBullet's forward kinematics of the source URDF."""
+    from dualarm.ik.velocity.stack import reference_stack, stacked_reference, start_configuration
+    from dualarm.paths.build import build_reference
+    from dualarm.tasks import load_task
+
+    task = load_task("circle", 1, robot=made["pr2"].directory)
+    robot, reference = task.robot, build_reference(task)
+    stack = reference_stack(robot, reference, dict(task.initial_q), False, "pose")
+    lower, upper = robot.lower_upper(stack.joint_names)
+    r0 = stacked_reference(stack, reference)[0][0]
+    stack.start_solver(x0=stack.initial, p=r0, lbx=lower, ubx=upper, lbg=0, ubg=0)
+    assert not stack.start_solver.stats()["success"]
+
+    theta = start_configuration(stack, reference, lower, upper)
+    assert ((theta >= lower - 1e-9) & (theta <= upper + 1e-9)).all()
+    (hand,) = stack.hands
+    asked = np.eye(4)
+    asked[:3, :3], asked[:3, 3] = reference.hands[hand].rotation[0], reference.hands[hand].position[0]
+    frame = reference.frame_in(robot)
+    with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(robots_share)}):
+        with load_pybullet_robot(robots_share / ROBOTS["pr2"]) as sim:
+            sim.set_positions(list(task.initial_q), list(task.initial_q.values()))
+            sim.set_positions(list(stack.joint_names), list(theta))
+            tip = sim.link_pose(robot.hand_chain(hand).tip)
+            base = np.eye(4) if frame == robot.urdf.root else sim.link_pose(frame)
+    reached = np.linalg.inv(base) @ tip
+    assert np.abs(reached[:3, 3] - asked[:3, 3]).max() < 1e-5
+    assert np.abs(reached[:3, :3] - asked[:3, :3]).max() < 1e-5

@@ -78,10 +78,14 @@ def _needing(claim: Claim, label: str, run: RunData | None) -> Claim:
     )
 
 
+def _run_failed(labels: str) -> str:
+    """The "ours" of a claim whose runs ``labels`` failed."""
+    return f"not available: the {labels} run failed (see its manifest)"
+
+
 def _failed_run(paper: str, where: str, claim: str, theirs: str, part: str, label: str, run: RunData) -> Claim:
     """The one claim left of a part whose run failed: that the run completes, contradicted, with its error."""
-    made = Claim(paper, where, claim, theirs, f"not available: the {label} run failed (see its manifest)", "", None, part)
-    return _needing(made, label, run)
+    return _needing(Claim(paper, where, claim, theirs, _run_failed(label), "", None, part), label, run)
 
 
 def _g(value: float, unit: str = "", digits: int = 3) -> str:
@@ -404,7 +408,7 @@ def consistency_claims(task: str, runs: list[RunData]) -> list[Claim]:
                 where,
                 text,
                 theirs,
-                f"not available: the {', '.join(failed)} run failed (see its manifest)",
+                _run_failed(", ".join(failed)),
                 "",
                 None,
                 part,

@@ -233,6 +233,9 @@ def stacked_reference(stack: HandStack, reference: CartesianReference) -> tuple[
 START_TOLERANCE_M = 1e-9
 #: Largest hand-orientation gap [rad] left as is (pose task space).
 START_TOLERANCE_RAD = 1e-9
+#: IPOPT starts drawn uniformly within the limits when the one from the initial configuration fails, and their seed.
+START_SEEDS = 8
+START_SEED = 0
 
 
 def start_configuration(
@@ -244,23 +247,37 @@ def start_configuration(
     :data:`START_TOLERANCE_M`, and :data:`START_TOLERANCE_RAD` in pose task space), otherwise the configuration
     nearest to them, within ``lower``/``upper`` [rad], that does — the least-squares problem
     min |theta - initial|^2 s.t. e(theta) = 0 (the stack's task error at the first sample) solved by IPOPT through
-    CasADi.
+    CasADi, from the initial values. IPOPT is local: where it fails from there (a start far from the path's, on a
+    robot the task was not written for), it is run from :data:`START_SEEDS` configurations drawn within the limits
+    (seed :data:`START_SEED`), and the solution nearest the initial values is kept.
 
     Raises:
-        StageError: IPOPT finds no such configuration.
+        StageError: IPOPT finds no such configuration from any start.
     """
     r0 = stacked_reference(stack, reference)[0][0]
     if _on_start(stack, stack.initial, r0):
         return stack.initial
     solver = stack.start_solver
-    theta = np.asarray(solver(x0=stack.initial, p=r0, lbx=lower, ubx=upper, lbg=0, ubg=0)["x"]).ravel()
-    if not solver.stats()["success"] or not _on_start(stack, theta, r0):
+
+    def solve(x0: np.ndarray) -> tuple[np.ndarray, bool, str]:
+        theta = np.asarray(solver(x0=x0, p=r0, lbx=lower, ubx=upper, lbg=0, ubg=0)["x"]).ravel()
+        return theta, bool(solver.stats()["success"]) and _on_start(stack, theta, r0), solver.stats()["return_status"]
+
+    theta, solved, status = solve(stack.initial)
+    if not solved:  # a local solver from one start: IPOPT from START_SEEDS more, the solution nearest the initial kept
+        low, high = np.clip(lower, -np.pi, np.pi), np.clip(upper, -np.pi, np.pi)  # continuous joints: one turn
+        starts = np.random.default_rng(START_SEED).uniform(low, high, (START_SEEDS, stack.n))
+        found = [theta for theta, ok, _ in map(solve, starts) if ok]
+        if found:
+            theta, solved = min(found, key=lambda t: float(np.sum((t - stack.initial) ** 2))), True
+    if not solved:
         e = np.abs(np.asarray(stack.errors(theta, r0)).ravel())
         p = 3 * len(stack.hands)
         gap = f"gap {e[:p].max():.3g} m" + (f", {e[p:].max():.3g} rad" if len(e) > p else "")
         what = "the hands on the path start" + (" in position and orientation" if stack.task_space == "pose" else "")
         raise StageError(
-            f"no configuration within the joint limits puts {what} (IPOPT: {solver.stats()['return_status']}, {gap})",
+            f"no configuration within the joint limits puts {what} (IPOPT from the initial configuration and "
+            f"{START_SEEDS} more starts; from the initial: {status}, {gap})",
             stage="ik",
             sample=0,
             t_s=0.0,

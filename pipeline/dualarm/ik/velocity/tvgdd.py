@@ -456,7 +456,8 @@ def _nearest(
             if x[i] <= lo[i] + FEASIBILITY_TOLERANCE
             else ("zeta+", hi[i], upper_t[i] - theta[i])
         )
-        held.append(f"{names[i]} at {side} = {bound:.3g} rad/s ({gap:.3g} rad from theta_new{side[-1]})")
+        where = f"{gap:.3g} rad from theta_new{side[-1]}" if np.isfinite(gap) else "a continuous joint"
+        held.append(f"{names[i]} at {side} = {bound:.3g} rad/s ({where})")
     miss = float(np.abs(J @ x - rhs).max())
     sigma = float(
         np.linalg.svd(J, compute_uv=False).min()
