@@ -99,15 +99,15 @@ def test_the_arms_end_at_the_hands(made, robots_share, name, tips):
 
 @pytest.mark.parametrize("name", ["talos", "pr2", "tiago_dual"])
 def test_disabled_pairs_are_rigid_or_always_in_contact_by_pybullet(made, robots_share, name):
-    """PyBullet on the source URDF: a 'rigid' pair (no chain's joint between them in the source's tree) keeps its
-    relative pose and an 'always' pair is in contact at random configurations of every chain joint (seed and count
-    not init's)."""
+    """PyBullet on the URDF init wrote (its concave collision meshes cut into convex parts, what every check uses):
+    a 'rigid' pair (no chain's joint between them in the source's tree) keeps its relative pose and an 'always' pair
+    is in contact at random configurations of every chain joint (seed and count not init's)."""
     result = made[name]
     robot = result.robot
     joints = sorted({n for c in robot.chains.values() for n in c.joint_names})
     held = {k: v for k, v in robot.home("zero").items() if k not in joints}
     with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(robots_share)}):
-        sim = load_pybullet_robot(robots_share / ROBOTS[name], self_collision=True)
+        sim = load_pybullet_robot(robot.urdf.path, self_collision=True)
     with sim:
         lower, upper = robot.lower_upper(tuple(joints))
         lower, upper = np.where(np.isfinite(lower), lower, -np.pi), np.where(np.isfinite(upper), upper, np.pi)
@@ -186,3 +186,104 @@ def test_the_velocity_methods_start_where_ipopt_from_the_initial_configuration_f
     reached = np.linalg.inv(base) @ tip
     assert np.abs(reached[:3, 3] - asked[:3, 3]).max() < 1e-5
     assert np.abs(reached[:3, :3] - asked[:3, :3]).max() < 1e-5
+
+
+def _fcl_link(urdf_path: Path, link: str) -> list:
+    """``link``'s collision meshes of ``urdf_path`` as FCL triangle models, with their origins in the link (4, 4)."""
+    import xml.etree.ElementTree as ET
+
+    import fcl
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from dualarm.describe.meshes import resolve_mesh
+
+    out = []
+    for node in (n for n in ET.parse(urdf_path).getroot().iter("link") if n.get("name") == link):
+        for collision in node.iter("collision"):
+            origin, T = collision.find("origin"), np.eye(4)
+            if origin is not None:
+                T[:3, :3] = Rotation.from_euler(
+                    "xyz", [float(v) for v in origin.get("rpy", "0 0 0").split()]
+                ).as_matrix()
+                T[:3, 3] = [float(v) for v in origin.get("xyz", "0 0 0").split()]
+            mesh = trimesh.load_mesh(resolve_mesh(collision.find(".//mesh").get("filename"), urdf_path))
+            model = fcl.BVHModel()
+            model.beginModel(len(mesh.vertices), len(mesh.faces))
+            model.addSubModel(mesh.vertices, mesh.faces)
+            model.endModel()
+            out.append((model, T))
+    return out
+
+
+def test_concave_collision_meshes_are_cut_so_pybullet_collides_what_the_maker_drew(made, robots_share):
+    """The PR2's elbow flexed towards its limit: PyBullet on the source URDF (each mesh its convex hull) finds the
+    forearm inside the upper arm; FCL on the meshes' triangles (as MoveIt checks them) finds them apart; PyBullet
+    on the robot init wrote (CoACD's convex parts) agrees with FCL. Every vertex of each cut mesh lies inside one
+    of its parts within 1 mm (scipy's hulls), so no material is lost."""
+    import fcl
+    import trimesh
+    from scipy.spatial import ConvexHull
+
+    robot = made["pr2"].robot
+    source = robots_share / ROBOTS["pr2"]
+    a, b = "l_forearm_link", "l_upper_arm_link"
+    meshes = {link: _fcl_link(source, link) for link in (a, b)}
+    (low,), _ = robot.lower_upper(("l_elbow_flex_joint",))
+    ready = dict(robot.home("ready"))
+
+    def depth(sim) -> float:
+        points = pb.getClosestPoints(
+            sim.body, sim.body, 0.0, sim.link_index[a], sim.link_index[b], physicsClientId=sim.client
+        )
+        return -min((p[8] for p in points), default=0.0)
+
+    hull_hits = 0
+    with mock.patch.dict(os.environ, {"ROS_PACKAGE_PATH": str(robots_share)}):
+        with load_pybullet_robot(source) as hulls, load_pybullet_robot(robot.urdf.path) as parts:
+            for elbow in np.linspace(low, low + 0.6, 4):
+                for roll in np.linspace(-np.pi, np.pi, 5):
+                    q = {**ready, "l_elbow_flex_joint": elbow, "l_forearm_roll_joint": roll}
+                    for sim in (hulls, parts):
+                        sim.set_positions(list(q), list(q.values()))
+                    if depth(hulls) <= 1e-3:
+                        continue
+                    hull_hits += 1
+                    placed = {
+                        link: [
+                            fcl.CollisionObject(m, _fcl_transform(hulls.link_pose(link) @ T)) for m, T in meshes[link]
+                        ]
+                        for link in (a, b)
+                    }
+                    apart = min(
+                        fcl.distance(x, y, fcl.DistanceRequest(), fcl.DistanceResult())
+                        for x in placed[a]
+                        for y in placed[b]
+                    )
+                    assert apart > 5e-3, (elbow, roll, apart)
+                    assert depth(parts) == 0.0, (elbow, roll, depth(parts))
+    assert hull_hits >= 10  # the setup: the hulls collide over much of the flexed range
+
+    directory = robot.urdf.path.parent
+    cut = sorted((directory / "meshes" / "convex").rglob("*.obj"))
+    assert {"upper_arm_v0/upper_arm.obj", "forearm_v0/forearm.obj"} <= {
+        p.relative_to(directory / "meshes" / "convex").as_posix() for p in cut
+    }
+    for obj in cut:
+        drawn = trimesh.load_mesh(
+            directory / "meshes" / obj.relative_to(directory / "meshes" / "convex").with_suffix(".stl")
+        )
+        parts = [
+            ConvexHull([[float(v) for v in line.split()[1:]] for line in part.splitlines() if line.startswith("v ")])
+            for part in obj.read_text().split("\no ")
+        ]
+        outside = np.min(
+            [(drawn.vertices @ h.equations[:, :3].T + h.equations[:, 3]).max(axis=1) for h in parts], axis=0
+        )
+        assert outside.max() < 1e-3, (obj, outside.max())
+
+
+def _fcl_transform(T: np.ndarray):
+    import fcl
+
+    return fcl.Transform(T[:3, :3], T[:3, 3])

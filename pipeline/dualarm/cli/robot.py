@@ -178,7 +178,7 @@ def robot_init(
     for value, option in ((acceleration, "--acceleration"), (jerk, "--jerk")):
         if value is not None:
             _within(value, option, 0.0, above_low=True)
-    with err.status("robot init: sampling configurations ..."):
+    with err.status("robot init: reading the URDF ...") as status:
         result = init_robot(
             urdf,
             _out_path(out_dir, "--out"),
@@ -191,6 +191,7 @@ def robot_init(
             jerk=jerk,
             allow=[_link_pair(text) for text in allow or ()],
             up=up,
+            progress=lambda text: status.update(f"robot init: {text} ..."),
         )
     for line in result.notes:
         out.print(line, markup=False, soft_wrap=True)

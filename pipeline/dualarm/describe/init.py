@@ -25,6 +25,8 @@ from the URDF, and every choice is returned as a line of :attr:`RobotInit.notes`
   and jerk from the caller or else :data:`ACCELERATION_PER_S` times the velocity limit and
   :data:`JERK_PER_S` times that, written with the comment ``# assumed`` and listed in
   ``[limits] assumed`` (so that every message a limit causes says it was assumed).
+- collision meshes: each concave one decomposed into convex parts (:mod:`dualarm.describe.convex`), since
+  PyBullet collides a mesh as its convex hull.
 - home poses ``zero`` and ``ready`` (:func:`ready_pose`).
 - the collision matrix (:mod:`dualarm.describe.collisions`): pairs joined through no chain's joint,
   pairs in contact at every sampled configuration and the pairs of ``--allow`` are written to
@@ -37,7 +39,7 @@ from __future__ import annotations
 
 import shutil
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -45,6 +47,7 @@ from types import MappingProxyType
 import numpy as np
 
 from dualarm.describe.collisions import allowed_pairs, disabled_pairs
+from dualarm.describe.convex import CONVEX_DIR, convex_collisions
 from dualarm.describe.layout import ArmPlan, _Layout, _layout, _srs_verdict, lock_value
 from dualarm.describe.meshes import copy_urdf, resolve_mesh
 from dualarm.describe.ready import SAMPLES, _collision_world, held_values, ready_pose
@@ -153,6 +156,7 @@ def init_robot(
     name: str | None = None,
     allow: Sequence[tuple[str, str]] = (),
     up: str | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> RobotInit:
     """Write a robot directory ``out`` (robot.toml, the URDF and its meshes) for ``urdf_path``.
 
@@ -173,6 +177,8 @@ def init_robot(
         up: the axis of the URDF's root frame that points up (:data:`dualarm.describe.up.AXES`); other than ``z``,
             the copy gets a root turned z-up (:func:`dualarm.describe.up.turn_root`). None: z, refused when the
             shoulders say otherwise (:func:`dualarm.describe.up.looks_turned`).
+        progress: told what init is doing while it decomposes collision meshes (the long part, minutes on a
+            robot of many meshes the first time; :mod:`dualarm.describe.convex`).
 
     Raises:
         RobotModelError: not a URDF, an unknown link, tips that are not on separate branches below a
@@ -195,7 +201,7 @@ def init_robot(
         resolve_mesh(filename, source)  # refused before anything is written (collision meshes are checked by copy_urdf)
     out.mkdir(parents=True, exist_ok=True)
     try:
-        return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name, allow, turn)
+        return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name, allow, turn, progress)
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
         raise
@@ -211,6 +217,7 @@ def _write(
     name: str,
     allow: Sequence[tuple[str, str]],
     turn: np.ndarray | None,
+    progress: Callable[[str], None] | None,
 ) -> RobotInit:
     notes = list(layout.notes)
     copy = copy_urdf(source, out)
@@ -218,6 +225,12 @@ def _write(
         f"URDF copied to {copy} with its meshes under {out / 'meshes'} "
         "(the directory is self-contained: it works when moved or shipped)"
     )
+    decomposed, convex = convex_collisions(copy, progress)
+    if decomposed:
+        notes.append(
+            f"collision meshes: {decomposed} concave ones decomposed into convex parts (CoACD) under "
+            f"{out / 'meshes' / CONVEX_DIR}, as PyBullet would collide their convex hulls; {convex} convex kept"
+        )
     if turn is not None:
         turn_root(copy, urdf.root, turn)
         notes.append(
@@ -258,6 +271,8 @@ def _write(
         robot_toml(name, copy.name, source, layout, urdf, srs, limits, homes, frozenset(), {})
     )
     robot = load_robot(out)
+    if progress is not None:
+        progress("sampling configurations")
     try:
         sim, touching = _collision_world(robot)
     except RobotModelError as exc:  # name the user's file, not the copy removed with the directory
