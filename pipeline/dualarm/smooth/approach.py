@@ -110,11 +110,27 @@ def approach_trajectory(
         fixed: the locked joints' values [rad].
         via: configurations (n,) [rad] to pass through at rest, in order (:func:`approach_waypoints`'s inner rows).
     """
+
+    def straight(a: np.ndarray, b: np.ndarray) -> JointTrajectory:  # one segment, rest to rest
+        q = np.stack([a, b])
+        zeros = np.zeros((2, len(names)))
+        line = JointPath(
+            method=STAGE,
+            joint_names=names,
+            t=np.arange(2.0),
+            rep=np.zeros(2, dtype=int),
+            q=q,
+            qd=zeros,
+            status=np.zeros(2, dtype=int),
+            solve_time_s=np.zeros(2),
+            hand_error_m=np.zeros((2, 0)),
+            hands=(),
+            fixed=fixed or {},
+        )
+        return replace(jerk_limited(line, velocity, acceleration, jerk).sample(period_s), stage=STAGE)
+
     points = [np.asarray(p, dtype=float) for p in (start, *via, goal)]
-    segments = [
-        _straight(names, a, b, velocity, acceleration, jerk, period_s, fixed)
-        for a, b in zip(points[:-1], points[1:], strict=True)
-    ]
+    segments = [straight(a, b) for a, b in zip(points[:-1], points[1:], strict=True)]
     first = segments[0]
     if len(segments) == 1:
         return first
@@ -131,32 +147,3 @@ def approach_trajectory(
         qdd=joined("qdd"),
         rep=joined("rep"),
     )
-
-
-def _straight(
-    names: tuple[str, ...],
-    start: np.ndarray,
-    goal: np.ndarray,
-    velocity: np.ndarray,
-    acceleration: np.ndarray,
-    jerk: np.ndarray,
-    period_s: float,
-    fixed: dict[str, float] | None,
-) -> JointTrajectory:
-    """One straight segment of :func:`approach_trajectory`."""
-    q = np.stack([start, goal])
-    zeros = np.zeros((2, len(names)))
-    line = JointPath(
-        method=STAGE,
-        joint_names=names,
-        t=np.arange(2.0),
-        rep=np.zeros(2, dtype=int),
-        q=q,
-        qd=zeros,
-        status=np.zeros(2, dtype=int),
-        solve_time_s=np.zeros(2),
-        hand_error_m=np.zeros((2, 0)),
-        hands=(),
-        fixed=fixed or {},
-    )
-    return replace(jerk_limited(line, velocity, acceleration, jerk).sample(period_s), stage=STAGE)
