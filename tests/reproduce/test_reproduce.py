@@ -712,6 +712,30 @@ def test_a_run_that_fails_at_its_stage_is_kept_and_contradicts_its_claims(tmp_pa
 
 
 @pytest.mark.integration
+def test_a_part_whose_path_leaves_the_robots_reach_is_not_available(tmp_path, monkeypatch):
+    """The ball game whose first stroke goes 2 m up: the task loads (its waypoints are the start), but the path
+    stage refuses the path (as on a Baxter, whose right hand cannot follow the strokes from its ready pose). The
+    part is not available, with the path stage's reason, not failed: exit 2 when it is the only part."""
+    from dualarm.reproduce import experiments
+
+    tasks = tmp_path / "tasks"
+    tasks.mkdir()
+    text = (TASKS / "ball_game.toml").read_text().replace('robot = "../robots/humanoid"', f'robot = "{HUMANOID}"')
+    stroke = "left = { by = [0.0, 0.0, 0.10] }\nright = { by = [0.0, 0.0, 0.10] }"
+    assert stroke in text
+    (tasks / "ball_game.toml").write_text(text.replace(stroke, stroke.replace("0.10", "2.0"), 1))
+    monkeypatch.setattr(experiments, "TASKS", tasks)
+    out = tmp_path / "reproduction"
+    result = reproduce(out, "ball-game-pinv", 1)
+    assert result.exit_code == 2, (result.output, result.exception)
+    (part,) = json.loads((out / "parts.json").read_text())["parts"]
+    assert part["status"] == "not available" and part["outputs"] == {}
+    assert (
+        part["error"].startswith("its task's path is out of this robot's reach: ") and "cannot reach" in part["error"]
+    )
+
+
+@pytest.mark.integration
 def test_one_at_a_time_is_not_said_to_share_the_machine(failed_repro):
     out, _ = failed_repro
     report = (out / "report.md").read_text()

@@ -28,7 +28,7 @@ from pathlib import Path
 from queue import SimpleQueue
 
 from dualarm.cluster import connect, stop_tasks
-from dualarm.errors import DualarmError, Terminated, excerpt
+from dualarm.errors import DualarmError, TaskFileError, Terminated, excerpt
 from dualarm.interrupt import held, stop_requested, stoppable
 from dualarm.record.run_dir import MARKER, OutputDir, claim_output_dir, write_whole
 from dualarm.reproduce.experiments import BY_NAME, PARTS, ROBOT, Outputs, unavailable
@@ -98,6 +98,8 @@ def _run_part(name: str, out: Path, robot: Path, report: Callable[[float, str], 
     try:
         outputs = BY_NAME[name].run(out, robot, report)
         status, error = "complete", ""
+    except TaskFileError as exc:  # the task loaded, but its path leaves the robot's reach (the path stage's check)
+        outputs, status, error = {}, NOT_AVAILABLE, f"its task's path is out of this robot's reach: {exc}"
     except DualarmError as exc:
         outputs, status, error = {}, "failed", str(exc)
     except Exception as exc:  # a bug in one part must not lose the others; it is reported whole
