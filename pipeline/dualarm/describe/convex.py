@@ -12,8 +12,8 @@ package): an OBJ of convex parts, one object each, which PyBullet loads as one c
 under ``meshes/convex/`` and the ``<collision>`` points to it; the ``<visual>`` meshes are untouched. A mesh
 that is convex already (closed, and its hull's volume within :data:`CONVEX_RATIO` of its own) is kept. Meshes
 are read by trimesh (STL, OBJ, and COLLADA through pycollada). A decomposition is kept between robot inits
-under the cache directory (:func:`~dualarm.numerics.compiled.cache_dir`), named by the SHA-256 of the mesh file
-, :data:`COACD_OPTIONS` and CoACD's version; CoACD with a fixed seed gives the same parts bit for bit.
+under the cache directory (:func:`~dualarm.numerics.compiled.cache_dir`), named by the SHA-256 of the mesh
+file, :data:`COACD_OPTIONS` and CoACD's version; CoACD with a fixed seed gives the same parts bit for bit.
 
 Why CoACD and not V-HACD (``pybullet.vhacd``): on the PR2's elbow, flexed to its limit, V-HACD's parts of the
 forearm and the upper arm still overlap by up to 5.1 mm (at its defaults, and with 10 times the voxels or a fifth
