@@ -107,10 +107,7 @@ def search_seconds(task) -> dict[str, tuple[float, float, float, int, int]]:
             start = time.perf_counter()
             clearance(arm.hand, arm.q0[None])  # builds the arm's checker
             build = time.perf_counter() - start
-
-            def clear(Q: np.ndarray, hand: str = arm.hand) -> np.ndarray:
-                return clearance(hand, Q)
-
+            clear = mc_path.arm_clearance(clearance, arm.hand)
             times: dict[bool, list[float]] = {False: [], True: []}
             for _ in range(SEARCH_REPEATS):
                 for checked in (False, True):

@@ -57,6 +57,11 @@ CLEARANCE_ROUNDS = 30
 Clearance = Callable[[str, np.ndarray], np.ndarray]
 
 
+def arm_clearance(clearance: Clearance | None, hand: str) -> Callable[[np.ndarray], np.ndarray] | None:
+    """``clearance`` for ``hand``'s arm alone: Q (M, 7) [rad] -> (M,) bool; None for None."""
+    return None if clearance is None else (lambda Q: clearance(hand, Q))
+
+
 def settings_for(task: Task, **overrides: object) -> ArmAngle:
     """MC-Inverse's settings for a task: its ``[arm_angle]`` table, with ``overrides``."""
     return with_overrides(task.spec.arm_angle.settings(), overrides)
@@ -118,8 +123,9 @@ def solve_mc_inverse(
         start = time.perf_counter()
         branch = None
         if spec.mode == "auto":
-            clear = (lambda Q, hand=arm.hand: clearance(hand, Q)) if clearance is not None else None
-            psi, branch = _auto(solver, arm.targets, reference, psi[0], arm.q0, spec, arm.hand, clear)
+            psi, branch = _auto(
+                solver, arm.targets, reference, psi[0], arm.q0, spec, arm.hand, arm_clearance(clearance, arm.hand)
+            )
         candidates, reasons = solver.solve_many(arm.targets, psi)
         elapsed = time.perf_counter() - start
         q = _kept_branch(arm.hand, solver, arm.q0, reference, psi, candidates, reasons, spec.max_joint_step_rad, branch)

@@ -100,7 +100,7 @@ def solve_sew(
         limits = (lower, upper, robot.limit_array("velocity", problem.chain.joint_names))
         found: dict[int, SewSolutions] = {}
         if spec.mode == "auto":
-            clear = (lambda Q, hand=problem.hand: clearance(hand, Q)) if clearance is not None else None
+            clear = mc_path.arm_clearance(clearance, problem.hand)
             try:
                 psi, found = _auto(arm, sew, problem, reference, initial, limits, spec, clear)
             except StageError as exc:
