@@ -321,6 +321,22 @@ def test_refusals(tmp_path):
     assert not any((tmp_path / n).exists() for n in "abcde")
 
 
+def test_a_collision_mesh_that_is_no_mesh_is_one_line_naming_the_urdf(tmp_path):
+    """An iiwa whose link 0 (its first collision mesh, read before any is cut) collides as a file of text named
+    .stl: refused in one line naming the user's URDF and the mesh, and nothing is left behind."""
+    (tmp_path / "bad.stl").write_text("this is not a mesh at all")
+    text = IIWA.read_text().replace('filename="meshes/', f'filename="{IIWA.parent}/meshes/')
+    at = text.index('<link name="lbr_iiwa_link_0"')
+    start, end = text.index("<collision>", at), text.index("</collision>", at)
+    collision = re.sub(r'filename="[^"]+"', f'filename="{tmp_path / "bad.stl"}"', text[start:end])
+    (tmp_path / "bad.urdf").write_text(text[:start] + collision + text[end:])
+    _one_line(
+        ["robot", "init", str(tmp_path / "bad.urdf"), "--out", str(tmp_path / "out")],
+        f"{tmp_path / 'bad.urdf'}: collision mesh 'meshes/",
+    )
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.integration
 def test_mesh_paths_resolve_through_ros_package_path(tmp_path):
     urdf = tmp_path / "one.urdf"

@@ -225,7 +225,10 @@ def _write(
         f"URDF copied to {copy} with its meshes under {out / 'meshes'} "
         "(the directory is self-contained: it works when moved or shipped)"
     )
-    decomposed, convex = convex_collisions(copy, progress)
+    try:
+        decomposed, convex = convex_collisions(copy, progress)
+    except RobotModelError as exc:  # name the user's file: the copy goes with the directory
+        raise RobotModelError(f"{excerpt(source)}: {exc}") from None
     if decomposed:
         notes.append(
             f"collision meshes: {decomposed} concave ones decomposed into convex parts (CoACD) under "
