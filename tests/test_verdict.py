@@ -142,13 +142,15 @@ def test_a_trajectory_over_a_velocity_limit_is_refused_before_execution(too_fast
 
 @pytest.fixture(scope="module")
 def square_runs(tmp_path_factory):
-    """``dualarm run square.toml --ik dls-svd``, refused and then played with --execute-anyway."""
+    """``dualarm run square.toml --ik pinv``, refused and then played with --execute-anyway.
+
+    (DLS-SVD's path jumps on this square: :func:`test_the_square_by_dls_svd_is_refused_where_its_path_jumps`.)"""
     tmp = tmp_path_factory.mktemp("square")
     (tmp / "square.toml").write_text(SQUARE)
     runner = CliRunner()
-    refused = runner.invoke(app, ["run", str(tmp / "square.toml"), "--ik", "dls-svd", "--out", str(tmp / "refused")])
+    refused = runner.invoke(app, ["run", str(tmp / "square.toml"), "--ik", "pinv", "--out", str(tmp / "refused")])
     played = runner.invoke(
-        app, ["run", str(tmp / "square.toml"), "--ik", "dls-svd", "--out", str(tmp / "played"), "--execute-anyway"]
+        app, ["run", str(tmp / "square.toml"), "--ik", "pinv", "--out", str(tmp / "played"), "--execute-anyway"]
     )
     return load_task(tmp / "square.toml"), tmp, refused, played
 
@@ -195,6 +197,24 @@ def test_the_colliding_square_played_anyway_is_violated_with_the_pair_time_and_d
         | (contacts["first"] == "right_upper_arm")
     ).any()
     assert data.metrics["execute.self_collisions"] > 0
+
+
+@pytest.mark.integration
+def test_the_square_by_dls_svd_is_refused_where_its_path_jumps(tmp_path):
+    """DLS-SVD holds the right shoulder pitch at its limit, then lets it go by 0.21 rad in one 10 ms sample (issue 36's
+    right-hand square, which the timing's IPOPT failed on): the run fails at retime, in one line naming the joint and
+    the samples of the first step beyond ten times the velocity limit, computed here from the IK's own path."""
+    (tmp_path / "square.toml").write_text(SQUARE)
+    result = CliRunner().invoke(app, ["run", str(tmp_path / "square.toml"), "--ik", "dls-svd", "--out", str(tmp_path)])
+    assert result.exit_code == EXIT_CODES["failed"], result.output
+    task = load_task(tmp_path / "square.toml")
+    path = run_task(task, "dls-svd", stages=("path", "ik")).joint_path
+    step = np.abs(np.diff(path.q, axis=0))
+    speed = step / np.diff(path.t)[:, None] / task.robot.limit_array("velocity", path.joint_names)
+    k, j = np.argwhere((speed > 10) & (step > 1e-3))[0]  # the first step beyond ten times the velocity limit
+    (error,) = [line for line in result.output.splitlines() if line.startswith("error: ")]
+    assert error.startswith(f"error: retime: the joint path jumps: {path.joint_names[j]} moves ")
+    assert f"between samples {k} and {k + 1}" in error
 
 
 @pytest.mark.integration

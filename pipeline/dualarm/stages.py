@@ -274,6 +274,7 @@ class RetimeStage:
                 sample_period_s=CONTROL_PERIOD_S,
                 keep_timing=settings.timing == "task",
                 jerk=j,
+                position=robot.lower_upper(names),
                 assumed=robot.assumed,
             )
         traj = result.trajectory
@@ -292,6 +293,8 @@ class RetimeStage:
                 hand_positions(self.task, traj, result.at_samples), hand_positions(self.task, traj, path.q)
             ),
             "retime.stretch": result.stretch,
+            "retime.fallback_pieces": len(result.fallbacks),
+            "retime.fallback_excess_s": sum(f.duration_s - f.bound_s for f in result.fallbacks),
         }
 
     def violations(self, traj: JointTrajectory) -> list[Violation]:

@@ -12,14 +12,14 @@ from scipy.spatial import cKDTree
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from dualarm.errors import InvalidArgumentError
+from dualarm.errors import InvalidArgumentError, StageError
 from dualarm.retime.stage import plan, retime_path
 from dualarm.retime.timing import path_deviation_max_rad
 from dualarm.run import run_task
 from dualarm.tasks import load_task
 from dualarm.tasks.schema import Retime
 from tests.helpers import HUMANOID, TASKS
-from tests.retime.test_topp import ARMS, joint_path
+from tests.retime.test_topp import ARMS, joint_path, rest_to_rest
 
 V = np.tile([1.0, 0.9, 1.2, 1.1, 1.5, 0.8, 1.3], 2)  # rad/s
 A = np.tile([3.0, 2.5, 3.5, 4.0, 2.0, 3.0, 5.0], 2)  # rad/s^2
@@ -234,3 +234,75 @@ def test_an_infeasible_jerk_limit_is_refused_in_one_line_before_running(tmp_path
     assert result.exit_code == 2, result.output
     assert len(result.output.strip().splitlines()) == 1 and "limits.jerk.left_elbow" in result.output, result.output
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.fixture
+def ipopt_stops_at_once(monkeypatch):
+    """IPOPT allowed one iteration: every piece's program ends Maximum_Iterations_Exceeded, a real failure of IPOPT."""
+    from dualarm.retime import jerk
+
+    monkeypatch.setitem(jerk.IPOPT, "max_iter", 1)
+    jerk._program.cache_clear()
+    yield
+    jerk._program.cache_clear()
+
+
+def test_a_piece_ipopt_does_not_time_falls_back_within_every_limit_and_says_so(loop, ipopt_stops_at_once):
+    """With every program failing, the loop is still timed: within the limits by finite differences, within 1e-6 rad of
+    every sample, each piece reported as timed on the worst-case limits, each no faster than its velocity- and
+    acceleration-limited bound, and the whole no faster than TOPP-RA's (the bound over every jerk-limited timing)."""
+    path, _, _ = loop
+    timing = plan(path, V, A, jerk=J)
+    assert max(_fd_ratios(timing)) <= 1 + 1e-6
+    assert path_deviation_max_rad(timing, path) <= 1e-6
+    assert timing.fallbacks and {f.how for f in timing.fallbacks} == {"worst-case limits"}
+    assert all(f.duration_s >= f.bound_s for f in timing.fallbacks)
+    assert timing.duration_s >= plan(path, V, A).duration_s
+
+
+def test_a_path_that_jumps_is_refused_in_one_line_naming_the_samples_and_the_joint():
+    """A joint stepping 2 rad between two samples 10 ms apart (the IK changing branch): refused, not timed as a line."""
+    t = 0.01 * np.arange(100)
+    q = rest_to_rest(t, 14, 0.4)
+    q[60:, 3] += 2.0
+    with pytest.raises(StageError) as error:
+        retime_path(joint_path(q, t, ARMS), V, A, jerk=J)
+    message = str(error.value)
+    assert "\n" not in message
+    assert f"{ARMS[3]} moves {abs(q[60, 3] - q[59, 3]):.4g} rad between samples 59 and 60" in message
+    assert error.value.joint == ARMS[3] and error.value.sample == 60
+
+
+def test_a_joint_held_at_its_limit_stays_within_it_where_the_free_curve_overshoots():
+    """A joint swinging up to its upper limit and held there (as an IK clamps it), then back: the curve through the
+    samples overshoots the limit between them; with the position limits the trajectory stays within (evaluated every
+    0.1 ms), within the other limits by finite differences, and nearer the samples than the free curve went beyond."""
+    t = 0.01 * np.arange(300)
+    q = rest_to_rest(t, 14, 0.4)
+    q[:, 2] = np.minimum(0.2 + 0.15 * np.sin(np.pi * t / t[-1]) ** 2, 0.3)
+    lower, upper = np.full(14, -np.inf), np.full(14, np.inf)
+    upper[2] = 0.3
+    path = joint_path(q, t, ARMS)
+    free, bounded = (plan(path, V, A, jerk=J, position=limits) for limits in (None, (lower, upper)))
+    overshoot = free.evaluate(np.arange(0.0, free.duration_s, 1e-4))[0][:, 2].max() - 0.3
+    assert overshoot > 1e-6  # the case: the free curve leaves the limit
+    assert bounded.evaluate(np.arange(0.0, bounded.duration_s, 1e-4))[0][:, 2].max() <= 0.3 + 1e-15
+    assert max(_fd_ratios(bounded)) <= 1 + 1e-6
+    assert path_deviation_max_rad(bounded, path) < overshoot
+
+
+def test_the_benchs_lower_bound_holds_under_every_timing_and_is_met_on_a_straight_line(loop):
+    """`dualarm bench trajectory`'s bound: no longer than the loop's jerk-limited timing (nor than TOPP-RA's time along
+    each piece, nor any joint's own rest-to-rest move); on a straight line whose one joint binds every limit, Ruckig's
+    time for that joint alone, which the jerk-limited timing meets within its 0.2 % margin."""
+    from dualarm.bench.trajectory import rest_to_rest_bound_s
+    from dualarm.retime.jerk import MARGIN
+
+    path, timing, _ = loop
+    assert plan(path, V, A).duration_s <= rest_to_rest_bound_s(path, V, A, J) <= timing.duration_s
+    q = np.zeros((2, 14))
+    q[1] = 0.01
+    q[1, 4] = 1.0  # a hundred times farther than the others: joint 4 binds every limit
+    line = joint_path(q, np.array([0.0, 1.0]), ARMS)
+    bound = rest_to_rest_bound_s(line, V, A, J)
+    assert bound <= plan(line, V, A, jerk=J).duration_s <= bound / MARGIN

@@ -256,3 +256,39 @@ def test_wrong_number_of_limits():
         match=r"^velocity: smooth expected 7 limits \(one per joint: arm_j1, .*, arm_j7\), got \(2,\)$",
     ):
         smooth_trajectory(reference(slow_profile, dt=0.1, duration=1.0), [V, V], A, J)
+
+
+def _segfault() -> None:
+    """Read address 0 through ctypes: a genuine crash in C code (signal 11)."""
+    import ctypes
+
+    ctypes.string_at(0)
+
+
+@pytest.mark.integration  # a process of its own
+def test_a_crash_in_c_code_in_an_isolated_case_is_an_error_naming_the_signal():
+    from dualarm.bench.trajectory import CrashedError, isolated
+
+    with pytest.raises(CrashedError, match=r"signal 11 \(SIGSEGV\)"):
+        isolated(_segfault)
+
+
+@pytest.mark.integration  # the ik stage's PyBullet world, and a process of its own
+def test_the_triangle_tracked_at_full_limits_where_the_bench_died_of_signal_11_exits_normally():
+    """`dualarm bench trajectory` died without a message (signal 11 in Ruckig's calculate, ruckig 0.19.4) at
+    "triangle: TOPP-RA 1.0/1.0 + tracking" on another machine (issue 36). That exact case, in a process of its own as
+    the bench runs it: it returns, and its motion holds every limit by finite differences of its positions."""
+    from dualarm.bench.trajectory import isolated, tracked_row
+    from dualarm.retime.stage import plan
+    from dualarm.run import run_task
+    from dualarm.tasks import load_task
+    from tests.helpers import TASKS
+
+    task = load_task(TASKS / "triangle.toml")
+    path = run_task(task, "mc-inverse", stages=("path", "ik")).joint_path
+    names = path.joint_names
+    optimal = plan(path, *(task.robot.limit_array(k, names) for k in ("velocity", "acceleration"))).duration_s
+    fields = (names, path.t, path.q, path.rep, dict(path.fixed))
+    row = isolated(tracked_row, str(TASKS / "triangle.toml"), fields, "TOPP-RA 1.0/1.0 + tracking", (1.0, 1.0), optimal)
+    assert row.failure is None and row.duration_s >= optimal
+    assert max(row.ratios) <= 1 + 1e-6

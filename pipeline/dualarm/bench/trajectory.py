@@ -11,8 +11,9 @@ timed on its own call (the motion the robot would execute):
   acceleration limits, then tracked by Ruckig per joint within the full limits (the smooth stage).
 - ``TOPP-RA 1.0/1.0 + tracking``: the same at the full limits.
 
-Per row: the motion's duration and its ratio to TOPP-RA's at the full velocity and acceleration
-limits with jerk unlimited (the bound any jerk-limited motion pays over); the velocity,
+Per row: the motion's duration, its ratio to TOPP-RA's at the full velocity and acceleration
+limits with jerk unlimited, and its ratio to :func:`rest_to_rest_bound_s` (what a jerk-limited motion
+resting where the jerk-limited timing rests needs at least); the velocity,
 acceleration and jerk limit ratios of the motion by finite differences of its positions sampled
 every :data:`STEP_S` (the jerk-limited timing evaluated there; the tracked motion at its 1 ms
 control period); its deviation from the path, per joint and at the hands (forward kinematics;
@@ -20,14 +21,20 @@ the tracked motion: from the retimed reference at the same time, as the smooth s
 the jerk-limited motion: from the IK samples at the times it passes them); and the compute time
 per second of motion.
 
+Each tracked row runs in a process of its own (:func:`isolated`): a crash of Ruckig's C++ there is that row's
+failure, named, and the other rows still run.
+
 Never used by the test suite: wall-clock numbers depend on the machine.
 """
 
 from __future__ import annotations
 
+import multiprocessing
+import signal
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -66,6 +73,7 @@ class TrajectoryRow:
         hand_deviation_m: the hands' deviation from the path [m] (module docstring).
         compute_s: wall-clock time of the timing (and tracking) [s].
         failure: why the method gave no motion (its one-line error), else None; the other fields are then NaN.
+        bound_s: :func:`rest_to_rest_bound_s` of the task's path [s].
     """
 
     task: str
@@ -77,6 +85,12 @@ class TrajectoryRow:
     hand_deviation_m: float
     compute_s: float
     failure: str | None = None
+    bound_s: float = float("nan")
+
+    @classmethod
+    def failed(cls, task: str, method: str, optimal_s: float, failure: str) -> TrajectoryRow:
+        """The row of a method that gave no motion: ``failure``, NaN for what it would have measured."""
+        return cls(task, method, np.nan, optimal_s, (np.nan,) * 3, np.nan, np.nan, np.nan, failure)
 
 
 def _ratios(q: np.ndarray, step_s: float, limits: Sequence[np.ndarray]) -> tuple[float, float, float]:
@@ -109,10 +123,10 @@ def bench_trajectory(
 ) -> list[TrajectoryRow]:
     """Make each task's joint path, then time it by each of :data:`METHODS` (module docstring)."""
     from dualarm.methods import METHODS as REGISTRY
-    from dualarm.smooth import smooth_trajectory
 
-    rows = []
+    rows: list[TrajectoryRow] = []
     for task_file, method in runs:
+        first = len(rows)
         task = load_task(task_file)
         progress(f"{task.name}: joint path ({method})")
         kind = "plan" if REGISTRY[method].kind == "planner" else "ik"
@@ -125,9 +139,7 @@ def bench_trajectory(
         try:
             timing = plan(path, v, a, jerk=j)
         except StageError as error:
-            rows.append(
-                TrajectoryRow(task.name, METHODS[0], np.nan, optimal, (np.nan,) * 3, np.nan, np.nan, np.nan, str(error))
-            )
+            rows.append(TrajectoryRow.failed(task.name, METHODS[0], optimal, str(error)))
         else:
             timing.sample(PERIOD_S)
             compute = time.perf_counter() - start
@@ -147,24 +159,140 @@ def bench_trajectory(
             )
         for name, share in zip(METHODS[1:], ((0.9, 0.3), (1.0, 1.0)), strict=True):
             progress(f"{task.name}: {name}")
-            start = time.perf_counter()
-            retimed = retime_path(path, share[0] * v, share[1] * a, sample_period_s=PERIOD_S).trajectory
-            smoothed = smooth_trajectory(retimed, v, a, j, period_s=PERIOD_S)
-            compute = time.perf_counter() - start
-            q = smoothed.trajectory.q[:-1]  # every period, without the final sample (the last step may be shorter)
-            hands = _hand_distance(
-                task, names, smoothed.trajectory.q, retimed.interpolate(smoothed.trajectory.t)[0], path.fixed
-            )
-            rows.append(
-                TrajectoryRow(
-                    task.name,
-                    name,
-                    smoothed.trajectory.duration_s,
-                    optimal,
-                    _ratios(q, PERIOD_S, (v, a, j)),
-                    smoothed.path_deviation_max_rad,
-                    hands,
-                    compute,
-                )
-            )
+            fields = (names, path.t, path.q, path.rep, dict(path.fixed))
+            try:
+                rows.append(isolated(tracked_row, task_file, fields, name, share, optimal))
+            except (StageError, CrashedError) as error:
+                rows.append(TrajectoryRow.failed(task.name, name, optimal, str(error)))
+        bound = rest_to_rest_bound_s(path, v, a, j)
+        rows[first:] = [replace(row, bound_s=bound) for row in rows[first:]]
     return rows
+
+
+class CrashedError(Exception):
+    """The process that ran a benchmark case ended without a result (a crash in a C extension)."""
+
+
+def isolated(function: Callable[..., Any], *args: Any) -> Any:
+    """``function(*args)`` run in a process of its own (spawned), its result or its StageError.
+
+    Ruckig's C++ has crashed the whole command without a message (signal 11 in ``calculate``, ruckig 0.19.4, issue
+    36); in a process of its own a crash is a :class:`CrashedError` naming the exit code or signal, and the other
+    cases still run.
+    """
+    context = multiprocessing.get_context("spawn")
+    receive, send = context.Pipe(duplex=False)
+    process = context.Process(target=_send_result, args=(send, function, args))
+    process.start()
+    send.close()
+    try:
+        kind, value = receive.recv()
+    except EOFError:
+        process.join()
+        code = process.exitcode
+        why = f"signal {-code} ({signal.Signals(-code).name})" if code is not None and code < 0 else f"exit {code}"
+        raise CrashedError(f"the process running {function.__name__} ended without a result: {why}") from None
+    process.join()
+    if kind == "error":
+        raise StageError(value)
+    return value
+
+
+def _send_result(send: Any, function: Callable[..., Any], args: tuple[Any, ...]) -> None:
+    """Run ``function(*args)`` and send ("ok", result) or ("error", the StageError's message) on ``send``."""
+    try:
+        send.send(("ok", function(*args)))
+    except StageError as error:
+        send.send(("error", str(error)))
+    finally:
+        send.close()
+
+
+def tracked_row(
+    task_file: str,
+    fields: tuple[tuple[str, ...], np.ndarray, np.ndarray, np.ndarray, dict[str, float]],
+    name: str,
+    share: tuple[float, float],
+    optimal: float,
+) -> TrajectoryRow:
+    """TOPP-RA at ``share`` of the velocity and acceleration limits, tracked by Ruckig at the full limits.
+
+    The row ``name`` of the joint path ``fields`` (joint names, t, q, rep, locked joints) of ``task_file``.
+    """
+    from dualarm.smooth import smooth_trajectory
+
+    task = load_task(task_file)
+    names, t, q, rep, fixed = fields
+    path = _bare_path(names, t, q, rep, fixed)
+    v, a, j = (task.robot.limit_array(k, names) for k in ("velocity", "acceleration", "jerk"))
+    start = time.perf_counter()
+    retimed = retime_path(path, share[0] * v, share[1] * a, sample_period_s=PERIOD_S).trajectory
+    smoothed = smooth_trajectory(retimed, v, a, j, period_s=PERIOD_S)
+    compute = time.perf_counter() - start
+    motion = smoothed.trajectory.q[:-1]  # every period, without the final sample (the last step may be shorter)
+    hands = _hand_distance(task, names, smoothed.trajectory.q, retimed.interpolate(smoothed.trajectory.t)[0], fixed)
+    return TrajectoryRow(
+        task.name,
+        name,
+        smoothed.trajectory.duration_s,
+        optimal,
+        _ratios(motion, PERIOD_S, (v, a, j)),
+        smoothed.path_deviation_max_rad,
+        hands,
+        compute,
+    )
+
+
+def _bare_path(
+    names: tuple[str, ...], t: np.ndarray, q: np.ndarray, rep: np.ndarray, fixed: Mapping[str, float]
+) -> JointPath:
+    """The joint path of ``names`` at ``q`` (N, n) [rad] and times ``t`` (N,) [s], every sample solved."""
+    return JointPath(
+        method="bench",
+        joint_names=names,
+        t=t,
+        rep=rep,
+        q=q,
+        qd=np.zeros(q.shape),
+        status=np.zeros(len(q), dtype=int),
+        solve_time_s=np.zeros(len(q)),
+        hand_error_m=np.zeros((len(q), 0)),
+        hands=(),
+        fixed=fixed,
+    )
+
+
+def rest_to_rest_bound_s(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> float:
+    """A lower bound [s] on a jerk-limited timing that rests where the jerk-limited timing rests.
+
+    Summed over its pieces (:func:`dualarm.retime.jerk.pieces`, rest to rest): the larger of TOPP-RA's duration
+    along the piece (jerk unlimited) and the longest of the joints' own time-optimal rest-to-rest moves over the
+    piece's displacement (Ruckig, one joint, no path to follow), both of which any timing of the piece needs.
+    """
+    from ruckig import InputParameter, Ruckig, Trajectory
+
+    from dualarm.retime.jerk import pieces
+    from dualarm.retime.topp import chord_parameter
+
+    s, kept, _ = chord_parameter(path.q)
+    q = path.q[kept]
+    total = 0.0
+    for first, last, _ in pieces(q, s):
+        samples = q[first : last + 1]
+        along = plan(
+            _bare_path(path.joint_names, np.arange(len(samples)), samples, np.zeros(len(samples), int), {}),
+            velocity,
+            acceleration,
+        )
+        moves = [0.0]
+        for i in np.flatnonzero(samples[-1] != samples[0]):
+            inp = InputParameter(1)
+            inp.current_position, inp.target_position = [float(samples[0, i])], [float(samples[-1, i])]
+            inp.max_velocity, inp.max_acceleration, inp.max_jerk = (
+                [float(x[i])] for x in (velocity, acceleration, jerk)
+            )
+            move = Trajectory(1)
+            Ruckig(1).calculate(inp, move)
+            moves.append(move.duration)
+        total += max(along.duration_s, max(moves))
+    return total

@@ -292,8 +292,9 @@ def bench_trajectory_command() -> None:
     """The jerk-limited timing against TOPP-RA (0.9/0.3 and 1.0/1.0) with Ruckig tracking.
 
     On the triangle, the circle, the ball game and the bowl grasp: duration and its ratio to TOPP-RA
-    at full limits, limit ratios by finite differences (red above 1 + 1e-6), path deviation per
-    joint and at the hands, compute time. Exits 1 if a method failed, 3 if a motion exceeds a limit.
+    at full limits and to a lower bound of a jerk-limited motion resting where the jerk-limited timing
+    rests, limit ratios by finite differences (red above 1 + 1e-6), path deviation per joint and at the
+    hands, compute time. Exits 1 if a method failed, 3 if a motion exceeds a limit.
     """
     from dualarm.bench.trajectory import bench_trajectory
     from dualarm.limits import LIMIT_TOLERANCE
@@ -308,25 +309,38 @@ def bench_trajectory_command() -> None:
         ),
         title_justify="left",
     )
-    for column in ("task", "method", "duration s", "× TOPP-RA 1.0/1.0", "v", "a", "j", "Δq rad", "Δhand µm", "ms / s"):
+    for column in (
+        "task",
+        "method",
+        "duration s",
+        "× TOPP-RA 1.0/1.0",
+        "× bound",
+        "v",
+        "a",
+        "j",
+        "Δq rad",
+        "Δhand µm",
+        "ms / s",
+    ):
         table.add_column(column, justify="left" if column in ("task", "method") else "right", no_wrap=True)
     for r in rows:
         if r.failure:
-            table.add_row(r.task, r.method, "failed", *["-"] * 7)
+            table.add_row(r.task, r.method, "failed", *["-"] * 8)
             continue
         table.add_row(
             r.task,
             r.method,
             f"{r.duration_s:.3f}",
             f"{r.duration_s / r.optimal_s:.3f}" if r.optimal_s else "-",
+            f"{r.duration_s / r.bound_s:.3f}" if r.bound_s else "-",
             *(Text(f"{x:.6f}", style="bold red" if x > 1 + LIMIT_TOLERANCE else "") for x in r.ratios),
             f"{r.deviation_rad:.2e}",
             f"{r.hand_deviation_m * 1e6:.3g}" if r.hand_deviation_m < 1e-3 else f"{r.hand_deviation_m * 1e6:.0f}",
             f"{r.compute_s / r.duration_s * 1e3:.1f}" if r.duration_s else "-",
         )
-    Console(highlight=False, emoji=False, width=max(out.width, 150), file=out.file).print(
+    Console(highlight=False, emoji=False, width=max(out.width, 170), file=out.file).print(
         table
-    )  # ten columns of numbers, none cut
+    )  # eleven columns of numbers, none cut
     exceeded = [
         f"- {r.task}, {r.method}: its {kind} reaches {x:.7f} times the limit"
         for r in rows

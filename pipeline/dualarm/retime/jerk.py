@@ -23,7 +23,7 @@ the ball game, by up to 8e-5 rad with a 0.19 s period), P is the interpolating q
 timing slows down to keep its jerk. q''' = P''' s'^3 + 3 P'' s' s'' + P' s''' is bounded.
 
 The timing of a piece. A straight piece (two samples) is timed by Ruckig on s, within the limits of
-s that keep each joint within :data:`MARGIN` of its own: exact and time-optimal. Any other is one
+s that keep each joint within :data:`MARGIN` of its own: exact and time-optimal (:func:`_bounded`). Any other is one
 nonlinear program (CasADi, solved by IPOPT; Debrouwere et al. 2013 set out time-optimal path
 following as such a program): on K + 1 values of s, the nodes, the unknowns are the path velocity
 s' and acceleration s'' at each node, and on each interval its duration and a constant path jerk
@@ -33,17 +33,28 @@ at every node, and the total time is minimised. The program is solved in units o
 length and its first guess's duration, where its unknowns are of order one. The solution's jerks
 are then integrated exactly, after the least change that ends the piece at rest (:func:`_exact`).
 
-The check. Between the nodes the limits can be exceeded; so each timing is checked analytically
-every :data:`CHECK_STEP_S`, on both sides of every node, and where s passes each knot of P and
-three points between knots. Each interval where a limit is exceeded by more than
-:data:`REFINE_ABOVE` is halved (in s), and the program solved again from the last timing: from
-:data:`NODES` intervals (denser at both rest ends) up to :data:`MAX_NODES`. What exceeds then is
+The check. Between the nodes the limits can be exceeded; so each timing is checked analytically,
+on both sides of every node, and where s passes each knot of P and three points between knots,
+and every :data:`REFINE_CHECK_STEP_S` while refining. Each interval where a limit is exceeded by
+more than :data:`REFINE_ABOVE` is halved (in s), and the program solved again from the last
+timing: from :data:`NODES` intervals (denser at both rest ends) up to :data:`MAX_NODES`. The
+refined programs bound the acceleration and jerk of the joints that come near their limits
+(:data:`ACTIVE_SHARE`; the others' constraints only cost IPOPT time), and of any joint found beyond
+one. Then the whole piece is checked every :data:`CHECK_STEP_S`, every joint, and what exceeds is
 removed by a uniform slow-down of the piece, k = max(velocity ratio, sqrt(acceleration ratio),
 cbrt(jerk ratio)) (t -> k t scales the velocity by 1/k, the acceleration by 1/k^2, the jerk by
 1/k^3).
 
 A piece equal to an earlier one (within :data:`SAME_PIECE_RAD`: a repetition) reuses its timing, so
 repeated paths give bit-identical repeated trajectories and are solved once.
+
+Fallbacks (:func:`_time_piece`). When IPOPT does not solve a piece's first program, the program is
+solved again from a first guess at :data:`WARM_START_SHARE` of its speed, and if that fails too the
+piece is timed by Ruckig on s within limits of s that keep every joint within its own wherever on
+the piece (:func:`_bounded`, feasible by construction). Either is reported
+(:attr:`dualarm.retime.timing.Timing.fallbacks`, with the piece's duration and its velocity- and
+acceleration-limited bound), so a finite path is always timed. A path that jumps is not a path:
+:func:`dualarm.retime.stage.check_jumps` refuses it before it is timed.
 
 Units: joint positions [rad], velocities [rad/s], accelerations [rad/s^2], jerks [rad/s^3], times
 [s]; s in [rad].
@@ -56,12 +67,12 @@ from dataclasses import dataclass, replace
 
 import casadi as cs
 import numpy as np
-from ruckig import InputParameter, Result, Ruckig, Trajectory
+from ruckig import InputParameter, Ruckig, Trajectory
 from scipy.interpolate import BSpline, make_interp_spline, make_lsq_spline
 
 from dualarm.contracts.joint_path import JointPath
 from dualarm.errors import StageError
-from dualarm.retime.timing import STAGE, Timing, still
+from dualarm.retime.timing import STAGE, Fallback, Timing, still
 from dualarm.retime.topp import chord_parameter
 
 #: The path is cut where its direction turns more than acos(this) ...
@@ -80,8 +91,13 @@ REFINE_ABOVE = 1e-2
 #: Share of each limit a program may use at its nodes (the check takes up the rest), and a straight piece
 #: everywhere.
 MARGIN = 1 - 2e-3
-#: Time step of the analytic check of each piece's limits [s].
+#: Time step of the analytic check of each piece's limits [s], and of the checks that choose what to refine.
 CHECK_STEP_S = 1e-4
+REFINE_CHECK_STEP_S = 5e-4
+#: The refined programs constrain the acceleration and jerk of the joints whose worst limit ratio in the first
+#: program's timing is at least this share of the worst joint's, and of any other joint the check then finds beyond
+#: its limit; the final check covers every joint.
+ACTIVE_SHARE = 0.8
 #: Pieces closer than this (every joint of every sample) share one timing [rad].
 SAME_PIECE_RAD = 1e-10
 #: IPOPT's settings: a monotone barrier from 1e-3 halved the solve time against the adaptive default on the
@@ -95,6 +111,14 @@ IPOPT = {
     "mu_init": 1e-3,
     "linear_solver": "mumps",
 }
+#: The fallbacks of a piece whose program IPOPT does not solve from its first guess, in order: the program from the
+#: first guess at this share of its speed, then Ruckig on s within limits that hold wherever on the piece.
+WARM_START_SHARE = 0.3
+FALLBACKS = ("warm start", "worst-case limits")
+#: Rounds of knot insertion before a curve's coefficients are clipped into the position limits (:func:`within`).
+CLIP_REFINEMENTS = 3
+#: Points per knot interval where a piece's worst-case derivatives are taken (and at each knot).
+WORST_CASE_POINTS = 16
 #: IPOPT's return statuses that count as solved.
 SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
@@ -112,6 +136,8 @@ class PieceTiming:
         sddd: s''' on each interval (K,) [rad/s^3].
         dt: each interval's duration (K,) [s].
         stretch: the uniform slow-down after the check (>= 1).
+        fallback: how the piece was timed when the program failed from its first guess (:data:`FALLBACKS`), else
+            "".
     """
 
     path: BSpline
@@ -121,6 +147,7 @@ class PieceTiming:
     sddd: np.ndarray
     dt: np.ndarray
     stretch: float = 1.0
+    fallback: str = ""
 
     @property
     def starts_s(self) -> np.ndarray:
@@ -160,12 +187,13 @@ class PieceTiming:
             d3 * sd[:, None] ** 3 + 3 * d2 * (sd * sdd)[:, None] + d1 * sddd[:, None],
         )
 
-    def excess(self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> np.ndarray:
-        """Each interval's slow-down to meet the limits (K,).
+    def excess(
+        self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, step_s: float = CHECK_STEP_S
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Each interval's slow-down to meet the limits (K,), and each joint's (n,).
 
-        max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)), checked every :data:`CHECK_STEP_S`, on both
-        sides of every node, and where s passes each knot of P and the points a quarter, half and three quarters
-        between them.
+        max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)), checked every ``step_s``, on both sides of
+        every node, and where s passes each knot of P and the points a quarter, half and three quarters between them.
         """
         end = self.duration_s
         nodes = self.stretch * self.starts_s
@@ -175,40 +203,51 @@ class PieceTiming:
         t = np.sort(
             np.concatenate(
                 [
-                    np.linspace(0.0, end, max(50, int(end / CHECK_STEP_S)) + 1),
+                    np.linspace(0.0, end, max(50, int(end / step_s)) + 1),
                     *(np.clip(x + side, 0, end) for x in (nodes, passes) for side in (-1e-12, 1e-12)),
                 ]
             )
         )
         _, qd, qdd, qddd = self(t)
-        worst = np.max(
-            [np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=(0, 2)
+        ratios = np.max(
+            [np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=0
         )
         excess = np.zeros(len(self.dt))
-        np.maximum.at(excess, np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(self.dt) - 1), worst)
-        return excess
+        np.maximum.at(
+            excess, np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(self.dt) - 1), ratios.max(axis=1)
+        )
+        return excess, ratios.max(axis=0)
 
 
-def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> Timing:
+def jerk_limited(
+    path: JointPath,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    jerk: np.ndarray,
+    position: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Timing:
     """The jerk-limited timing of ``path`` (module docstring).
 
     Args:
         path: the IK output, finite.
         velocity, acceleration, jerk: validated limits per joint (n,), symmetric [rad/s, rad/s^2, rad/s^3].
+        position: the lower and upper position limits (n,) each [rad]: the curve stays within them wherever the
+            samples do (:func:`within`); None: not bounded.
 
     Returns:
-        A ``jerk-limited`` timing; a path that does not move gives one at rest of duration 0.
+        A ``jerk-limited`` timing; a path that does not move gives one at rest of duration 0. The pieces timed by a
+        fallback are its :attr:`~dualarm.retime.timing.Timing.fallbacks`.
 
-    Raises:
-        StageError: IPOPT does not solve a piece's program (naming the piece's samples).
+    Never fails on a finite path: a piece whose program fails is timed by a fallback (:func:`_time_piece`).
     """
     s, kept, of_sample = chord_parameter(path.q)
     if len(kept) == 1:
         return still(path, method="jerk-limited")
     q = path.q[kept]
-    cut = pieces(q, s)
+    cut = pieces(q, s, position)
     timings: list[PieceTiming] = []
     solved: list[tuple[np.ndarray, PieceTiming]] = []
+    fallbacks: list[Fallback] = []
     for first, last, curve in cut:
         samples = q[first : last + 1]
         same = next(
@@ -222,6 +261,9 @@ def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray
         if same is None:
             same = _time_piece(curve, velocity, acceleration, jerk, (int(kept[first]), int(kept[last])))
             solved.append((samples, same))
+        if same.fallback:
+            bound = _bound_s(curve, velocity, acceleration)
+            fallbacks.append(Fallback(int(kept[first]), int(kept[last]), same.fallback, same.duration_s, bound))
         timings.append(same)
     starts = np.concatenate([[0.0], np.cumsum([p.duration_s for p in timings])])
     evaluate = _Pieces(tuple(timings), starts)
@@ -241,10 +283,13 @@ def jerk_limited(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray
         evaluate=evaluate,
         stretch=max(p.stretch for p in timings),
         fixed=path.fixed,
+        fallbacks=tuple(fallbacks),
     )
 
 
-def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
+def pieces(
+    q: np.ndarray, s: np.ndarray, position: tuple[np.ndarray, np.ndarray] | None = None
+) -> list[tuple[int, int, BSpline]]:
     """The pieces of the distinct samples ``q`` (K, n) at chord lengths ``s`` (K,) [rad], in order.
 
     Each one's first and last sample and its curve P over s - s[first] (module docstring).
@@ -256,7 +301,8 @@ def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
     far after it (or the last). Then each piece gets its curve (:func:`fit`). Where none fits and
     it misses samples within :data:`TURN_CHORD_RAD` of an end (a hook), every sample from that end
     to the last it misses there is cut too, and the rest fitted again; where it misses only samples
-    farther in, the curve is the interpolating quintic.
+    farther in, the curve is the interpolating quintic. Each curve is kept within the ``position``
+    limits (:func:`within`).
     """
     index = np.arange(len(s))
     before = np.clip(np.searchsorted(s, s - TURN_CHORD_RAD, side="right") - 1, 0, None)
@@ -278,7 +324,7 @@ def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
         hook = np.flatnonzero(miss > FIT_RAD) + first  # the samples it misses
         start, end = hook[s[hook] - s[first] <= TURN_CHORD_RAD], hook[s[last] - s[hook] <= TURN_CHORD_RAD]
         if spline is not None:
-            done.append((first, last, spline))
+            done.append((first, last, within(spline, position, q[first : last + 1])))
         elif len(start) or len(end):  # hooks: cut every sample from each end to the last it misses there
             lo = max(int(start.max()), first + 1) if len(start) else first
             hi = max(lo, min(int(end.min()), last - 1)) if len(end) else last
@@ -288,7 +334,8 @@ def pieces(q: np.ndarray, s: np.ndarray) -> list[tuple[int, int, BSpline]]:
                 + [(k, k + 1) for k in range(hi, last)]
             )
         else:
-            done.append((first, last, make_interp_spline(s[first : last + 1] - s[first], q[first : last + 1], k=5)))
+            spline = make_interp_spline(s[first : last + 1] - s[first], q[first : last + 1], k=5)
+            done.append((first, last, within(spline, position, q[first : last + 1])))
     return sorted(done, key=lambda piece: piece[0])
 
 
@@ -302,7 +349,7 @@ def fit(s: np.ndarray, q: np.ndarray) -> tuple[BSpline | None, np.ndarray]:
     denser where the samples are: where the task moves slowly, as it does where the path bends
     tightly), and at least :data:`TURN_CHORD_RAD` apart. Their number is doubled from 1 until the
     spline fits; with at most 6 samples the interpolating spline of degree m - 1 is P. None when no
-    spline of at most m / 2 intervals fits (the misses are then the densest one's).
+    spline of at most min(m / 2, m - 5) intervals fits (the misses are then the densest one's).
     """
     m, k = len(s), 5
     if m <= k + 1:
@@ -311,7 +358,7 @@ def fit(s: np.ndarray, q: np.ndarray) -> tuple[BSpline | None, np.ndarray]:
     weights = np.ones(m)
     weights[[0, -1]] = 1e6
     intervals, miss = 1, np.zeros(m)
-    while intervals <= max(1, m // 2):
+    while intervals <= max(1, min(m // 2, m - k)):  # at most m coefficients: a least-squares problem
         inner = [s[0]]
         for knot in np.interp(np.linspace(0.0, 1.0, intervals + 1)[1:], blend, s):
             if knot - inner[-1] >= TURN_CHORD_RAD or knot == s[-1]:
@@ -320,11 +367,53 @@ def fit(s: np.ndarray, q: np.ndarray) -> tuple[BSpline | None, np.ndarray]:
             del inner[-2]
         spline = make_lsq_spline(s, q, np.concatenate([np.full(k, s[0]), inner, np.full(k, s[-1])]), k=k, w=weights)
         spline.c[[0, -1]] = q[[0, -1]]  # nearly so already (their weights): through both ends exactly, so pieces meet
-        miss = np.abs(spline(s) - q).max(axis=1)
+        now = np.abs(spline(s) - q).max(axis=1)
+        if not np.isfinite(now).all():  # knots without samples between them: no denser spline fits better
+            break
+        miss = now
         if miss.max() <= FIT_RAD:
             return spline, miss
         intervals *= 2
     return None, miss
+
+
+def within(spline: BSpline, position: tuple[np.ndarray, np.ndarray] | None, q: np.ndarray) -> BSpline:
+    """``spline`` kept within the ``position`` limits wherever its samples are.
+
+    ``position``: lower and upper (n,) [rad]; ``q``: the samples (m, n) [rad].
+
+    A B-spline lies in the convex hull of its coefficients, so with every coefficient within a joint's limits
+    (widened to any sample beyond them) the curve is within them everywhere, exactly. Where a coefficient is
+    outside, knots are first inserted at the middle of every knot interval its B-spline spans, which leaves the
+    curve as it is and brings its coefficients toward it (up to :data:`CLIP_REFINEMENTS` times; not in a curve of
+    degree 2 or less, one polynomial through at most three samples, whose P'' would then jump); then the
+    coefficients are clipped into the limits. That moves the curve by at most the largest clip (the B-splines sum
+    to one): about as far as the curve itself went beyond the limit between samples, which the retime stage
+    measures as the path deviation. The end coefficients are the end samples: pieces still meet.
+    """
+    if position is None:
+        return spline
+    lower = np.minimum(position[0], q.min(axis=0))
+    upper = np.maximum(position[1], q.max(axis=0))
+    for refinement in range(CLIP_REFINEMENTS + 1):
+        outside = np.flatnonzero(((spline.c < lower) | (spline.c > upper)).any(axis=1))
+        if not len(outside):
+            return spline
+        if refinement == CLIP_REFINEMENTS or spline.k < 3:  # a new knot would leave a quadratic's P'' to jump there
+            break
+        t, k = spline.t, spline.k
+        spans = np.unique((outside[:, None] + np.arange(k + 1)).ravel())  # coefficient i's B-spline spans t[i .. i+k+1]
+        middles = (t[spans] + t[spans + 1]) / 2
+        for x in np.unique(middles[t[spans + 1] > t[spans]]):
+            spline = spline.insert_knot(x)
+    return BSpline(spline.t, np.clip(spline.c, lower, upper), spline.k)
+
+
+def _dense(path: BSpline) -> np.ndarray:
+    """Each knot of ``path``, and :data:`WORST_CASE_POINTS` - 1 points evenly between each two [rad]."""
+    knots = np.unique(path.t)
+    shares = np.arange(WORST_CASE_POINTS) / WORST_CASE_POINTS
+    return np.append((knots[:-1, None] + shares * np.diff(knots)[:, None]).ravel(), knots[-1])
 
 
 def _cosines(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -375,51 +464,81 @@ def _time_piece(
     """One piece's timing along its curve ``path`` (:func:`pieces`).
 
     Programs solved on nodes refined where the check finds a limit exceeded, then stretched (module docstring); the
-    piece's ``samples`` (first, last) name it in errors.
+    piece's ``samples`` (first, last) name it in errors. A straight piece is Ruckig's (:func:`_bounded`). When IPOPT
+    does not solve the first program, the fallbacks of :data:`FALLBACKS`: the program from the first guess slowed to
+    :data:`WARM_START_SHARE` of its speed, then :func:`_bounded`, which cannot fail.
     """
     if path.k == 1:
-        return _straight(path, velocity, acceleration, jerk, samples)
+        return _bounded(path, velocity, acceleration, jerk)
     nodes = path.t[-1] * (1 - np.cos(np.linspace(0.0, np.pi, NODES + 1))) / 2  # denser at both rest ends
-    piece = _solve(path, nodes, velocity, acceleration, jerk, samples, None)
-    excess = piece.excess(velocity, acceleration, jerk)
+    fallback = ""
+    try:
+        piece = _solve(path, nodes, velocity, acceleration, jerk, samples, None)
+    except StageError:
+        try:
+            fallback = FALLBACKS[0]
+            piece = _solve(path, nodes, velocity, acceleration, jerk, samples, None, WARM_START_SHARE)
+        except StageError:
+            return replace(_bounded(path, velocity, acceleration, jerk), fallback=FALLBACKS[1])
+    excess, by_joint = piece.excess(velocity, acceleration, jerk, REFINE_CHECK_STEP_S)
+    joints = np.flatnonzero(by_joint >= ACTIVE_SHARE * by_joint.max())
     while (excess > 1 + REFINE_ABOVE).any():
         halve = excess > 1 + REFINE_ABOVE
         if len(nodes) - 1 + halve.sum() > MAX_NODES:
             break
         nodes = np.sort(np.concatenate([nodes, (nodes[:-1][halve] + nodes[1:][halve]) / 2]))
         try:
-            piece = _solve(path, nodes, velocity, acceleration, jerk, samples, piece)
+            piece = _solve(path, nodes, velocity, acceleration, jerk, samples, piece, joints=joints)
         except StageError:  # a finer program IPOPT cannot solve: the coarser timing, stretched, stands
             break
-        excess = piece.excess(velocity, acceleration, jerk)
-    k = float(excess.max())
+        excess, by_joint = piece.excess(velocity, acceleration, jerk, REFINE_CHECK_STEP_S)
+        joints = np.union1d(joints, np.flatnonzero(by_joint > 1 + REFINE_ABOVE))  # a joint left out that now exceeds
+    k = float(piece.excess(velocity, acceleration, jerk)[0].max())
+    return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0, fallback=fallback)
+
+
+def _bounded(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> PieceTiming:
+    """Ruckig's timing of s, rest to rest, within limits of s that keep every joint within its own.
+
+    With D1, D2, D3 each joint's largest |P'|, |P''|, |P'''| on the piece (at its knots and
+    :data:`WORST_CASE_POINTS` points between), and v, a, j its limits times :data:`MARGIN`, the limits of s are
+    s' <= min(v / D1, sqrt(a / (2 D2)), cbrt(j / (3 D3))), then s'' <= min((a - D2 s'^2) / D1, j / (9 D2 s')),
+    then s''' <= (j - D3 s'^3 - 3 D2 s' s'') / D1, which is at least j / (3 D1): so |q'| <= v,
+    |q''| = |P'' s'^2 + P' s''| <= a and |q'''| = |P''' s'^3 + 3 P'' s' s'' + P' s'''| <= j wherever s is. Feasible
+    by construction, and exact and time-optimal for a straight piece (D2 = D3 = 0). For a curve, the check
+    stretches what the points between miss.
+    """
+    x = _dense(path)
+    d1, d2, d3 = (np.abs(path(x, m)).max(axis=0) if m <= path.k else np.zeros(path.c.shape[-1]) for m in (1, 2, 3))
+    v, a, j = (MARGIN * limit for limit in (velocity, acceleration, jerk))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sd = np.nanmin(np.concatenate([v / d1, np.sqrt(a / (2 * d2)), np.cbrt(j / (3 * d3))]))
+        sdd = np.nanmin(np.concatenate([(a - d2 * sd**2) / d1, j / (9 * d2 * sd)]))
+        sddd = np.nanmin((j - d3 * sd**3 - 3 * d2 * sd * sdd) / d1)
+    inp = InputParameter(1)
+    inp.current_position, inp.target_position = [0.0], [float(path.t[-1])]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [float(sd)], [float(sdd)], [float(sddd)]
+    plan = Trajectory(1)
+    Ruckig(1).calculate(inp, plan)  # finite positive limits, rest to rest: within Ruckig's domain
+    profile = plan.profiles[0][0]
+    used = np.flatnonzero(np.asarray(profile.t) > 0)  # Ruckig's seven phases, without those of no duration
+    piece = _exact(path, np.asarray(profile.j)[used], np.asarray(profile.t)[used])
+    if path.k == 1:  # P' constant: the limits of s hold the joints' exactly, no check needed
+        return piece
+    k = float(piece.excess(velocity, acceleration, jerk)[0].max())
     return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0)
 
 
-def _straight(
-    path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, samples: tuple[int, int]
-) -> PieceTiming:
-    """The time-optimal timing of a straight piece (two samples).
+def _bound_s(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray) -> float:
+    """A piece's duration within the velocity and acceleration limits alone, jerk unlimited [s].
 
-    Ruckig's on s, rest to rest, within the limits of s that keep every joint within :data:`MARGIN` of its own (P'
-    is constant, P'' and P''' are 0).
+    The backward-forward integration of :func:`_first_guess` at the full limits on :data:`MAX_NODES` intervals.
     """
-    direction = np.maximum(np.abs(path(0.0, 1)), 1e-300)
-    inp = InputParameter(1)
-    inp.current_position, inp.target_position = [0.0], [float(path.t[-1])]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = (
-        [float(MARGIN * np.min(limit / direction))] for limit in (velocity, acceleration, jerk)
-    )
-    plan = Trajectory(1)
-    if Ruckig(1).calculate(inp, plan) not in (Result.Working, Result.Finished):
-        raise StageError(
-            f"{STAGE}: jerk-limited: Ruckig did not time the straight piece from sample {samples[0]} to {samples[1]}",
-            stage=STAGE,
-            sample=samples[0],
-        )
-    profile = plan.profiles[0][0]
-    used = np.flatnonzero(np.asarray(profile.t) > 0)  # Ruckig's seven phases, without those of no duration
-    return _exact(path, np.asarray(profile.j)[used], np.asarray(profile.t)[used])
+    nodes = np.linspace(0.0, path.t[-1], MAX_NODES + 1)
+    d1, d2 = path(nodes, 1), path(nodes, 2)
+    cap = np.min(velocity / np.maximum(np.abs(d1), 1e-12), axis=1)
+    sd = _first_guess(nodes, d1, d2, cap, acceleration, share=1.0)
+    return float(np.sum(2 * np.diff(nodes) / np.maximum(sd[:-1] + sd[1:], 1e-12)))
 
 
 def _exact(path: BSpline, sddd: np.ndarray, dt: np.ndarray) -> PieceTiming:
@@ -455,21 +574,25 @@ def _solve(
     jerk: np.ndarray,
     samples: tuple[int, int],
     start: PieceTiming | None,
+    share: float = 0.9,
+    joints: np.ndarray | None = None,
 ) -> PieceTiming:
     """The program on ``nodes`` (K + 1,) [rad] along ``path`` solved (:func:`_program`), unstretched.
 
-    From the timing ``start`` on coarser nodes (or from :func:`_first_guess`); StageError naming the piece's
-    ``samples`` if IPOPT fails.
+    From the timing ``start`` on coarser nodes (or from :func:`_first_guess` at ``share`` of its speed); the
+    acceleration and jerk of the ``joints`` (indices; all when None) are constrained, every joint's velocity.
+    StageError naming the piece's ``samples`` if IPOPT fails.
     """
     K = len(nodes) - 1
     d1, d2, d3 = (path(nodes, m) for m in (1, 2, 3))
-    solver, lbg, ubg = _program(d1.shape[1], K)
+    joints = np.arange(d1.shape[1]) if joints is None else joints
+    solver, lbg, ubg = _program(len(joints), K)
     cap = MARGIN * np.min(velocity / np.maximum(np.abs(d1), 1e-12), axis=1)  # s' within every joint's velocity limit
     if start is None:
         bends = (
             np.min(np.cbrt(jerk / np.maximum(np.abs(d3), 1e-12)), axis=1) / 2
         )  # s' where the path's third derivative alone asks 8 times the jerk limit
-        sd0 = _first_guess(nodes, d1, d2, np.minimum(cap, bends), MARGIN * acceleration)
+        sd0 = _first_guess(nodes, d1, d2, np.minimum(cap, bends), MARGIN * acceleration, share)
         dt0 = 2 * np.diff(nodes) / np.maximum(sd0[:-1] + sd0[1:], 1e-6)
         sdd0 = np.append(np.diff(sd0) / dt0, 0.0)
     else:
@@ -488,9 +611,9 @@ def _solve(
     parameters = np.concatenate(
         [
             np.diff(nodes) / L,
-            *((d * L**m).T.ravel() for m, d in ((1, d1), (2, d2), (3, d3))),
-            1 / (acceleration * T**2),
-            1 / (jerk * T**3),
+            *((d[:, joints] * L**m).T.ravel() for m, d in ((1, d1), (2, d2), (3, d3))),
+            1 / (acceleration[joints] * T**2),
+            1 / (jerk[joints] * T**3),
         ]
     )
     x0 = np.concatenate([sd0 / speed, sdd0 * T / speed, np.diff(sdd0) / dt0 * T**2 / speed, dt0 / T])
@@ -552,12 +675,12 @@ def _program(n: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
 
 
 def _first_guess(
-    s: np.ndarray, d1: np.ndarray, d2: np.ndarray, cap: np.ndarray, acceleration: np.ndarray
+    s: np.ndarray, d1: np.ndarray, d2: np.ndarray, cap: np.ndarray, acceleration: np.ndarray, share: float = 0.9
 ) -> np.ndarray:
     """A starting s' (K + 1,) [rad/s] for the program.
 
     Constant path acceleration between nodes within the velocity cap and the acceleration limits, backward then
-    forward (numerical integration, as TOPP's), at 90 %.
+    forward (numerical integration, as TOPP's), at ``share`` of the speed.
     """
     ds = np.diff(s)
     moving = np.abs(d1) > 1e-12
@@ -576,4 +699,4 @@ def _first_guess(
     for k in range(len(s) - 1):
         lo, hi = bounds(k, forward[k])
         forward[k + 1] = min(back[k + 1], forward[k] + 2 * ds[k] * max(hi, 0.0))
-    return 0.9 * np.sqrt(np.maximum(forward, 0.0))
+    return share * np.sqrt(np.maximum(forward, 0.0))

@@ -5,10 +5,11 @@ into a trajectory over time, q(t), qd(t), qdd(t), sampled at a fixed period, tha
 every IK sample and keeps every joint within its velocity and acceleration limits:
 
 1. :func:`plan` validates the limits (:func:`dualarm.limits.per_joint`) and the path
-   (:func:`check_path`), and times the path: time-optimally by TOPP-RA
-   (:func:`dualarm.retime.topp.time_optimal`, which explains the method), or with the task's own
-   timing (``keep_timing``, :func:`dualarm.retime.timing.task_timing`), or jerk-limited within
-   velocity, acceleration and jerk limits (``jerk``, :func:`dualarm.retime.jerk.jerk_limited`).
+   (:func:`check_path`; :func:`check_jumps` but for the task's own timing), and times the path:
+   time-optimally by TOPP-RA (:func:`dualarm.retime.topp.time_optimal`, which explains the method),
+   or with the task's own timing (``keep_timing``, :func:`dualarm.retime.timing.task_timing`), or
+   jerk-limited within velocity, acceleration and jerk limits (``jerk``,
+   :func:`dualarm.retime.jerk.jerk_limited`).
 2. :func:`retime_path` samples the timing (:meth:`dualarm.retime.timing.Timing.sample`). A time-optimal
    trajectory is then checked on its samples (:func:`dualarm.limits.limit_ratios`) and slowed down
    uniformly by k = max(velocity ratio, sqrt(acceleration ratio)) should a sample still exceed a
@@ -31,11 +32,15 @@ from dualarm.contracts.joint_path import JointPath
 from dualarm.contracts.trajectory import JointTrajectory
 from dualarm.errors import StageError
 from dualarm.limits import LimitRatio, limit_ratios, per_joint
-from dualarm.retime.timing import STAGE, Timing, task_timing
+from dualarm.retime.timing import STAGE, Fallback, Timing, task_timing
 from dualarm.retime.topp import time_optimal
 
 #: At most this many uniform slow-downs after sampling, should a sample still exceed a limit.
 SAFEGUARD_PASSES = 3
+#: A joint step between samples beyond this many times what the joint's velocity limit covers in their interval, and
+#: beyond JUMP_MIN_RAD, is a jump (:func:`check_jumps`).
+JUMP_FACTOR = 10.0
+JUMP_MIN_RAD = 1e-3
 
 
 @dataclass(frozen=True)
@@ -49,12 +54,14 @@ class Retimed:
         path_deviation_max_rad: largest joint difference between the trajectory at the times it
             passes the joint-path samples (:attr:`Timing.sample_times_s`) and the samples [rad].
         at_samples: the trajectory's joints at those times, (N, n) [rad].
+        fallbacks: the pieces the jerk-limited timing timed by a fallback (:attr:`Timing.fallbacks`).
     """
 
     trajectory: JointTrajectory
     stretch: float
     path_deviation_max_rad: float
     at_samples: np.ndarray
+    fallbacks: tuple[Fallback, ...] = ()
 
 
 def retime_path(
@@ -65,6 +72,7 @@ def retime_path(
     sample_period_s: float = 0.001,
     keep_timing: bool = False,
     jerk: np.ndarray | None = None,
+    position: tuple[np.ndarray, np.ndarray] | None = None,
     assumed: Callable[[str], str] = lambda kind: "",
 ) -> Retimed:
     """Time a joint path within joint limits and sample it.
@@ -80,6 +88,8 @@ def retime_path(
         jerk: jerk limit per active joint (n,) [rad/s^3] (or one for all): given, the timing is
             jerk-limited (:mod:`dualarm.retime.jerk`) instead of TOPP-RA's, or the task's own
             timing is checked against it.
+        position: the lower and upper position limits per joint (n,) each [rad]: the jerk-limited curve stays
+            within them wherever the samples do (:func:`dualarm.retime.jerk.within`).
         assumed: what a ``keep_timing`` refusal adds about a limit of a kind
             (:meth:`dualarm.model.robot.Robot.assumed`: that it was assumed).
 
@@ -89,20 +99,21 @@ def retime_path(
 
     Raises:
         StageError: a limit is not a positive finite number, the path has non-finite joints,
-            TOPP-RA finds no parameterisation, or (``keep_timing``) the task's timing exceeds a limit.
+            TOPP-RA finds no parameterisation, the path jumps (:func:`check_jumps`; ``keep_timing`` checks the
+            limits instead), or (``keep_timing``) the task's timing exceeds a limit.
     """
     if not (np.isfinite(sample_period_s) and sample_period_s > 0):
         raise StageError(
             f"{STAGE}: the sample period must be a positive number of seconds, got {sample_period_s!r}", stage=STAGE
         )
-    timing = plan(path, velocity, acceleration, keep_timing=keep_timing, jerk=jerk)
+    timing = plan(path, velocity, acceleration, keep_timing=keep_timing, jerk=jerk, position=position)
     traj = timing.sample(sample_period_s)
     if keep_timing:
         check_limits(traj, velocity, acceleration, jerk, assumed)
     else:
         timing, traj = _within_limits(timing, traj, velocity, acceleration, sample_period_s)
     at_samples = timing.evaluate(timing.sample_times_s)[0]
-    return Retimed(traj, timing.stretch, float(np.abs(at_samples - path.q).max()), at_samples)
+    return Retimed(traj, timing.stretch, float(np.abs(at_samples - path.q).max()), at_samples, timing.fallbacks)
 
 
 def plan(
@@ -112,6 +123,7 @@ def plan(
     *,
     keep_timing: bool = False,
     jerk: np.ndarray | None = None,
+    position: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Timing:
     """The continuous trajectory :func:`retime_path` samples (checks the limits and the path first).
 
@@ -121,6 +133,7 @@ def plan(
         acceleration: acceleration limit per active joint (n,) [rad/s^2] (or one for all).
         keep_timing: the path's own timing instead of the time-optimal one.
         jerk: jerk limit per joint (n,) [rad/s^3] (or one for all): the jerk-limited timing.
+        position: the lower and upper position limits per joint (n,) each [rad], for the jerk-limited timing.
 
     Raises:
         StageError: as :func:`retime_path`, except the ``keep_timing`` limit check, which needs samples.
@@ -130,10 +143,11 @@ def plan(
     check_path(path)
     if keep_timing:
         return task_timing(path)
+    check_jumps(path, v)
     if jerk is not None:
         from dualarm.retime.jerk import jerk_limited
 
-        return jerk_limited(path, v, a, per_joint(jerk, path.joint_names, "jerk", STAGE))
+        return jerk_limited(path, v, a, per_joint(jerk, path.joint_names, "jerk", STAGE), position)
     return time_optimal(path, v, a)
 
 
@@ -188,6 +202,33 @@ def check_limits(
             stage=STAGE,
             t_s=worst.t_s,
             joint=worst.joint,
+        )
+
+
+def check_jumps(path: JointPath, velocity: np.ndarray) -> None:
+    """Refuse a path that jumps: a joint step between samples no motion of the joint makes in their time.
+
+    A step of more than :data:`JUMP_FACTOR` times what the joint's velocity limit (n,) [rad/s] covers in the
+    samples' interval is not a motion the task asked for but the IK changing branch (or a path joined from two);
+    no timing follows it *as a path* (any would draw a line the IK never solved through). The StageError names
+    the samples, the joint and the step.
+    """
+    if len(path) < 2:
+        return
+    steps = np.abs(np.diff(path.q, axis=0))
+    allowed = JUMP_FACTOR * np.maximum(np.diff(path.t), 0.0)[:, None] * velocity[None, :]
+    jumps = np.argwhere((steps > allowed) & (steps > JUMP_MIN_RAD))
+    if len(jumps):
+        k, j = (int(x) for x in jumps[0])
+        joint, t_s = path.joint_names[j], float(path.t[k + 1])
+        raise StageError(
+            f"{STAGE}: the joint path jumps: {joint} moves {steps[k, j]:.4g} rad between samples {k} and {k + 1} "
+            f"(t = {t_s:.3f} s), more than {JUMP_FACTOR:g} times its velocity limit allows in "
+            f"{float(path.t[k + 1] - path.t[k]):.4g} s; the IK left its solution there, no timing follows a jump",
+            stage=STAGE,
+            sample=k + 1,
+            t_s=t_s,
+            joint=joint,
         )
 
 

@@ -38,6 +38,26 @@ Evaluator = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 @dataclass(frozen=True)
+class Fallback:
+    """A piece of a jerk-limited timing that its time-optimal program did not time from its first guess.
+
+    Attributes:
+        first_sample, last_sample: the joint-path samples the piece runs between.
+        how: ``warm start`` (the program from a slower first guess) or ``worst-case limits`` (Ruckig on the path
+            parameter within limits that hold wherever on the piece).
+        duration_s: the piece's duration as timed [s].
+        bound_s: its duration within the velocity and acceleration limits alone, jerk unlimited [s]; what the
+            fallback cost is at most ``duration_s - bound_s``.
+    """
+
+    first_sample: int
+    last_sample: int
+    how: str
+    duration_s: float
+    bound_s: float
+
+
+@dataclass(frozen=True)
 class Timing:
     """A continuous joint trajectory along a joint path, before sampling.
 
@@ -53,6 +73,7 @@ class Timing:
         stretch: the uniform slow-down applied after TOPP-RA to meet the limits between its
             gridpoints (>= 1; 1 for ``keep_timing`` and for a path that does not move).
         fixed: values of the robot's locked joints [rad].
+        fallbacks: the pieces of a ``jerk-limited`` timing timed by a fallback, in order.
     """
 
     method: str
@@ -63,6 +84,7 @@ class Timing:
     evaluate: Evaluator
     stretch: float = 1.0
     fixed: Mapping[str, float] = field(default_factory=dict)
+    fallbacks: tuple[Fallback, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
