@@ -223,7 +223,7 @@ def tracked_row(
 
     task = load_task(task_file)
     names, t, q, rep, fixed = fields
-    path = _bare_path(names, t, q, rep, fixed)
+    path = JointPath.of_positions("bench", names, t, q, rep, fixed)
     v, a, j = (task.robot.limit_array(k, names) for k in ("velocity", "acceleration", "jerk"))
     start = time.perf_counter()
     retimed = retime_path(path, share[0] * v, share[1] * a, sample_period_s=PERIOD_S).trajectory
@@ -243,25 +243,6 @@ def tracked_row(
     )
 
 
-def _bare_path(
-    names: tuple[str, ...], t: np.ndarray, q: np.ndarray, rep: np.ndarray, fixed: Mapping[str, float]
-) -> JointPath:
-    """The joint path of ``names`` at ``q`` (N, n) [rad] and times ``t`` (N,) [s], every sample solved."""
-    return JointPath(
-        method="bench",
-        joint_names=names,
-        t=t,
-        rep=rep,
-        q=q,
-        qd=np.zeros(q.shape),
-        status=np.zeros(len(q), dtype=int),
-        solve_time_s=np.zeros(len(q)),
-        hand_error_m=np.zeros((len(q), 0)),
-        hands=(),
-        fixed=fixed,
-    )
-
-
 def rest_to_rest_bound_s(path: JointPath, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> float:
     """A lower bound [s] on a jerk-limited timing that rests where the jerk-limited timing rests.
 
@@ -269,9 +250,7 @@ def rest_to_rest_bound_s(path: JointPath, velocity: np.ndarray, acceleration: np
     along the piece (jerk unlimited) and the longest of the joints' own time-optimal rest-to-rest moves over the
     piece's displacement (Ruckig, one joint, no path to follow), both of which any timing of the piece needs.
     """
-    from ruckig import InputParameter, Ruckig, Trajectory
-
-    from dualarm.retime.jerk import pieces
+    from dualarm.retime.jerk import pieces, rest_to_rest
     from dualarm.retime.topp import chord_parameter
 
     s, kept, _ = chord_parameter(path.q)
@@ -279,20 +258,11 @@ def rest_to_rest_bound_s(path: JointPath, velocity: np.ndarray, acceleration: np
     total = 0.0
     for first, last, _ in pieces(q, s):
         samples = q[first : last + 1]
-        along = plan(
-            _bare_path(path.joint_names, np.arange(len(samples)), samples, np.zeros(len(samples), int), {}),
-            velocity,
-            acceleration,
-        )
-        moves = [0.0]
-        for i in np.flatnonzero(samples[-1] != samples[0]):
-            inp = InputParameter(1)
-            inp.current_position, inp.target_position = [float(samples[0, i])], [float(samples[-1, i])]
-            inp.max_velocity, inp.max_acceleration, inp.max_jerk = (
-                [float(x[i])] for x in (velocity, acceleration, jerk)
-            )
-            move = Trajectory(1)
-            Ruckig(1).calculate(inp, move)
-            moves.append(move.duration)
-        total += max(along.duration_s, max(moves))
+        piece = JointPath.of_positions("bench", path.joint_names, np.arange(len(samples)), samples)
+        along = plan(piece, velocity, acceleration)
+        moves = [
+            rest_to_rest(samples[0, i], samples[-1, i], velocity[i], acceleration[i], jerk[i]).duration
+            for i in np.flatnonzero(samples[-1] != samples[0])
+        ]
+        total += max([along.duration_s, *moves])
     return total

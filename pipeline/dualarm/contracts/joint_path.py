@@ -93,6 +93,35 @@ class JointPath:
         object.__setattr__(self, "fixed", MappingProxyType(dict(self.fixed)))
         object.__setattr__(self, "chosen", MappingProxyType(dict(self.chosen)))
 
+    @classmethod
+    def of_positions(
+        cls,
+        method: str,
+        joint_names: tuple[str, ...],
+        t: np.ndarray,
+        q: np.ndarray,
+        rep: np.ndarray | None = None,
+        fixed: Mapping[str, float] | None = None,
+    ) -> JointPath:
+        """Joint positions ``q`` (N, n) [rad] at times ``t`` (N,) [s] alone: every sample solved, no hands.
+
+        No velocities commanded and no solve times; ``rep`` 0 for every sample unless given.
+        """
+        N = len(t)
+        return cls(
+            method=method,
+            joint_names=joint_names,
+            t=t,
+            rep=np.zeros(N, dtype=int) if rep is None else rep,
+            q=q,
+            qd=np.zeros(np.shape(q)),
+            status=np.zeros(N, dtype=int),
+            solve_time_s=np.zeros(N),
+            hand_error_m=np.zeros((N, 0)),
+            hands=(),
+            fixed=fixed or {},
+        )
+
     def __len__(self) -> int:
         return len(self.t)
 

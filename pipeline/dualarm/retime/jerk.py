@@ -197,9 +197,7 @@ class PieceTiming:
         """
         end = self.duration_s
         nodes = self.stretch * self.starts_s
-        knots = np.unique(self.path.t)
-        between = np.concatenate([knots, *(knots[:-1] + share * np.diff(knots) for share in (0.25, 0.5, 0.75))])
-        passes = _passing(self, between)
+        passes = _passing(self, _dense(self.path, 4))
         t = np.sort(
             np.concatenate(
                 [
@@ -246,23 +244,23 @@ def jerk_limited(
     q = path.q[kept]
     cut = pieces(q, s, position)
     timings: list[PieceTiming] = []
-    solved: list[tuple[np.ndarray, PieceTiming]] = []
+    solved: list[tuple[np.ndarray, PieceTiming, float]] = []  # the samples, their timing, its fallback's bound
     fallbacks: list[Fallback] = []
     for first, last, curve in cut:
         samples = q[first : last + 1]
-        same = next(
+        same, bound = next(
             (
-                timing
-                for earlier, timing in solved
+                (timing, bound)
+                for earlier, timing, bound in solved
                 if earlier.shape == samples.shape and np.abs(earlier - samples).max() <= SAME_PIECE_RAD
             ),
-            None,
+            (None, np.nan),
         )
         if same is None:
             same = _time_piece(curve, velocity, acceleration, jerk, (int(kept[first]), int(kept[last])))
-            solved.append((samples, same))
+            bound = _bound_s(curve, velocity, acceleration) if same.fallback else np.nan
+            solved.append((samples, same, bound))
         if same.fallback:
-            bound = _bound_s(curve, velocity, acceleration)
             fallbacks.append(Fallback(int(kept[first]), int(kept[last]), same.fallback, same.duration_s, bound))
         timings.append(same)
     starts = np.concatenate([[0.0], np.cumsum([p.duration_s for p in timings])])
@@ -409,10 +407,10 @@ def within(spline: BSpline, position: tuple[np.ndarray, np.ndarray] | None, q: n
     return BSpline(spline.t, np.clip(spline.c, lower, upper), spline.k)
 
 
-def _dense(path: BSpline) -> np.ndarray:
-    """Each knot of ``path``, and :data:`WORST_CASE_POINTS` - 1 points evenly between each two [rad]."""
+def _dense(path: BSpline, points: int = WORST_CASE_POINTS) -> np.ndarray:
+    """Each knot of ``path``, and ``points`` - 1 points evenly between each two [rad]."""
     knots = np.unique(path.t)
-    shares = np.arange(WORST_CASE_POINTS) / WORST_CASE_POINTS
+    shares = np.arange(points) / points
     return np.append((knots[:-1, None] + shares * np.diff(knots)[:, None]).ravel(), knots[-1])
 
 
@@ -515,18 +513,26 @@ def _bounded(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk
         sd = np.nanmin(np.concatenate([v / d1, np.sqrt(a / (2 * d2)), np.cbrt(j / (3 * d3))]))
         sdd = np.nanmin(np.concatenate([(a - d2 * sd**2) / d1, j / (9 * d2 * sd)]))
         sddd = np.nanmin((j - d3 * sd**3 - 3 * d2 * sd * sdd) / d1)
-    inp = InputParameter(1)
-    inp.current_position, inp.target_position = [0.0], [float(path.t[-1])]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [float(sd)], [float(sdd)], [float(sddd)]
-    plan = Trajectory(1)
-    Ruckig(1).calculate(inp, plan)  # finite positive limits, rest to rest: within Ruckig's domain
-    profile = plan.profiles[0][0]
+    profile = rest_to_rest(0.0, path.t[-1], sd, sdd, sddd).profiles[0][0]
     used = np.flatnonzero(np.asarray(profile.t) > 0)  # Ruckig's seven phases, without those of no duration
     piece = _exact(path, np.asarray(profile.j)[used], np.asarray(profile.t)[used])
     if path.k == 1:  # P' constant: the limits of s hold the joints' exactly, no check needed
         return piece
     k = float(piece.excess(velocity, acceleration, jerk)[0].max())
     return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0)
+
+
+def rest_to_rest(start: float, goal: float, velocity: float, acceleration: float, jerk: float) -> Trajectory:
+    """Ruckig's time-optimal one-DOF move from ``start`` to ``goal``, at rest at both, within the limits.
+
+    Positions [rad], limits [rad/s, rad/s^2, rad/s^3], finite and positive: within Ruckig's domain.
+    """
+    inp = InputParameter(1)
+    inp.current_position, inp.target_position = [float(start)], [float(goal)]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [float(velocity)], [float(acceleration)], [float(jerk)]
+    move = Trajectory(1)
+    Ruckig(1).calculate(inp, move)
+    return move
 
 
 def _bound_s(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray) -> float:

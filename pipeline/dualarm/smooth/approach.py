@@ -112,21 +112,7 @@ def approach_trajectory(
     """
 
     def straight(a: np.ndarray, b: np.ndarray) -> JointTrajectory:  # one segment, rest to rest
-        q = np.stack([a, b])
-        zeros = np.zeros((2, len(names)))
-        line = JointPath(
-            method=STAGE,
-            joint_names=names,
-            t=np.arange(2.0),
-            rep=np.zeros(2, dtype=int),
-            q=q,
-            qd=zeros,
-            status=np.zeros(2, dtype=int),
-            solve_time_s=np.zeros(2),
-            hand_error_m=np.zeros((2, 0)),
-            hands=(),
-            fixed=fixed or {},
-        )
+        line = JointPath.of_positions(STAGE, names, np.arange(2.0), np.stack([a, b]), fixed=fixed)
         return replace(jerk_limited(line, velocity, acceleration, jerk).sample(period_s), stage=STAGE)
 
     points = [np.asarray(p, dtype=float) for p in (start, *via, goal)]
