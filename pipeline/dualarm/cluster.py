@@ -49,6 +49,8 @@ ALLOWED_FAILURES = 3
 #: The environment a ``LocalCluster``'s worker starts with: what Dask's nanny sets, but for
 #: ``MALLOC_TRIM_THRESHOLD_`` (:class:`WorkerSetup` undoes that one in other clusters' workers).
 WORKER_ENVIRON = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+#: The address every server of a ``LocalCluster`` listens on: this machine only.
+LOCAL_HOST = "127.0.0.1"
 #: Dask settings of the ``LocalCluster``: a task that took down :data:`ALLOWED_FAILURES` workers
 #: fails; no statistical profiler in the workers (it samples every thread's stack every 10 ms: 5 %
 #: of a study's trial here); the workers' environment :data:`WORKER_ENVIRON`.
@@ -198,14 +200,20 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
     if n < 1:
         raise DualarmError(f"--workers {n}: give at least 1 worker")
     with dask.config.set(LOCAL_CLUSTER_CONFIG):
-        # dashboard ":0": the scheduler's HTTP routes on a free port (on 8787, a warning when it is taken); bokeh's
-        # dashboard is not installed.
+        # Every server on LOCAL_HOST (the scheduler, its HTTP routes, the workers and their nannies): none is
+        # authenticated, so none is reachable from another machine. The HTTP routes on a free port (on 8787, a warning
+        # when it is taken); bokeh's dashboard is not installed.
         # Dask's own logs silenced up to ERROR: a task's failure comes back as its exception (a failed row or part), and
         # an interrupted command's workers, stopped as the scheduler closes, logged "Failed to communicate with
         # scheduler during heartbeat" with a traceback (seen once in CI, under SIGTERM).
         with (
             LocalCluster(
-                n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.CRITICAL
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                host=LOCAL_HOST,
+                dashboard_address=f"{LOCAL_HOST}:0",
+                silence_logs=logging.CRITICAL,
             ) as cluster,
             Client(cluster) as client,
         ):

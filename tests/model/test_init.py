@@ -325,7 +325,8 @@ def test_a_collision_mesh_that_is_no_mesh_is_one_line_naming_the_urdf(tmp_path):
     """An iiwa whose link 0 (its first collision mesh, read before any is cut) collides as a file of text named
     .stl: refused in one line naming the user's URDF and the mesh, and nothing is left behind."""
     (tmp_path / "bad.stl").write_text("this is not a mesh at all")
-    text = IIWA.read_text().replace('filename="meshes/', f'filename="{IIWA.parent}/meshes/')
+    shutil.copytree(IIWA.parent / "meshes", tmp_path / "meshes")  # meshes beside the URDF, as a description ships
+    text = IIWA.read_text()
     at = text.index('<link name="lbr_iiwa_link_0"')
     start, end = text.index("<collision>", at), text.index("</collision>", at)
     collision = re.sub(r'filename="[^"]+"', f'filename="{tmp_path / "bad.stl"}"', text[start:end])
@@ -396,7 +397,8 @@ def test_an_arm_of_eight_joints_starts_at_its_seven_nearest_the_hand(tmp_path):
     """pybullet_data's iiwa hung from a 'clavicle' joint: 8 movable joints from the root. The 7 nearest the hand are
     the iiwa (S-R-S: PyBullet's axes of joints 1-3 meet), so the arm starts at the iiwa's base and the clavicle is
     held; --left-base above it keeps all 8."""
-    text = IIWA.read_text().replace('filename="meshes/', f'filename="{IIWA.parent}/meshes/')
+    shutil.copytree(IIWA.parent / "meshes", tmp_path / "meshes")  # meshes beside the URDF, as a description ships
+    text = IIWA.read_text()
     clavicle = (
         '<link name="torso"/>\n'
         '<joint name="clavicle" type="revolute"><parent link="torso"/><child link="lbr_iiwa_link_0"/>'

@@ -207,7 +207,7 @@ def _fcl_link(urdf_path: Path, link: str) -> list:
                     "xyz", [float(v) for v in origin.get("rpy", "0 0 0").split()]
                 ).as_matrix()
                 T[:3, 3] = [float(v) for v in origin.get("xyz", "0 0 0").split()]
-            mesh = trimesh.load_mesh(resolve_mesh(collision.find(".//mesh").get("filename"), urdf_path))
+            mesh = trimesh.load_mesh(resolve_mesh(collision.find(".//mesh").get("filename"), urdf_path)[0])
             model = fcl.BVHModel()
             model.beginModel(len(mesh.vertices), len(mesh.faces))
             model.addSubModel(mesh.vertices, mesh.faces)

@@ -92,6 +92,37 @@ def test_web_serves_rerun_s_viewer_until_ctrl_c(ik_run):
         urllib.request.urlopen(url, timeout=10)
 
 
+@pytest.mark.integration
+def test_the_web_viewer_dies_with_the_command_even_by_sigkill(ik_run):
+    """``kill -9`` of ``view --web``: the Rerun server it started (one process, the viewer binary) is gone within 10 s
+    and its URL stops answering (it kept serving, a wrapper and the binary, two orphans)."""
+    import psutil
+
+    process = subprocess.Popen(
+        [str(BIN / "dualarm"), "view", str(ik_run), "--web"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        line = ""
+        while not line.startswith("Rerun web viewer:"):
+            line = process.stdout.readline()
+            assert line, "ended before printing a URL"
+        url = re.search(r"http://127\.0\.0\.1:\d+/\S*", line).group(0)
+        viewers = psutil.Process(process.pid).children(recursive=True)
+        assert viewers
+        process.kill()
+        process.wait(timeout=30)
+        gone, alive = psutil.wait_procs(viewers, timeout=10)
+        assert not alive, [p.cmdline() for p in alive]
+        with pytest.raises(urllib.error.URLError):
+            urllib.request.urlopen(url, timeout=10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+
+
 def _one_line_error(args, needle: str) -> None:
     result = runner.invoke(app, ["view", *args])
     assert result.exit_code == 2, result.output

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dualarm.errors import RecordingError
+from dualarm.errors import OutputError, RecordingError
 from dualarm.record.run_dir import claim_output_dir
 from dualarm.study.report import feature_rates, logistic_fit, method_rates, read_trials, write_study_report
 
@@ -123,6 +123,22 @@ def test_the_report_is_written_from_trials_parquet_alone(tmp_path):
     for name in ("methods.csv", "features.csv", "logit.csv", "methods.png", "features.png"):
         assert (out / name).stat().st_size > 0
     pd.testing.assert_frame_equal(pd.read_csv(out / "methods.csv"), method_rates(read_trials(out)), check_dtype=False)
+
+
+def test_a_report_replaces_its_own_files_but_never_a_users(tmp_path):
+    """Written twice, the report replaces its own files; a report.md the user wrote (or edited) is refused in one line
+    naming it, byte for byte kept, and nothing else is written (it was overwritten, exit 0)."""
+    out = tmp_path / "study"
+    with claim_output_dir(out, "study"):
+        hand_made().to_parquet(out / "trials.parquet")
+    first = write_study_report(out).read_text()
+    assert write_study_report(out).read_text() == first
+    (out / "report.md").write_text("my notes on this study\n")
+    (out / "methods.csv").unlink()
+    with pytest.raises(OutputError, match=r"report\.md: not the file the last 'study report' wrote there") as raised:
+        write_study_report(out)
+    assert "\n" not in str(raised.value)
+    assert (out / "report.md").read_text() == "my notes on this study\n" and not (out / "methods.csv").exists()
 
 
 @pytest.mark.integration

@@ -6,6 +6,7 @@ Every row is checked against the same trial run again alone, in this process, fr
 """
 
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -18,7 +19,7 @@ import pytest
 
 from dualarm.bench.study import loopback_cluster
 from dualarm.cluster import connect
-from dualarm.errors import OutputError, StageError, TaskFileError, UnreachablePoseError
+from dualarm.errors import OutputError, RecordingError, StageError, TaskFileError, UnreachablePoseError
 from dualarm.run import run_task
 from dualarm.study.run import PARTS, RESULTS, TASKS, VARYING, read_study, run_study, run_trial
 from dualarm.study.spec import study_from_toml
@@ -91,6 +92,30 @@ def test_resume_runs_only_the_trials_missing(local, tmp_path):
     again = run_study(study_from_toml(SPEC), REPO, copy, workers=1, resume=True)
     assert again.ran == 2
     _same(again.results, rows)
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(
+    ("name", "source", "why"),
+    [
+        ("trial-000001 (copy).parquet", 1, "its name is no trial-NNNNNN.parquet"),  # a file manager's copy
+        ("trial-000009.parquet", 1, "its name is no trial-NNNNNN.parquet of trials 0 to 3"),  # no such trial
+        ("trial-000002.parquet", 1, "rows of another study or trial than 2"),  # trial 1's rows under 2's name
+    ],
+)
+def test_resume_trusts_only_parts_that_are_the_specs_trials(local, tmp_path, name, source, why):
+    """A stale or copied part in parts/ (it was read and its rows doubled in trials.parquet, exit 0): refused in one
+    line naming it, and trials.parquet is left as it was."""
+    out, _ = local
+    copy = tmp_path / "small"
+    subprocess.run(["cp", "-r", str(out), str(copy)], check=True)
+    (copy / PARTS / "trial-000002.parquet").unlink()
+    (copy / PARTS / name).write_bytes((out / PARTS / f"trial-{source:06d}.parquet").read_bytes())
+    table = (copy / RESULTS).read_bytes()
+    with pytest.raises(RecordingError, match=re.escape(why)) as raised:
+        run_study(study_from_toml(SPEC), REPO, copy, workers=1, resume=True)
+    assert f"parts/{name}: not a part of study" in str(raised.value) and "\n" not in str(raised.value)
+    assert (copy / RESULTS).read_bytes() == table
 
 
 @pytest.mark.integration
@@ -339,3 +364,17 @@ def test_local_workers_are_each_pinned_to_a_core_of_their_own():
     }
     assert sorted(tasks) == [[cores[0]], [cores[1]]]
     assert len(os.sched_getaffinity(0)) >= 2
+
+
+@pytest.mark.integration
+def test_every_server_of_a_local_cluster_listens_on_this_machine_only():
+    """The scheduler, its HTTP routes (the dashboard), the worker and its nanny: every listening socket of this process
+    and its children, read back from the OS (psutil), is bound to 127.0.0.1 (the dashboard was on every interface)."""
+    import psutil
+
+    with connect(workers=1):
+        processes = [psutil.Process(), *psutil.Process().children(recursive=True)]
+        bound = {
+            c.laddr.ip for p in processes for c in p.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN
+        }
+    assert bound == {"127.0.0.1"}

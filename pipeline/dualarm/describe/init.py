@@ -38,7 +38,6 @@ from the URDF, and every choice is returned as a line of :attr:`RobotInit.notes`
 from __future__ import annotations
 
 import shutil
-import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,7 +48,7 @@ import numpy as np
 from dualarm.describe.collisions import allowed_pairs, disabled_pairs
 from dualarm.describe.convex import CONVEX_DIR, convex_collisions
 from dualarm.describe.layout import ArmPlan, _Layout, _layout, _srs_verdict, lock_value
-from dualarm.describe.meshes import copy_urdf, resolve_mesh
+from dualarm.describe.meshes import check_meshes, copy_urdf
 from dualarm.describe.ready import SAMPLES, _collision_world, held_values, ready_pose
 from dualarm.describe.robot_toml import ACCELERATION_PER_S, DEFAULT_VELOCITY_RAD_S, JERK_PER_S, robot_toml
 from dualarm.describe.tips import _first_movable, _zero_position
@@ -197,8 +196,7 @@ def init_robot(
     layout = _layout(urdf, {"left": left_tip, "right": right_tip}, {"left": left_base, "right": right_base}, torso)
     allowed_pairs(urdf, allow)
     turn = _turning(source, urdf, layout, up)
-    for filename in (e.get("filename", "") for e in ET.fromstring(urdf.kinematic_xml).iter("mesh")):
-        resolve_mesh(filename, source)  # refused before anything is written (collision meshes are checked by copy_urdf)
+    check_meshes(source)  # refused before anything is written
     out.mkdir(parents=True, exist_ok=True)
     try:
         return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name, allow, turn, progress)

@@ -155,6 +155,18 @@ _TASK = Layout(dirs={_RUN_ID: _RUN, PARTIAL.format(_RUN_ID): _RUN})
 #:
 #: A writer that adds a file to one of these directories adds its name here, or the next command
 #: into the directory refuses it as foreign.
+#: What ``study report`` writes into a study's directory, and the digests of them it writes last
+#: (:mod:`dualarm.study.report`).
+STUDY_REPORT_FILES = (
+    "report.md",
+    "methods.csv",
+    "features.csv",
+    "logit.csv",
+    "methods.png",
+    "features.png",
+    "deviations.png",
+)
+STUDY_REPORT_DIGESTS = "report.sha256"
 KINDS: Mapping[str, Layout] = {
     "recordings": Layout(dirs={"*": _TASK}, add_only=True),
     "plan": Layout(files=("plan_trials.csv", "plan_summary.json")),
@@ -181,7 +193,12 @@ KINDS: Mapping[str, Layout] = {
         dirs={"*": "report"},
     ),
     "study": Layout(
-        files=("study.json", "trials.parquet", "report.md", "*.png", "*.csv"),
+        files=(
+            "study.json",
+            "trials.parquet",
+            STUDY_REPORT_DIGESTS,
+            *STUDY_REPORT_FILES,
+        ),
         dirs={"parts": Layout(files=("trial-*.parquet",)), "tasks": Layout(files=("*.toml",)), "runs": "recordings"},
     ),
     "reproduction": Layout(

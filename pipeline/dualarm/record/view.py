@@ -17,6 +17,8 @@ stopped (its whole process group) when the command ends, however it ends.
 from __future__ import annotations
 
 import contextlib
+import functools
+import importlib.util
 import os
 import re
 import shutil
@@ -26,7 +28,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
@@ -154,23 +156,36 @@ def _recorded_robot(mcap: Path, directory: Path) -> Robot:
 
 
 def rerun_executable() -> Path:
-    """Rerun's command line: ``rerun`` beside the running Python, else on ``PATH``.
+    """Rerun's command line: ``rerun`` beside the running Python (from rerun-sdk), else on ``PATH``.
 
-    Beside the running Python: installed with rerun-sdk.
+    Where that is rerun-sdk's script, which runs the viewer binary in a process of its own, the binary itself
+    (:func:`_binary`): the viewer is then one process, which :func:`_viewer` can tie to this one's life.
 
     Raises:
         DualarmError: neither exists.
     """
     beside = Path(sys.executable).parent / "rerun"
     if beside.is_file() and os.access(beside, os.X_OK):
-        return beside
+        return _binary(beside)
     found = shutil.which("rerun")
     if found is None:
         raise DualarmError(
             f"no Rerun viewer: no 'rerun' beside {excerpt(sys.executable)} "
             "nor on PATH (it comes with rerun-sdk: pip install rerun-sdk)"
         )
-    return Path(found)
+    return _binary(Path(found))
+
+
+def _binary(script: Path) -> Path:
+    """The viewer binary rerun-sdk's ``script`` runs (``rerun_cli/rerun``); else ``script`` itself."""
+    with contextlib.suppress(OSError):
+        with script.open("rb") as head:
+            if b"from rerun_cli" in head.read(4096):
+                spec = importlib.util.find_spec("rerun_cli")
+                binary = Path(spec.origin).parent / "rerun" if spec is not None and spec.origin else script
+                if binary.is_file() and os.access(binary, os.X_OK):
+                    return binary
+    return script
 
 
 def has_display() -> bool:
@@ -213,7 +228,8 @@ def _last_line(log: IO[bytes]) -> str:
 def _viewer(executable: Path, arguments: Sequence[str]) -> Iterator[tuple[subprocess.Popen, IO[bytes]]]:
     """Rerun's command line ``executable`` with ``arguments``, in its own session.
 
-    Its output kept in a temporary file; its process group is stopped when the block ends.
+    Its output kept in a temporary file; its process group is stopped when the block ends, and on Linux the viewer is
+    sent SIGTERM when this process dies (``PR_SET_PDEATHSIG``), even by SIGKILL: no server outlives the command.
     """
     with tempfile.TemporaryFile() as log:
         process = subprocess.Popen(
@@ -223,11 +239,25 @@ def _viewer(executable: Path, arguments: Sequence[str]) -> Iterator[tuple[subpro
             stderr=log,
             start_new_session=True,
             env={**os.environ, "NO_COLOR": "1"},
+            preexec_fn=_dies_with_parent(),
         )
         try:
             yield process, log
         finally:
             _stop(process)
+
+
+def _dies_with_parent() -> Callable[[], object] | None:
+    """What a child runs between fork and exec to be sent SIGTERM when its parent dies; None but on Linux.
+
+    Linux's ``prctl(PR_SET_PDEATHSIG)``, looked up here, before the fork: the child only calls it.
+    """
+    if sys.platform != "linux":
+        return None
+    import ctypes
+
+    pr_set_pdeathsig = 1
+    return functools.partial(ctypes.CDLL(None).prctl, pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
 
 
 def _stop(process: subprocess.Popen) -> None:

@@ -22,6 +22,7 @@ method) into the study's directory.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import warnings
@@ -30,7 +31,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from dualarm.errors import RecordingError, excerpt
+from dualarm.errors import OutputError, RecordingError, excerpt
+from dualarm.record.run_dir import STUDY_REPORT_DIGESTS as DIGESTS
+from dualarm.record.run_dir import STUDY_REPORT_FILES as REPORT_FILES
 from dualarm.record.run_dir import claim_output_dir, write_whole
 from dualarm.study.run import RESULTS, SPEC_FILE
 
@@ -391,6 +394,7 @@ def write_study_report(directory: str | Path) -> Path:
     directory = Path(directory)
     rows = read_trials(directory)
     with claim_output_dir(directory, "study"):
+        _only_ours(directory)
         rates, features = method_rates(rows), feature_rates(rows)
         fit, skipped = logistic_fit(rows)
         write_whole(directory / "methods.csv", rates.to_csv(index=False))
@@ -459,4 +463,32 @@ def write_study_report(directory: str | Path) -> Path:
             _markdown(fit) if len(fit) else "No method has a fit.\n",
             "".join(f"- {m}: {why}\n" for m, why in skipped.items()),
         ]
-        return write_whole(directory / "report.md", "\n".join(text))
+        report = write_whole(directory / "report.md", "\n".join(text))
+        written = (name for name in REPORT_FILES if (directory / name).is_file())
+        write_whole(directory / DIGESTS, "".join(f"{_sha256(directory / name)}  {name}\n" for name in written))
+        return report
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _only_ours(directory: Path) -> None:
+    """Refuse a report file in ``directory`` other than the last report's, unchanged (``DIGESTS``).
+
+    Raises:
+        OutputError: one such file (named): a user's, or one edited since.
+    """
+    recorded: dict[str, str] = {}
+    if (directory / DIGESTS).is_file():
+        for line in (directory / DIGESTS).read_text(errors="replace").splitlines():
+            digest, _, name = line.partition("  ")
+            recorded[name] = digest
+    for name in REPORT_FILES:
+        path = directory / name
+        if (path.exists() or path.is_symlink()) and (not path.is_file() or recorded.get(name) != _sha256(path)):
+            raise OutputError(
+                f"{excerpt(path)}: not the file the last 'study report' wrote there (yours, or edited since); "
+                "move it away to write the report (nothing was written)",
+                str(path),
+            )

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 from collections.abc import Callable
 from contextlib import nullcontext
@@ -231,27 +232,47 @@ def error_rows(spec: StudySpec, index: int, error: str) -> tuple[dict[str, Any],
     return tuple({**_identity(spec, index, m), **rest} for m in spec.methods)
 
 
-def read_study(directory: str | Path) -> pd.DataFrame:
+def read_study(directory: str | Path, spec: StudySpec | None = None) -> pd.DataFrame:
     """Every row of the study in ``directory``: its parts (the trials finished so far).
 
-    Sorted by trial and method in the spec's order; empty without any.
+    Sorted by trial and method in the spec's order; empty without any. With ``spec``, each part must be one of its
+    trials: named ``trial-NNNNNN.parquet`` with N below its ``trials``, holding that trial's rows of this study, one
+    per method of the spec (what ``--resume`` trusts).
 
     Raises:
-        RecordingError: a part that is not a readable parquet file (named).
+        RecordingError: a part that is not a readable parquet file, or not one of ``spec``'s trials (named).
     """
     from dualarm.errors import RecordingError
 
-    parts = sorted((Path(directory) / PARTS).glob("trial-*.parquet"))
     frames = []
-    for part in parts:
+    for part in sorted((Path(directory) / PARTS).glob("trial-*.parquet")):
         try:
-            frames.append(pd.read_parquet(part))
+            rows = pd.read_parquet(part)
         except Exception as exc:  # pyarrow raises its own errors for a truncated or foreign file
             raise RecordingError(
                 f"{excerpt(part)}: not a readable study part ({type(exc).__name__}: "
                 f"{excerpt(str(exc), 120)}); delete it to run the trial again with --resume"
             ) from None
+        why = _not_a_part(part.name, rows, spec) if spec is not None else ""
+        if spec is not None and why:
+            raise RecordingError(f"{excerpt(part)}: not a part of study '{spec.name}' ({why}); move it out of it")
+        frames.append(rows)
     return _ordered(pd.concat(frames, ignore_index=True)) if frames else pd.DataFrame(columns=list(COLUMNS))
+
+
+def _not_a_part(name: str, rows: pd.DataFrame, spec: StudySpec) -> str:
+    """Why the part file ``name`` holding ``rows`` is not one of ``spec``'s trials; "" if it is."""
+    match = re.fullmatch(r"trial-(\d{6})\.parquet", name)
+    if match is None or int(match.group(1)) >= spec.trials:
+        return f"its name is no trial-NNNNNN.parquet of trials 0 to {spec.trials - 1}"
+    if not {"study", "trial", "method"} <= set(rows.columns):
+        return "no study, trial and method columns"
+    trial = int(match.group(1))
+    if not (rows["study"] == spec.name).all() or not (rows["trial"] == trial).all():
+        return f"rows of another study or trial than {trial}"
+    if sorted(rows["method"].astype(str)) != sorted(spec.methods):
+        return f"its methods are not the spec's, once each ({', '.join(spec.methods)})"
+    return ""
 
 
 def _ordered(rows: pd.DataFrame) -> pd.DataFrame:
@@ -326,6 +347,7 @@ def run_study(
 
     Raises:
         OutputError: ``out`` holds another study, or this one's trials without ``resume``, or is in use.
+        RecordingError: a part in ``out`` that is not one of ``spec``'s trials (:func:`read_study`).
         DualarmError: ``scheduler`` cannot be reached, an unknown ``record`` level.
     """
     record_level(record)
@@ -351,7 +373,7 @@ def run_study(
                 ) from None
     directory = Path(out)
     claim = claim_study_dir(directory, spec, resume)
-    done = read_study(directory)
+    done = read_study(directory, spec)
     finished = (
         set(done.groupby("trial")["method"].nunique().loc[lambda n: n == len(spec.methods)].index)
         if len(done)
@@ -406,7 +428,7 @@ def _write_trial(directory: Path, spec: StudySpec, result: TrialResult) -> None:
 
 
 def _consolidate(directory: Path, rows: list[dict[str, Any]]) -> pd.DataFrame:
-    """Write ``trials.parquet`` from ``rows`` (whole, then renamed); returns them as a table.
+    """Write ``trials.parquet``: ``rows``, one per trial and method, whole, then renamed; returns them.
 
     Without rows nothing is written: a study that ran no trial (its cluster unreachable) leaves no
     empty table that looks like results.
@@ -414,5 +436,13 @@ def _consolidate(directory: Path, rows: list[dict[str, Any]]) -> pd.DataFrame:
     if not rows:
         return pd.DataFrame(columns=list(COLUMNS))
     table = _ordered(pd.DataFrame(rows))
+    twice = table[table.duplicated(["trial", "method"])]
+    if len(twice):  # the parts are checked (read_study): a second row of a trial and method is a bug, not data
+        from dualarm.errors import RecordingError
+
+        raise RecordingError(
+            f"{excerpt(directory / RESULTS)}: trial {twice['trial'].iloc[0]} has two rows of method "
+            f"{twice['method'].iloc[0]}; not written"
+        )
     write_whole(directory / RESULTS, table.to_parquet(index=False))
     return table
