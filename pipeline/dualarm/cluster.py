@@ -171,6 +171,54 @@ def worker_name() -> str:
         return LOCAL
 
 
+def _is_a_scheduler(scheduler: str) -> None:
+    """Refuse ``scheduler`` unless a Dask scheduler answers there within :data:`CONNECT_TIMEOUT_S`, handshake included.
+
+    Its ``identity``, asked over Dask's own comm, in a thread with an event loop of its own (so also where one runs, as
+    in a notebook). Dask's ``Client`` bounds the connection but not the handshake (a server that accepts and never
+    answers held it forever), and reads another protocol's bytes as a frame's length (an HTTP server's reply made it
+    allocate 3 EiB).
+
+    Raises:
+        DualarmError: nothing answers in time, or something that is not a Dask scheduler (one line).
+    """
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    from distributed.comm import connect as open_comm
+
+    async def identity() -> Any:
+        comm = await open_comm(scheduler, timeout=CONNECT_TIMEOUT_S)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def ask() -> Any:
+        return asyncio.run(asyncio.wait_for(identity(), CONNECT_TIMEOUT_S))
+
+    with ThreadPoolExecutor(1) as pool:
+        try:
+            reply = pool.submit(ask).result()
+        except TimeoutError:
+            raise DualarmError(
+                f"--scheduler {excerpt(scheduler)}: no Dask scheduler answers there within {CONNECT_TIMEOUT_S:g} s"
+            ) from None
+        except OSError as exc:
+            raise DualarmError(
+                f"--scheduler {excerpt(scheduler)}: no Dask scheduler answers there "
+                f"({type(exc).__name__}: {excerpt(str(exc), 120)})"
+            ) from None
+        except (Exception, MemoryError) as exc:  # whatever another protocol's bytes make of Dask's reader
+            raise DualarmError(
+                f"--scheduler {excerpt(scheduler)}: something answers there, but not in Dask's protocol "
+                f"({type(exc).__name__})"
+            ) from None
+    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
+        raise DualarmError(f"--scheduler {excerpt(scheduler)}: something answers there, but not a Dask scheduler")
+
+
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, workers: int | None = None) -> Iterator[Client]:
     """A Dask client of the cluster at ``scheduler``, else of a new ``LocalCluster``; closed at the end.
@@ -179,12 +227,14 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
     one per core), one thread each.
 
     Raises:
-        DualarmError: ``scheduler`` cannot be reached (within :data:`CONNECT_TIMEOUT_S`), or ``workers`` < 1.
+        DualarmError: ``scheduler`` cannot be reached, or is no Dask scheduler (within :data:`CONNECT_TIMEOUT_S`,
+            handshake included), or ``workers`` < 1.
     """
     import dask
     from distributed import Client, LocalCluster
 
     if scheduler is not None:  # its own allowed-failures holds (Dask's default is 3 too)
+        _is_a_scheduler(scheduler)
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError, TypeError) as exc:

@@ -19,7 +19,7 @@ import pytest
 
 from dualarm.bench.study import loopback_cluster
 from dualarm.cluster import connect
-from dualarm.errors import OutputError, RecordingError, StageError, TaskFileError, UnreachablePoseError
+from dualarm.errors import DualarmError, OutputError, RecordingError, StageError, TaskFileError, UnreachablePoseError
 from dualarm.run import run_task
 from dualarm.study.run import PARTS, RESULTS, TASKS, VARYING, read_study, run_study, run_trial
 from dualarm.study.spec import study_from_toml
@@ -170,6 +170,45 @@ def test_an_unreachable_scheduler_is_one_line_and_leaves_no_table(tmp_path, monk
     with pytest.raises(Exception, match="no Dask scheduler answers there"):
         run_study(study_from_toml(SPEC), REPO, tmp_path / "out", scheduler="tcp://127.0.0.1:9")
     assert not (tmp_path / "out" / RESULTS).exists()
+
+
+def _server(reply: bytes | None):
+    """A TCP server on 127.0.0.1 that accepts and sends ``reply`` after the first bytes, or never answers (None)."""
+    import socket
+
+    server = socket.create_server(("127.0.0.1", 0))
+
+    def serve() -> None:
+        held = []
+        while True:
+            connection, _ = server.accept()
+            held.append(connection)
+            if reply is not None:
+                connection.recv(1000)
+                connection.sendall(reply)
+
+    threading.Thread(target=serve, daemon=True).start()
+    return f"tcp://127.0.0.1:{server.getsockname()[1]}"
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(
+    ("reply", "why"),
+    [
+        (None, "no Dask scheduler answers there within 3 s"),  # it hung past 420 s
+        (b"HTTP/1.1 200 OK\r\nContent-Length: 5\r\n\r\nhello", "something answers there, but not in Dask's protocol"),
+    ],
+)
+def test_a_scheduler_address_that_is_not_dask_is_one_line_within_the_timeout(monkeypatch, reply, why):
+    """A server that accepts and never answers (the handshake was not bounded), or an HTTP server (a 74-line
+    'Unable to allocate 3.07 EiB'): one line, within the connect timeout."""
+    monkeypatch.setattr("dualarm.cluster.CONNECT_TIMEOUT_S", 3.0)
+    address = _server(reply)
+    start = time.monotonic()
+    with pytest.raises(DualarmError, match=re.escape(why)) as raised:
+        with connect(address):
+            pass
+    assert time.monotonic() - start < 10 and "\n" not in str(raised.value)
 
 
 @pytest.mark.integration
