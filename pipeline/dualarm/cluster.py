@@ -172,12 +172,12 @@ def worker_name() -> str:
 
 
 def _is_a_scheduler(scheduler: str) -> None:
-    """Refuse ``scheduler`` unless a Dask scheduler answers there within :data:`CONNECT_TIMEOUT_S`, handshake included.
+    """Refuse ``scheduler`` unless a Dask scheduler answers there in time (:data:`CONNECT_TIMEOUT_S`).
 
-    Its ``identity``, asked over Dask's own comm, in a thread with an event loop of its own (so also where one runs, as
-    in a notebook). Dask's ``Client`` bounds the connection but not the handshake (a server that accepts and never
-    answers held it forever), and reads another protocol's bytes as a frame's length (an HTTP server's reply made it
-    allocate 3 EiB).
+    Handshake included: its ``identity``, asked over Dask's own comm, in a thread with an event loop of its own (so
+    also where one runs, as in a notebook). Dask's ``Client`` bounds the connection but not the handshake (a server
+    that accepts and never answers held it forever), and reads another protocol's bytes as a frame's length (an HTTP
+    server's reply made it allocate 3 EiB).
 
     Raises:
         DualarmError: nothing answers in time, or something that is not a Dask scheduler (one line).
