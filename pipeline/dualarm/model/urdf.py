@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import re
 import xml.etree.ElementTree as ET
+from collections import Counter
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -140,6 +141,71 @@ def _finite(value: float | None, default: float) -> float:
     return default if value is None else float(value)
 
 
+#: The most links a robot may have (TIAGo dual, the largest public robot tried, has 129), the longest name of a robot,
+#: link or joint [characters], and the largest magnitude of an origin's coordinate [m] (a position limit beyond it
+#: [rad, m] is read as none).
+MAX_LINKS, MAX_NAME, MAX_MAGNITUDE = 1000, 256, 1e6
+
+
+def _check_tree(where: str, name: str, links: list[str], joints: list[JointSpec]) -> None:
+    """Refuse, in one line, a robot that is not a tree of links PyBullet and dualarm can read.
+
+    Bounded names and sizes; every link and joint named once; every joint between two declared links, parent not its
+    child; every link the child of at most one joint; one root, from which every link is reached (no loop). PyBullet
+    crashed (signal 11) on a joint whose parent is its child, on a duplicate joint name and on a 5 MB robot name, and
+    a loop made the chain search run forever.
+    """
+    if len(links) > MAX_LINKS:
+        raise RobotModelError(f"{where}: {len(links)} links; dualarm reads robots of at most {MAX_LINKS}")
+    for kind, names in (("robot", [name]), ("link", links), ("joint", [j.name for j in joints])):
+        long = next((n for n in names if len(n) > MAX_NAME), None)
+        if long is not None:
+            raise RobotModelError(
+                f"{where}: {kind} name '{excerpt(long, 40)}' is {len(long)} characters (<= {MAX_NAME})"
+            )
+        twice = next((n for n, count in Counter(names).items() if count > 1), None)
+        if twice is not None:
+            raise RobotModelError(f"{where}: two {kind}s are named '{excerpt(twice, 40)}'")
+    declared, parent_of = set(links), dict[str, str]()
+    for j in joints:
+        joint = f"{where}: joint '{excerpt(j.name, 40)}'"
+        for role, link in (("parent", j.parent), ("child", j.child)):
+            if link not in declared:
+                raise RobotModelError(f"{joint}: its {role} link '{excerpt(link, 40)}' is not declared")
+        if j.parent == j.child:
+            raise RobotModelError(f"{joint}: its parent and child are the same link '{excerpt(j.child, 40)}'")
+        if j.child in parent_of:
+            raise RobotModelError(
+                f"{joint}: link '{excerpt(j.child, 40)}' is already the child of joint "
+                f"'{excerpt(parent_of[j.child], 40)}' (a URDF is a tree: one parent joint per link)"
+            )
+        parent_of[j.child] = j.name
+        big = max(abs(v) for v in j.origin_xyz)
+        if big > MAX_MAGNITUDE:
+            raise RobotModelError(f"{joint}: an origin coordinate of {big:g} m (<= {MAX_MAGNITUDE:g})")
+    roots = [link for link in links if link not in parent_of]
+    if len(roots) != 1:
+        raise RobotModelError(
+            f"{where}: {len(roots)} root links (links no joint moves)"
+            + (
+                f": {excerpt(', '.join(roots), 80)}; a URDF has one"
+                if roots
+                else "; a URDF has one (joints form a loop)"
+            )
+        )
+    children: dict[str, list[str]] = {}
+    for j in joints:
+        children.setdefault(j.parent, []).append(j.child)
+    reached, todo = {roots[0]}, [roots[0]]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            reached.add(child)
+            todo.append(child)
+    if len(reached) != len(links):
+        missing = next(link for link in links if link not in reached)
+        raise RobotModelError(f"{where}: link '{excerpt(missing, 40)}' is on a loop of joints, not below the root")
+
+
 #: Top-level URDF elements removed before parsing: ROS (2) control's and Gazebo's, which dualarm does not read.
 IGNORED = ("transmission", "gazebo", "ros2_control")
 
@@ -237,6 +303,8 @@ def load_urdf(path: str | Path) -> UrdfModel:
         limit = j.limit
         lower = -np.inf if j.type == "continuous" or limit is None else _finite(limit.lower, -np.inf)
         upper = np.inf if j.type == "continuous" or limit is None else _finite(limit.upper, np.inf)
+        # Beyond MAX_MAGNITUDE a position limit is the "no limit" of Gazebo's exports (1e16), not a number to use.
+        lower, upper = (-np.inf if lower < -MAX_MAGNITUDE else lower), (np.inf if upper > MAX_MAGNITUDE else upper)
         velocity = _finite(limit.velocity if limit is not None else None, np.inf)
         effort = _finite(limit.effort if limit is not None else None, np.inf)
         if np.isnan([lower, upper, velocity, effort]).any():
@@ -258,6 +326,7 @@ def load_urdf(path: str | Path) -> UrdfModel:
                 effort=effort,
             )
         )
+    _check_tree(where, str(robot.name), [link.name for link in robot.links], joints)
     try:
         root = robot.get_root()
     except Exception as exc:  # urdf_parser_py asserts there is exactly one root link
