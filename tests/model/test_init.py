@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from dualarm.cli import app
-from dualarm.describe.init import init_robot
+from dualarm.describe.init import DEFAULT_VELOCITY_RAD_S, init_robot
 from dualarm.model.kinematics import ChainKinematics
 from dualarm.model.robot import load_robot
 from dualarm.quiet import c_output_silenced
@@ -256,6 +256,22 @@ def test_init_prints_every_choice_and_assumption(tmp_path):
     assert robot.assumed_limits == {"acceleration"} and robot.assumed("jerk") == ""
     assert "an assumed acceleration limit" in robot.assumed("acceleration")
     assert (tmp_path / "kuka" / "meshes" / "link_0.stl").is_file()
+
+
+@pytest.mark.integration
+def test_a_velocity_limit_of_0_or_less_is_assumed_and_said(tmp_path):
+    """An iiwa whose URDF gives joints 1 and 2 velocity limits 0 and -1 (init clipped them to 1e-6 rad/s, silently,
+    and the run was refused at retime): both are assumed, printed and marked, like a velocity the URDF does not give."""
+    shutil.copytree(IIWA.parent / "meshes", tmp_path / "meshes")
+    text = IIWA.read_text().replace('velocity="10"', 'velocity="0"', 1).replace('velocity="10"', 'velocity="-1"', 1)
+    (tmp_path / "iiwa.urdf").write_text(text)
+    done = runner.invoke(app, ["robot", "init", str(tmp_path / "iiwa.urdf"), "--out", str(tmp_path / "out")])
+    assert done.exit_code == 0, done.output
+    assert "assumed velocity limits for 2 joints" in done.stdout and "or 0 or less" in done.stdout
+    robot = load_robot(tmp_path / "out")
+    velocity = [robot.limits[n].velocity for n in robot.chain("left_arm").joint_names]
+    assert velocity[:2] == [DEFAULT_VELOCITY_RAD_S] * 2 and velocity[2:] == [10.0] * 5
+    assert "velocity" in robot.assumed_limits
 
 
 @pytest.mark.integration

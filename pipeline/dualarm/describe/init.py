@@ -21,7 +21,7 @@ from the URDF, and every choice is returned as a line of :attr:`RobotInit.notes`
 - locked joints: movable joints between the torso and an arm's base (a clavicle) belong to no chain
   and are held at :data:`lock_value` (0 clipped into the limits) by every home pose.
 - S-R-S or not, per arm (:func:`dualarm.model.srs.srs_geometry`'s verdict, with the miss distance).
-- limits: velocity from the URDF (:data:`DEFAULT_VELOCITY_RAD_S` where it gives none), acceleration
+- limits: velocity from the URDF (:data:`DEFAULT_VELOCITY_RAD_S` where it gives none, or 0 or less), acceleration
   and jerk from the caller or else :data:`ACCELERATION_PER_S` times the velocity limit and
   :data:`JERK_PER_S` times that, written with the comment ``# assumed`` and listed in
   ``[limits] assumed`` (so that every message a limit causes says it was assumed).
@@ -95,7 +95,7 @@ def _limits(
     limits: dict[str, dict[str, tuple[float, bool]]] = {"velocity": {}, "acceleration": {}, "jerk": {}}
     for joint in joints:
         v = urdf.joint(joint).velocity
-        if not np.isfinite(v):
+        if not np.isfinite(v) or v <= 0:  # none, or 0 or less: no limit a motion could keep (was clipped to 1e-6)
             v = DEFAULT_VELOCITY_RAD_S
             limits["velocity"][joint] = (v, True)
         v = float(np.clip(v, *LIMIT_RANGES["velocity"]))
@@ -257,7 +257,7 @@ def _write(
         chain_joints = [j.name for j in urdf.chain(*layout.waist) if j.movable] + chain_joints
     limits = _limits(urdf, chain_joints, acceleration, jerk)
     for kind_, rule, unit in (
-        ("velocity", f"{DEFAULT_VELOCITY_RAD_S:g} rad/s (the URDF gives none)", "rad/s"),
+        ("velocity", f"{DEFAULT_VELOCITY_RAD_S:g} rad/s (the URDF gives none, or 0 or less)", "rad/s"),
         ("acceleration", f"{ACCELERATION_PER_S:g}/s times the velocity limit (give --acceleration)", "rad/s^2"),
         ("jerk", f"{JERK_PER_S:g}/s times the acceleration limit (give --jerk)", "rad/s^3"),
     ):
