@@ -141,6 +141,25 @@ def test_a_report_replaces_its_own_files_but_never_a_users(tmp_path):
     assert (out / "report.md").read_text() == "my notes on this study\n" and not (out / "methods.csv").exists()
 
 
+@pytest.mark.parametrize(
+    ("change", "why"),
+    [
+        (lambda rows: rows.iloc[:0], "no rows"),  # KeyError 'p_inconsistent'
+        (
+            lambda rows: rows.assign(inconsistent=rows["inconsistent"].astype(str)),
+            "column inconsistent holds .*, not booleans",
+        ),
+    ],
+)
+def test_a_table_without_rows_or_with_verdicts_as_text_is_one_line(tmp_path, change, why):
+    out = tmp_path / "study"
+    with claim_output_dir(out, "study"):
+        change(hand_made()).to_parquet(out / "trials.parquet")
+    with pytest.raises(RecordingError, match=why) as raised:
+        write_study_report(out)
+    assert "\n" not in str(raised.value) and not (out / "report.md").exists()
+
+
 @pytest.mark.integration
 def test_a_report_without_a_table_is_one_line(tmp_path):
     with pytest.raises(RecordingError, match="no such file"):

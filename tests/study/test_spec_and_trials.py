@@ -47,6 +47,7 @@ def test_the_example_spec_loads():
         ),
         ('name = "s"\ntrials = 10.5\n', "trials"),
         ('name = "s"\ntrials = \n', "not valid TOML"),
+        ('name = "s"\ntrials = 1\nrobot = "hum\\u0000anoid"\n', "robot: a robot directory or name cannot hold a NUL"),
     ],
 )
 def test_a_bad_spec_is_one_line_naming_the_key(text, message):

@@ -100,6 +100,13 @@ def read_trials(directory: str | Path) -> pd.DataFrame:
     missing = [c for c in ("trial", "method", "status", "failed", "inconsistent") if c not in rows.columns]
     if missing:
         raise RecordingError(f"{excerpt(file)}: not a study's table (no column {', '.join(missing)})")
+    if not len(rows):
+        raise RecordingError(f"{excerpt(file)}: no rows; a study writes its table once a trial has finished")
+    for column in ("failed", "inconsistent"):
+        if not pd.api.types.is_bool_dtype(rows[column]):
+            raise RecordingError(
+                f"{excerpt(file)}: not a study's table (column {column} holds {rows[column].dtype}, not booleans)"
+            )
     return rows
 
 

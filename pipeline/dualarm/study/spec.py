@@ -182,7 +182,7 @@ class StudySpec(_Model):
     """
 
     name: Annotated[str, Field(pattern=r"^[A-Za-z0-9_\-]+$", max_length=MAX_NAME_CHARS)]
-    robot: str = "humanoid"
+    robot: Annotated[str, Field(min_length=1, max_length=4096)] = "humanoid"
     methods: tuple[str, ...] = IK_METHODS
     trials: Annotated[int, Field(strict=True), Range(1, MAX_TRIALS)]
     seed: Annotated[int, Field(strict=True), Range(0, 2**63 - 1)] = 0
@@ -214,6 +214,8 @@ class StudySpec(_Model):
             raise ValueError("methods: a method is named twice")
         if not self.hands:
             raise ValueError("hands: name at least one of left, right, both")
+        if "\0" in self.robot:
+            raise ValueError("robot: a robot directory or name cannot hold a NUL byte")
         _ordered(self.repetitions, "repetitions")
         _ordered(self.period_s, "period_s")
         return self
