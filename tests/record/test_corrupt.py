@@ -8,6 +8,7 @@ sections lie is found with the ``mcap`` library's own stream reader, not with ou
 
 import json
 import os
+import random
 import re
 import shutil
 from collections.abc import Callable
@@ -252,6 +253,16 @@ def _empty(path: Path) -> str:
     return {"run.rrd": "empty", "run.mcap": "not a readable MCAP"}.get(path.name, "not valid JSON")
 
 
+def _half(path: Path) -> str:
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])  # a copy cut short
+    return "Rerun cannot read it"
+
+
+def _garbage(path: Path) -> str:
+    path.write_bytes(random.Random(0).randbytes(5000))
+    return "Rerun cannot read it"
+
+
 def _nan(path: Path) -> str:
     values = _json(path)
     values[sorted(values)[0]] = float("nan")
@@ -300,7 +311,7 @@ CASES = [
     *[("manifest.json", d) for d in JSON_DAMAGE],
     *[("metrics.json", d) for d in [*JSON_DAMAGE, _nan, _boolean, _bad_key]],
     *[("run.mcap", d) for d in (_directory, _fifo, _missing, _empty)],
-    *[("run.rrd", d) for d in (_directory, _fifo, _missing, _empty)],
+    *[("run.rrd", d) for d in (_directory, _fifo, _missing, _empty, _half, _garbage)],
     ("manifest.json", _manifest_edit("run_id", _DELETE, "key 'run_id' is missing")),
     ("manifest.json", _manifest_edit("status", "bogus", "'status'")),
     ("manifest.json", _manifest_edit("status", None, "'status'")),
@@ -310,6 +321,8 @@ CASES = [
     ("manifest.json", _manifest_edit("task", "../../x", "not a task name")),
     ("manifest.json", _manifest_edit("task", 7, "'task'")),
     ("manifest.json", _manifest_edit("error", {"nested": 1}, "'error'")),
+    ("manifest.json", _manifest_edit("violations", "none", "'violations'")),
+    ("manifest.json", _manifest_edit("violations", [{"message": 3}], "'violations'")),
 ]
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+import warnings
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -346,14 +347,36 @@ def read_run(directory: str | Path) -> RunData:
     _check_one_run(manifest, mcap)
     metrics = _metrics(directory / METRICS)
     _check_metrics(directory / METRICS, str(manifest["status"]), metrics, mcap.metrics)
-    if _regular_file(directory / RRD_FILE, "Rerun recording").st_size == 0:
-        raise RecordingError(f"{excerpt(directory / RRD_FILE)}: empty (not a Rerun recording)")
+    _check_rrd(directory / RRD_FILE, str(manifest["run_id"]))
     return RunData(
         directory=directory,
         manifest=MappingProxyType(manifest),
         metrics=MappingProxyType(cast(dict[str, float], metrics or {})),
         topics=McapTopics(mcap),
     )
+
+
+def _check_rrd(path: Path, run_id: str) -> None:
+    """Refuse ``path`` unless Rerun's own reader opens it whole and it holds the one recording ``run_id``.
+
+    ``rerun.chunk.RrdReader`` decodes the file's footer (a recording dualarm closed has one): a truncated or garbage
+    file, or one without a footer, is refused naming Rerun's reason.
+    """
+    if _regular_file(path, "Rerun recording").st_size == 0:
+        raise RecordingError(f"{excerpt(path)}: empty (not a Rerun recording)")
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # Rerun warns, and reads on, where the footer is missing: a cut file
+        try:
+            recordings = [entry.recording_id for entry in RrdReader(path).recordings()]
+        except (RuntimeError, ValueError, OSError, Warning) as exc:
+            reason = str(exc).removeprefix(f"Failed to read RRD file at {path}: ")
+            raise RecordingError(f"{excerpt(path)}: Rerun cannot read it ({excerpt(reason, 160)})") from None
+    if recordings != [run_id]:
+        raise RecordingError(
+            f"{excerpt(path)}: holds the recordings {excerpt(', '.join(recordings) or 'none', 80)}, not run {run_id}'s"
+        )
 
 
 def _metrics_run(directory: Path, manifest: dict[str, Any]) -> RunData:

@@ -138,6 +138,17 @@ def _json_object(path: Path, what: str) -> dict[str, Any]:
     return value
 
 
+class ManifestViolation(BaseModel):
+    """One of the verdict's violations in ``manifest.json`` (:class:`dualarm.contracts.verdict.Violation`)."""
+
+    model_config = ConfigDict(extra="allow", strict=True, frozen=True)
+
+    check: str
+    stage: str
+    message: str
+    t_s: Annotated[float, Field(strict=True, allow_inf_nan=False)] | None = None
+
+
 class Manifest(BaseModel):
     """The keys of ``manifest.json`` that readers use, with their types; other keys are kept as they are."""
 
@@ -151,6 +162,7 @@ class Manifest(BaseModel):
     error: str | None = None
     task_file: str | None = None
     record: RecordLevel = "full"
+    violations: list[ManifestViolation] = []
 
 
 _METRICS = TypeAdapter(
