@@ -69,6 +69,7 @@ import casadi as cs
 import numpy as np
 from ruckig import InputParameter, Ruckig, Trajectory
 from scipy.interpolate import BSpline, make_interp_spline, make_lsq_spline
+from scipy.optimize import lsq_linear
 
 from dualarm.contracts.joint_path import JointPath
 from dualarm.errors import StageError
@@ -115,8 +116,10 @@ IPOPT = {
 #: first guess at this share of its speed, then Ruckig on s within limits that hold wherever on the piece.
 WARM_START_SHARE = 0.3
 FALLBACKS = ("warm start", "worst-case limits")
-#: Rounds of knot insertion before a curve's coefficients are clipped into the position limits (:func:`within`).
-CLIP_REFINEMENTS = 3
+#: Rounds of knot insertion around the samples a curve fitted within the position limits misses (:func:`within`), and
+#: the weight of the third differences of its coefficients in that fit (relative to a sample's).
+CLIP_REFINEMENTS = 8
+BOUNDED_FIT_SMOOTHING = 1e-3
 #: Points per knot interval where a piece's worst-case derivatives are taken (and at each knot).
 WORST_CASE_POINTS = 16
 #: IPOPT's return statuses that count as solved.
@@ -300,7 +303,8 @@ def pieces(
     it misses samples within :data:`TURN_CHORD_RAD` of an end (a hook), every sample from that end
     to the last it misses there is cut too, and the rest fitted again; where it misses only samples
     farther in, the curve is the interpolating quintic. Each curve is kept within the ``position``
-    limits (:func:`within`).
+    limits (:func:`within`); the samples of a polynomial through three that cannot be are joined by straight
+    pieces.
     """
     index = np.arange(len(s))
     before = np.clip(np.searchsorted(s, s - TURN_CHORD_RAD, side="right") - 1, 0, None)
@@ -318,12 +322,19 @@ def pieces(
     todo = list(zip(cuts[:-1].tolist(), cuts[1:].tolist(), strict=True))
     while todo:
         first, last = todo.pop()
-        spline, miss = fit(s[first : last + 1] - s[first], q[first : last + 1])
+        here, samples = s[first : last + 1] - s[first], q[first : last + 1]
+        spline, miss = fit(here, samples)
         hook = np.flatnonzero(miss > FIT_RAD) + first  # the samples it misses
         start, end = hook[s[hook] - s[first] <= TURN_CHORD_RAD], hook[s[last] - s[hook] <= TURN_CHORD_RAD]
+        if spline is None and not (len(start) or len(end)):  # wiggles further in: the interpolating quintic
+            spline = make_interp_spline(here, samples, k=5)
         if spline is not None:
-            done.append((first, last, within(spline, position, q[first : last + 1])))
-        elif len(start) or len(end):  # hooks: cut every sample from each end to the last it misses there
+            bounded = within(spline, position, here, samples)
+            if bounded is not None:
+                done.append((first, last, bounded))
+            else:  # a polynomial through three samples that leaves a limit: the straight lines between them
+                todo += [(k, k + 1) for k in range(first, last)]
+        else:  # hooks: cut every sample from each end to the last it misses there
             lo = max(int(start.max()), first + 1) if len(start) else first
             hi = max(lo, min(int(end.min()), last - 1)) if len(end) else last
             todo += (
@@ -331,9 +342,6 @@ def pieces(
                 + ([(lo, hi)] if lo < hi else [])
                 + [(k, k + 1) for k in range(hi, last)]
             )
-        else:
-            spline = make_interp_spline(s[first : last + 1] - s[first], q[first : last + 1], k=5)
-            done.append((first, last, within(spline, position, q[first : last + 1])))
     return sorted(done, key=lambda piece: piece[0])
 
 
@@ -375,36 +383,80 @@ def fit(s: np.ndarray, q: np.ndarray) -> tuple[BSpline | None, np.ndarray]:
     return None, miss
 
 
-def within(spline: BSpline, position: tuple[np.ndarray, np.ndarray] | None, q: np.ndarray) -> BSpline:
-    """``spline`` kept within the ``position`` limits wherever its samples are.
+def within(
+    spline: BSpline, position: tuple[np.ndarray, np.ndarray] | None, s: np.ndarray, q: np.ndarray
+) -> BSpline | None:
+    """``spline`` kept within the ``position`` limits wherever its samples are, and on them where it can.
 
-    ``position``: lower and upper (n,) [rad]; ``q``: the samples (m, n) [rad].
+    ``position``: lower and upper (n,) [rad]; ``s`` (m,) [rad] and ``q`` (m, n) [rad]: the samples ``spline`` fits.
 
     A B-spline lies in the convex hull of its coefficients, so with every coefficient within a joint's limits
     (widened to any sample beyond them) the curve is within them everywhere, exactly. Where a coefficient is
-    outside, knots are first inserted at the middle of every knot interval its B-spline spans, which leaves the
-    curve as it is and brings its coefficients toward it (up to :data:`CLIP_REFINEMENTS` times; not in a curve of
-    degree 2 or less, one polynomial through at most three samples, whose P'' would then jump); then the
-    coefficients are clipped into the limits. That moves the curve by at most the largest clip (the B-splines sum
-    to one): about as far as the curve itself went beyond the limit between samples, which the retime stage
-    measures as the path deviation. The end coefficients are the end samples: pieces still meet.
+    outside, a knot is inserted at the middle of every knot interval its B-spline spans, and each joint that had
+    one is fitted again, the coefficients bounded by its limits (bounded-variable least squares,
+    :func:`_bounded_fit`); while that misses a sample by more than :data:`FIT_RAD`, knots are inserted around the
+    samples it misses and it is fitted again (up to :data:`CLIP_REFINEMENTS` times). The curve then bends onto
+    the limit where the samples reach it, instead of overshooting between them; the last fit stands, and the
+    retime stage measures what it misses as the path deviation. None for a curve of degree 2 or less that leaves
+    the limits (one polynomial through at most three samples, whose P'' would jump at a new knot): its samples are
+    then joined by straight pieces, which stay within. The end coefficients stay the end samples: pieces still
+    meet.
     """
     if position is None:
         return spline
     lower = np.minimum(position[0], q.min(axis=0))
     upper = np.maximum(position[1], q.max(axis=0))
-    for refinement in range(CLIP_REFINEMENTS + 1):
-        outside = np.flatnonzero(((spline.c < lower) | (spline.c > upper)).any(axis=1))
-        if not len(outside):
-            return spline
-        if refinement == CLIP_REFINEMENTS or spline.k < 3:  # a new knot would leave a quadratic's P'' to jump there
+    outside = (spline.c < lower) | (spline.c > upper)
+    if not outside.any():
+        return spline
+    if spline.k < 3:  # a new knot would leave a quadratic's P'' to jump there
+        return None
+    joints = np.flatnonzero(outside.any(axis=0))
+
+    def bounded(spline: BSpline) -> BSpline:
+        c = spline.c.copy()
+        for joint in joints:
+            c[:, joint] = _bounded_fit(spline, s, q[:, joint], lower[joint], upper[joint])
+        return BSpline(spline.t, c, spline.k)
+
+    spline = _insert_knots(spline, np.flatnonzero(outside.any(axis=1)))
+    fitted = bounded(spline)
+    for _ in range(CLIP_REFINEMENTS):
+        missed = np.flatnonzero(np.abs(fitted(s) - q).max(axis=1) > FIT_RAD)
+        if not len(missed):
             break
-        t, k = spline.t, spline.k
-        spans = np.unique((outside[:, None] + np.arange(k + 1)).ravel())  # coefficient i's B-spline spans t[i .. i+k+1]
-        middles = (t[spans] + t[spans + 1]) / 2
-        for x in np.unique(middles[t[spans + 1] > t[spans]]):
-            spline = spline.insert_knot(x)
-    return BSpline(spline.t, np.clip(spline.c, lower, upper), spline.k)
+        span = np.searchsorted(spline.t, s[missed], side="right") - 1  # sample i is in [t[span], t[span + 1])
+        spline = _insert_knots(spline, np.unique((span[:, None] - np.arange(spline.k + 1)).ravel()))
+        fitted = bounded(spline)
+    return fitted
+
+
+def _insert_knots(spline: BSpline, coefficients: np.ndarray) -> BSpline:
+    """``spline`` with a knot amid every nonempty knot interval the ``coefficients``' B-splines span."""
+    t, k = spline.t, spline.k
+    spans = np.unique((np.clip(coefficients, 0, len(spline.c) - 1)[:, None] + np.arange(k + 1)).ravel())
+    middles = (t[spans] + t[spans + 1]) / 2  # coefficient i's B-spline spans t[i .. i+k+1]
+    for x in np.unique(middles[t[spans + 1] > t[spans]]):
+        spline = spline.insert_knot(x)
+    return spline
+
+
+def _bounded_fit(spline: BSpline, s: np.ndarray, y: np.ndarray, lower: float, upper: float) -> np.ndarray:
+    """One joint's coefficients (N,): least squares to ``y`` (m,) [rad] at ``s`` on ``spline``'s knots.
+
+    Each coefficient within [``lower``, ``upper``] [rad], the first and last the end samples (``scipy.optimize``'s
+    bounded-variable least squares). Where the knots are denser than the samples, coefficients the samples do not
+    determine are held by a small penalty (:data:`BOUNDED_FIT_SMOOTHING`) on their third differences.
+    """
+    basis = BSpline.design_matrix(s, spline.t, spline.k).toarray()
+    c = np.zeros(basis.shape[1])
+    c[[0, -1]] = y[[0, -1]]
+    smooth = BOUNDED_FIT_SMOOTHING * np.sqrt(len(s) / len(c)) * np.diff(np.eye(len(c)), 3, axis=0)
+    matrix = np.vstack([basis, smooth])
+    target = np.concatenate([y, np.zeros(len(smooth))]) - matrix[:, [0, -1]] @ c[[0, -1]]
+    inner = lsq_linear(matrix[:, 1:-1], target, bounds=(lower, upper), method="bvls", tol=1e-14, lsmr_tol=None).x
+    c[1:-1] = np.clip(inner, lower, upper)
+    return c
 
 
 def _dense(path: BSpline, points: int = WORST_CASE_POINTS) -> np.ndarray:
