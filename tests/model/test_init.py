@@ -303,6 +303,17 @@ def _one_line(args, needle):
     assert len(lines) == 1 and needle in lines[0], lines
 
 
+@pytest.mark.integration  # init reads the robot in PyBullet before it makes --out
+@pytest.mark.parametrize(
+    ("out", "why"), [("/proc/dualarm-x", "No such file or directory"), ("{file}/sub", "Not a dir")]
+)
+def test_an_out_the_system_refuses_is_one_line(tmp_path, out, why):
+    """--out in /proc, or through a file: one line naming it and the system's reason (a 50-line FileNotFoundError)."""
+    (tmp_path / "file").write_text("x")
+    out = out.format(file=tmp_path / "file")
+    _one_line(["robot", "init", str(IIWA), "--out", out], f"--out {out}: cannot create the directory ({why}")
+
+
 def test_refusals(tmp_path):
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "x").write_text("x")

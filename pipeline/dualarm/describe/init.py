@@ -197,7 +197,11 @@ def init_robot(
     allowed_pairs(urdf, allow)
     turn = _turning(source, urdf, layout, up)
     check_meshes(source)  # refused before anything is written
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # /proc/x, a path through a file, no permission, ...
+        why = exc.strerror or type(exc).__name__
+        raise OutputError(f"--out {excerpt(out)}: cannot create the directory ({why})", str(out)) from None
     try:
         return _write(source, out, urdf, layout, acceleration, jerk, name or out.resolve().name, allow, turn, progress)
     except BaseException:
