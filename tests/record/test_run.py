@@ -255,6 +255,24 @@ def test_cli_run_prints_the_run_directory_last_and_inspect_reads_it(tmp_path):
 
 
 @pytest.mark.integration
+def test_inspect_names_the_directory_and_cuts_a_huge_error(triangle_run, tmp_path, monkeypatch):
+    """``inspect .`` names the run's directory; a 10 MB error in the manifest is printed cut to 2,000 characters
+    (it was printed whole)."""
+    import json
+    import shutil
+
+    run = tmp_path / triangle_run.name
+    shutil.copytree(triangle_run, run)
+    manifest = json.loads((run / "manifest.json").read_text())
+    manifest["error"] = "x" * 10_000_000
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    monkeypatch.chdir(run)
+    shown = CliRunner().invoke(app, ["inspect", "."])
+    assert shown.exit_code == 0, shown.output[:2000]
+    assert str(run) in shown.stdout.splitlines()[0] and len(shown.stdout) < 20_000
+
+
+@pytest.mark.integration
 @pytest.mark.parametrize("damage", ["garbage", "truncated", "no manifest"])
 def test_cli_inspect_refuses_a_corrupt_recording(triangle_run, tmp_path, damage):
     broken = tmp_path / "run"

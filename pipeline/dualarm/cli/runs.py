@@ -16,6 +16,9 @@ from dualarm.cli.app import app, err, out, user_errors
 from dualarm.cli.options import _out_path, _within
 from dualarm.errors import DualarmError, excerpt
 
+#: The most characters ``inspect`` prints of a run's error or of a violation (the manifest holds them whole).
+INSPECT_CHARS = 2000
+
 
 @app.command()
 @user_errors
@@ -28,15 +31,15 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory (recor
 
     data = read_run(run_dir)
     m = data.manifest
-    out.print(f"run      {data.run_id}  ({data.status})", markup=False)
+    out.print(f"run      {data.run_id}  ({data.status})  {run_dir.resolve()}", markup=False, soft_wrap=True)
     out.print(f"task     {m.get('task')}  ({m.get('task_file')})", markup=False)
     out.print(f"stages   {', '.join(data.stages)}", markup=False)
     if data.record != "full":
         out.print(f"record   {data.record} ({data.lacks()})", markup=False, soft_wrap=True)
     if m.get("error"):
-        out.print(f"error    {m['error']}", markup=False, soft_wrap=True)
+        out.print(f"error    {excerpt(str(m['error']), INSPECT_CHARS)}", markup=False, soft_wrap=True)
     for violation in data.violations:
-        out.print(f"violated {violation}", markup=False, soft_wrap=True)
+        out.print(f"violated {excerpt(violation, INSPECT_CHARS)}", markup=False, soft_wrap=True)
     table = Table(title="topics", title_justify="left")
     for column in ("topic", "stage", "rows", "t from [s]", "t to [s]"):
         table.add_column(column, justify="left" if column in ("topic", "stage") else "right")
