@@ -256,17 +256,23 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
         # Dask's own logs silenced up to ERROR: a task's failure comes back as its exception (a failed row or part), and
         # an interrupted command's workers, stopped as the scheduler closes, logged "Failed to communicate with
         # scheduler during heartbeat" with a traceback (seen once in CI, under SIGTERM).
-        with (
-            LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                host=LOCAL_HOST,
-                dashboard_address=f"{LOCAL_HOST}:0",
-                silence_logs=logging.CRITICAL,
-            ) as cluster,
-            Client(cluster) as client,
-        ):
+        with contextlib.ExitStack() as stack:
+            try:
+                cluster = stack.enter_context(
+                    LocalCluster(
+                        n_workers=n,
+                        threads_per_worker=1,
+                        processes=True,
+                        host=LOCAL_HOST,
+                        dashboard_address=f"{LOCAL_HOST}:0",
+                        silence_logs=logging.CRITICAL,
+                    )
+                )
+            except RuntimeError as exc:  # "Nanny failed to start": a worker process died (was killed) while starting
+                raise DualarmError(
+                    f"the local Dask cluster did not start ({excerpt(str(exc), 120)}); nothing ran, run it again"
+                ) from None
+            client = stack.enter_context(Client(cluster))
             _without_gc_diagnosis()  # this process's, which the LocalCluster's scheduler installed
             client.register_plugin(WorkerSetup(local=True, cores=local_cores(n)))
             yield client

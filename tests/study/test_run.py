@@ -417,3 +417,17 @@ def test_every_server_of_a_local_cluster_listens_on_this_machine_only():
             c.laddr.ip for p in processes for c in p.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN
         }
     assert bound == {"127.0.0.1"}
+
+
+@pytest.mark.integration
+def test_a_worker_that_dies_while_the_local_cluster_starts_is_one_line(tmp_path):
+    """A worker process that ends as it starts (a Dask preload script that exits, as a kill at that moment does):
+    one line saying the cluster did not start (a RuntimeError 'Nanny failed to start' traceback)."""
+    import dask
+
+    (tmp_path / "dies.py").write_text("import os\nos._exit(3)\n")
+    with dask.config.set({"distributed.worker.preload": [str(tmp_path / "dies.py")]}):
+        with pytest.raises(DualarmError, match="the local Dask cluster did not start") as raised:
+            with connect(workers=1):
+                pass
+    assert "\n" not in str(raised.value)
