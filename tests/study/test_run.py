@@ -431,3 +431,27 @@ def test_a_worker_that_dies_while_the_local_cluster_starts_is_one_line(tmp_path)
             with connect(workers=1):
                 pass
     assert "\n" not in str(raised.value)
+
+
+@pytest.mark.integration
+def test_trials_are_submitted_a_few_per_worker_at_a_time(tmp_path, monkeypatch):
+    """12 trials on one worker: never more than IN_FLIGHT_PER_WORKER submitted and unfinished (every trial was
+    submitted first: a million took 60 s before the first showed), and every trial has its rows."""
+    from distributed import Client
+
+    from dualarm.study.run import IN_FLIGHT_PER_WORKER
+
+    submitted, in_flight = [], []
+    submit = Client.submit
+
+    def counting(self, *args, **kwargs):
+        submitted.append(args[3])
+        return submit(self, *args, **kwargs)
+
+    monkeypatch.setattr(Client, "submit", counting)
+    spec = study_from_toml(SPEC.replace("trials = 4", "trials = 12").replace('"pinv", "dls-svd", "pybullet"', '"pinv"'))
+    done = run_study(
+        spec, REPO, tmp_path / "out", workers=1, progress=lambda n, *_: in_flight.append(len(submitted) - n)
+    )
+    assert sorted(submitted) == list(range(12)) and sorted(done.results["trial"]) == list(range(12))
+    assert max(in_flight) <= IN_FLIGHT_PER_WORKER

@@ -321,6 +321,11 @@ def claim_study_dir(directory: Path, spec: StudySpec, resume: bool) -> Any:
     return claimed
 
 
+#: Trials submitted per worker at a time: the queue stays full, and a study of a million trials starts at once (it
+#: submitted every trial first, 60 s of nothing on the screen for a million).
+IN_FLIGHT_PER_WORKER = 4
+
+
 def run_study(
     spec: StudySpec,
     base_dir: str | Path,
@@ -392,10 +397,20 @@ def run_study(
                 n_workers = len(client.scheduler_info(n_workers=-1)["workers"])
                 start = time.perf_counter()
                 base, runs = str(Path(base_dir).resolve()), str((directory / RUNS).resolve())
-                futures = [client.submit(run_trial, spec, base, i, record, runs, pure=False) for i in todo]
-                index = {f.key: i for f, i in zip(futures, todo, strict=True)}
+                waiting, index, running = iter(todo), {}, as_completed()
+
+                def submit_next() -> None:  # at most IN_FLIGHT_PER_WORKER per worker are submitted at a time
+                    i = next(waiting, None)
+                    if i is not None:
+                        future = client.submit(run_trial, spec, base, i, record, runs, pure=False)
+                        index[future.key] = i
+                        running.add(future)
+
+                for _ in range(IN_FLIGHT_PER_WORKER * max(n_workers, 1)):
+                    submit_next()
                 written = time.perf_counter()
-                for future in as_completed(futures):
+                for future in running:
+                    submit_next()
                     try:
                         result = future.result()
                     except Exception as exc:  # the trial took ALLOWED_FAILURES workers down, or could not be built
