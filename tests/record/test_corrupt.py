@@ -421,6 +421,15 @@ def test_run_mcap_of_another_task_is_refused(triangle, circle, tmp_path):
 
 
 @pytest.mark.integration
+def test_run_rrd_of_another_run_is_refused(triangle, triangle_twice, tmp_path):
+    """Rerun's reader opens it whole, but the recording it holds is another run's (it passed before)."""
+    run = _copy(triangle, tmp_path)
+    shutil.copy(triangle_twice / "run.rrd", run / "run.rrd")
+    message = _read_error(run)
+    assert "run.rrd: " in message and f"not run {triangle.name}'s" in message and triangle_twice.name in message
+
+
+@pytest.mark.integration
 def test_manifest_json_of_another_run_is_refused(triangle, triangle_twice, tmp_path):
     run = _copy(triangle, tmp_path)
     shutil.copy(triangle_twice / "manifest.json", run / "manifest.json")
