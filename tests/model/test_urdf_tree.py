@@ -100,3 +100,28 @@ def test_robot_init_refuses_them_in_one_line_and_writes_nothing(tmp_path, case):
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and needle in done.stderr
     assert not (tmp_path / "out").exists() and time.monotonic() - start < 30
+
+
+def crashes_loading(urdf: str) -> int:
+    """A PyBullet load that crashes in C (reads address 0), as its loader did on malformed trees."""
+    import ctypes
+
+    ctypes.string_at(0)
+    return 0
+
+
+@pytest.mark.integration  # robot init, and a process of its own
+def test_a_crash_of_pybullets_loader_is_one_line_and_leaves_nothing(tmp_path, monkeypatch):
+    """The load robot init checks in a process of its own crashes (signal 11): one line naming the user's URDF and
+    the signal, exit 2, and no half-written directory (it was left behind, and a re-run refused as not empty)."""
+    from typer.testing import CliRunner
+
+    from dualarm.cli import app
+
+    monkeypatch.setattr("dualarm.describe.init.loads", crashes_loading)
+    (tmp_path / "arm.urdf").write_text(_robot(*ARM))
+    done = CliRunner().invoke(app, ["robot", "init", str(tmp_path / "arm.urdf"), "--out", str(tmp_path / "out")])
+    assert done.exit_code == 2, done.output
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "arm.urdf: PyBullet crashed loading it (signal 11 (SIGSEGV))" in lines[0], lines
+    assert not (tmp_path / "out").exists()

@@ -267,7 +267,7 @@ def _segfault() -> None:
 
 @pytest.mark.integration  # a process of its own
 def test_a_crash_in_c_code_in_an_isolated_case_is_an_error_naming_the_signal():
-    from dualarm.bench.trajectory import CrashedError, isolated
+    from dualarm.isolation import CrashedError, isolated
 
     with pytest.raises(CrashedError, match=r"signal 11 \(SIGSEGV\)"):
         isolated(_segfault)
@@ -278,7 +278,8 @@ def test_the_triangle_tracked_at_full_limits_where_the_bench_died_of_signal_11_e
     """`dualarm bench trajectory` died without a message (signal 11 in Ruckig's calculate, ruckig 0.19.4) at
     "triangle: TOPP-RA 1.0/1.0 + tracking" on another machine (issue 36). That exact case, in a process of its own as
     the bench runs it: it returns, and its motion holds every limit by finite differences of its positions."""
-    from dualarm.bench.trajectory import isolated, tracked_row
+    from dualarm.bench.trajectory import tracked_row
+    from dualarm.isolation import isolated
     from dualarm.retime.stage import plan
     from dualarm.run import run_task
     from dualarm.tasks import load_task

@@ -29,17 +29,15 @@ Never used by the test suite: wall-clock numbers depend on the machine.
 
 from __future__ import annotations
 
-import multiprocessing
-import signal
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 
 from dualarm.contracts.joint_path import JointPath
 from dualarm.errors import StageError
+from dualarm.isolation import CrashedError, isolated
 from dualarm.retime.stage import plan, retime_path
 from dualarm.retime.timing import path_deviation_max_rad
 from dualarm.run import run_task
@@ -167,45 +165,6 @@ def bench_trajectory(
         bound = rest_to_rest_bound_s(path, v, a, j)
         rows[first:] = [replace(row, bound_s=bound) for row in rows[first:]]
     return rows
-
-
-class CrashedError(Exception):
-    """The process that ran a benchmark case ended without a result (a crash in a C extension)."""
-
-
-def isolated(function: Callable[..., Any], *args: Any) -> Any:
-    """``function(*args)`` run in a process of its own (spawned), its result or its StageError.
-
-    Ruckig's C++ has crashed the whole command without a message (signal 11 in ``calculate``, ruckig 0.19.4, issue
-    36); in a process of its own a crash is a :class:`CrashedError` naming the exit code or signal, and the other
-    cases still run.
-    """
-    context = multiprocessing.get_context("spawn")
-    receive, send = context.Pipe(duplex=False)
-    process = context.Process(target=_send_result, args=(send, function, args))
-    process.start()
-    send.close()
-    try:
-        kind, value = receive.recv()
-    except EOFError:
-        process.join()
-        code = process.exitcode
-        why = f"signal {-code} ({signal.Signals(-code).name})" if code is not None and code < 0 else f"exit {code}"
-        raise CrashedError(f"the process running {function.__name__} ended without a result: {why}") from None
-    process.join()
-    if kind == "error":
-        raise StageError(value)
-    return value
-
-
-def _send_result(send: Any, function: Callable[..., Any], args: tuple[Any, ...]) -> None:
-    """Run ``function(*args)`` and send ("ok", result) or ("error", the StageError's message) on ``send``."""
-    try:
-        send.send(("ok", function(*args)))
-    except StageError as error:
-        send.send(("error", str(error)))
-    finally:
-        send.close()
 
 
 def tracked_row(

@@ -55,8 +55,10 @@ from dualarm.describe.tips import _first_movable, _zero_position
 from dualarm.describe.up import TURNED_JOINT, TURNED_ROOT, looks_turned, turn_root, turning
 from dualarm.errors import OutputError, RobotModelError, excerpt
 from dualarm.files import DIRECTORY, kind
+from dualarm.isolation import CrashedError, isolated
 from dualarm.model.robot import Robot, load_robot
 from dualarm.model.urdf import UrdfModel, load_urdf
+from dualarm.sim.world import loads
 
 
 @dataclass(frozen=True)
@@ -243,6 +245,12 @@ def _write(
             f"joint '{TURNED_JOINT}'; task poses are in '{TURNED_ROOT}'"
         )
     urdf = load_urdf(copy)
+    try:  # before PyBullet reads it here: a crash in its loader is then a line, not the end of the command
+        isolated(loads, str(copy))
+    except CrashedError as exc:
+        raise RobotModelError(f"{excerpt(source)}: PyBullet crashed loading it ({str(exc).split(': ')[-1]})") from None
+    except RobotModelError as exc:  # name the user's file, not the copy removed with the directory
+        raise RobotModelError(str(exc).replace(excerpt(copy), excerpt(source))) from None
     srs = {hand: _srs_verdict(urdf, f"{hand}_arm", base, tip) for hand, base, tip in layout.arms}
     for hand, base, tip in layout.arms:
         notes.append(

@@ -216,6 +216,16 @@ def load_pybullet_robot(urdf: str | Path, *, self_collision: bool = False, gui: 
     )
 
 
+def loads(urdf: str) -> int:
+    """Load ``urdf`` as :func:`load_pybullet_robot` does (self-collision on), unload it; its joints' count.
+
+    Run in a process of its own (:func:`dualarm.isolation.isolated`) before a command relies on PyBullet reading a
+    user's file: PyBullet's loader has crashed (signal 11) on URDFs it accepted the parse of.
+    """
+    with load_pybullet_robot(urdf, self_collision=True) as sim:
+        return len(sim.joint_index)
+
+
 def _merged_links(urdf: str | Path, kept: dict[str, int]) -> dict[str, tuple[str, np.ndarray]]:
     """Each link PyBullet merged away -> (its ancestor PyBullet kept, its pose in that ancestor's frame)."""
     from dualarm.model.kinematics import origin_matrix
