@@ -17,7 +17,15 @@ from dualarm.errors import DualarmError
 
 
 class CrashedError(Exception):
-    """The process that ran a call ended without a result (a crash in a C extension)."""
+    """The process that ran a call ended without a result (a crash in a C extension).
+
+    Attributes:
+        why: how it ended: ``signal 11 (SIGSEGV)``, or ``exit`` and its code.
+    """
+
+    def __init__(self, function: str, why: str) -> None:
+        super().__init__(f"the process running {function} ended without a result: {why}")
+        self.why = why
 
 
 def isolated(function: Callable[..., Any], *args: Any) -> Any:
@@ -40,7 +48,7 @@ def isolated(function: Callable[..., Any], *args: Any) -> Any:
         process.join()
         code = process.exitcode
         why = f"signal {-code} ({signal.Signals(-code).name})" if code is not None and code < 0 else f"exit {code}"
-        raise CrashedError(f"the process running {function.__name__} ended without a result: {why}") from None
+        raise CrashedError(function.__name__, why) from None
     process.join()
     if kind == "error":
         error_class, message = value

@@ -37,8 +37,9 @@ from the URDF, and every choice is returned as a line of :attr:`RobotInit.notes`
 
 from __future__ import annotations
 
+import contextlib
 import shutil
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -211,6 +212,15 @@ def init_robot(
         raise
 
 
+@contextlib.contextmanager
+def _naming(source: Path, copy: Path) -> Iterator[None]:
+    """Inside, a RobotModelError names the user's ``source``, not its ``copy`` (deleted with the output)."""
+    try:
+        yield
+    except RobotModelError as exc:
+        raise RobotModelError(str(exc).replace(excerpt(copy), excerpt(source))) from None
+
+
 def _write(
     source: Path,
     out: Path,
@@ -246,11 +256,10 @@ def _write(
         )
     urdf = load_urdf(copy)
     try:  # before PyBullet reads it here: a crash in its loader is then a line, not the end of the command
-        isolated(loads, str(copy))
+        with _naming(source, copy):
+            isolated(loads, str(copy))
     except CrashedError as exc:
-        raise RobotModelError(f"{excerpt(source)}: PyBullet crashed loading it ({str(exc).split(': ')[-1]})") from None
-    except RobotModelError as exc:  # name the user's file, not the copy removed with the directory
-        raise RobotModelError(str(exc).replace(excerpt(copy), excerpt(source))) from None
+        raise RobotModelError(f"{excerpt(source)}: PyBullet crashed loading it ({exc.why})") from None
     srs = {hand: _srs_verdict(urdf, f"{hand}_arm", base, tip) for hand, base, tip in layout.arms}
     for hand, base, tip in layout.arms:
         notes.append(
@@ -286,10 +295,8 @@ def _write(
     robot = load_robot(out)
     if progress is not None:
         progress("sampling configurations")
-    try:
+    with _naming(source, copy):
         sim, touching = _collision_world(robot)
-    except RobotModelError as exc:  # name the user's file, not the copy removed with the directory
-        raise RobotModelError(str(exc).replace(excerpt(copy), excerpt(source))) from None
     with sim:
         held = held_values(robot, sim, chain_joints)
         for joint, value in held.items():

@@ -143,18 +143,6 @@ class Layout:
 _RUN = Layout(files=RUN_FILES)
 _RUN_ID = "????????-??????-??????"
 _TASK = Layout(dirs={_RUN_ID: _RUN, PARTIAL.format(_RUN_ID): _RUN})
-#: Every kind of output directory and what dualarm writes into it.
-#:
-#: - ``recordings`` (``run --out``, ``plan --recordings``, a consistency's or a reproduction's
-#:   ``runs/``): ``<task>/<run-id>/`` trees, added beside the others and never deleted; an entry
-#:   dualarm did not write is left alone and does not stop a run. An existing directory without
-#:   the marker is used too (the repository's ``recordings/`` holds ``.gitkeep``), unmarked.
-#: - ``plan``, ``consistency``, ``report``: rewritten in place by the next command into them.
-#: - ``reproduction``: emptied by the next reproduction, after checking at every depth that it
-#:   holds only what dualarm writes there.
-#:
-#: A writer that adds a file to one of these directories adds its name here, or the next command
-#: into the directory refuses it as foreign.
 #: What ``study report`` writes into a study's directory, and the digests of them it writes last
 #: (:mod:`dualarm.study.report`).
 STUDY_REPORT_FILES = (
@@ -167,6 +155,18 @@ STUDY_REPORT_FILES = (
     "deviations.png",
 )
 STUDY_REPORT_DIGESTS = "report.sha256"
+#: Every kind of output directory and what dualarm writes into it.
+#:
+#: - ``recordings`` (``run --out``, ``plan --recordings``, a consistency's or a reproduction's
+#:   ``runs/``): ``<task>/<run-id>/`` trees, added beside the others and never deleted; an entry
+#:   dualarm did not write is left alone and does not stop a run. An existing directory without
+#:   the marker is used too (the repository's ``recordings/`` holds ``.gitkeep``), unmarked.
+#: - ``plan``, ``consistency``, ``report``: rewritten in place by the next command into them.
+#: - ``reproduction``: emptied by the next reproduction, after checking at every depth that it
+#:   holds only what dualarm writes there.
+#:
+#: A writer that adds a file to one of these directories adds its name here, or the next command
+#: into the directory refuses it as foreign.
 KINDS: Mapping[str, Layout] = {
     "recordings": Layout(dirs={"*": _TASK}, add_only=True),
     "plan": Layout(files=("plan_trials.csv", "plan_summary.json")),

@@ -253,8 +253,7 @@ def read_study(directory: str | Path, spec: StudySpec | None = None) -> pd.DataF
                 f"{excerpt(part)}: not a readable study part ({type(exc).__name__}: "
                 f"{excerpt(str(exc), 120)}); delete it to run the trial again with --resume"
             ) from None
-        why = _not_a_part(part.name, rows, spec) if spec is not None else ""
-        if spec is not None and why:
+        if spec is not None and (why := _not_a_part(part.name, rows, spec)):
             raise RecordingError(f"{excerpt(part)}: not a part of study '{spec.name}' ({why}); move it out of it")
         frames.append(rows)
     return _ordered(pd.concat(frames, ignore_index=True)) if frames else pd.DataFrame(columns=list(COLUMNS))
@@ -263,11 +262,11 @@ def read_study(directory: str | Path, spec: StudySpec | None = None) -> pd.DataF
 def _not_a_part(name: str, rows: pd.DataFrame, spec: StudySpec) -> str:
     """Why the part file ``name`` holding ``rows`` is not one of ``spec``'s trials; "" if it is."""
     match = re.fullmatch(r"trial-(\d{6})\.parquet", name)
-    if match is None or int(match.group(1)) >= spec.trials:
+    trial = int(match.group(1)) if match is not None else spec.trials
+    if trial >= spec.trials:
         return f"its name is no trial-NNNNNN.parquet of trials 0 to {spec.trials - 1}"
     if not {"study", "trial", "method"} <= set(rows.columns):
         return "no study, trial and method columns"
-    trial = int(match.group(1))
     if not (rows["study"] == spec.name).all() or not (rows["trial"] == trial).all():
         return f"rows of another study or trial than {trial}"
     if sorted(rows["method"].astype(str)) != sorted(spec.methods):
