@@ -288,6 +288,11 @@ BOWL = str(TASKS / "bowl_grasp.toml")
             "--samples 10000000: give a finite number in [1, 1e+06]",
         ),
         (["bench", "tvgdd", "--repeats", "5000"], "--repeats 5000: give a finite number in [1, 1000]"),
+        # Click's usage errors: one line, not four (usage, hint, blank, error)
+        (["run", TRIANGLE, "--bogus"], "error: dualarm run: No such option: --bogus"),
+        (["robot", "init"], "error: dualarm robot init: Missing argument 'urdf' (see 'dualarm robot init --help')"),
+        (["run", TRIANGLE, "--reps", "abc"], "error: dualarm run: Invalid value for '--reps'"),
+        (["nosuch"], "error: dualarm: No such command 'nosuch'"),
     ],
 )
 def test_arguments_outside_their_meaning_are_one_line_before_any_work(args, needle, tmp_path, monkeypatch):

@@ -296,3 +296,39 @@ app()
     assert stdout.splitlines()[-1] == str(out / "report.md")
     assert (out / "table_i.json").read_bytes() == before["table_i.json"]
     assert [p["status"] for p in json.loads((out / "parts.json").read_text())["parts"]] == ["complete"]
+
+
+@pytest.mark.integration
+def test_the_next_run_removes_the_staging_directories_of_killed_runs_only(tmp_path):
+    """A run killed by SIGKILL leaves its hidden staging directory; the next run into the recordings directory
+    removes it (once STALE_STAGING_S old), and leaves the staging directory of a run still being written (its writer
+    holds it, though as old) and a fresh one (between a writer's mkdir and its lock)."""
+    from dualarm.record.run_dir import STALE_STAGING_S, RunDirectory
+
+    writer = (
+        "import os, signal, sys, time\n"
+        "from pathlib import Path\n"
+        "from dualarm.record.run_dir import RunDirectory\n"
+        f"run = RunDirectory.create(Path({str(tmp_path)!r}), sys.argv[1], {{}})\n"
+        "(run.staging / 'run.mcap').write_bytes(b'half')\n"
+        "print(run.staging, flush=True)\n"
+        "os.kill(os.getpid(), signal.SIGKILL) if sys.argv[1] == 'killed' else time.sleep(60)\n"
+    )
+    killed = subprocess.run([sys.executable, "-c", writer, "killed"], capture_output=True, text=True, timeout=60)
+    assert killed.returncode == -9
+    running = subprocess.Popen([sys.executable, "-c", writer, "running"], stdout=subprocess.PIPE, text=True)
+    try:
+        stale, live = Path(killed.stdout.strip()), Path(running.stdout.readline().strip())
+        fresh = live.parent.parent / "fresh" / live.name
+        fresh.mkdir(parents=True)
+        old = time.time() - 2 * STALE_STAGING_S
+        for staging in (stale, live):
+            os.utime(staging, (old, old))
+        assert stale.is_dir() and stale.name.endswith(".partial")
+        run = RunDirectory.create(tmp_path, "next", {})
+        assert not stale.exists() and live.is_dir() and fresh.is_dir()
+        assert (live / "run.mcap").read_bytes() == b"half"
+        assert run.finish(None).is_dir()
+    finally:
+        running.kill()
+        running.wait()

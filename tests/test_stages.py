@@ -408,3 +408,37 @@ def test_a_limit_robot_init_assumed_says_so_in_the_message_it_causes(tmp_path):
         assert result.exit_code == 1 and "velocity limit" in result.output, result.output
         said = "an assumed velocity limit: robot init's default, not the robot's data" in result.output
         assert said == assumed, result.output
+
+
+def test_an_ik_path_through_a_box_is_a_contact_violation_without_the_execute_stage():
+    """``--stages path,ik``: a box put where TV-GDD's left hand is at the middle sample makes the run violated, with
+    a contact violation of the ik stage naming the box (it was 'complete': collisions were judged only at execute).
+    PyBullet, given the IK sample at the time the violation names, finds a link of the robot overlapping the box."""
+    from dataclasses import replace
+
+    from dualarm.model.kinematics import ChainKinematics
+    from dualarm.run import build_stages, run_stages
+    from dualarm.sim.world import add_environment, in_contact, pb
+    from dualarm.tasks.schema import EnvironmentObject
+
+    task = load_task(TRIANGLE, 1)
+    clean = run_stages(task, build_stages(task, "tvgdd", stages=("path", "ik")))
+    assert clean.verdict.status == "complete"
+    path = clean.joint_path
+    chain = task.hand_chain_from_root("left")
+    q = {**path.fixed, **dict(zip(path.joint_names, path.q[len(path.t) // 2], strict=True))}
+    hand = ChainKinematics.of(chain).pose(np.array([q[n] for n in chain.joint_names]))[:3, 3]
+    box = EnvironmentObject(
+        name="box", shape="box", pose={"position": tuple(hand), "rpy": (0.0, 0.0, 0.0)}, size_m=(0.04, 0.04, 0.04)
+    )
+    boxed = replace(task, spec=task.spec.model_copy(update={"environment": (box,)}))
+    verdict = run_stages(boxed, build_stages(boxed, "tvgdd", stages=("path", "ik"))).verdict
+    contacts = [v for v in verdict.violations if v.check == "contact"]
+    assert verdict.status == "violated" and contacts and all(v.stage == "ik" for v in contacts)
+    assert all("box" in v.message for v in contacts), contacts
+    at = int(np.flatnonzero(np.isclose(path.t, contacts[0].t_s))[0])
+    with load_pybullet_robot(task.robot.urdf.path) as sim:
+        (body,) = add_environment(sim, (box,))
+        sim.set_positions(path.joint_names, path.q[at])
+        pb.performCollisionDetection(physicsClientId=sim.client)
+        assert any(in_contact(p) for p in pb.getContactPoints(sim.body, body, physicsClientId=sim.client))

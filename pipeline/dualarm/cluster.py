@@ -232,6 +232,7 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
     """
     import dask
     from distributed import Client, LocalCluster
+    from distributed.deploy.spec import SpecCluster
 
     if scheduler is not None:  # its own allowed-failures holds (Dask's default is 3 too)
         _is_a_scheduler(scheduler)
@@ -257,6 +258,7 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
         # an interrupted command's workers, stopped as the scheduler closes, logged "Failed to communicate with
         # scheduler during heartbeat" with a traceback (seen once in CI, under SIGTERM).
         with contextlib.ExitStack() as stack:
+            started = set(SpecCluster._instances)
             try:
                 cluster = stack.enter_context(
                     LocalCluster(
@@ -268,10 +270,15 @@ def connect(scheduler: str | None = None, workers: int | None = None) -> Iterato
                         silence_logs=logging.CRITICAL,
                     )
                 )
-            except RuntimeError as exc:  # "Nanny failed to start": a worker process died (was killed) while starting
-                raise DualarmError(
-                    f"the local Dask cluster did not start ({excerpt(str(exc), 120)}); nothing ran, run it again"
-                ) from None
+            except BaseException as exc:
+                # Dask's exit hook would close the half-started cluster and fail on its workers' state with a
+                # traceback (Ctrl-C while it starts); its worker processes end with this one.
+                SpecCluster._instances.difference_update(set(SpecCluster._instances) - started)
+                if isinstance(exc, RuntimeError):  # "Nanny failed to start": a worker process was killed while starting
+                    raise DualarmError(
+                        f"the local Dask cluster did not start ({excerpt(str(exc), 120)}); nothing ran, run it again"
+                    ) from None
+                raise
             client = stack.enter_context(Client(cluster))
             _without_gc_diagnosis()  # this process's, which the LocalCluster's scheduler installed
             client.register_plugin(WorkerSetup(local=True, cores=local_cores(n)))

@@ -157,7 +157,7 @@ def build_stages(
     checks = checks or Checks()
     built: list[Stage[Any, Any]] = [PathStage(task)]
     if "ik" in chosen and m is not None:
-        built.append(IkStage(task, m, settings, checks, retimed="retime" in chosen))
+        built.append(IkStage(task, m, settings, checks, retimed="retime" in chosen, executed="execute" in chosen))
     if "retime" in chosen:  # the back half's imports (toppra, ruckig, pybullet) wait until it runs
         built.append(RetimeStage(task, retime or task.spec.retime))
     if "smooth" in chosen:

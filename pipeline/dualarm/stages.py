@@ -135,6 +135,7 @@ class IkStage:
     settings: Any
     checks: Checks = field(default_factory=Checks)
     retimed: bool = True
+    executed: bool = True
     name: ClassVar[str] = "ik"
 
     def __post_init__(self) -> None:
@@ -177,12 +178,19 @@ class IkStage:
         return replace(path, chosen=recorded.settings), metrics
 
     def violations(self, path: JointPath) -> list[Violation]:
-        """Failed samples, hands off the asked pose, position limits; velocity limits without a retime stage.
+        """Failed IK, hands off the pose, position limits; velocity without retime, contacts without execute.
 
         Hands off the asked pose: the orientation too when the method solved it. Velocity limits when no
-        retime stage follows (``retimed`` False).
+        retime stage follows (``retimed`` False). Collisions when no execute stage follows (``executed`` False), whose
+        preflight would check the trajectory through these samples: at the solved samples, with the preflight's
+        checker (:func:`dualarm.execute.preflight.path_collision_violations`).
         """
-        return ik_violations(path, self.task.robot, self.checks, retimed=self.retimed)
+        found = ik_violations(path, self.task.robot, self.checks, retimed=self.retimed)
+        if not self.executed:
+            from dualarm.execute.preflight import path_collision_violations
+
+            found += path_collision_violations(path, self.task)
+        return found
 
 
 @dataclass(frozen=True)

@@ -434,6 +434,30 @@ def test_a_worker_that_dies_while_the_local_cluster_starts_is_one_line(tmp_path)
 
 
 @pytest.mark.integration
+def test_ctrl_c_while_the_local_cluster_starts_leaves_no_traceback_at_exit():
+    """SIGINT as the worker's nanny starts, in a process of its own: KeyboardInterrupt comes out of connect() and the
+    process exits without output on stderr (Dask's exit hook printed a 28-line 'AssertionError: Status.init' traceback
+    closing the half-started cluster)."""
+    script = """
+import os, signal
+import distributed.nanny
+start = distributed.nanny.Nanny.start_unsafe
+async def interrupted(self):
+    os.kill(os.getpid(), signal.SIGINT)
+    return await start(self)
+distributed.nanny.Nanny.start_unsafe = interrupted
+from dualarm.cluster import connect
+try:
+    with connect(workers=1):
+        print("started")
+except KeyboardInterrupt:
+    print("interrupted")
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert (done.returncode, done.stdout, done.stderr) == (0, "interrupted\n", "")
+
+
+@pytest.mark.integration
 def test_trials_are_submitted_a_few_per_worker_at_a_time(tmp_path, monkeypatch):
     """12 trials on one worker: never more than IN_FLIGHT_PER_WORKER submitted and unfinished (every trial was
     submitted first: a million took 60 s before the first showed), and every trial has its rows."""

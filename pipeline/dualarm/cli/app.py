@@ -6,6 +6,7 @@ One line and exit 2 for a user's mistake, 130 or 143 on a signal.
 from __future__ import annotations
 
 import functools
+import importlib
 import signal
 import sys
 import threading
@@ -15,6 +16,7 @@ from typing import Any
 import typer
 from rich.console import Console
 from rich.status import Status
+from typer.core import TyperGroup
 
 from dualarm.errors import DualarmError, StageError, Terminated, excerpt
 
@@ -27,7 +29,41 @@ EXIT_CODES = {
     "interrupted (SIGINT)": 130,
     "terminated (SIGTERM)": 143,
 }
+
+#: The exceptions of the click that Typer uses (its own copy since Typer 0.23).
+_click = importlib.import_module(typer.BadParameter.__module__)
+
+
+class _Commands(TyperGroup):
+    """The app's command group: a usage error (an unknown option, a missing argument, ...) is one line.
+
+    Click prints four (the usage, a hint, a blank line, the error); the usage is one ``--help`` away.
+    """
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:  # Click's: (args, prog_name, complete_var, standalone_mode, ...)
+        if not kwargs.get("standalone_mode", True) or len(args) > 3:  # a caller handling Click's exceptions itself
+            return super().main(*args, **kwargs)
+        try:  # no command returns a value: what comes back is an exit code (typer.Exit's) or None
+            code = super().main(*args, **{**kwargs, "standalone_mode": False})
+        except getattr(_click, "NoArgsIsHelpError", ()) as exc:  # a group called alone: its help
+            exc.show()
+            sys.exit(exc.exit_code)
+        except _click.ClickException as exc:
+            where = exc.ctx.command_path if isinstance(exc, _click.UsageError) and exc.ctx is not None else "dualarm"
+            err.print(
+                excerpt(f"error: {where}: {exc.format_message().rstrip('.')} (see '{where} --help')", MAX_LINE),
+                markup=False,
+                soft_wrap=True,
+            )
+            sys.exit(exc.exit_code)
+        except _click.Abort:
+            err.print("aborted", markup=False)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
 app = typer.Typer(
+    cls=_Commands,
     name="dualarm",
     help="Humanoid dual-arm motion papers as runnable, recorded, repeatable experiments.\n\nExit codes: "
     + ", ".join(f"{code} {what}" for what, code in EXIT_CODES.items())

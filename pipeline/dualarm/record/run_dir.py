@@ -474,13 +474,48 @@ def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
+#: A staging directory no process holds (its writer was killed: SIGKILL, a power cut) and unchanged for this long is
+#: removed by the next run into the recordings directory [s]; the age covers the moment between its ``mkdir`` and
+#: its writer's lock.
+STALE_STAGING_S = 60.0
+
+
+def _remove_stale_staging(recordings: Path) -> None:
+    """Remove the staging directories in ``recordings/<task>/`` of writers gone (:data:`STALE_STAGING_S`).
+
+    A writer holds an exclusive ``flock`` on its staging directory until it renames it into place; the system
+    releases it when the process ends, however it ends. What cannot be read or removed is left as it is.
+    """
+    pattern = PARTIAL.format(_RUN_ID)
+    with contextlib.suppress(OSError):
+        for task in os.scandir(recordings):
+            if not task.is_dir(follow_symlinks=False):
+                continue
+            with contextlib.suppress(OSError):
+                for entry in os.scandir(task.path):
+                    if entry.is_dir(follow_symlinks=False) and fnmatch.fnmatchcase(entry.name, pattern):
+                        _remove_if_stale(Path(entry.path))
+
+
+def _remove_if_stale(staging: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(staging, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # BlockingIOError (an OSError): its writer is running
+            if time.time() - os.fstat(fd).st_mtime > STALE_STAGING_S:
+                shutil.rmtree(staging)
+        finally:
+            os.close(fd)
+
+
 @dataclass
 class RunDirectory:
     """A run being written.
 
     Attributes:
         final: where the run will live.
-        staging: the temporary directory written to until :meth:`finish`.
+        staging: the temporary directory written to until :meth:`finish`, locked (``flock``, exclusive) until then:
+            the next run removes a staging directory no process holds (:func:`_remove_stale_staging`).
         manifest: the manifest being built (written by :meth:`finish`).
         output: the recordings directory, locked (shared) while this object lives.
     """
@@ -490,6 +525,7 @@ class RunDirectory:
     manifest: dict[str, object] = field(default_factory=dict)
     _started: float = field(default_factory=time.perf_counter)
     output: OutputDir | None = None
+    _lock: int = -1
 
     @classmethod
     def create(cls, out_dir: Path, task_name: str, manifest: Mapping[str, object]) -> RunDirectory:
@@ -506,6 +542,7 @@ class RunDirectory:
         if task_name in ("", ".", "..") or "/" in task_name or os.sep in task_name or "\0" in task_name:
             raise InvalidArgumentError("task_name", f"'{excerpt(task_name)}' is not a directory name")
         output = claim_output_dir(out_dir, "recordings")
+        _remove_stale_staging(output.path)
         parent = output.path / task_name
         try:
             parent.mkdir(exist_ok=True)
@@ -520,9 +557,13 @@ class RunDirectory:
             raise _os_error(parent, "cannot create the run directory", exc) from None
         try:
             run = cls(final=parent / run_id, staging=staging, output=output)
+            run._lock = os.open(staging, os.O_RDONLY | os.O_DIRECTORY)
+            fcntl.flock(run._lock, fcntl.LOCK_EX)
             run.manifest = {"run_id": run_id, "status": "running", "started_at": _now(), **manifest}
-        except BaseException:  # interrupted: no hidden staging directory is left
+        except BaseException as exc:  # interrupted: no hidden staging directory is left
             shutil.rmtree(staging, ignore_errors=True)
+            if isinstance(exc, OSError):
+                raise _os_error(staging, "cannot lock the run directory", exc) from None
             raise
         return run
 
@@ -557,8 +598,18 @@ class RunDirectory:
             (self.staging / METRICS).write_text(json.dumps(clean, indent=2, sort_keys=True) + "\n")
         (self.staging / MANIFEST).write_text(json.dumps(self.manifest, indent=2) + "\n")
         self.staging.rename(self.final)
+        self._unlock()
         return self.final
 
     def discard(self) -> None:
         """Remove the staging directory (used only when even a failed run cannot be written)."""
         shutil.rmtree(self.staging, ignore_errors=True)
+        self._unlock()
+
+    def _unlock(self) -> None:
+        fd, self._lock = self._lock, -1
+        if fd >= 0:
+            os.close(fd)
+
+    def __del__(self) -> None:
+        self._unlock()

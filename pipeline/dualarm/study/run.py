@@ -26,7 +26,8 @@ A study's directory ``DIR`` holds:
 
 A row (:data:`COLUMNS`, then the trial's features and every ``path.*`` and ``ik.*`` metric):
 
-- ``status``: the run's verdict, ``complete`` or ``violated`` (:mod:`dualarm.violations`); ``failed``
+- ``status``: the run's verdict, ``complete`` or ``violated`` (:mod:`dualarm.violations`; an IK path through the
+  robot or the scene is a violation, as in any run without the execute stage); ``failed``
   when the method raised (a :class:`~dualarm.errors.DualarmError`: no path, an unreachable start);
   ``error`` for any other exception, or a trial whose worker died :data:`~dualarm.cluster.ALLOWED_FAILURES` times.
 - ``failed``: the method raised, or a repetition holds a failed IK sample (``ik.failed_reps``).
