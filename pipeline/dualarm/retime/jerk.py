@@ -23,7 +23,10 @@ the ball game, by up to 8e-5 rad with a 0.19 s period), P is the interpolating q
 timing slows down to keep its jerk. q''' = P''' s'^3 + 3 P'' s' s'' + P' s''' is bounded.
 
 The timing of a piece. A straight piece (two samples) is timed by Ruckig on s, within the limits of
-s that keep each joint within :data:`MARGIN` of its own: exact and time-optimal (:func:`_bounded`). Any other is one
+s that keep each joint within :data:`MARGIN` of its own: exact and time-optimal (:func:`_bounded`). So is a parabola
+through three samples (a piece between two turns a sample apart), within limits of s that hold on the whole piece:
+on the ball game's two, IPOPT took 76 and 201 iterations (0.35 and 0.76 s) for 5.6 and 7.9 ms of motion, Ruckig 3 ms
+for 0.7 ms more each. Any other is one
 nonlinear program (CasADi, solved by IPOPT; Debrouwere et al. 2013 set out time-optimal path
 following as such a program): on K + 1 values of s, the nodes, the unknowns are the path velocity
 s' and acceleration s'' at each node, and on each interval its duration and a constant path jerk
@@ -514,11 +517,11 @@ def _time_piece(
     """One piece's timing along its curve ``path`` (:func:`pieces`).
 
     Programs solved on nodes refined where the check finds a limit exceeded, then stretched (module docstring); the
-    piece's ``samples`` (first, last) name it in errors. A straight piece is Ruckig's (:func:`_bounded`). When IPOPT
-    does not solve the first program, the fallbacks of :data:`FALLBACKS`: the program from the first guess slowed to
-    :data:`WARM_START_SHARE` of its speed, then :func:`_bounded`, which cannot fail.
+    piece's ``samples`` (first, last) name it in errors. A straight piece or a parabola is Ruckig's (:func:`_bounded`).
+    When IPOPT does not solve the first program, the fallbacks of :data:`FALLBACKS`: the program from the first guess
+    slowed to :data:`WARM_START_SHARE` of its speed, then :func:`_bounded`, which cannot fail.
     """
-    if path.k == 1:
+    if path.k <= 2:  # a straight piece, or a parabola through three samples: Ruckig's (see the module docstring)
         return _bounded(path, velocity, acceleration, jerk)
     nodes = path.t[-1] * (1 - np.cos(np.linspace(0.0, np.pi, NODES + 1))) / 2  # denser at both rest ends
     fallback = ""
