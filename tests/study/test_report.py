@@ -26,7 +26,8 @@ def wilson_closed_form(k: int, n: int) -> tuple[float, float]:
 
 def hand_made() -> pd.DataFrame:
     """Method `a`: 2000 trials, P(inconsistent) = logistic(-1 + (size - 0.1) / 0.03) (one unit per 0.03 m), P(failed) 0;
-    method `b`: 200 trials, the first 30 inconsistent (of them 10 failed), plus 5 rows that are errors; kinds cycle."""
+    method `b`: 200 trials, the first 30 inconsistent (of them 10 failed), 12 violated (50-61), plus 5 rows that are
+    errors; kinds cycle."""
     rng = np.random.default_rng(7)
     size = rng.normal(0.1, 0.03, 2000)
     a = pd.DataFrame(
@@ -52,6 +53,7 @@ def hand_made() -> pd.DataFrame:
     rows = pd.concat([a, b], ignore_index=True)
     rows["status"] = "complete"
     rows.loc[(rows["method"] == "b") & (rows["trial"] >= 200), "status"] = "error"
+    rows.loc[(rows["method"] == "b") & (rows["trial"] >= 50) & (rows["trial"] < 62), "status"] = "violated"
     rows["study"] = "hand-made"
     return rows
 
@@ -59,7 +61,8 @@ def hand_made() -> pd.DataFrame:
 def test_per_method_rates_and_wilson_intervals():
     rates = method_rates(hand_made()).set_index("method")
     b = rates.loc["b"]
-    assert (b["trials"], b["errors"], b["inconsistent"], b["failed"]) == (200, 5, 30, 10)
+    assert (b["trials"], b["errors"], b["inconsistent"], b["failed"], b["violated"]) == (200, 5, 30, 10, 12)
+    assert rates.loc["a", "violated"] == 0
     assert b["p_inconsistent"] == 30 / 200
     np.testing.assert_allclose(
         (b["p_inconsistent_low"], b["p_inconsistent_high"]), wilson_closed_form(30, 200), rtol=1e-12

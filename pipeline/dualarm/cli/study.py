@@ -143,7 +143,8 @@ def study(
 
     A run writes DIR/trials.parquet (one row per trial and method: the trial's features, every ik.*
     metric, the verdict, wall time, worker), one task file per trial in DIR/tasks, and prints per
-    method P(inconsistent) and P(failed) with 95 % Wilson intervals. A report writes DIR/report.md,
+    method P(inconsistent) and P(failed) with 95 % Wilson intervals and its violated rows (a hand off
+    its pose, a joint beyond a limit, an IK path through the robot or the scene). A report writes DIR/report.md,
     its tables (csv) and figures from DIR/trials.parquet alone.
 
     Exits 0 when every trial has its rows (a method that failed a trial is the study's data, counted
@@ -208,7 +209,7 @@ def study(
         ),
         title_justify="left",
     )
-    for column in ("method", "trials", "P(inconsistent) [95 %]", "P(failed) [95 %]", "errors"):
+    for column in ("method", "trials", "P(inconsistent) [95 %]", "P(failed) [95 %]", "violated", "errors"):
         table.add_column(column, justify="left" if column == "method" else "right")
     for r in rates.itertuples():
         table.add_row(
@@ -216,6 +217,7 @@ def study(
             str(r.trials),
             f"{r.p_inconsistent:.3f} [{r.p_inconsistent_low:.3f}, {r.p_inconsistent_high:.3f}]",
             Text(f"{r.p_failed:.3f} [{r.p_failed_low:.3f}, {r.p_failed_high:.3f}]", style="yellow" if r.failed else ""),
+            Text(str(r.violated), style="yellow" if r.violated else ""),
             Text(str(r.errors), style="red" if r.errors else ""),
         )
     out.print(table)

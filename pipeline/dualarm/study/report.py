@@ -116,10 +116,11 @@ def _judged(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def method_rates(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per method (in the table's order): trials, errors, inconsistent and failed counts, and more.
+    """Per method (in the table's order): trials, errors, inconsistent, failed, violated counts, and more.
 
     Errors are left out; each share with its Wilson interval, and the median and 90th percentile of
-    the largest joint deviation between repetitions (of the trials that have one) [rad].
+    the largest joint deviation between repetitions (of the trials that have one) [rad]. ``violated``: rows whose
+    verdict is ``violated`` (a hand off its pose, a joint beyond a limit, an IK path through the robot or the scene).
     """
     out = []
     for method, group in rows.groupby("method", sort=False):
@@ -140,6 +141,7 @@ def method_rates(rows: pd.DataFrame) -> pd.DataFrame:
                 "p_failed": failed / n if n else math.nan,
                 "p_failed_low": f_low,
                 "p_failed_high": f_high,
+                "violated": int((judged["status"] == "violated").sum()),
                 **_quantiles(judged),
             }
         )
@@ -433,7 +435,9 @@ def write_study_report(directory: str | Path) -> Path:
             f"# Study {study}: when does repeated motion become inconsistent?\n",
             f"{rows['trial'].nunique()} trials, {len(rows)} rows (trial x method); from `{RESULTS}` alone. "
             "P is the share of a method's trials, with its 95 % Wilson "
-            "interval; rows with `status = error` are left out and counted.\n",
+            "interval; rows with `status = error` are left out and counted. `violated`: rows whose run broke a "
+            "check (a hand off its pose, a joint beyond a limit, an IK path through the robot or the scene; the "
+            "row's `violations` names them).\n",
             "## Per method\n",
             _markdown(
                 shown[
@@ -445,6 +449,7 @@ def write_study_report(directory: str | Path) -> Path:
                         "P",
                         "failed",
                         "P_failed",
+                        "violated",
                         "deviation_median_rad",
                         "deviation_p90_rad",
                     ]
