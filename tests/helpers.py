@@ -4,6 +4,8 @@ A plain module (``from tests.helpers import ...``); ``tests/conftest.py`` keeps 
 """
 
 import contextlib
+import subprocess
+import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,6 +16,16 @@ REPO = Path(__file__).resolve().parents[1]
 HUMANOID = REPO / "robots" / "humanoid"
 OFFSET = REPO / "robots" / "humanoid_offset"
 TASKS = REPO / "tasks"
+
+
+def dualarm_subprocess(args: Sequence[str], timeout: float = 300) -> subprocess.CompletedProcess:
+    """``dualarm ARGS`` in a fresh interpreter (the real stderr, text); the timeout turns a hang into a failure."""
+    return subprocess.run(
+        [sys.executable, "-c", "from dualarm.cli import app; app()", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
 def wrist_offset_robot(directory: Path) -> Path:

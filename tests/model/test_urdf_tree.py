@@ -8,15 +8,13 @@ tracebacks from PyBullet or Python. ``robot init`` exits 2 with the same line, i
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from dualarm.errors import RobotModelError
 from dualarm.model.urdf import MAX_LINKS, load_urdf
+from tests.helpers import dualarm_subprocess
 
 
 def _joint(name: str, parent: str, child: str, lower: str = "-1", xyz: str = "0 0 0.1") -> str:
@@ -84,19 +82,7 @@ def test_robot_init_refuses_them_in_one_line_and_writes_nothing(tmp_path, case):
     text, needle = CASES[case]
     (tmp_path / "bad.urdf").write_text(text)
     start = time.monotonic()
-    done = subprocess.run(
-        [
-            str(Path(sys.executable).parent / "dualarm"),
-            "robot",
-            "init",
-            str(tmp_path / "bad.urdf"),
-            "--out",
-            str(tmp_path / "out"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    done = dualarm_subprocess(["robot", "init", str(tmp_path / "bad.urdf"), "--out", str(tmp_path / "out")], 120)
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and needle in done.stderr
     assert not (tmp_path / "out").exists() and time.monotonic() - start < 30

@@ -3,8 +3,6 @@ against their closed form, the binned rates against counts made here, and the lo
 table was drawn from."""
 
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
@@ -13,6 +11,7 @@ import pytest
 from dualarm.errors import OutputError, RecordingError
 from dualarm.record.run_dir import claim_output_dir
 from dualarm.study.report import feature_rates, logistic_fit, method_rates, read_trials, write_study_report
+from tests.helpers import dualarm_subprocess
 
 Z95 = 1.959963984540054  # the normal distribution's 97.5 % quantile
 
@@ -167,10 +166,5 @@ def test_a_table_without_rows_or_with_verdicts_as_text_is_one_line(tmp_path, cha
 def test_a_report_without_a_table_is_one_line(tmp_path):
     with pytest.raises(RecordingError, match="no such file"):
         write_study_report(tmp_path)
-    done = subprocess.run(
-        [sys.executable, "-c", "from dualarm.cli import app; app()", "study", "report", str(tmp_path / "none")],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    done = dualarm_subprocess(["study", "report", str(tmp_path / "none")], 120)
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and "trials.parquet: no such file" in done.stderr

@@ -25,6 +25,7 @@ from dualarm.study.run import PARTS, RESULTS, TASKS, VARYING, read_study, run_st
 from dualarm.study.spec import study_from_toml
 from dualarm.study.trials import reachable_trial, trial, within_reach
 from dualarm.tasks.load import load_task
+from tests.helpers import dualarm_subprocess
 
 REPO = Path(__file__).resolve().parents[2]
 SPEC = """
@@ -130,20 +131,7 @@ def test_another_study_into_the_same_directory_is_refused(local):
 def test_the_cli_refuses_a_bad_spec_in_one_line(tmp_path):
     spec = tmp_path / "bad.toml"
     spec.write_text('name = "s"\ntrials = 10\nrepetitions = [9, 3]\n')
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            "from dualarm.cli import app; app()",
-            "study",
-            str(spec),
-            "--out",
-            str(tmp_path / "out"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    done = dualarm_subprocess(["study", str(spec), "--out", str(tmp_path / "out")], 120)
     assert done.returncode == 2, done.stderr
     assert done.stderr.strip().count("\n") == 0 and "repetitions: the low end 9 is above the high end 3" in done.stderr
     assert not (tmp_path / "out").exists()

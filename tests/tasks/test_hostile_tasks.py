@@ -16,8 +16,6 @@ import errno
 import json
 import math
 import os
-import subprocess
-import sys
 import tempfile
 import tomllib
 import types
@@ -31,6 +29,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel
+from tests.helpers import dualarm_subprocess
 from typer.testing import CliRunner
 
 from dualarm.cli import app
@@ -369,18 +368,11 @@ def test_urdf_option_naming_a_directory(tmp_path: Path, command: str):
     assert str(tmp_path) in line and "directory" in line
 
 
-def run_subprocess(args: list[str]) -> subprocess.CompletedProcess:
-    """``dualarm ARGS`` in a fresh interpreter (the real stderr); the timeout turns a hang into a failure."""
-    return subprocess.run(
-        [sys.executable, "-c", "from dualarm.cli import app; app()", *args], capture_output=True, text=True, timeout=300
-    )
-
-
 @pytest.mark.integration
 def test_subprocess_fifo_and_long_path_no_traceback_no_hang(tmp_path: Path, hostile_paths):
     for case in ("fifo", "10000_characters"):
         out = tmp_path / f"out_{case}"
-        result = run_subprocess(["run", hostile_paths[case], "--stages", "path", "--out", str(out)])
+        result = dualarm_subprocess(["run", hostile_paths[case], "--stages", "path", "--out", str(out)])
         assert result.returncode == 2, result.stderr[-3000:]
         assert "Traceback" not in result.stderr
         assert_names(error_line(result.stderr), hostile_paths[case], os_reason(hostile_paths[case]))
@@ -400,7 +392,7 @@ def test_subprocess_hostile_content_no_traceback(tmp_path: Path, edit):
     """Hostile content, on the real stderr: one line, no traceback, no escape sequence or bidi override printed raw (in
     carry_box, whose ``initial`` is the one-line ``"ready"``)."""
     path = write(tmp_path, shipped_text("carry_box", edit))
-    result = run_subprocess(["run", str(path), "--stages", "path", "--out", str(tmp_path / "out")])
+    result = dualarm_subprocess(["run", str(path), "--stages", "path", "--out", str(tmp_path / "out")])
     assert result.returncode == 2, result.stderr[-3000:]
     assert "Traceback" not in result.stderr
     line = error_line(result.stderr)
@@ -638,7 +630,7 @@ def test_cli_margin_1e300_exits_2_at_once(tmp_path: Path):
     process."""
     path = write(tmp_path, shipped_text("triangle", (ARM_ANGLE, ARM_ANGLE + "\nmargin_rad = 1e300")))
     out = tmp_path / "out"
-    result = run_subprocess(["run", str(path), "--ik", "mc-inverse", "--out", str(out)])
+    result = dualarm_subprocess(["run", str(path), "--ik", "mc-inverse", "--out", str(out)])
     assert result.returncode == 2, result.stderr[-3000:]
     assert "Traceback" not in result.stderr
     line = error_line(result.stderr)

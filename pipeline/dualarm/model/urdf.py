@@ -147,8 +147,8 @@ def _finite(value: float | None, default: float) -> float:
 MAX_LINKS, MAX_NAME, MAX_MAGNITUDE = 1000, 256, 1e6
 
 
-def _check_tree(where: str, name: str, links: list[str], joints: list[JointSpec]) -> None:
-    """Refuse, in one line, a robot that is not a tree of links PyBullet and dualarm can read.
+def _check_tree(where: str, name: str, links: list[str], joints: list[JointSpec]) -> str:
+    """The root link of a tree of links PyBullet and dualarm can read; any other robot refused in one line.
 
     Bounded names and sizes; every link and joint named once; every joint between two declared links, parent not its
     child; every link the child of at most one joint; one root, from which every link is reached (no loop). PyBullet
@@ -204,6 +204,7 @@ def _check_tree(where: str, name: str, links: list[str], joints: list[JointSpec]
     if len(reached) != len(links):
         missing = next(link for link in links if link not in reached)
         raise RobotModelError(f"{where}: link '{excerpt(missing, 40)}' is on a loop of joints, not below the root")
+    return roots[0]
 
 
 #: Top-level URDF elements removed before parsing: ROS (2) control's and Gazebo's, which dualarm does not read.
@@ -326,15 +327,10 @@ def load_urdf(path: str | Path) -> UrdfModel:
                 effort=effort,
             )
         )
-    _check_tree(where, str(robot.name), [link.name for link in robot.links], joints)
-    try:
-        root = robot.get_root()
-    except Exception as exc:  # urdf_parser_py asserts there is exactly one root link
-        raise RobotModelError(f"{where}: not a valid URDF ({excerpt(exc, 200) or 'no single root link'})") from None
     return UrdfModel(
         path=path,
         name=str(robot.name),
-        root=root,
+        root=_check_tree(where, str(robot.name), [link.name for link in robot.links], joints),
         links=tuple(link.name for link in robot.links),
         joints=tuple(joints),
         kinematic_xml=kinematic_xml,
