@@ -306,3 +306,27 @@ def test_the_benchs_lower_bound_holds_under_every_timing_and_is_met_on_a_straigh
     line = joint_path(q, np.array([0.0, 1.0]), ARMS)
     bound = rest_to_rest_bound_s(line, V, A, J)
     assert bound <= plan(line, V, A, jerk=J).duration_s <= bound / MARGIN
+
+
+def test_each_node_constrains_the_joints_nearest_their_limits_as_the_motion_itself_shows(loop):
+    """The joints whose acceleration and jerk a program bounds at a node (`jerk._loaded`) are the LOADED largest of
+    max(sqrt(|q''| / a), cbrt(|q'''| / j)) there, q'' and q''' (before and after the node) evaluated from the timed
+    motion itself, and every joint of the 14 is within its limits after (finite differences)."""
+    from dualarm.retime import jerk
+
+    _, timing, _ = loop
+    piece = timing.evaluate.pieces[0]
+    nodes = piece.stretch * piece.starts_s  # node times of the stretched motion (it ranks the joints the same)
+    d1, d2, d3 = (piece.path(piece.s, m) for m in (1, 2, 3))
+    chosen = jerk._loaded(d1, d2, d3, piece.sd, piece.sdd, piece.sddd, A, J)
+    _, _, qdd, _ = piece(nodes)
+    before, after = piece(np.clip(nodes - 1e-9, 0, None))[3], piece(nodes + 1e-9)[3]
+    before[0], after[-1] = after[0], before[-1]  # no interval before the first node, nor after the last
+    load = np.maximum(np.sqrt(np.abs(qdd) / A), np.cbrt(np.maximum(np.abs(before), np.abs(after)) / J))
+    ranked = np.sort(load, axis=1)[:, ::-1]
+    clear = ranked[:, jerk.LOADED - 1] > ranked[:, jerk.LOADED] * (1 + 1e-6)  # no tie at the cut
+    assert clear.mean() > 0.9
+    expected = np.sort(np.argsort(-load, axis=1)[:, : jerk.LOADED], axis=1)
+    assert chosen.shape == (len(nodes), jerk.LOADED) and len(np.unique(chosen)) > jerk.LOADED
+    np.testing.assert_array_equal(chosen[clear], expected[clear])
+    assert max(_fd_ratios(timing)) <= 1 + 1e-6
