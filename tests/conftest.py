@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from tests import tiers
-from tests.helpers import HUMANOID, REPO, SHIPPED
+from tests.helpers import HUMANOID, OTHER_RUNS, REPO, SHIPPED
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -155,13 +155,12 @@ def wheel_env(tmp_path_factory) -> Path:
     return venv
 
 
-@pytest.fixture(scope="session")
-def shipped_runs(tmp_path_factory, worker_id) -> dict[str, Path]:
-    """Task name -> the run directory of a one-repetition run of that shipped task through every stage.
+def _shared_runs(tmp_path_factory, worker_id, kind: str, runs: dict[str, tuple]) -> dict[str, Path]:
+    """Name -> the run directory of ``record_run(task, method, record=level)`` for each of ``runs``.
 
     Made once per test session: under pytest-xdist, the first worker to ask makes them in the
-    session's base directory, under a file lock, and the others read their directories from there
-    (the pattern of pytest-xdist's documentation).
+    session's base directory (under ``kind``), under a file lock, and the others read their
+    directories from there (the pattern of pytest-xdist's documentation).
     """
     from filelock import FileLock
 
@@ -169,13 +168,28 @@ def shipped_runs(tmp_path_factory, worker_id) -> dict[str, Path]:
     from dualarm.tasks import load_task
 
     def make(out: Path) -> dict[str, Path]:
-        return {name: record_run(load_task(name, 1), method, out_dir=out).directory for name, method in SHIPPED.items()}
+        return {
+            name: record_run(load_task(task, 1), method, out_dir=out, record=level).directory
+            for name, (task, method, level) in runs.items()
+        }
 
     if worker_id == "master":  # not under xdist
-        return make(tmp_path_factory.mktemp("shipped"))
-    shared = tmp_path_factory.getbasetemp().parent / "shipped"
+        return make(tmp_path_factory.mktemp(kind))
+    shared = tmp_path_factory.getbasetemp().parent / kind
     made = shared / "runs.json"
     with FileLock(shared.with_suffix(".lock")):
         if not made.is_file():
             made.write_text(json.dumps({name: str(run) for name, run in make(shared).items()}))
     return {name: Path(run) for name, run in json.loads(made.read_text()).items()}
+
+
+@pytest.fixture(scope="session")
+def shipped_runs(tmp_path_factory, worker_id) -> dict[str, Path]:
+    """Task name -> the run directory of a one-repetition run of that shipped task through every stage."""
+    return _shared_runs(tmp_path_factory, worker_id, "shipped", {n: (n, m, "full") for n, m in SHIPPED.items()})
+
+
+@pytest.fixture(scope="session")
+def other_runs(tmp_path_factory, worker_id) -> dict[str, Path]:
+    """Name -> the run directory of each of :data:`tests.helpers.OTHER_RUNS`: another robot, a lower record level."""
+    return _shared_runs(tmp_path_factory, worker_id, "other", OTHER_RUNS)

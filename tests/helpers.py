@@ -72,6 +72,12 @@ SHIPPED = {
     "carry_box": "mc-inverse",
     "bowl_grasp": "mcikrrt",
 }
+#: Runs the viewer tests open besides the shipped ones: name -> (task file, method, record level). A robot whose URDF
+#: names meshes by relative paths (the Panda), and a run recorded up to the IK only.
+OTHER_RUNS = {
+    "panda_triangle": (str(REPO / "tests" / "panda" / "panda_triangle.toml"), "sew", "full"),
+    "triangle_ik": ("triangle", "mc-inverse", "ik"),
+}
 
 
 @dataclass

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from dualarm.record.foxglove_layout import _path
+from dualarm.record.foxglove_layout import message_path
 from tests.helpers import HUMANOID, REPO, SHIPPED
 
 FOXGLOVE = REPO / "viewers" / "foxglove"
@@ -156,7 +156,7 @@ def test_quoted_field_names_parse_in_studio():
     script = (
         f"const {{ loadMessagePathSupport }} = require({json.dumps(str(FOXGLOVE / 'lib' / 'studioBundle.cjs'))});"
         f"const {{ parseRosPath }} = loadMessagePathSupport();"
-        f"for (const p of {json.dumps([_path('/execute/sample', 'position', n) for n in names])})"
+        f"for (const p of {json.dumps([message_path('/execute/sample', 'position', n) for n in names])})"
         " console.log(JSON.stringify(parseRosPath(p)));"
     )
     done = subprocess.run(
@@ -236,3 +236,37 @@ def test_studio_draws_the_whole_robot(opened, task):
         and cols.max() < width - MARGIN_PX
     )
     assert rows.max() - rows.min() > 0.3 * height  # a 1.6 m robot, not a speck
+
+
+def test_every_plot_of_the_layout_spans_its_units_floor_and_the_held_arm_angle_is_flat(shipped_runs):
+    """Each Plot panel's y-range (the ``minYValue`` and ``maxYValue`` Studio's Plot panel reads) is at least its unit's
+    floor wide and holds every value of its paths, read from run.mcap with the mcap reader: the triangle's arm angle,
+    which MC-Inverse holds to 1e-12 rad, sits in a plot at least 1e-3 rad wide."""
+    from mcap.reader import make_reader
+
+    from dualarm.record.sink import PLOT_FLOORS
+
+    units = {"[m]": "m", "[rad]": "rad", "contacts": "count"}
+    for task, run in shipped_runs.items():
+        layout = json.loads((run / LAYOUT_FILE).read_text())
+        values: dict[str, list[float]] = {}
+        with (run / "run.mcap").open("rb") as f:
+            for _, channel, message in make_reader(f).iter_messages():
+                if channel.topic.endswith("/sample") or channel.topic.endswith("/executed"):
+                    data = json.loads(message.data)
+                    for field, value in data.items():
+                        for key, v in value.items() if isinstance(value, dict) else [(None, value)]:
+                            if isinstance(v, (int, float)):
+                                fields = (field,) if key is None else (field, key)
+                                values.setdefault(message_path(channel.topic, *fields), []).append(float(v))
+        for panel, config in layout["configById"].items():
+            if not panel.startswith("Plot!"):
+                continue
+            title = config["foxglovePanelTitle"]
+            unit = next(unit for word, unit in units.items() if word in title)
+            low, high = config["minYValue"], config["maxYValue"]
+            shown = np.concatenate([values[p["value"]] for p in config["paths"]])
+            assert high - low >= PLOT_FLOORS[unit] * (1 - 1e-9), (task, title)
+            assert low <= shown.min() and shown.max() <= high, (task, title)
+            if task == "triangle" and panel == "Plot!arm-angle":  # each hand's held angle
+                assert max(np.ptp(values[p["value"]]) for p in config["paths"]) < 1e-12

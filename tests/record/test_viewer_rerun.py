@@ -19,7 +19,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tests.helpers import HUMANOID, SHIPPED
+from dualarm.model.robot import load_robot
+from dualarm.record.sink import recorded_stages, shown_stage
+from tests.helpers import OTHER_RUNS, SHIPPED
 
 RERUN = str(Path(sys.executable).with_name("rerun"))
 #: The 3D view's target frame (the blueprint's origin "/").
@@ -59,13 +61,15 @@ def _until(check, what: str, timeout_s: float = 120.0, period_s: float = 0.1):
     raise TimeoutError(f"the viewer: {what} after {timeout_s} s")
 
 
-@pytest.fixture(scope="module", params=sorted(SHIPPED))
-def opened(request, shipped_runs):
-    """Each shipped task's run through every stage, opened in a headless viewer; (client, manifest stages, end of the
-    execution [s])."""
+@pytest.fixture(scope="module", params=[*sorted(SHIPPED), *sorted(OTHER_RUNS)])
+def opened(request):
+    """Each shipped task's run through every stage, and each of :data:`OTHER_RUNS` (the Panda, a run recorded up to the
+    IK), opened in a headless viewer; (client, store id, the stages recorded, the end of the recording's time [s], the
+    run's robot)."""
     from rerun.experimental import ViewerClient
 
-    run = shipped_runs[request.param]
+    runs = request.getfixturevalue("shipped_runs" if request.param in SHIPPED else "other_runs")
+    run = runs[request.param]
     client = ViewerClient.spawn(headless=True, port=_free_port(), hide_welcome_screen=True, executable_path=RERUN)
     try:
         _until(client.get_state, "no answer")
@@ -85,8 +89,10 @@ def opened(request, shipped_runs):
             return True if len(counts) >= 4 and len(set(counts[-4:])) == 1 and not graph.get("missing_chunks") else None
 
         _until(settled, "the transform graph is still growing", period_s=0.5)
-        stages = json.loads((run / "manifest.json").read_text())["stages"]
-        yield client, stages, json.loads((run / "metrics.json").read_text())["execute.duration_s"]
+        manifest = json.loads((run / "manifest.json").read_text())
+        (timeline,) = [t for t in client.get_recording_schema(store).timelines if t.name == "time"]
+        stages = recorded_stages(manifest["record"], manifest["stages"])
+        yield client, store, stages, timeline.end / 1e9, load_robot(manifest["robot_dir"])
     finally:
         client.quit()
 
@@ -112,7 +118,7 @@ def _joined(graph: dict) -> set[str]:
 
 
 def test_every_view_reports_nothing_at_start_middle_and_end(opened):
-    client, _, end = opened
+    client, _, _, end, _ = opened
     for t in (0.0, end / 2, end):
         _show(client, t)
         errors = {
@@ -124,9 +130,9 @@ def test_every_view_reports_nothing_at_start_middle_and_end(opened):
 
 
 def test_every_stage_robot_is_joined_to_the_3d_views_frame(opened):
-    """Every link of the URDF (read with ElementTree), for every stage the manifest lists."""
-    client, stages, end = opened
-    links = {link.get("name") for link in ET.parse(HUMANOID / "humanoid.urdf").getroot().iter("link")}
+    """Every link of the URDF (read with ElementTree), for every stage the run recorded."""
+    client, _, stages, end, robot = opened
+    links = {link.get("name") for link in ET.parse(robot.urdf.path).getroot().iter("link")}
     for t in (0.0, end / 2):
         _show(client, t)
         joined = _joined(client.get_transform_graph())
@@ -139,10 +145,11 @@ def test_every_stage_robot_is_joined_to_the_3d_views_frame(opened):
 
 
 def test_the_3d_view_draws_the_whole_robot(opened):
-    """In the view the run opens on, hiding the executed robot changes at least 1 % of the pixels, none near the
-    edges."""
-    client, stages, end = opened
-    view = next(v.view_id for v in client.get_state().views if v.name == "execute: robot and hand paths")
+    """In the view the run opens on, hiding its robot (the executed one, when the run recorded the execution) changes at
+    least 1 % of the pixels, none near the edges."""
+    client, _, stages, end, _ = opened
+    stage = shown_stage(stages)
+    view = next(v.view_id for v in client.get_state().views if v.name == f"{stage}: robot and hand paths")
 
     def shot() -> np.ndarray:
         _show(client, end / 2)
@@ -152,8 +159,10 @@ def test_the_3d_view_draws_the_whole_robot(opened):
     blueprint = client.get_blueprint()
     key = f"/view/{view}/ViewContents"
     before = blueprint.blueprint.get(key)
-    blueprint.blueprint[key] = {"ViewContents": {"query": [*before["ViewContents"]["query"], "- /execute/**"]}}
+    hiding = {"ViewContents": {"query": [*before["ViewContents"]["query"], f"- /{stage}/**"]}}
+    blueprint.blueprint[key] = hiding
     client.set_blueprint(blueprint.blueprint, store_id=blueprint.store_id)
+    _until(lambda: True if client.get_blueprint().blueprint.get(key) == hiding else None, "the view is not changed")
     try:
         hidden = shot()
     finally:
@@ -171,14 +180,84 @@ def test_the_3d_view_draws_the_whole_robot(opened):
 
 def test_the_run_opens_on_its_own_layout(opened):
     """The views the viewer shows are the run's blueprint (sent before the data), not a layout the viewer made up."""
-    client, stages, _ = opened
+    client, _, stages, _, _ = opened
     names = {v.name for v in client.get_state().views}
-    assert {
-        "execute: robot and hand paths",
-        "hand error [m]",
-        "velocity / limit",
-        "acceleration / limit",
-        "jerk / limit",
-        "contacts",
-    } <= names, names
+    assert f"{shown_stage(stages)}: robot and hand paths" in names, names
+    if "execute" in stages:
+        plots = {"hand error [m]", "velocity / limit", "acceleration / limit", "jerk / limit", "contacts"}
+        assert plots <= names, names
     assert {stage for stage in stages if stage != "approach"} <= names, names  # the "stages" tab: a 3D view per stage
+
+
+def _matches(query: list[str], entity: str) -> bool:
+    """Whether a view's contents ``query`` (Rerun's "+ /path/**" and "- /path/**" rules, the last match wins) holds
+    ``entity``."""
+    verdict = False
+    for rule in query:
+        sign, pattern = rule[0], rule[1:].strip()
+        base = pattern.removesuffix("/**")
+        if entity == base or (pattern.endswith("/**") and entity.startswith(base.rstrip("/") + "/")):
+            verdict = sign == "+"
+    return verdict
+
+
+def test_every_view_of_the_blueprint_shows_data(opened):
+    """No view the run opens on is empty: each plot's contents hold a logged scalar series, each 3D view's some logged
+    data, by the viewer's own blueprint and recording schema."""
+    client, store, _, _, _ = opened
+    blueprint = client.get_blueprint().blueprint
+    plots = client.get_recording_schema(store, entity_path="/plots", max_entities=10**6).entities
+    scalars = {e.entity_path for e in plots if any(c.component == "Scalars:scalars" for c in e.components)}
+    logged = {e.entity_path for e in client.get_recording_schema(store, paths_only=True, max_entities=10**6).entities}
+    empty = []
+    for view in client.get_state().views:
+        query = blueprint[f"/view/{view.view_id}/ViewContents"]["ViewContents"]["query"]
+        query = [query] if isinstance(query, str) else query
+        shown = scalars if view.view_class == "TimeSeries" else logged
+        if not any(_matches(query, entity) for entity in shown):
+            empty.append(f"{view.name} [{view.view_class}]: {query}")
+    assert not empty
+
+
+#: The unit of each plot of the blueprint, by a word of its name.
+UNITS = {"[m]": "m", "[rad]": "rad", "/ limit": "ratio", "contacts": "count"}
+
+
+def test_every_plot_shows_a_range_no_narrower_than_its_units_floor(opened):
+    """Each time series view's y-range, as the viewer holds it, is at least its unit's floor wide (1e-4 m, 1e-3 rad):
+    a series constant up to rounding is drawn flat, not as noise filling the plot."""
+    from dualarm.record.sink import PLOT_FLOORS
+
+    client, _, _, _, _ = opened
+    blueprint = client.get_blueprint().blueprint
+    narrow = {}
+    for view in client.get_state().views:
+        if view.view_class != "TimeSeries":
+            continue
+        unit = next(unit for word, unit in UNITS.items() if word in view.name)
+        low, high = blueprint[f"/view/{view.view_id}/ScalarAxis"]["ScalarAxis"]["range"]
+        if high - low < PLOT_FLOORS[unit] * (1 - 1e-9):
+            narrow[view.name] = (low, high)
+    assert not narrow
+
+
+def test_the_held_arm_angle_is_drawn_flat_within_its_plot(opened, request):
+    """MC-Inverse holds the triangle's arm angle: its samples (read from run.mcap with the mcap reader) spread less than
+    1e-12 rad, and the viewer's arm-angle plot spans at least 1e-3 rad around them."""
+    from mcap.reader import make_reader
+
+    if request.node.callspec.params["opened"] != "triangle":
+        pytest.skip("the triangle's run holds the arm angle")
+    client, _, _, _, _ = opened
+    run = request.getfixturevalue("shipped_runs")["triangle"]
+    with (run / "run.mcap").open("rb") as f:
+        psi = np.array(
+            [
+                list(json.loads(message.data)["arm_angle_rad"].values())
+                for _, _, message in make_reader(f).iter_messages(topics=["/ik/sample"])
+            ]
+        )
+    assert psi.size and np.ptp(psi, axis=0).max() < 1e-12
+    view = next(v for v in client.get_state().views if v.name == "arm angle [rad]")
+    low, high = client.get_blueprint().blueprint[f"/view/{view.view_id}/ScalarAxis"]["ScalarAxis"]["range"]
+    assert high - low >= 1e-3 * (1 - 1e-9) and low <= psi.min() and psi.max() <= high

@@ -19,35 +19,40 @@ with this layout in Studio itself.
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+
+import numpy as np
 
 from dualarm.contracts.run import ALL_STAGES
 from dualarm.errors import InvalidArgumentError, excerpt
 from dualarm.files import listing
 from dualarm.model.robot import Robot
-from dualarm.record.sink import shown_stage
+from dualarm.record.sink import plot_range, robot_box, shown_stage
 
 #: The stages a run may hold, in order.
 STAGES = ALL_STAGES
 #: Stages whose ``/<stage>/sample`` holds ``hand_error_m``, the most refined first.
 HAND_ERROR_STAGES = ("execute", "ik", "plan")
 
-#: The camera of the 3D panel, in frame ``world`` (the robot base at the floor, x forward, z up):
-#: aimed at the middle of a 1.6 m humanoid from 3.4 m away, in front of it and to its left, a little
-#: above, so that head, feet and the hands' workspace stay in view. Angles in degrees, as in Studio:
-#: ``phi`` from the vertical, ``thetaOffset`` about it (-120: the robot's front-left).
+#: The camera of the 3D panel, in frame ``world`` (the robot base at the floor, x forward, z up), for a robot whose
+#: largest side is 1 m (:func:`~dualarm.record.sink.robot_box`; the distance and ``targetOffset`` scale with it): aimed
+#: at the box's centre moved forward by TARGET_AHEAD, from in front of the robot and to its left, a little above, so
+#: that the whole robot stays in view (for the 1.59 m humanoid: at (0.15, 0, 0.8) from 3.4 m). Angles in degrees, as in
+#: Studio: ``phi`` from the vertical, ``thetaOffset`` about it (-120: the robot's front-left).
+DISTANCE_PER_M = 2.138
 CAMERA = {
-    "distance": 3.4,
+    "distance": DISTANCE_PER_M,
     "perspective": True,
     "phi": 65.0,
     "target": [0.0, 0.0, 0.0],
-    "targetOffset": [0.15, 0.0, 0.8],
+    "targetOffset": [0.0, 0.0, 0.0],
     "targetOrientation": [0.0, 0.0, 0.0, 1.0],
     "thetaOffset": -120.0,
     "fovy": 45.0,
     "near": 0.01,
     "far": 100.0,
 }
+TARGET_AHEAD = (0.094, 0.0, 0.0)
 #: The key of a panel's title in its config (Studio's PANEL_TITLE_CONFIG_KEY).
 TITLE = "foxglovePanelTitle"
 #: The id of the 3D panel (Studio panel ids are ``<panel type>!<any suffix>``).
@@ -57,7 +62,11 @@ _PLAIN_FIELD = re.compile(r"^[a-zA-Z0-9_-]+$")
 
 
 def foxglove_layout(
-    robot: Robot, stages: Sequence[str], hands: Sequence[str], joint_names: Sequence[str] | None = None
+    robot: Robot,
+    stages: Sequence[str],
+    hands: Sequence[str],
+    joint_names: Sequence[str] | None = None,
+    ranges: Mapping[str, tuple[float, float]] | None = None,
 ) -> dict:
     """The Foxglove Studio layout of a run of ``stages`` of ``robot`` moving ``hands``.
 
@@ -67,6 +76,9 @@ def foxglove_layout(
         hands: the hands the task moves (``left``, ``right``).
         joint_names: the joints in the run's samples (default: the joints of the ``hands``' arm
             chains); joints of other chains (a free waist) get a plot of their own.
+        ranges: the lowest and highest value of each plotted message path (:func:`message_path`); each plot then
+            shows its values' range, no narrower than its unit's floor (:func:`~dualarm.record.sink.plot_range`).
+            None: Studio's own range.
 
     Returns:
         The layout as Studio exports it: ``configById``, ``globalVariables``, ``userNodes``,
@@ -83,8 +95,8 @@ def foxglove_layout(
         else tuple(j for hand in hands for j in robot.hand_chain(hand).joint_names)
     )
     _check("joint_names", joints, robot.joint_names)
-    plots = _plots(robot, tuple(stages), tuple(hands), joints)
-    configs = {THREE_D_PANEL: _three_d(stages), **{panel_id: config for panel_id, config in plots}}
+    plots = _plots(robot, tuple(stages), tuple(hands), joints, ranges or {})
+    configs = {THREE_D_PANEL: _three_d(robot, stages), **{panel_id: config for panel_id, config in plots}}
     layout: str | dict = THREE_D_PANEL
     if plots:
         layout = {
@@ -117,8 +129,8 @@ def _shown(stages: Sequence[str]) -> str | None:
     return None if shown == "path" else shown
 
 
-def _three_d(stages: Sequence[str]) -> dict:
-    """The 3D panel, in ``world``.
+def _three_d(robot: Robot, stages: Sequence[str]) -> dict:
+    """The 3D panel, in ``world``, its camera on ``robot`` (:data:`CAMERA`).
 
     The URDF layer, the task's paths and objects and the shown stage's hand path (the executed one).
     """
@@ -143,9 +155,15 @@ def _three_d(stages: Sequence[str]) -> dict:
         "rotation": [0, 0, 0],
         "order": 1,
     }
+    centre, size = robot_box(robot)
+    camera = {
+        **CAMERA,
+        "distance": DISTANCE_PER_M * size,
+        "targetOffset": (centre + size * np.array(TARGET_AHEAD)).tolist(),
+    }
     return {
         TITLE: "robot (world)",
-        "cameraState": CAMERA,
+        "cameraState": camera,
         "followMode": "follow-pose",
         "followTf": "world",
         "scene": {"transforms": {"showLabel": False, "axisScale": 0.2, "lineWidth": 1}},
@@ -156,25 +174,40 @@ def _three_d(stages: Sequence[str]) -> dict:
 
 
 def _plots(
-    robot: Robot, stages: tuple[str, ...], hands: tuple[str, ...], joints: tuple[str, ...]
+    robot: Robot,
+    stages: tuple[str, ...],
+    hands: tuple[str, ...],
+    joints: tuple[str, ...],
+    ranges: Mapping[str, tuple[float, float]],
 ) -> list[tuple[str, dict]]:
-    """``(panel id, Plot config)`` per quantity the run records, in display order."""
+    """``(panel id, Plot config)`` per quantity the run records, in display order.
+
+    ``ranges``: as :func:`foxglove_layout`'s.
+    """
+
+    def _plot(title: str, unit: str, paths: list[tuple[str, str]]) -> dict:
+        return plot(title, paths, [ranges[value] for value, _ in paths if value in ranges], unit)
+
     plots: list[tuple[str, dict]] = []
     error_stage = next((s for s in HAND_ERROR_STAGES if s in stages), None)
     if error_stage is not None:
-        paths = [(_path(f"/{error_stage}/sample", "hand_error_m", hand), hand) for hand in hands]
-        plots.append(("Plot!hand-error", _plot(f"hand position error [m] ({error_stage})", paths, min_y=0.0)))
+        paths = [(message_path(f"/{error_stage}/sample", "hand_error_m", hand), hand) for hand in hands]
+        plots.append(("Plot!hand-error", _plot(f"hand position error [m] ({error_stage})", "m", paths)))
     if "ik" in stages:
-        paths = [(_path("/ik/sample", "arm_angle_rad", hand), hand) for hand in hands]
-        plots.append(("Plot!arm-angle", _plot("arm angle psi [rad] (ik)", paths)))
+        paths = [(message_path("/ik/sample", "arm_angle_rad", hand), hand) for hand in hands]
+        plots.append(("Plot!arm-angle", _plot("arm angle psi [rad] (ik)", "rad", paths)))
     joint_stage = _shown(stages)
     if joint_stage is not None:
         for group, names in _joint_groups(robot, joints):
-            paths = [(_path(f"/{joint_stage}/sample", "position", name), _short(name, names)) for name in names]
-            plots.append((f"Plot!joints-{group}", _plot(f"{group} joint positions [rad] ({joint_stage})", paths)))
+            paths = [(message_path(f"/{joint_stage}/sample", "position", name), _short(name, names)) for name in names]
+            plots.append(
+                (f"Plot!joints-{group}", _plot(f"{group} joint positions [rad] ({joint_stage})", "rad", paths))
+            )
     if "execute" in stages:
-        paths = [(_path("/execute/sample", f"{kind}_contacts"), kind) for kind in ("self", "environment", "expected")]
-        plots.append(("Plot!contacts", _plot("contacts (execute)", paths)))
+        paths = [
+            (message_path("/execute/sample", f"{kind}_contacts"), kind) for kind in ("self", "environment", "expected")
+        ]
+        plots.append(("Plot!contacts", _plot("contacts (execute)", "count", paths)))
     return plots
 
 
@@ -202,15 +235,20 @@ def _short(name: str, names: tuple[str, ...]) -> str:
     )
 
 
-def _path(topic: str, *fields: str) -> str:
+def message_path(topic: str, *fields: str) -> str:
     """A message path ``<topic>.<field>...``, each field quoted as Studio's grammar needs."""
     return topic + "".join(
         "." + (f if _PLAIN_FIELD.match(f) else '"' + f.replace("\\", "\\\\").replace('"', '\\"') + '"') for f in fields
     )
 
 
-def _plot(title: str, paths: list[tuple[str, str]], min_y: float | None = None) -> dict:
-    """A Plot panel of ``paths`` (message path, legend label) against the log time (the motion time)."""
+def plot(title: str, paths: list[tuple[str, str]], logged: list[tuple[float, float]], unit: str) -> dict:
+    """A Plot panel of ``paths`` (message path, legend label) against the log time (the motion time).
+
+    Its y-range from the ``logged`` (lowest, highest) of its paths in ``unit``
+    (:func:`~dualarm.record.sink.plot_range`); none logged: Studio's own, from 0 for a quantity that cannot be
+    negative ([m], counts).
+    """
     config = {
         TITLE: title,
         "paths": [
@@ -226,8 +264,12 @@ def _plot(title: str, paths: list[tuple[str, str]], min_y: float | None = None) 
         "xAxisVal": "timestamp",
         "sidebarDimension": 150,
     }
-    if min_y is not None:
-        config["minYValue"] = min_y
+    if logged:
+        config["minYValue"], config["maxYValue"] = plot_range(
+            min(r[0] for r in logged), max(r[1] for r in logged), unit
+        )
+    elif unit in ("m", "count"):
+        config["minYValue"] = 0.0
     return config
 
 

@@ -48,9 +48,9 @@ from dualarm.model.poses import pose_matrix, quaternion_xyzw
 from dualarm.model.robot import Robot
 from dualarm.model.urdf import viewer_urdf
 from dualarm.record import schemas
-from dualarm.record.foxglove_layout import foxglove_layout
+from dualarm.record.foxglove_layout import foxglove_layout, message_path
 from dualarm.record.run_dir import FOXGLOVE_LAYOUT
-from dualarm.record.sink import HAND_COLORS, STAGE_COLORS, NullSink, animation_rows, shown_stage
+from dualarm.record.sink import HAND_COLORS, STAGE_COLORS, NullSink, animation_rows, extend_range, shown_stage
 from dualarm.tasks.task import hand_poses_at
 
 if TYPE_CHECKING:  # pybullet is imported only by runs that execute
@@ -119,6 +119,7 @@ class McapSink(NullSink):
         self._context = foxglove.Context()
         self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
         self._channels: dict[str, foxglove.Channel] = {}
+        self._ranges: dict[str, tuple[float, float]] = {}  # message path -> its values' lowest and highest
         self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
         for name, text in attachments.items():
             media = "application/xml" if name.endswith(".urdf") else "application/toml"
@@ -137,6 +138,15 @@ class McapSink(NullSink):
                 topic, schema=schemas.named(schema, {**self._keys, **keys}), context=self._context
             )
         return self._channels[topic]
+
+    def _extents(self, topic: str, **fields: Mapping[str, np.ndarray]) -> None:
+        """Note the range of each of ``fields`` (field -> key -> values) on ``topic``, for the layout's plots.
+
+        By message path (:func:`~dualarm.record.foxglove_layout.message_path`).
+        """
+        for field, values in fields.items():
+            for key, v in values.items():
+                extend_range(self._ranges, message_path(topic, field, key), v)
 
     def _tf(self, stage: str, t: np.ndarray | float, q: Mapping[str, np.ndarray | float]) -> None:
         """The robot's link frames on ``/tf`` at times ``t`` (K,) [s]: the shown stage's only.
@@ -249,6 +259,12 @@ class McapSink(NullSink):
                     ),
                     log_time=_ns(t),
                 )
+        self._extents(
+            f"{family}/sample",
+            position=dict(zip(names, path.q.T, strict=True)),
+            hand_error_m=dict(zip(path.hands, path.hand_error_m.T, strict=True)),
+            arm_angle_rad=dict(arm_angles),
+        )
         self._animation(stage, path.t, names, path.q, path.fixed)
         if stage == self.shown:
             fixed = {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed}
@@ -352,6 +368,7 @@ class McapSink(NullSink):
                 ),
                 log_time=_ns(t),
             )
+        self._extents(f"{STAGE_TOPICS[stage]}/sample", position=dict(zip(names, traj.q.T, strict=True)))
         self._animation(stage, traj.t, names, traj.q, traj.fixed)
         self._hand_path(stage, hand_positions)
 
@@ -398,6 +415,9 @@ class McapSink(NullSink):
                 ),
                 log_time=_ns(t),
             )
+        self._extents(samples, position=dict(zip(names, log.q.T, strict=True)), hand_error_m=dict(log.hand_error_m))
+        for kind in ("self", "environment", "expected"):
+            extend_range(self._ranges, message_path(samples, f"{kind}_contacts"), getattr(log, f"{kind}_contacts"))
         touching = self._json(contacts, schemas.CONTACT)
         for e in log.contact_events:
             touching.log(
@@ -496,7 +516,7 @@ class McapSink(NullSink):
 
         The layout: ``foxglove-layout.json``.
         """
-        layout = foxglove_layout(self.robot, self.stages, self._hands, self._joint_names)
+        layout = foxglove_layout(self.robot, self.stages, self._hands, self._joint_names, self._ranges)
         (self.directory / FOXGLOVE_LAYOUT).write_text(json.dumps(layout, indent=1) + "\n")
         self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})
         self._mcap.close()

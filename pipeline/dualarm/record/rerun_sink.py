@@ -23,7 +23,16 @@ from dualarm.contracts.trajectory import JointTrajectory
 from dualarm.interrupt import held
 from dualarm.model.poses import pose_matrix, quaternion_xyzw
 from dualarm.model.robot import Robot
-from dualarm.record.sink import HAND_COLORS, STAGE_COLORS, NullSink, animation_rows, shown_stage
+from dualarm.record.sink import (
+    HAND_COLORS,
+    STAGE_COLORS,
+    NullSink,
+    animation_rows,
+    extend_range,
+    plot_range,
+    robot_box,
+    shown_stage,
+)
 from dualarm.tasks.task import hand_poses_at
 
 if TYPE_CHECKING:  # pybullet is imported only by runs that execute
@@ -31,24 +40,46 @@ if TYPE_CHECKING:  # pybullet is imported only by runs that execute
 
 #: Rerun's timeline of motion time.
 TIMELINE = "time"
-#: Where the 3D views look from: the whole 1.6 m humanoid from its front right.
-EYE = rrb.EyeControls3D(position=[2.4, -1.5, 1.5], look_target=[0.2, 0.0, 0.8], eye_up=[0.0, 0.0, 1.0])
+#: Where the 3D views look, per metre of the robot's largest side (:func:`~dualarm.record.sink.robot_box`): at the
+#: box's centre moved forward by TARGET_AHEAD, from EYE_OFFSET away (its front right, a little above). For the 1.59 m
+#: humanoid: at (0.2, 0, 0.8) from (2.4, -1.5, 1.5), the whole robot in view.
+TARGET_AHEAD = np.array([0.126, 0.0, 0.0])
+EYE_OFFSET = np.array([1.384, -0.943, 0.440])
+#: The quantities each stage's plots give as ratios to their limits: the IK's (or plan's) velocity by finite
+#: differences of its samples, the timed stages' velocity, acceleration and jerk.
+RATIOS = {
+    "ik": ("velocity",),
+    "plan": ("velocity",),
+    "retime": ("velocity", "acceleration", "jerk"),
+    "smooth": ("velocity", "acceleration", "jerk"),
+}
 #: The limit line of the ratio plots.
 LIMIT_LINE = rr.SeriesLines(colors=[(200, 0, 0)], widths=[2.0], names=["limit"])
 
 
-def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> rrb.Blueprint:
+def blueprint(
+    robot: Robot,
+    stages: Sequence[str],
+    focus: str | None = None,
+    ranges: Mapping[str, tuple[float, float]] | None = None,
+) -> rrb.Blueprint:
     """The Rerun layout a run of ``stages`` opens on, centred on the stage ``focus``.
 
-    ``focus`` defaults to :func:`shown_stage`.
+    ``focus`` defaults to :func:`shown_stage`. ``ranges``: the lowest and highest value logged under each
+    ``/plots/<path>``; each plot then shows its values' range, no narrower than its unit's floor
+    (:func:`~dualarm.record.sink.plot_range`); None: Rerun's own range (the layout sent before the data).
 
     Tab "run": the ``focus`` robot with the reference and its hand paths in one 3D view, beside
-    plots grouped by quantity: hand errors; velocity, acceleration and jerk over their limits
-    (the limit is the line at 1); joint positions, arm angles and contacts. Tab "stages": one 3D
+    plots grouped by quantity, each only where the run logs it: the IK's and the execution's hand
+    errors; the quantities of :data:`RATIOS` over their limits (the limit is the line at 1); joint
+    positions, arm angles, the planner's distance to its target, and contacts. Tab "stages": one 3D
     view per stage, each with its robot and hand traces on its own clock. The URDF's collision
     shapes are logged but hidden.
     """
     focus = focus or shown_stage(stages)
+    centre, size = robot_box(robot)
+    target = centre + size * TARGET_AHEAD
+    eye = rrb.EyeControls3D(position=target + size * EYE_OFFSET, look_target=target, eye_up=[0.0, 0.0, 1.0])
     hidden = [f"- /{stage}/{robot.urdf.name}/collision_geometries/**" for stage in stages]
     scene = ["+ /world/reference/**", "+ /world/environment/**"]
 
@@ -57,29 +88,44 @@ def blueprint(robot: Robot, stages: Sequence[str], focus: str | None = None) -> 
             origin="/",
             name=name,
             contents=[*scene, f"+ /{stage}/**", f"+ /world/{stage}/**", *hidden],
-            eye_controls=EYE,
+            eye_controls=eye,
         )
 
-    def plot(name: str, *paths: str, legend: bool = True) -> rrb.TimeSeriesView:
+    def plot(name: str, unit: str, *paths: str, legend: bool = True) -> rrb.TimeSeriesView:
+        logged = [ranges[p] for p in paths if ranges and p in ranges]
         return rrb.TimeSeriesView(
             origin="/plots",
             name=name,
             contents=[f"+ /plots/{p}/**" for p in paths],
             plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=legend),
+            axis_y=rrb.ScalarAxis(
+                range=plot_range(min(r[0] for r in logged), max(r[1] for r in logged), unit) if logged else None
+            ),
         )
 
     driven = next((s for s in ("smooth", "retime") if s in stages), focus) if focus == "execute" else focus
     solved = next((s for s in ("ik", "plan") if s in stages), None)
+    # a hand's pose error: the IK's, the execution's (a planner's is its distance to the target, plotted apart)
+    errors = [f"{s}/hand_error_m" for s in dict.fromkeys((solved, focus)) if s in ("ik", "execute")]
     plots: list[rrb.Container | rrb.View] = [
-        plot("hand error [m]", *[f"{s}/hand_error_m" for s in (solved, focus) if s]),
-        rrb.Tabs(*[plot(f"{kind} / limit", f"{driven}/{kind}_ratio") for kind in ("velocity", "acceleration", "jerk")]),
+        *([plot("hand error [m]", "m", *errors)] if errors else []),
+        *(
+            [rrb.Tabs(*[plot(f"{kind} / limit", "ratio", f"{driven}/{kind}_ratio") for kind in RATIOS[driven]])]
+            if driven in RATIOS
+            else []
+        ),
         rrb.Tabs(
-            plot(f"joint positions [rad] ({driven})", f"{driven}/position", legend=False),
-            *([plot("arm angle [rad]", f"{solved}/arm_angle_rad")] if solved == "ik" else []),
+            *(
+                [plot(f"joint positions [rad] ({driven})", "rad", f"{driven}/position", legend=False)]
+                if driven != "path"
+                else []
+            ),
+            *([plot("arm angle [rad]", "rad", f"{solved}/arm_angle_rad")] if solved == "ik" else []),
+            *([plot("plan: hand to target [m]", "m", "plan/hand_error_m")] if solved == "plan" else []),
             *(
                 [
-                    plot("contacts", "execute/contacts"),
-                    plot("tracking error [rad]", "execute/tracking_error_rad", legend=False),
+                    plot("contacts", "count", "execute/contacts"),
+                    plot("tracking error [rad]", "rad", "execute/tracking_error_rad", legend=False),
                 ]
                 if focus == "execute"
                 else []
@@ -117,6 +163,7 @@ class RerunSink(NullSink):
             self._rr.send_blueprint(blueprint(robot, self.stages), make_active=True, make_default=True)
             self._rr.flush()  # in the file before any data, whatever Rerun's batcher does next
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
+        self._ranges: dict[str, tuple[float, float]] = {}  # /plots/<prefix> -> its values' lowest and highest
         self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
@@ -161,6 +208,18 @@ class RerunSink(NullSink):
             self._rr.send_columns(
                 f"plots/{prefix}/{name}", indexes=[times], columns=rr.Scalars.columns(scalars=np.asarray(v, float))
             )
+            extend_range(self._ranges, prefix, v)
+
+    def _ratio(
+        self, stage: str, kind: str, t: np.ndarray, names: Sequence[str], values: np.ndarray, limit: np.ndarray
+    ) -> None:
+        """``plots/<stage>/<kind>_ratio``: each joint's |value| / limit, ``values`` (N, n) at ``t`` (N,).
+
+        And the limit, the line at 1.
+        """
+        ratio = np.abs(values) / np.asarray(limit, dtype=float)
+        self._series(f"{stage}/{kind}_ratio", t, {**dict(zip(names, ratio.T, strict=False)), "limit": np.ones(len(t))})
+        self._rr.log(f"plots/{stage}/{kind}_ratio/limit", LIMIT_LINE, static=True)
 
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
         """The robot at configuration ``q`` [rad] at motion time ``t`` [s]: the URDF under ``/<stage>``."""
@@ -184,6 +243,10 @@ class RerunSink(NullSink):
         self._animation(stage, path.t, names, path.q, path.fixed)
         self._series(f"{stage}/position", path.t, dict(zip(names, path.q.T, strict=True)))
         self._series(f"{stage}/velocity", path.t, dict(zip(names, path.qd.T, strict=True)))
+        if len(path.t) > 1:  # the velocity the samples ask, whatever the method commanded (qd is 0 for some)
+            with np.errstate(divide="ignore", invalid="ignore"):  # samples at one time: a gap in the plot
+                qd = np.gradient(path.q, axis=0) / np.gradient(path.t)[:, None]
+            self._ratio(stage, "velocity", path.t, names, np.where(np.isfinite(qd), qd, np.nan), velocity_limits)
         for key, v in path.extras.items():
             self._series(f"{stage}/{key}", path.t, dict(zip(names, v.T, strict=True)))
         self._series(f"{stage}/hand_error_m", path.t, dict(zip(path.hands, path.hand_error_m.T, strict=True)))
@@ -243,13 +306,7 @@ class RerunSink(NullSink):
         self._hand_traces(stage, hand_positions)
         self._series(f"{stage}/position", traj.t, dict(zip(names, traj.q.T, strict=True)))
         for kind, limit in limits.items():
-            ratio = np.abs(series[kind]) / np.asarray(limit, dtype=float)
-            self._series(
-                f"{stage}/{kind}_ratio",
-                traj.t,
-                {**dict(zip(names, ratio.T, strict=False)), "limit": np.ones(len(traj))},
-            )
-            self._rr.log(f"plots/{stage}/{kind}_ratio/limit", LIMIT_LINE, static=True)
+            self._ratio(stage, kind, traj.t, names, series[kind], limit)
         if "deviation_rad" in extras:
             self._series(f"{stage}/deviation_rad", traj.t, dict(zip(names, extras["deviation_rad"].T, strict=False)))
 
@@ -333,6 +390,9 @@ class RerunSink(NullSink):
             )
 
     def close(self, manifest: Mapping[str, object]) -> None:
-        """Finish the file."""
+        """Send the layout again with each plot's value range (:func:`blueprint`), then finish the file."""
+        self._rr.send_blueprint(
+            blueprint(self.robot, self.stages, ranges=self._ranges), make_active=True, make_default=True
+        )
         self._rr.flush()
         self._rr.disconnect()

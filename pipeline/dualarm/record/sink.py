@@ -19,12 +19,14 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args, runtime_chec
 import numpy as np
 
 from dualarm.errors import InvalidArgumentError, excerpt
+from dualarm.model.kinematics import joint_transforms
 
 if TYPE_CHECKING:
     from dualarm.contracts.execution import ExecutionLog
     from dualarm.contracts.joint_path import JointPath
     from dualarm.contracts.reference import CartesianReference
     from dualarm.contracts.trajectory import JointTrajectory
+    from dualarm.model.robot import Robot
 
 
 @runtime_checkable
@@ -281,3 +283,52 @@ def animation_rows(t: np.ndarray) -> np.ndarray:
     """
     stride = max(1, int(round(ANIMATION_PERIOD_S / float(np.median(np.diff(t))))) if len(t) > 1 else 1)
     return np.unique(np.r_[np.arange(0, len(t), stride), len(t) - 1])
+
+
+def robot_box(robot: Robot) -> tuple[np.ndarray, float]:
+    """Where the viewers' cameras look: the box around ``robot``'s link frames with every joint at 0.
+
+    Its centre (3,) [m] in the robot's base frame (the viewers' world) and its largest side [m] (at least 0.1 m).
+    """
+    world = {robot.urdf.root: np.eye(4)}
+    todo = joint_transforms(robot.urdf.joints, {})
+    while todo:  # the URDF lists its joints in any order; a tree, checked when it was loaded
+        waiting = [(parent, child, T) for parent, child, T in todo if parent not in world]
+        world.update({child: world[parent] @ T for parent, child, T in todo if parent in world})
+        if len(waiting) == len(todo):
+            break
+        todo = waiting
+    points = np.array([T[:3, 3] for T in world.values()])
+    low, high = points.min(axis=0), points.max(axis=0)
+    return (low + high) / 2, max(float((high - low).max()), 0.1)
+
+
+#: The narrowest value range a plot shows, per unit, so that a series constant up to rounding (MC-Inverse's held arm
+#: angle spreads 2.7e-15 rad) is drawn as the flat line it is, not as noise filling the plot: [m], [rad], a ratio to a
+#: limit, a count.
+PLOT_FLOORS = {"m": 1e-4, "rad": 1e-3, "ratio": 0.1, "count": 1.0}
+#: Room above and below a plot's values, a share of their range.
+PLOT_PADDING = 0.05
+
+
+def plot_range(low: float, high: float, unit: str) -> tuple[float, float]:
+    """The value range a plot of values from ``low`` to ``high`` in ``unit`` (:data:`PLOT_FLOORS`) shows.
+
+    [low, high] padded by :data:`PLOT_PADDING`, widened about its middle to the unit's floor; never below 0 when no
+    value is (errors, counts, ratios).
+    """
+    floor = PLOT_FLOORS[unit]
+    middle, half = (low + high) / 2, max((high - low) * (1 + 2 * PLOT_PADDING), floor) / 2
+    bottom = middle - half
+    if low >= 0 > bottom:
+        bottom = 0.0
+    return bottom, bottom + 2 * half
+
+
+def extend_range(ranges: dict[str, tuple[float, float]], key: str, values: np.ndarray) -> None:
+    """Widen ``ranges[key]`` (low, high) to the finite ``values``; none: unchanged."""
+    finite = np.asarray(values, dtype=float)
+    finite = finite[np.isfinite(finite)]
+    if finite.size:
+        low, high = ranges.get(key, (np.inf, -np.inf))
+        ranges[key] = (min(low, float(finite.min())), max(high, float(finite.max())))
