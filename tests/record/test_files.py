@@ -467,14 +467,17 @@ class RrdListing:
     activations: list[tuple[str, str, str, bool, bool]] = field(default_factory=list)
     footers: list[set[str]] = field(default_factory=list)
 
-    def store_chunks(self, kind: str) -> set[str]:
-        """Chunk ids of the blueprint store (the footer holding ``/viewport``) or of the recording."""
+    def blueprint_footers(self) -> list[set[str]]:
+        """The chunk ids of each blueprint store (each footer holding a ``/viewport``), in the file's order."""
         viewport = {cid for cid, entity, _, _ in self.chunks if entity == "/viewport"}
-        blueprint = [f for f in self.footers if f & viewport]
-        assert len(blueprint) <= 1, "more than one footer holds a /viewport"
+        return [f for f in self.footers if f & viewport]
+
+    def store_chunks(self, kind: str) -> set[str]:
+        """Chunk ids of the blueprint stores or of the recording."""
+        blueprints = self.blueprint_footers()
         if kind == "Blueprint":
-            return set().union(*blueprint)
-        return set().union(*(f for f in self.footers if f not in blueprint))
+            return set().union(*blueprints)
+        return set().union(*(f for f in self.footers if f not in blueprints))
 
     def entities(self, kind: str) -> dict[str, tuple[int, set[str]]]:
         """Entity -> (rows, columns) of the chunks of the store of ``kind``."""
@@ -558,20 +561,22 @@ def test_rerun_cli_refuses_a_damaged_rrd(rrd, tmp_path, damage):
 
 
 def test_rrd_holds_the_recording_and_an_active_blueprint(run, rrd):
+    """The layout before the data, so that a viewer opening the file never shows its default layout; then, after the
+    data, the same layout with each plot's value range, activated last."""
     _, run_dir = run
     path, listing = rrd
     assert listing.stores[0] == ("Recording", "dualarm", run_dir.name)
-    ((_, app, blueprint_id),) = [s for s in listing.stores if s[0] == "Blueprint"]
-    assert app == "dualarm"
-    assert ("Blueprint", "dualarm", blueprint_id, True, True) in listing.activations
-    # the layout comes before the data, so that a viewer opening the file never shows its default layout
-    blueprint_chunks, order = (
-        listing.store_chunks("Blueprint"),
-        [cid for cid, entity, _, _ in listing.chunks if entity != "/__properties"],
-    )
-    assert set(order[: len(blueprint_chunks)]) == blueprint_chunks
+    blueprints = [s for s in listing.stores if s[0] == "Blueprint"]
+    assert [app for _, app, _ in blueprints] == ["dualarm", "dualarm"]
+    assert all(("Blueprint", "dualarm", sid, True, True) in listing.activations for _, _, sid in blueprints)
+    assert listing.activations[-1][2] == blueprints[-1][2]  # the final layout is the active one
+    order = [cid for cid, entity, _, _ in listing.chunks if entity != "/__properties"]
+    blueprint_footers = listing.blueprint_footers()
+    assert len(blueprint_footers) == 2
+    first = min(blueprint_footers, key=lambda chunks: min(order.index(c) for c in chunks))
+    assert set(order[: len(first)]) == first
     # one footer manifest per store, and together they hold exactly the chunks listed
-    assert len(listing.footers) == len(listing.stores) == 2
+    assert len(listing.footers) == len(listing.stores) == 3
     assert sorted(c for f in listing.footers for c in f) == sorted(c[0] for c in listing.chunks)
     blueprint = listing.entities("Blueprint")
     assert "/viewport" in blueprint

@@ -26,8 +26,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from dualarm.model.robot import load_robot
 from dualarm.record.foxglove_layout import message_path
-from tests.helpers import HUMANOID, REPO, SHIPPED
+from tests.helpers import OTHER_RUNS, REPO, SHIPPED
 
 FOXGLOVE = REPO / "viewers" / "foxglove"
 NODE = shutil.which("node")
@@ -43,6 +44,10 @@ BORDER_PX = 2
 #: (for the humanoid the bowl grasp, whose run holds the most: both hands, the task's objects, the free waist, the plan
 #: stage). Studio opening more runs of the same robot would repeat the same checks on the same URDF.
 STUDIO = {Path(tomllib.loads((REPO / "tasks" / f"{task}.toml").read_text())["robot"]).name: task for task in SHIPPED}
+#: Every run the Node check reads: the shipped tasks' and :data:`OTHER_RUNS` (the Panda, whose URDF names meshes by
+#: relative paths, and a run recorded up to the IK); the whole Studio app opens those of :data:`STUDIO` and the others.
+RUNS = [*SHIPPED, *OTHER_RUNS]
+OPENED = [*STUDIO.values(), *OTHER_RUNS]
 
 pytestmark = [
     pytest.mark.integration,
@@ -71,6 +76,12 @@ def _layout_args(run: Path) -> list[str]:
 
 
 @pytest.fixture(scope="module")
+def runs(shipped_runs, other_runs) -> dict[str, Path]:
+    """Name -> run directory, for every name of :data:`RUNS`."""
+    return {**shipped_runs, **other_runs}
+
+
+@pytest.fixture(scope="module")
 def bad_run(tmp_path_factory, shipped_runs) -> Path:
     """A negative control: the triangle run (linked) with a layout whose plot path names a joint the run has not and
     whose 3D panel follows a frame it lacks."""
@@ -96,10 +107,10 @@ def bad_run(tmp_path_factory, shipped_runs) -> Path:
 
 
 @pytest.fixture(scope="module")
-def parsed(shipped_runs, bad_run) -> dict[str, list[dict]]:
-    """Task name (and "bad layout": :func:`bad_run`) -> the Node check's lines for its run: its channels, then its
+def parsed(runs, bad_run) -> dict[str, list[dict]]:
+    """Run name (and "bad layout": :func:`bad_run`) -> the Node check's lines for its run: its channels, then its
     layout's panels."""
-    runs = {**shipped_runs, "bad layout": bad_run}
+    runs = {**runs, "bad layout": bad_run}
     lines = _node(
         "check-mcap.cjs",
         *[arg for run in runs.values() for arg in (*_layout_args(run), str(run / "run.mcap"))],
@@ -108,7 +119,7 @@ def parsed(shipped_runs, bad_run) -> dict[str, list[dict]]:
     return {name: [line for line in lines if line["mcap"] == str(run / "run.mcap")] for name, run in runs.items()}
 
 
-@pytest.mark.parametrize("task", list(SHIPPED))
+@pytest.mark.parametrize("task", RUNS)
 def test_every_channel_parses_and_decodes_in_studio(parsed, task):
     channels = [line for line in parsed[task] if "panel" not in line]
     failing = {
@@ -123,23 +134,24 @@ def test_every_channel_parses_and_decodes_in_studio(parsed, task):
     assert channels and all(line["decoded"] == line["messages"] > 0 for line in channels)
 
 
-@pytest.mark.parametrize("task", list(SHIPPED))
-def test_robot_description_parses_with_studios_urdf_parser(parsed, task):
-    """Studio's URDF parser reads every link of the robot's URDF (counted here with ElementTree)."""
+@pytest.mark.parametrize("task", RUNS)
+def test_robot_description_parses_with_studios_urdf_parser_and_every_mesh_loads(parsed, runs, task):
+    """Studio's URDF parser reads every link of the robot's URDF, and every mesh it draws is one Studio's 3D panel
+    fetches and loads (counted here with ElementTree: the Panda's 11 visual meshes)."""
     (urdf,) = [line["urdf"] for line in parsed[task] if line.get("topic") == "/robot_description"]
     assert urdf["ok"], urdf.get("error")
-    assert urdf["links"] == len(ET.parse(HUMANOID / "humanoid.urdf").getroot().findall("link"))
+    robot = ET.parse(load_robot(json.loads((runs[task] / "manifest.json").read_text())["robot_dir"]).urdf.path)
+    assert urdf["links"] == len(robot.getroot().findall("link"))
+    assert urdf["meshes"] == len(robot.getroot().findall("link/visual/geometry/mesh"))
 
 
-@pytest.mark.parametrize("task", list(SHIPPED))
-def test_studio_can_plot_every_path_of_the_runs_layout(parsed, shipped_runs, task):
+@pytest.mark.parametrize("task", RUNS)
+def test_studio_can_plot_every_path_of_the_runs_layout(parsed, runs, task):
     """Each plot path is a plottable field by Studio's message path code and holds values; the 3D panel's frame is on
     /tf and joins its scene topics' frames."""
-    assert (shipped_runs[task] / LAYOUT_FILE).is_file(), f"the run has no {LAYOUT_FILE}"
+    assert (runs[task] / LAYOUT_FILE).is_file(), f"the run has no {LAYOUT_FILE}"
     panels = [line for line in parsed[task] if "panel" in line]
-    assert {line["panel"] for line in panels} == set(
-        json.loads((shipped_runs[task] / LAYOUT_FILE).read_text())["configById"]
-    )
+    assert {line["panel"] for line in panels} == set(json.loads((runs[task] / LAYOUT_FILE).read_text())["configById"])
     assert [line for line in panels if not line["ok"]] == []
 
 
@@ -172,29 +184,25 @@ def test_quoted_field_names_parse_in_studio():
 
 
 @pytest.fixture(scope="module")
-def opened(shipped_runs, tmp_path_factory) -> dict[str, dict]:
-    """Task name -> what Studio showed for its run opened with the run's layout, for the tasks of :data:`STUDIO` (one
+def opened(runs, tmp_path_factory) -> dict[str, dict]:
+    """Run name -> what Studio showed for its run opened with the run's layout, for the runs of :data:`OPENED` (one
     browser, the runs one after the other)."""
-    missing = [task for task in STUDIO.values() if not (shipped_runs[task] / LAYOUT_FILE).is_file()]
+    missing = [task for task in OPENED if not (runs[task] / LAYOUT_FILE).is_file()]
     assert not missing, f"runs without {LAYOUT_FILE}: {missing}"
     out = tmp_path_factory.mktemp("studio")
-    args = [
-        arg
-        for task in STUDIO.values()
-        for arg in ("--layout", str(shipped_runs[task] / LAYOUT_FILE), str(shipped_runs[task] / "run.mcap"))
-    ]
-    results = _node("open-in-studio.cjs", "--out", str(out), *args, timeout_s=300 * len(STUDIO))
-    return {task: result for task, result in zip(STUDIO.values(), results, strict=True)}
+    args = [arg for task in OPENED for arg in ("--layout", str(runs[task] / LAYOUT_FILE), str(runs[task] / "run.mcap"))]
+    results = _node("open-in-studio.cjs", "--out", str(out), *args, timeout_s=300 * len(OPENED))
+    return {task: result for task, result in zip(OPENED, results, strict=True)}
 
 
 @needs_chromium
-@pytest.mark.parametrize("task", list(STUDIO.values()))
+@pytest.mark.parametrize("task", OPENED)
 def test_studio_reports_no_problem(opened, task):
     assert opened[task]["problems"] == [] and opened[task]["problems_tab"] == "No problems found"
 
 
 @needs_chromium
-@pytest.mark.parametrize("task", list(STUDIO.values()))
+@pytest.mark.parametrize("task", OPENED)
 def test_studios_3d_panel_reports_no_layer_error(opened, task):
     """No "Missing transform" (the reference path's base_link joined to world), nor any other layer error."""
     assert opened[task]["urdf_parsed"], opened[task]["urdf_error"]
@@ -220,7 +228,7 @@ def _robot_mask(with_urdf: Path, without: Path) -> np.ndarray:
 
 
 @needs_chromium
-@pytest.mark.parametrize("task", list(STUDIO.values()))
+@pytest.mark.parametrize("task", OPENED)
 def test_studio_draws_the_whole_robot(opened, task):
     """The 3D panel with the URDF layer differs from its twin without it over a robot-sized area, clear of the panel's
     edges."""
@@ -238,7 +246,7 @@ def test_studio_draws_the_whole_robot(opened, task):
     assert rows.max() - rows.min() > 0.3 * height  # a 1.6 m robot, not a speck
 
 
-def test_every_plot_of_the_layout_spans_its_units_floor_and_the_held_arm_angle_is_flat(shipped_runs):
+def test_every_plot_of_the_layout_spans_its_units_floor_and_the_held_arm_angle_is_flat(runs):
     """Each Plot panel's y-range (the ``minYValue`` and ``maxYValue`` Studio's Plot panel reads) is at least its unit's
     floor wide and holds every value of its paths, read from run.mcap with the mcap reader: the triangle's arm angle,
     which MC-Inverse holds to 1e-12 rad, sits in a plot at least 1e-3 rad wide."""
@@ -247,7 +255,7 @@ def test_every_plot_of_the_layout_spans_its_units_floor_and_the_held_arm_angle_i
     from dualarm.record.sink import PLOT_FLOORS
 
     units = {"[m]": "m", "[rad]": "rad", "contacts": "count"}
-    for task, run in shipped_runs.items():
+    for task, run in runs.items():
         layout = json.loads((run / LAYOUT_FILE).read_text())
         values: dict[str, list[float]] = {}
         with (run / "run.mcap").open("rb") as f:

@@ -9,7 +9,8 @@
 //   - Studio's McapIndexedIterableSource must report no problem for the topic (these are what its
 //     Problems tab lists), and every message must decode through its messageIterator,
 //   - /robot_description (std_msgs/String) must parse with Studio's URDF parser (xacro pass, then
-//     parseRobot) as the 3D panel's URDF layer does; "urdf" gives its link/joint counts.
+//     parseRobot) as the 3D panel's URDF layer does, and every mesh it draws must be one Studio can
+//     fetch in a page and load (meshError); "urdf" gives its link/joint/mesh counts.
 // With --layout (the layout for the next file), one more line per panel ({"mcap", "panel", ...}):
 //   - Plot: each path as Studio's path input judges it (parseRosPath; traverseStructure over the
 //     player's datatypes ending on one of the Plot panel's plotableRosTypes), and how many messages
@@ -59,16 +60,58 @@ function problemText(problem) {
   return detail === "" || problem.message.includes(detail) ? problem.message : `${problem.message}: ${detail}`;
 }
 
+// The media types Studio's ModelCache loads a mesh by (ModelCache.js), and its file name endings.
+const MESH_TYPES = [
+  [["model/gltf", "model/gltf-binary", "model/gltf+json"], /\.gl(b|tf)$/i],
+  [["model/stl", "model/x.stl-ascii", "model/x.stl-binary", "application/sla"], /\.stl$/i],
+  [["model/vnd.collada+xml"], /\.dae$/i],
+  [["model/obj", "text/prs.wavefront-obj"], /\.obj$/i],
+];
+
+/**
+ * Whether Studio's 3D panel can draw a URDF mesh, as its URDF layer and ModelCache do it: the URL is
+ * `new URL(filename, baseUrl)` with no base for a URDF from a topic (Urdfs.js createMeshMarker), fetched
+ * by the page (only a data: URL is there offline: a browser page reads no file:// or package://), and
+ * loaded by its media type or its name's ending (ModelCache._loadModel). Null when it can, else why not.
+ */
+async function meshError(filename) {
+  let url;
+  try {
+    url = new URL(filename);
+  } catch (err) {
+    return `Failed to construct 'URL': Invalid URL (${filename.slice(0, 80)})`;
+  }
+  if (url.protocol !== "data:") return `${url.protocol} URL ${filename.slice(0, 80)}: a page cannot fetch it offline`;
+  const response = await fetch(url);
+  const bytes = (await response.arrayBuffer()).byteLength;
+  const type = response.headers.get("content-type") ?? "";
+  if (bytes < 4) return `${bytes} bytes received`;
+  if (!MESH_TYPES.some(([types, ending]) => types.includes(type) || ending.test(filename))) return `Unknown ${bytes} byte mesh (content-type: "${type}")`;
+  return null;
+}
+
 async function checkUrdf(parseRobot, message) {
   if (typeof message?.data !== "string") return { ok: false, error: "message has no string field 'data' (std_msgs/String)" };
+  let robot;
   try {
-    const robot = await parseRobot(message.data, async (url) => {
+    robot = await parseRobot(message.data, async (url) => {
       throw new Error(`URDF refers to an external file ${url}`);
     });
-    return { ok: true, robot: robot.name, links: robot.links.size, joints: robot.joints.size };
   } catch (err) {
     return { ok: false, error: String(err?.message ?? err) };
   }
+  // what the URDF layer draws: each link's visuals, or its colliders when it has none (Urdfs.js _loadRobot)
+  const shapes = [...robot.links.values()].flatMap((link) => (link.visuals.length > 0 ? link.visuals : link.colliders));
+  const meshes = shapes.filter((shape) => shape.geometry.geometryType === "mesh");
+  const errors = (await Promise.all(meshes.map((shape) => meshError(shape.geometry.filename)))).filter((e) => e !== null);
+  return {
+    ok: errors.length === 0,
+    robot: robot.name,
+    links: robot.links.size,
+    joints: robot.joints.size,
+    meshes: meshes.length,
+    ...(errors.length > 0 ? { error: `${errors.length} of ${meshes.length} meshes cannot be drawn: ${errors[0]}` } : {}),
+  };
 }
 
 /** The value at `names` inside a decoded message, or undefined. */

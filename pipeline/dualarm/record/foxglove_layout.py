@@ -53,6 +53,8 @@ CAMERA = {
     "far": 100.0,
 }
 TARGET_AHEAD = (0.094, 0.0, 0.0)
+#: The 3D panel's background: dark, as Rerun's, so that white meshes stand out.
+BACKGROUND = "#2b2b2b"
 #: The key of a panel's title in its config (Studio's PANEL_TITLE_CONFIG_KEY).
 TITLE = "foxglovePanelTitle"
 #: The id of the 3D panel (Studio panel ids are ``<panel type>!<any suffix>``).
@@ -166,7 +168,13 @@ def _three_d(robot: Robot, stages: Sequence[str]) -> dict:
         "cameraState": camera,
         "followMode": "follow-pose",
         "followTf": "world",
-        "scene": {"transforms": {"showLabel": False, "axisScale": 0.2, "lineWidth": 1}},
+        # URDF meshes are z-up in their links (ROS REP-103); Studio turns STL and OBJ meshes as y-up unless told
+        # and a dark background, as Rerun's: a robot whose meshes have no colour (the Panda's) is drawn white
+        "scene": {
+            "transforms": {"showLabel": False, "axisScale": 0.2, "lineWidth": 1},
+            "meshUpAxis": "z_up",
+            "backgroundColor": BACKGROUND,
+        },
         "transforms": {},
         "topics": topics,
         "layers": {"floor": grid},

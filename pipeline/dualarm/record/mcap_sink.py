@@ -3,17 +3,19 @@
 And ``foxglove-layout.json``.
 
 One Context per run, so nothing is global: one topic family per stage (``/task/...`` for the path
-stage, :data:`STAGE_TOPICS`), ``/robot_description`` with the URDF as URDF 1.0 viewers read it,
-``/tf`` with the link frames of one robot, the run's :func:`~dualarm.record.sink.shown_stage`,
-under the URDF's own link names (Foxglove's URDF layer places links by those names, so it can
-animate one robot), ``/metrics``; the manifest as metadata; the task file, robot.toml and URDF as
-attachments. Log time is motion time (each stage from 0), not the wall clock: repetitions and runs
-line up.
+stage, :data:`STAGE_TOPICS`), ``/robot_description`` with the URDF as URDF 1.0 viewers read it
+and its meshes inside (:func:`robot_description`), ``/tf`` with the link frames of one robot, the
+run's :func:`~dualarm.record.sink.shown_stage`, under the URDF's own link names (Foxglove's URDF
+layer places links by those names, so it can animate one robot), ``/metrics``; the manifest as
+metadata; the task file, robot.toml and URDF as attachments. Log time is motion time (each stage
+from 0), not the wall clock: repetitions and runs line up.
 """
 
 from __future__ import annotations
 
+import base64
 import json
+import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -43,6 +45,7 @@ from foxglove.messages import (
 from dualarm.contracts.joint_path import JointPath
 from dualarm.contracts.reference import CartesianReference
 from dualarm.contracts.trajectory import JointTrajectory
+from dualarm.errors import RobotModelError
 from dualarm.model.kinematics import joint_transforms
 from dualarm.model.poses import pose_matrix, quaternion_xyzw
 from dualarm.model.robot import Robot
@@ -66,6 +69,51 @@ STAGE_TOPICS = {
     "approach": "/approach",
     "execute": "/execute",
 }
+
+
+#: The media type of each mesh file ending Foxglove Studio's 3D panel loads (its ModelCache); other meshes are
+#: written as binary STL (trimesh).
+MESH_MEDIA_TYPES = {
+    ".obj": "model/obj",
+    ".stl": "model/stl",
+    ".dae": "model/vnd.collada+xml",
+    ".glb": "model/gltf-binary",
+}
+
+
+def robot_description(urdf: Path) -> str:
+    """The URDF at ``urdf`` as ``/robot_description`` carries it: URDF 1.0, its meshes inside.
+
+    URDF 1.0 as :func:`viewer_urdf` writes it.
+
+    Each ``<mesh filename>`` (``package://``, relative or absolute, found as the robot's init found it,
+    :func:`~dualarm.describe.meshes.resolve_mesh`) becomes a ``data:`` URL holding the file. Foxglove's URDF layer
+    fetches a mesh from the page it runs in, where a relative path is an invalid URL and ``file://`` or
+    ``package://`` cannot be read, so this is how a recording draws a robot with meshes anywhere. A mesh that cannot
+    be found is left as named (the viewer then reports it).
+    """
+    from dualarm.describe.meshes import resolve_mesh
+
+    root = ET.fromstring(viewer_urdf(urdf.read_text()))
+    embedded: dict[Path, str] = {}
+    for mesh in root.iter("mesh"):
+        try:
+            path, _ = resolve_mesh(mesh.get("filename", ""), urdf)
+        except RobotModelError:
+            continue
+        if path not in embedded:
+            media = MESH_MEDIA_TYPES.get(path.suffix.lower())
+            data = path.read_bytes() if media else _as_stl(path)
+            embedded[path] = f"data:{media or MESH_MEDIA_TYPES['.stl']};base64,{base64.b64encode(data).decode()}"
+        mesh.set("filename", embedded[path])
+    return ET.tostring(root, encoding="unicode")
+
+
+def _as_stl(path: Path) -> bytes:
+    """The mesh file ``path`` as binary STL (trimesh reads it), for a format Foxglove does not load."""
+    import trimesh
+
+    return bytes(trimesh.load(path, force="mesh").export(file_obj=None, file_type="stl"))
 
 
 def _ns(t: float) -> int:
@@ -125,7 +173,7 @@ class McapSink(NullSink):
             media = "application/xml" if name.endswith(".urdf") else "application/toml"
             self._mcap.attach(log_time=0, create_time=0, name=name, media_type=media, data=text.encode())
         self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log(
-            {"data": viewer_urdf(robot.urdf.path.read_text())}, log_time=0
+            {"data": robot_description(robot.urdf.path)}, log_time=0
         )
 
     def _json(self, topic: str, schema: dict, **keys: Sequence[str]) -> foxglove.Channel:
