@@ -100,7 +100,7 @@ class PathStage:
 
         sink.begin(self.name)
         sink.robot_state("path", 0.0, task.initial_q)
-        sink.environment(task.spec.environment)
+        sink.environment(task.spec.environment, task.spec.object)
         reference = build_reference(task)
         sink.reference(reference)
         return reference, path_metrics(reference)

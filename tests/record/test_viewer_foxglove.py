@@ -47,7 +47,7 @@ STUDIO = {Path(tomllib.loads((REPO / "tasks" / f"{task}.toml").read_text())["rob
 #: Every run the Node check reads: the shipped tasks' and :data:`OTHER_RUNS` (the Panda, whose URDF names meshes by
 #: relative paths, and a run recorded up to the IK); the whole Studio app opens those of :data:`STUDIO` and the others.
 RUNS = [*SHIPPED, *OTHER_RUNS]
-OPENED = [*STUDIO.values(), *OTHER_RUNS]
+OPENED = [*STUDIO.values(), "carry_box", *OTHER_RUNS]  # carry_box: the box its hands carry
 
 pytestmark = [
     pytest.mark.integration,
@@ -278,3 +278,12 @@ def test_every_plot_of_the_layout_spans_its_units_floor_and_the_held_arm_angle_i
             assert low <= shown.min() and shown.max() <= high, (task, title)
             if task == "triangle" and panel == "Plot!arm-angle":  # each hand's held angle
                 assert max(np.ptp(values[p["value"]]) for p in config["paths"]) < 1e-12
+
+
+def test_the_carried_box_is_a_scene_entity_of_the_3d_panel(parsed, runs):
+    """carry_box: the box its hands carry is on /execute/object, every message decoded by Studio, one per animation
+    step of the execution, and shown by the layout's 3D panel."""
+    (box,) = [line for line in parsed["carry_box"] if line.get("topic") == "/execute/object"]
+    assert box["ok"] and box["decoded"] == box["messages"] > 100, box
+    layout = json.loads((runs["carry_box"] / LAYOUT_FILE).read_text())
+    assert layout["configById"]["3D!dualarm"]["topics"]["/execute/object"]["visible"]

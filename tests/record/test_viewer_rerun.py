@@ -241,13 +241,12 @@ def test_every_plot_shows_a_range_no_narrower_than_its_units_floor(opened):
     assert not narrow
 
 
+@pytest.mark.parametrize("opened", ["triangle"], indirect=True)
 def test_the_held_arm_angle_is_drawn_flat_within_its_plot(opened, request):
     """MC-Inverse holds the triangle's arm angle: its samples (read from run.mcap with the mcap reader) spread less than
     1e-12 rad, and the viewer's arm-angle plot spans at least 1e-3 rad around them."""
     from mcap.reader import make_reader
 
-    if request.node.callspec.params["opened"] != "triangle":
-        pytest.skip("the triangle's run holds the arm angle")
     client, _, _, _, _ = opened
     run = request.getfixturevalue("shipped_runs")["triangle"]
     with (run / "run.mcap").open("rb") as f:
@@ -261,3 +260,45 @@ def test_the_held_arm_angle_is_drawn_flat_within_its_plot(opened, request):
     view = next(v for v in client.get_state().views if v.name == "arm angle [rad]")
     low, high = client.get_blueprint().blueprint[f"/view/{view.view_id}/ScalarAxis"]["ScalarAxis"]["range"]
     assert high - low >= 1e-3 * (1 - 1e-9) and low <= psi.min() and psi.max() <= high
+
+
+@pytest.mark.parametrize("opened", ["carry_box"], indirect=True)
+def test_the_carried_box_is_drawn_and_moves_with_the_hands(opened, request):
+    """carry_box: hiding the box's entity changes the executed view's pixels at the start and where the master hand is
+    highest (read from run.mcap with the mcap reader), and the box's pixels move up between the two."""
+    from mcap.reader import make_reader
+
+    from dualarm.tasks import load_task
+
+    client, _, _, _, _ = opened
+    run = request.getfixturevalue("shipped_runs")["carry_box"]
+    carried = load_task("carry_box").spec.object
+    with (run / "run.mcap").open("rb") as f:
+        samples = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/execute/sample"])]
+    heights = np.array([s["hand_position"][carried.master]["z"] for s in samples])
+    top = samples[int(np.argmax(heights))]["t"]
+    assert heights.max() - heights[0] > 0.1  # the task lifts the box 0.2 m
+    view = next(v.view_id for v in client.get_state().views if v.name == "execute: robot and hand paths")
+    blueprint = client.get_blueprint()
+    key = f"/view/{view}/ViewContents"
+    before = blueprint.blueprint[key]
+    hiding = {"ViewContents": {"query": [*before["ViewContents"]["query"], f"- /world/execute/{carried.name}/**"]}}
+
+    def shot(t: float) -> np.ndarray:
+        _show(client, t)
+        return np.asarray(Image.open(io.BytesIO(client.take_screenshot(view))).convert("RGB")).astype(int)
+
+    shown = {t: shot(t) for t in (0.0, top)}
+    blueprint.blueprint[key] = hiding
+    client.set_blueprint(blueprint.blueprint, store_id=blueprint.store_id)
+    _until(lambda: True if client.get_blueprint().blueprint.get(key) == hiding else None, "the view is not changed")
+    try:
+        rows = {}
+        for t, image in shown.items():
+            box = np.abs(image - shot(t)).max(axis=2) > 30
+            assert box.sum() > 200, f"t = {t:g} s: {box.sum()} pixels of the box"
+            rows[t] = np.nonzero(box)[0].mean()
+    finally:
+        blueprint.blueprint[key] = before
+        client.set_blueprint(blueprint.blueprint, store_id=blueprint.store_id)
+    assert rows[top] < rows[0.0] - 10  # up the image: the box rose with the hands

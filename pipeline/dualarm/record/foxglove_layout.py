@@ -143,6 +143,7 @@ def _three_d(robot: Robot, stages: Sequence[str]) -> dict:
     shown = _shown(stages)
     if shown is not None:
         topics[f"/{shown}/hand_path"] = {"visible": True}
+        topics[f"/{shown}/object"] = {"visible": True}  # written only when the hands carry an object
     grid = {
         "layerId": "foxglove.Grid",
         "instanceId": "floor",

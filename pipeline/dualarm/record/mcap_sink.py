@@ -18,7 +18,7 @@ import json
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import foxglove
 import numpy as np
@@ -53,7 +53,16 @@ from dualarm.model.urdf import viewer_urdf
 from dualarm.record import schemas
 from dualarm.record.foxglove_layout import foxglove_layout, message_path
 from dualarm.record.run_dir import FOXGLOVE_LAYOUT
-from dualarm.record.sink import HAND_COLORS, STAGE_COLORS, NullSink, animation_rows, extend_range, shown_stage
+from dualarm.record.sink import (
+    HAND_COLORS,
+    OBJECT_COLOR,
+    STAGE_COLORS,
+    NullSink,
+    animation_rows,
+    carried_poses,
+    extend_range,
+    shown_stage,
+)
 from dualarm.tasks.task import hand_poses_at
 
 if TYPE_CHECKING:  # pybullet is imported only by runs that execute
@@ -173,6 +182,7 @@ class McapSink(NullSink):
         self._mcap = foxglove.open_mcap(directory / "run.mcap", context=self._context)
         self._channels: dict[str, foxglove.Channel] = {}
         self._ranges: dict[str, tuple[float, float]] = {}  # message path -> its values' lowest and highest
+        self._carried: Any | None = None  # the object both hands carry (environment)
         self._tf_channel = FrameTransformsChannel("/tf", context=self._context)
         for name, text in attachments.items():
             media = "application/xml" if name.endswith(".urdf") else "application/toml"
@@ -321,13 +331,9 @@ class McapSink(NullSink):
         self._animation(stage, path.t, names, path.q, path.fixed)
         if stage == self.shown:
             fixed = {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed}
-            self._hand_path(
-                stage,
-                {
-                    hand: T[:, :3, 3]
-                    for hand, T in hand_poses_at(self.robot, path.hands, path.joint_names, path.q, fixed).items()
-                },
-            )
+            poses = hand_poses_at(self.robot, path.hands, path.joint_names, path.q, fixed)
+            self._hand_path(stage, {hand: T[:, :3, 3] for hand, T in poses.items()})
+            self._carried_object(stage, path.t, poses)
 
     def _animation(
         self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]
@@ -350,6 +356,29 @@ class McapSink(NullSink):
             },
             log_time=0,
         )
+
+    def _carried_object(self, stage: str, t: np.ndarray, hand_poses: Mapping[str, np.ndarray]) -> None:
+        """The carried object on ``/<stage>/object`` (SceneUpdate, a cube in ``world``), the shown stage's only.
+
+        Moved with its master hand (``hand_poses``: hand -> (K, 4, 4) [m]) at the animation's times of ``t``.
+        """
+        carried, poses = self._carried, carried_poses(self._carried, hand_poses)
+        if stage != self.shown or carried is None or poses is None or not len(t):
+            return
+        channel = SceneUpdateChannel(f"{STAGE_TOPICS[stage]}/object", context=self._context)
+        size = Vector3(x=carried.size_m[0], y=carried.size_m[1], z=carried.size_m[2])
+        color = Color(**{c: v / 255 for c, v in zip("rgb", OBJECT_COLOR, strict=True)}, a=1.0)
+        rows = animation_rows(t)
+        for T, time in zip(poses[rows], t[rows].tolist(), strict=True):
+            x, y, z, w = quaternion_xyzw(T[:3, :3]).tolist()
+            pose = Pose(position=Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3]), orientation=Quaternion(x=x, y=y, z=z, w=w))
+            entity = SceneEntity(
+                timestamp=Timestamp(sec=_ns(time) // 10**9, nsec=_ns(time) % 10**9),
+                frame_id="world",
+                id=carried.name,
+                cubes=[CubePrimitive(pose=pose, size=size, color=color)],
+            )
+            channel.log(SceneUpdate(entities=[entity]), log_time=_ns(time))
 
     def _hand_path(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
         """Each hand's path (M, 3) [m] in ``stage`` on ``/<stage>/hand_path``: the shown stage's.
@@ -440,6 +469,7 @@ class McapSink(NullSink):
         if len(log.t):
             self._animation("execute", log.t, log.joint_names, log.q, log.fixed)
         self._hand_path("execute", {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()})
+        self._carried_object("execute", log.t, log.hand_poses)
         if log.approach is not None:
             self._executed(log.approach, f"{STAGE_TOPICS['approach']}/executed", f"{STAGE_TOPICS['approach']}/contacts")
 
@@ -485,12 +515,14 @@ class McapSink(NullSink):
                 log_time=_ns(e.t_s),
             )
 
-    def environment(self, objects) -> None:
-        """A task's fixed objects: once on ``/task/environment`` (Foxglove SceneUpdate).
+    def environment(self, objects, carried=None) -> None:
+        """A task's fixed objects: once on ``/task/environment`` (Foxglove SceneUpdate); the carried one is kept.
 
         The objects: :class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base
-        frame, ``world``.
+        frame, ``world``; ``carried``: a :class:`~dualarm.tasks.schema.CarriedObject` or None, drawn
+        with the shown stage's hands (:meth:`_carried_object`).
         """
+        self._carried = carried
         if "path" not in self.stages:
             return
         entities = []

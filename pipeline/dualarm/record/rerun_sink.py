@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rerun as rr
@@ -25,9 +25,11 @@ from dualarm.model.poses import pose_matrix, quaternion_xyzw
 from dualarm.model.robot import Robot
 from dualarm.record.sink import (
     HAND_COLORS,
+    OBJECT_COLOR,
     STAGE_COLORS,
     NullSink,
     animation_rows,
+    carried_poses,
     extend_range,
     plot_range,
     robot_box,
@@ -164,6 +166,7 @@ class RerunSink(NullSink):
             self._rr.flush()  # in the file before any data, whatever Rerun's batcher does next
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
         self._ranges: dict[str, tuple[float, float]] = {}  # /plots/<prefix> -> its values' lowest and highest
+        self._carried: Any | None = None  # the object both hands carry (environment)
         self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     def _rerun_robot(self, stage: str) -> rr.urdf.UrdfTree:
@@ -254,19 +257,15 @@ class RerunSink(NullSink):
             self._series(f"{stage}/hand_orientation_error_rad", path.t, dict(zip(path.hands, angle.T, strict=True)))
         self._series(f"{stage}/solve_time_s", path.t, {"all": path.solve_time_s})
         self._series(f"{stage}/arm_angle_rad", path.t, arm_angles)
-        self._hand_traces(
-            stage,
-            {
-                hand: T[:, :3, 3]
-                for hand, T in hand_poses_at(
-                    self.robot,
-                    path.hands,
-                    path.joint_names,
-                    path.q,
-                    {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed},
-                ).items()
-            },
+        poses = hand_poses_at(
+            self.robot,
+            path.hands,
+            path.joint_names,
+            path.q,
+            {**dict.fromkeys(self.robot.joint_names, 0.0), **path.fixed},
         )
+        self._hand_traces(stage, {hand: T[:, :3, 3] for hand, T in poses.items()})
+        self._carried_object(stage, path.t, poses)
 
     def _animation(
         self, stage: str, t: np.ndarray, names: tuple[str, ...], q: np.ndarray, fixed: Mapping[str, float]
@@ -277,6 +276,26 @@ class RerunSink(NullSink):
             stage,
             t[rows],
             {**{n: np.full(len(rows), v) for n, v in fixed.items()}, **dict(zip(names, q[rows].T, strict=True))},
+        )
+
+    def _carried_object(self, stage: str, t: np.ndarray, hand_poses: Mapping[str, np.ndarray]) -> None:
+        """The object both hands carry under ``/world/<stage>/<name>``, moved with its master hand at times ``t``.
+
+        At :func:`~dualarm.record.sink.animation_rows`; ``hand_poses``: hand -> (K, 4, 4) [m]. Nothing without one.
+        """
+        carried, poses = self._carried, carried_poses(self._carried, hand_poses)
+        if carried is None or poses is None or not len(t):
+            return
+        rows = animation_rows(t)
+        entity = f"world/{stage}/{carried.name}"
+        half = [s / 2 for s in carried.size_m]
+        self._rr.log(entity, rr.Boxes3D(half_sizes=[half], colors=[OBJECT_COLOR], fill_mode="solid"), static=True)
+        self._rr.send_columns(
+            entity,
+            indexes=[rr.TimeColumn(TIMELINE, duration=t[rows])],
+            columns=rr.Transform3D.columns(
+                translation=poses[rows, :3, 3], quaternion=quaternion_xyzw(poses[rows, :3, :3])
+            ),
         )
 
     def _hand_traces(self, stage: str, positions: Mapping[str, np.ndarray]) -> None:
@@ -323,6 +342,7 @@ class RerunSink(NullSink):
         if len(log.t):
             self._animation("execute", log.t, log.joint_names, log.q, log.fixed)
         self._hand_traces("execute", {hand: T[:, :3, 3] for hand, T in log.hand_poses.items()})
+        self._carried_object("execute", log.t, log.hand_poses)
         if log.approach is not None:
             self._executed(log.approach, "approach/executed_")
 
@@ -339,12 +359,14 @@ class RerunSink(NullSink):
             {"self": log.self_contacts, "environment": log.environment_contacts, "expected": log.expected_contacts},
         )
 
-    def environment(self, objects) -> None:
-        """A task's fixed objects under ``/world/environment/<name>``.
+    def environment(self, objects, carried=None) -> None:
+        """A task's fixed objects under ``/world/environment/<name>``; the carried one is kept for the stages.
 
         The objects: :class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base
-        frame.
+        frame; ``carried``: a :class:`~dualarm.tasks.schema.CarriedObject` or None, drawn with each
+        stage's hands (:meth:`_carried_object`).
         """
+        self._carried = carried
         if "path" not in self.stages:
             return
         for obj in objects:

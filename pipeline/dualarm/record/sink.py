@@ -20,6 +20,7 @@ import numpy as np
 
 from dualarm.errors import InvalidArgumentError, excerpt
 from dualarm.model.kinematics import joint_transforms
+from dualarm.model.poses import pose_matrix
 
 if TYPE_CHECKING:
     from dualarm.contracts.execution import ExecutionLog
@@ -39,8 +40,11 @@ class Sink(Protocol):
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
         """The robot at configuration ``q`` [rad] at motion time ``t`` [s]."""
 
-    def environment(self, objects: Sequence[Any]) -> None:
-        """The task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`)."""
+    def environment(self, objects: Sequence[Any], carried: Any | None = None) -> None:
+        """The task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`), and what both hands carry.
+
+        ``carried``: a :class:`~dualarm.tasks.schema.CarriedObject`, or None.
+        """
 
     def reference(self, ref: CartesianReference) -> None:
         """The path stage's product."""
@@ -105,7 +109,7 @@ class NullSink:
     def robot_state(self, stage: str, t: float, q: Mapping[str, float], rep: int = 0) -> None:
         """Ignored."""
 
-    def environment(self, objects: Sequence[Any]) -> None:
+    def environment(self, objects: Sequence[Any], carried: Any | None = None) -> None:
         """Ignored."""
 
     def reference(self, ref: CartesianReference) -> None:
@@ -213,10 +217,10 @@ class Tee(NullSink):
         for sink in self.sinks:
             sink.robot_state(stage, t, q, rep)
 
-    def environment(self, objects: Sequence[Any]) -> None:
+    def environment(self, objects: Sequence[Any], carried: Any | None = None) -> None:
         """Handed to each sink."""
         for sink in self.sinks:
-            sink.environment(objects)
+            sink.environment(objects, carried)
 
     def reference(self, ref: CartesianReference) -> None:
         """Handed to each sink."""
@@ -272,6 +276,8 @@ STAGE_COLORS = {
     "approach": (150, 150, 150),
     "execute": (220, 40, 40),
 }
+#: Colour of an object both hands carry.
+OBJECT_COLOR = (140, 115, 90)
 #: Period of the robot's animation (/tf and the Rerun URDF) for stages sampled faster [s].
 ANIMATION_PERIOD_S = 0.01
 
@@ -332,3 +338,15 @@ def extend_range(ranges: dict[str, tuple[float, float]], key: str, values: np.nd
     if finite.size:
         low, high = ranges.get(key, (np.inf, -np.inf))
         ranges[key] = (min(low, float(finite.min())), max(high, float(finite.max())))
+
+
+def carried_poses(carried: Any | None, hand_poses: Mapping[str, np.ndarray]) -> np.ndarray | None:
+    """The pose of the object both hands carry (K, 4, 4) [m], from its master hand's ``hand_poses`` (hand -> (K, 4, 4)).
+
+    T_object = T_master ^{T_master}T_object (MC-Inverse, eq 11); None without a carried object or that hand's poses.
+    ``carried``: a :class:`~dualarm.tasks.schema.CarriedObject`.
+    """
+    if carried is None or carried.master not in hand_poses:
+        return None
+    offset = pose_matrix(carried.master_to_object.position, carried.master_to_object.rpy)
+    return np.asarray(hand_poses[carried.master]) @ offset
