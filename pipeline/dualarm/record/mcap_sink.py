@@ -358,7 +358,7 @@ class McapSink(NullSink):
         )
 
     def _carried_object(self, stage: str, t: np.ndarray, hand_poses: Mapping[str, np.ndarray]) -> None:
-        """The carried object on ``/<stage>/object`` (SceneUpdate, a cube in ``world``), the shown stage's only.
+        """The carried object on ``/<stage>/object``: a SceneUpdate cube in ``world``, the shown stage's only.
 
         Moved with its master hand (``hand_poses``: hand -> (K, 4, 4) [m]) at the animation's times of ``t``.
         """
@@ -516,7 +516,7 @@ class McapSink(NullSink):
             )
 
     def environment(self, objects, carried=None) -> None:
-        """A task's fixed objects: once on ``/task/environment`` (Foxglove SceneUpdate); the carried one is kept.
+        """A task's fixed objects once on ``/task/environment`` (SceneUpdate); the carried one is kept.
 
         The objects: :class:`~dualarm.tasks.schema.EnvironmentObject`, poses in the robot base
         frame, ``world``; ``carried``: a :class:`~dualarm.tasks.schema.CarriedObject` or None, drawn

@@ -279,9 +279,10 @@ class RerunSink(NullSink):
         )
 
     def _carried_object(self, stage: str, t: np.ndarray, hand_poses: Mapping[str, np.ndarray]) -> None:
-        """The object both hands carry under ``/world/<stage>/<name>``, moved with its master hand at times ``t``.
+        """The object both hands carry under ``/world/<stage>/<name>``, moved with its master hand.
 
-        At :func:`~dualarm.record.sink.animation_rows`; ``hand_poses``: hand -> (K, 4, 4) [m]. Nothing without one.
+        At the :func:`~dualarm.record.sink.animation_rows` of times ``t`` (K,) [s]; ``hand_poses``: hand -> (K, 4,
+        4) [m]. Nothing without one.
         """
         carried, poses = self._carried, carried_poses(self._carried, hand_poses)
         if carried is None or poses is None or not len(t):

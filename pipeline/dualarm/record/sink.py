@@ -41,7 +41,7 @@ class Sink(Protocol):
         """The robot at configuration ``q`` [rad] at motion time ``t`` [s]."""
 
     def environment(self, objects: Sequence[Any], carried: Any | None = None) -> None:
-        """The task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`), and what both hands carry.
+        """The task's fixed objects (:class:`~dualarm.tasks.schema.EnvironmentObject`), what the hands carry.
 
         ``carried``: a :class:`~dualarm.tasks.schema.CarriedObject`, or None.
         """
@@ -341,7 +341,9 @@ def extend_range(ranges: dict[str, tuple[float, float]], key: str, values: np.nd
 
 
 def carried_poses(carried: Any | None, hand_poses: Mapping[str, np.ndarray]) -> np.ndarray | None:
-    """The pose of the object both hands carry (K, 4, 4) [m], from its master hand's ``hand_poses`` (hand -> (K, 4, 4)).
+    """The pose of the object both hands carry (K, 4, 4) [m], from its master hand's ``hand_poses``.
+
+    ``hand_poses``: hand -> (K, 4, 4) [m].
 
     T_object = T_master ^{T_master}T_object (MC-Inverse, eq 11); None without a carried object or that hand's poses.
     ``carried``: a :class:`~dualarm.tasks.schema.CarriedObject`.
