@@ -6,6 +6,8 @@
 //   - urdf_error: the URDF layer's parse error ("Failed to parse URDF", logged by Studio), if any;
 //   - layer_errors: what the 3D panel's layers report ("[topics > /task/reference_path] Missing
 //     transform from frame <base_link> to frame <world>"); Studio logs each when it is first raised;
+//   - robot_pixels_on_open: whether the robot is drawn on opening, before anything is clicked (watched
+//     for OPEN_LIMIT_MS); 3d-open.png;
 //   - robot_pixels: whether the robot is drawn, in the middle of the run (the harness clicks the middle
 //     of the timeline). The harness gives the layout's 3D panel a twin below it, same shape and camera,
 //     with /robot_description hidden: the pixels that differ are the robot.
@@ -13,7 +15,8 @@
 //   node open-in-studio.cjs [--out DIR] --layout LAYOUT.json RUN.mcap [--layout LAYOUT.json RUN.mcap ...]
 //
 // Prints one JSON line per run; writes DIR/<run directory name>/{studio.png, 3d-urdf.png, 3d-bare.png}.
-// Exit 0 when every run has no problem and no layer error, its URDF parsed and robot pixels > 0;
+// Exit 0 when every run has no problem and no layer error, its URDF parsed and robot pixels > 0 (on
+// opening and mid-run);
 // 1 otherwise; 2 when the harness itself failed. Runs are opened one after the other in one browser.
 // Environment: CHROMIUM (default /usr/bin/chromium), STUDIO_DEBUG=1 echoes the page's console.
 "use strict";
@@ -40,6 +43,8 @@ const CHROMIUM_ARGS = [
 // Upper bounds on waiting (Studio takes 10-20 s to load on two shared cores), not assertions on time.
 const LOAD_LIMIT_MS = 180_000;
 const SETTLE_LIMIT_MS = 60_000;
+// How long the 3D panel is watched for the robot on opening, before the harness touches anything.
+const OPEN_LIMIT_MS = 10_000;
 const BARE_PANEL = "3D!dualarm-check-bare";
 /** The browser window a layout is judged in [px], and the height of Studio's playback bar below the panels. */
 const VIEWPORT = { width: 1600, height: 1000 };
@@ -188,10 +193,23 @@ async function openRun(browser, url, index, run, outDir) {
     // close the first-run hint each 3D panel shows ("Open settings to configure topics and layers.")
     await page.evaluate(() => document.querySelectorAll('[role="tooltip"] button').forEach((button) => button.click()));
     mark("hints closed");
-    await seekToMiddle(page);
-    mark("seeked");
     const canvas = (id) => page.locator(`[data-testid="panel-mouseenter-container ${id}"] canvas`).first();
     const shoot = async () => [await canvas(panel).screenshot(), await canvas(BARE_PANEL).screenshot()];
+    // what a user sees on opening, before touching anything: the robot within OPEN_LIMIT_MS, no click
+    let opened = { pixels: 0, of: 0 };
+    let openShots;
+    await waitFor(
+      async () => {
+        openShots = await shoot();
+        opened = differingPixels(...openShots);
+        return opened.pixels > 0;
+      },
+      OPEN_LIMIT_MS,
+      1000,
+    );
+    mark("open seen");
+    await seekToMiddle(page);
+    mark("seeked");
     const urdfError = () => consoleErrors.find((t) => t.includes("Failed to parse URDF"));
     let shots;
     let robot = { pixels: 0, of: 0 };
@@ -214,6 +232,7 @@ async function openRun(browser, url, index, run, outDir) {
     }, SETTLE_LIMIT_MS);
     const dir = path.join(outDir, path.basename(path.dirname(run.mcap)));
     fs.mkdirSync(dir, { recursive: true });
+    fs.writeFileSync(path.join(dir, "3d-open.png"), openShots[0]);
     fs.writeFileSync(path.join(dir, "3d-urdf.png"), shots[0]);
     fs.writeFileSync(path.join(dir, "3d-bare.png"), shots[1]);
     await page.screenshot({ path: path.join(dir, "studio.png") });
@@ -228,6 +247,7 @@ async function openRun(browser, url, index, run, outDir) {
       urdf_parsed: urdfError() === undefined,
       urdf_error: urdfError(),
       layer_errors: layerErrors,
+      robot_pixels_on_open: opened.pixels,
       robot_pixels: robot.pixels,
       panel_pixels: robot.of,
       screenshots: dir,
@@ -246,7 +266,8 @@ async function main() {
   try {
     for (const [index, run] of args.runs.entries()) {
       const result = await openRun(browser, url, index, run, args.out);
-      result.ok = result.problems.length === 0 && result.urdf_parsed && result.layer_errors.length === 0 && result.robot_pixels > 0;
+      result.ok =
+        result.problems.length === 0 && result.urdf_parsed && result.layer_errors.length === 0 && result.robot_pixels > 0 && result.robot_pixels_on_open > 0;
       bad += result.ok ? 0 : 1;
       process.stdout.write(`${JSON.stringify(result)}\n`);
     }
