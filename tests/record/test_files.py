@@ -647,3 +647,22 @@ def test_rrd_has_every_stage_robot(run, rrd, mcap_file, urdf):
             ), f"no hand traces of {stage}"
     for obj in tomllib.loads(spec.task.read_text()).get("environment", []):
         assert f"/world/environment/{obj['name']}" in entities
+
+
+def test_the_series_of_a_plot_have_colours_of_their_own(rrd):
+    """Within a plot the run opens on (the IK's and the execution's hand errors; a stage's joint positions), no two
+    series share a colour, as Rerun's own ``rrd print`` reads them (Rerun's default, from the path's hash, repeats)."""
+    path, listing = rrd
+    entities = listing.entities("Recording")
+
+    def colour(entity: str) -> int:
+        (packed,) = re.findall(r"^│ │ row_\w+\s*┆\s*\[(\d+)\]", rrd_rows(path, entity), re.MULTILINE)
+        return int(packed)
+
+    plots = {
+        "hand error": sorted(e for e in entities if re.fullmatch(r"/plots/(ik|execute)/hand_error_m/\w+", e)),
+        "joint positions": sorted(e for e in entities if e.startswith("/plots/smooth/position/")),
+    }
+    for plot, series in plots.items():
+        colours = [colour(entity) for entity in series]
+        assert len(series) >= 2 and len(set(colours)) == len(colours), (plot, dict(zip(series, colours, strict=True)))

@@ -69,6 +69,7 @@ def foxglove_layout(
     hands: Sequence[str],
     joint_names: Sequence[str] | None = None,
     ranges: Mapping[str, tuple[float, float]] | None = None,
+    carried: bool = False,
 ) -> dict:
     """The Foxglove Studio layout of a run of ``stages`` of ``robot`` moving ``hands``.
 
@@ -81,6 +82,7 @@ def foxglove_layout(
         ranges: the lowest and highest value of each plotted message path (:func:`message_path`); each plot then
             shows its values' range, no narrower than its unit's floor (:func:`~dualarm.record.sink.plot_range`).
             None: Studio's own range.
+        carried: whether the hands carry an object (its topic ``/<shown stage>/object`` is then in the 3D panel).
 
     Returns:
         The layout as Studio exports it: ``configById``, ``globalVariables``, ``userNodes``,
@@ -98,7 +100,7 @@ def foxglove_layout(
     )
     _check("joint_names", joints, robot.joint_names)
     plots = _plots(robot, tuple(stages), tuple(hands), joints, ranges or {})
-    configs = {THREE_D_PANEL: _three_d(robot, stages), **{panel_id: config for panel_id, config in plots}}
+    configs = {THREE_D_PANEL: _three_d(robot, stages, carried), **{panel_id: config for panel_id, config in plots}}
     layout: str | dict = THREE_D_PANEL
     if plots:
         layout = {
@@ -131,10 +133,11 @@ def _shown(stages: Sequence[str]) -> str | None:
     return None if shown == "path" else shown
 
 
-def _three_d(robot: Robot, stages: Sequence[str]) -> dict:
+def _three_d(robot: Robot, stages: Sequence[str], carried: bool) -> dict:
     """The 3D panel, in ``world``, its camera on ``robot`` (:data:`CAMERA`).
 
-    The URDF layer, the task's paths and objects and the shown stage's hand path (the executed one).
+    The URDF layer, the task's paths and objects, the shown stage's hand path (the executed one) and the object its
+    hands carry.
     """
     topics: dict[str, dict] = {"/robot_description": {"visible": True}}
     if "path" in stages:
@@ -143,7 +146,8 @@ def _three_d(robot: Robot, stages: Sequence[str]) -> dict:
     shown = _shown(stages)
     if shown is not None:
         topics[f"/{shown}/hand_path"] = {"visible": True}
-        topics[f"/{shown}/object"] = {"visible": True}  # written only when the hands carry an object
+        if carried:
+            topics[f"/{shown}/object"] = {"visible": True}
     grid = {
         "layerId": "foxglove.Grid",
         "instanceId": "floor",

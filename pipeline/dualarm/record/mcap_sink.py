@@ -601,7 +601,9 @@ class McapSink(NullSink):
 
         The layout: ``foxglove-layout.json``.
         """
-        layout = foxglove_layout(self.robot, self.stages, self._hands, self._joint_names, self._ranges)
+        layout = foxglove_layout(
+            self.robot, self.stages, self._hands, self._joint_names, self._ranges, self._carried is not None
+        )
         (self.directory / FOXGLOVE_LAYOUT).write_text(json.dumps(layout, indent=1) + "\n")
         self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})
         self._mcap.close()

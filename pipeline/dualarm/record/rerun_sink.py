@@ -55,6 +55,29 @@ RATIOS = {
     "retime": ("velocity", "acceleration", "jerk"),
     "smooth": ("velocity", "acceleration", "jerk"),
 }
+#: The colours of the series of one plot, in order: matplotlib's tab10, then its lighter shades (20 apart).
+SERIES_COLORS = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+    (174, 199, 232),
+    (255, 187, 120),
+    (152, 223, 138),
+    (255, 152, 150),
+    (197, 176, 213),
+    (196, 156, 148),
+    (247, 182, 210),
+    (199, 199, 199),
+    (219, 219, 141),
+    (158, 218, 229),
+]
 #: The limit line of the ratio plots.
 LIMIT_LINE = rr.SeriesLines(colors=[(200, 0, 0)], widths=[2.0], names=["limit"])
 
@@ -117,17 +140,13 @@ def blueprint(
             else []
         ),
         rrb.Tabs(
-            *(
-                [plot(f"joint positions [rad] ({driven})", "rad", f"{driven}/position", legend=False)]
-                if driven != "path"
-                else []
-            ),
+            *([plot(f"joint positions [rad] ({driven})", "rad", f"{driven}/position")] if driven != "path" else []),
             *([plot("arm angle [rad]", "rad", f"{solved}/arm_angle_rad")] if solved == "ik" else []),
             *([plot("plan: hand to target [m]", "m", "plan/hand_error_m")] if solved == "plan" else []),
             *(
                 [
                     plot("contacts", "count", "execute/contacts"),
-                    plot("tracking error [rad]", "rad", "execute/tracking_error_rad", legend=False),
+                    plot("tracking error [rad]", "rad", "execute/tracking_error_rad"),
                 ]
                 if focus == "execute"
                 else []
@@ -141,6 +160,7 @@ def blueprint(
             ),
             rrb.Grid(*[view3d(stage, stage) for stage in stages if stage != "approach"], name="stages"),
         ),
+        rrb.TimePanel(timeline=TIMELINE),  # the motion's clock, not the viewer's log_time
         collapse_panels=True,
     )
 
@@ -204,10 +224,13 @@ class RerunSink(NullSink):
                     columns=joint.compute_transform_columns(np.asarray(values, float).tolist(), clamp=False),
                 )
 
-    def _series(self, prefix: str, t: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
+    def _series(self, prefix: str, t: np.ndarray, values: Mapping[str, np.ndarray], first_color: int = 0) -> None:
         """Rerun time series ``plots/<prefix>/<name>``."""
         times = rr.TimeColumn(TIMELINE, duration=t)
-        for name, v in values.items():
+        for i, (name, v) in enumerate(values.items()):
+            if name != "limit":  # a colour of its own in its plot (Rerun's default, from the path's hash, repeats)
+                color = SERIES_COLORS[(first_color + i) % len(SERIES_COLORS)]
+                self._rr.log(f"plots/{prefix}/{name}", rr.SeriesLines(colors=[color], names=[name]), static=True)
             self._rr.send_columns(
                 f"plots/{prefix}/{name}", indexes=[times], columns=rr.Scalars.columns(scalars=np.asarray(v, float))
             )
@@ -350,7 +373,7 @@ class RerunSink(NullSink):
     def _executed(self, log: ExecutionLog, plots: str) -> None:
         """One played trajectory's plots, named ``plots/<plots><quantity>``."""
         names = log.joint_names
-        self._series(f"{plots}hand_error_m", log.t, dict(log.hand_error_m))
+        self._series(f"{plots}hand_error_m", log.t, dict(log.hand_error_m), first_color=2)  # beside the IK's
         self._series(
             f"{plots}tracking_error_rad", log.t, dict(zip(names, np.abs(log.q - log.q_command).T, strict=True))
         )
