@@ -3,7 +3,8 @@
 And the :func:`blueprint` the run opens on.
 
 The URDF per stage under ``/<stage>/<robot>``, reference paths and each stage's hand traces in 3D
-under ``/world``, time series under ``/plots``; the blueprint is sent before any data.
+under ``/world``, time series under ``/plots``; the blueprint is sent before any data, and again at
+the end with each plot's value range (activated last).
 """
 
 from __future__ import annotations
