@@ -19,8 +19,6 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args, runtime_chec
 import numpy as np
 
 from dualarm.errors import InvalidArgumentError, excerpt
-from dualarm.model.kinematics import joint_transforms
-from dualarm.model.poses import pose_matrix
 
 if TYPE_CHECKING:
     from dualarm.contracts.execution import ExecutionLog
@@ -296,6 +294,8 @@ def robot_box(robot: Robot) -> tuple[np.ndarray, float]:
 
     Its centre (3,) [m] in the robot's base frame (the viewers' world) and its largest side [m] (at least 0.1 m).
     """
+    from dualarm.model.kinematics import joint_transforms  # casadi: not for every importer of the sinks
+
     world = {robot.urdf.root: np.eye(4)}
     todo = joint_transforms(robot.urdf.joints, {})
     while todo:  # the URDF lists its joints in any order; a tree, checked when it was loaded
@@ -348,6 +348,8 @@ def carried_poses(carried: Any | None, hand_poses: Mapping[str, np.ndarray]) -> 
     T_object = T_master ^{T_master}T_object (MC-Inverse, eq 11); None without a carried object or that hand's poses.
     ``carried``: a :class:`~dualarm.tasks.schema.CarriedObject`.
     """
+    from dualarm.model.poses import pose_matrix  # scipy: not for every importer of the sinks
+
     if carried is None or carried.master not in hand_poses:
         return None
     offset = pose_matrix(carried.master_to_object.position, carried.master_to_object.rpy)
