@@ -197,30 +197,26 @@ def _plots(
 
     ``ranges``: as :func:`foxglove_layout`'s.
     """
-
-    def _plot(title: str, unit: str, paths: list[tuple[str, str]]) -> dict:
-        return plot(title, paths, [ranges[value] for value, _ in paths if value in ranges], unit)
-
     plots: list[tuple[str, dict]] = []
     error_stage = next((s for s in HAND_ERROR_STAGES if s in stages), None)
     if error_stage is not None:
         paths = [(message_path(f"/{error_stage}/sample", "hand_error_m", hand), hand) for hand in hands]
-        plots.append(("Plot!hand-error", _plot(f"hand position error [m] ({error_stage})", "m", paths)))
+        plots.append(("Plot!hand-error", _plot(f"hand position error [m] ({error_stage})", "m", paths, ranges)))
     if "ik" in stages:
         paths = [(message_path("/ik/sample", "arm_angle_rad", hand), hand) for hand in hands]
-        plots.append(("Plot!arm-angle", _plot("arm angle psi [rad] (ik)", "rad", paths)))
+        plots.append(("Plot!arm-angle", _plot("arm angle psi [rad] (ik)", "rad", paths, ranges)))
     joint_stage = _shown(stages)
     if joint_stage is not None:
         for group, names in _joint_groups(robot, joints):
             paths = [(message_path(f"/{joint_stage}/sample", "position", name), _short(name, names)) for name in names]
             plots.append(
-                (f"Plot!joints-{group}", _plot(f"{group} joint positions [rad] ({joint_stage})", "rad", paths))
+                (f"Plot!joints-{group}", _plot(f"{group} joint positions [rad] ({joint_stage})", "rad", paths, ranges))
             )
     if "execute" in stages:
         paths = [
             (message_path("/execute/sample", f"{kind}_contacts"), kind) for kind in ("self", "environment", "expected")
         ]
-        plots.append(("Plot!contacts", _plot("contacts (execute)", "count", paths)))
+        plots.append(("Plot!contacts", _plot("contacts (execute)", "count", paths, ranges)))
     return plots
 
 
@@ -255,13 +251,13 @@ def message_path(topic: str, *fields: str) -> str:
     )
 
 
-def plot(title: str, paths: list[tuple[str, str]], logged: list[tuple[float, float]], unit: str) -> dict:
-    """A Plot panel of ``paths`` (message path, legend label) against the log time (the motion time).
+def _plot(title: str, unit: str, paths: list[tuple[str, str]], ranges: Mapping[str, tuple[float, float]]) -> dict:
+    """A Plot panel of ``paths`` (message path, legend label) in ``unit`` against the log (motion) time.
 
-    Its y-range from the ``logged`` (lowest, highest) of its paths in ``unit``
-    (:func:`~dualarm.record.sink.plot_range`); none logged: Studio's own, from 0 for a quantity that cannot be
-    negative ([m], counts).
+    Its y-range from the ``ranges`` of its paths (:func:`~dualarm.record.sink.plot_range`); none logged: Studio's
+    own, from 0 for a quantity that cannot be negative ([m], counts).
     """
+    logged = [ranges[value] for value, _ in paths if value in ranges]
     config = {
         TITLE: title,
         "paths": [
@@ -278,9 +274,7 @@ def plot(title: str, paths: list[tuple[str, str]], logged: list[tuple[float, flo
         "sidebarDimension": 150,
     }
     if logged:
-        config["minYValue"], config["maxYValue"] = plot_range(
-            min(r[0] for r in logged), max(r[1] for r in logged), unit
-        )
+        config["minYValue"], config["maxYValue"] = plot_range(logged, unit)
     elif unit in ("m", "count"):
         config["minYValue"] = 0.0
     return config

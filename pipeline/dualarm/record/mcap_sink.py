@@ -130,6 +130,12 @@ def _as_stl(path: Path) -> bytes:
     return bytes(trimesh.load(path, force="mesh").export(file_obj=None, file_type="stl"))
 
 
+def _pose(T: np.ndarray) -> Pose:
+    """The transform ``T`` (4, 4) [m] as a Foxglove pose."""
+    x, y, z, w = quaternion_xyzw(T[:3, :3]).tolist()
+    return Pose(position=Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3]), orientation=Quaternion(x=x, y=y, z=z, w=w))
+
+
 def _ns(t: float) -> int:
     """Motion time [s] -> MCAP log time [ns]."""
     return int(round(t * 1e9))
@@ -370,8 +376,7 @@ class McapSink(NullSink):
         color = Color(**{c: v / 255 for c, v in zip("rgb", OBJECT_COLOR, strict=True)}, a=1.0)
         rows = animation_rows(t)
         for T, time in zip(poses[rows], t[rows].tolist(), strict=True):
-            x, y, z, w = quaternion_xyzw(T[:3, :3]).tolist()
-            pose = Pose(position=Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3]), orientation=Quaternion(x=x, y=y, z=z, w=w))
+            pose = _pose(T)
             entity = SceneEntity(
                 timestamp=Timestamp(sec=_ns(time) // 10**9, nsec=_ns(time) % 10**9),
                 frame_id="world",
@@ -528,8 +533,7 @@ class McapSink(NullSink):
         entities = []
         for obj in objects:
             T = pose_matrix(obj.pose.position, obj.pose.rpy)
-            x, y, z, w = quaternion_xyzw(T[:3, :3]).tolist()
-            pose = Pose(position=Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3]), orientation=Quaternion(x=x, y=y, z=z, w=w))
+            pose = _pose(T)
             color = Color(r=0.55, g=0.45, b=0.35, a=0.8)
             if obj.shape == "box":
                 size = obj.size_m

@@ -124,9 +124,7 @@ def blueprint(
             name=name,
             contents=[f"+ /plots/{p}/**" for p in paths],
             plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=legend),
-            axis_y=rrb.ScalarAxis(range=plot_range(min(r[0] for r in logged), max(r[1] for r in logged), unit))
-            if logged
-            else None,
+            axis_y=rrb.ScalarAxis(range=plot_range(logged, unit)) if logged else None,
         )
 
     driven = next((s for s in ("smooth", "retime") if s in stages), focus) if focus == "execute" else focus

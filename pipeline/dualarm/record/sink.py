@@ -294,17 +294,12 @@ def robot_box(robot: Robot) -> tuple[np.ndarray, float]:
 
     Its centre (3,) [m] in the robot's base frame (the viewers' world) and its largest side [m] (at least 0.1 m).
     """
-    from dualarm.model.kinematics import joint_transforms  # casadi: not for every importer of the sinks
+    import casadi as cs  # not for every importer of the sinks
 
-    world = {robot.urdf.root: np.eye(4)}
-    todo = joint_transforms(robot.urdf.joints, {})
-    while todo:  # the URDF lists its joints in any order; a tree, checked when it was loaded
-        waiting = [(parent, child, T) for parent, child, T in todo if parent not in world]
-        world.update({child: world[parent] @ T for parent, child, T in todo if parent in world})
-        if len(waiting) == len(todo):
-            break
-        todo = waiting
-    points = np.array([T[:3, 3] for T in world.values()])
+    from dualarm.model.kinematics import link_frames
+
+    frames = link_frames(robot.urdf.joints, robot.urdf.root, {})
+    points = np.array([np.asarray(cs.evalf(T))[:3, 3] for T in frames.values()])
     low, high = points.min(axis=0), points.max(axis=0)
     return (low + high) / 2, max(float((high - low).max()), 0.1)
 
@@ -317,12 +312,13 @@ PLOT_FLOORS = {"m": 1e-4, "rad": 1e-3, "ratio": 0.1, "count": 1.0}
 PLOT_PADDING = 0.05
 
 
-def plot_range(low: float, high: float, unit: str) -> tuple[float, float]:
-    """The value range a plot of values from ``low`` to ``high`` in ``unit`` (:data:`PLOT_FLOORS`) shows.
+def plot_range(logged: Sequence[tuple[float, float]], unit: str) -> tuple[float, float]:
+    """The value range a plot shows of series whose values span ``logged`` (low, high each) in ``unit``.
 
-    [low, high] padded by :data:`PLOT_PADDING`, widened about its middle to the unit's floor; never below 0 when no
-    value is (errors, counts, ratios).
+    Their [lowest, highest] padded by :data:`PLOT_PADDING`, widened about its middle to the unit's floor
+    (:data:`PLOT_FLOORS`); never below 0 when no value is (errors, counts, ratios).
     """
+    low, high = min(r[0] for r in logged), max(r[1] for r in logged)
     floor = PLOT_FLOORS[unit]
     middle, half = (low + high) / 2, max((high - low) * (1 + 2 * PLOT_PADDING), floor) / 2
     bottom = middle - half
