@@ -110,3 +110,21 @@ def test_the_default_timing_holds_every_limit_or_refuses_a_jump_on_generated_pat
             counts["with a fallback piece"] += bool(timing.fallbacks)
             assert path_deviation_max_rad(timing, variant) <= 1e-6, where
     print(index, dict(counts))
+
+
+@pytest.mark.integration
+def test_a_jerk_peak_between_two_points_of_the_check_is_found():
+    """Trial 11's MC-Inverse path (deterministic): its jerk peaks between the final check's points, 0.1 ms apart.
+
+    Checked every 10 us by finite differences of the timing's accelerations, which stay within the limit's 1e-6 only
+    if the check also looked between its points (it found 1 + 1.4e-5 without).
+    """
+    _, task = reachable_trial(study_from_toml(SPEC), 11, REPO)
+    path = run_task(task, "mc-inverse", stages=("path", "ik")).joint_path
+    v, a, jerk = (task.robot.limit_array(kind, path.joint_names) for kind in ("velocity", "acceleration", "jerk"))
+    timing = plan(path, v, a, jerk=jerk, position=task.robot.lower_upper(path.joint_names))
+    step_s, worst = 1e-5, 0.0
+    for start in np.arange(0.0, timing.duration_s, 1.0):  # a second at a time: 100,000 points
+        qdd = timing.evaluate(np.arange(start, min(start + 1.0 + step_s, timing.duration_s), step_s))[2]
+        worst = max(worst, float((np.abs(np.diff(qdd, axis=0)) / step_s / jerk).max()))
+    assert 0.999 < worst <= 1 + 1e-6

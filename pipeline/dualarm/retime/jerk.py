@@ -101,6 +101,10 @@ MARGIN = 1 - 2e-3
 #: Time step of the analytic check of each piece's limits [s], and of the checks that choose what to refine.
 CHECK_STEP_S = 1e-4
 REFINE_CHECK_STEP_S = 5e-4
+#: The final check looks again every PEAK_STEP_S [s] within a step of each point whose ratio is within PEAK_WITHIN (a
+#: share) of the largest, or of 1.
+PEAK_STEP_S = 2e-6
+PEAK_WITHIN = 1e-3
 #: At each node, the programs constrain the acceleration and jerk of this many joints, those nearest their limits in
 #: the program's first guess (:func:`_loaded`); every joint's velocity, and the final check covers every joint.
 LOADED = 3
@@ -197,11 +201,14 @@ class PieceTiming:
 
     def excess(
         self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, step_s: float = CHECK_STEP_S
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Each interval's slow-down to meet the limits (K,), and each joint's (n,).
+    ) -> np.ndarray:
+        """Each interval's slow-down to meet the limits (K,).
 
         max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)), checked every ``step_s``, on both sides of
-        every node, and where s passes each knot of P and the points a quarter, half and three quarters between them.
+        every node, and where s passes each knot of P and the points a quarter, half and three quarters between them;
+        at :data:`CHECK_STEP_S`, also every :data:`PEAK_STEP_S` around each point within :data:`PEAK_WITHIN` of the
+        largest ratio, or of 1: a peak between two points of the step can be above both (1.4e-5 of the jerk limit on
+        an MC-Inverse path, every 0.1 ms).
         """
         end = self.duration_s
         nodes = self.stretch * self.starts_s
@@ -214,15 +221,25 @@ class PieceTiming:
                 ]
             )
         )
-        _, qd, qdd, qddd = self(t)
-        ratios = np.max(
-            [np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=0
-        )
+        ratio = self._ratio(t, velocity, acceleration, jerk)
+        if step_s <= CHECK_STEP_S:
+            near = np.flatnonzero(ratio >= (1 - PEAK_WITHIN) * max(ratio.max(), 1.0))
+            around = np.linspace(-step_s, step_s, int(round(2 * step_s / PEAK_STEP_S)) + 1)
+            zoom = np.unique(np.clip((t[near, None] + around).ravel(), 0.0, end))
+            t, ratio = (
+                np.concatenate([t, zoom]),
+                np.concatenate([ratio, self._ratio(zoom, velocity, acceleration, jerk)]),
+            )
         excess = np.zeros(len(self.dt))
-        np.maximum.at(
-            excess, np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(self.dt) - 1), ratios.max(axis=1)
+        np.maximum.at(excess, np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(self.dt) - 1), ratio)
+        return excess
+
+    def _ratio(self, t: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> np.ndarray:
+        """max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) over the joints at times ``t`` (M,)."""
+        _, qd, qdd, qddd = self(t)
+        return np.max(
+            [np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=(0, 2)
         )
-        return excess, ratios.max(axis=0)
 
 
 def jerk_limited(
@@ -535,7 +552,7 @@ def _time_piece(
             piece = _solve(path, nodes, velocity, acceleration, jerk, samples, None, WARM_START_SHARE)
         except StageError:
             return replace(_bounded(path, velocity, acceleration, jerk), fallback=FALLBACKS[1])
-    excess, _ = piece.excess(velocity, acceleration, jerk, REFINE_CHECK_STEP_S)
+    excess = piece.excess(velocity, acceleration, jerk, REFINE_CHECK_STEP_S)
     while (excess > 1 + REFINE_ABOVE).any():
         halve = excess > 1 + REFINE_ABOVE
         if len(nodes) - 1 + halve.sum() > MAX_NODES:
@@ -545,8 +562,8 @@ def _time_piece(
             piece = _solve(path, nodes, velocity, acceleration, jerk, samples, piece)
         except StageError:  # a finer program IPOPT cannot solve: the coarser timing, stretched, stands
             break
-        excess, _ = piece.excess(velocity, acceleration, jerk, REFINE_CHECK_STEP_S)
-    k = float(piece.excess(velocity, acceleration, jerk)[0].max())
+        excess = piece.excess(velocity, acceleration, jerk, REFINE_CHECK_STEP_S)
+    k = float(piece.excess(velocity, acceleration, jerk).max())
     return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0, fallback=fallback)
 
 
@@ -573,7 +590,7 @@ def _bounded(path: BSpline, velocity: np.ndarray, acceleration: np.ndarray, jerk
     piece = _exact(path, np.asarray(profile.j)[used], np.asarray(profile.t)[used])
     if path.k == 1:  # P' constant: the limits of s hold the joints' exactly, no check needed
         return piece
-    k = float(piece.excess(velocity, acceleration, jerk)[0].max())
+    k = float(piece.excess(velocity, acceleration, jerk).max())
     return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0)
 
 
