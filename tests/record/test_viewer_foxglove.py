@@ -48,6 +48,8 @@ STUDIO = {Path(tomllib.loads((REPO / "tasks" / f"{task}.toml").read_text())["rob
 #: relative paths, and a run recorded up to the IK); the whole Studio app opens those of :data:`STUDIO` and the others.
 RUNS = [*SHIPPED, *OTHER_RUNS]
 OPENED = [*STUDIO.values(), "carry_box", *OTHER_RUNS]  # carry_box: the box its hands carry
+#: The runs opened as a user does who opens the file, then imports its layout (a humanoid and a Panda run).
+IMPORTED = ["carry_box", "panda_triangle"]
 
 pytestmark = [
     pytest.mark.integration,
@@ -98,7 +100,13 @@ def bad_run(tmp_path_factory, shipped_runs) -> Path:
                     }
                 ]
             },
-            "3D!bad": {"followTf": "no_such_frame", "topics": {}},
+            "3D!bad": {
+                "followTf": "no_such_frame",
+                "topics": {},
+                "layers": {
+                    "robot": {"layerId": "foxglove.Urdf", "url": "data:application/xml,<robot name='cut'><link"}
+                },
+            },
         },
         "layout": "Plot!bad",
     }
@@ -156,10 +164,19 @@ def test_studio_can_plot_every_path_of_the_runs_layout(parsed, runs, task):
 
 
 def test_the_node_check_reports_what_studio_cannot_show(parsed):
-    """The negative control: a path to a field the schema has not, and a frame /tf has not."""
+    """The negative control: a path to a field the schema has not, a frame /tf has not, and a URDF layer whose URDF is
+    cut short."""
     by_kind = {line["kind"]: line for line in parsed["bad layout"] if "panel" in line}
     assert not by_kind["Plot"]["ok"] and by_kind["Plot"]["paths"][0]["error"] is not None
     assert not by_kind["3D"]["ok"] and not by_kind["3D"]["follow_on_tf"]
+    assert not by_kind["3D"]["urdf_layers"]["robot"]["ok"]
+
+
+@pytest.mark.parametrize("task", RUNS)
+def test_the_layouts_urdf_layer_parses_with_studios_urdf_parser(parsed, task):
+    """The layout's 3D panel draws the robot from a URDF layer (drawn when the panel mounts), fetched from its url."""
+    (three_d,) = [line for line in parsed[task] if line.get("kind") == "3D"]
+    assert three_d["urdf_layers"]["robot"]["ok"] and three_d["urdf_layers"]["robot"]["links"] > 1
 
 
 def test_quoted_field_names_parse_in_studio():
@@ -193,6 +210,33 @@ def opened(runs, tmp_path_factory) -> dict[str, dict]:
     args = [arg for task in OPENED for arg in ("--layout", str(runs[task] / LAYOUT_FILE), str(runs[task] / "run.mcap"))]
     results = _node("open-in-studio.cjs", "--out", str(out), *args, timeout_s=300 * len(OPENED))
     return {task: result for task, result in zip(OPENED, results, strict=True)}
+
+
+@pytest.fixture(scope="module")
+def imported(runs, tmp_path_factory) -> dict[str, dict]:
+    """Run name -> what Studio showed for the runs of :data:`IMPORTED`, each opened with Studio's default layout, then
+    its own imported twice from the Layouts sidebar (the second import mounts the panels again with the same topics)."""
+    out = tmp_path_factory.mktemp("studio-import")
+    args = [
+        arg for task in IMPORTED for arg in ("--layout", str(runs[task] / LAYOUT_FILE), str(runs[task] / "run.mcap"))
+    ]
+    results = _node("open-in-studio.cjs", "--import", "2", "--out", str(out), *args, timeout_s=300 * len(IMPORTED))
+    return {task: result for task, result in zip(IMPORTED, results, strict=True)}
+
+
+@needs_chromium
+@pytest.mark.parametrize("task", OPENED)
+def test_studio_draws_the_robot_on_opening_without_a_click(opened, task):
+    """Before anything is clicked, the robot covers at least half the pixels it covers mid-run (its links' frame axes
+    alone: 15 %)."""
+    assert opened[task]["robot_pixels_on_open"] >= 0.5 * opened[task]["robot_pixels"] > 0
+
+
+@needs_chromium
+@pytest.mark.parametrize("task", IMPORTED)
+def test_studio_draws_the_robot_when_the_layout_is_imported_after_the_file_without_a_click(imported, task):
+    assert imported[task]["robot_pixels_on_open"] >= 0.5 * imported[task]["robot_pixels"] > 0
+    assert imported[task]["urdf_parsed"] and imported[task]["layer_errors"] == []
 
 
 @needs_chromium
@@ -246,10 +290,12 @@ def test_studio_draws_the_whole_robot(opened, task):
     assert rows.max() - rows.min() > 0.3 * height  # a 1.6 m robot, not a speck
 
 
-def test_every_plot_of_the_layout_spans_its_units_floor_and_the_held_arm_angle_is_flat(runs):
+def test_every_plot_of_the_layout_spans_its_units_floor_and_its_stages_clock(runs):
     """Each Plot panel's y-range (the ``minYValue`` and ``maxYValue`` Studio's Plot panel reads) is at least its unit's
     floor wide and holds every value of its paths, read from run.mcap with the mcap reader: the triangle's arm angle,
-    which MC-Inverse holds to 1e-12 rad, sits in a plot at least 1e-3 rad wide."""
+    which MC-Inverse holds to 1e-12 rad, sits in a plot at least 1e-3 rad wide. Its x-range (``minXValue``,
+    ``maxXValue``, not synced with the other plots) is its topic's first and last ``t``: on carry_box the IK's 20 s and
+    the execution's 6.3 s apart. Its series have colours of their own."""
     from mcap.reader import make_reader
 
     from dualarm.record.sink import PLOT_FLOORS
@@ -278,6 +324,13 @@ def test_every_plot_of_the_layout_spans_its_units_floor_and_the_held_arm_angle_i
             assert low <= shown.min() and shown.max() <= high, (task, title)
             if task == "triangle" and panel == "Plot!arm-angle":  # each hand's held angle
                 assert max(np.ptp(values[p["value"]]) for p in config["paths"]) < 1e-12
+            (topic,) = {p["value"].split(".")[0] for p in config["paths"]}
+            clock = values[message_path(topic, "t")]
+            assert (config["minXValue"], config["maxXValue"]) == (min(clock), max(clock)), (task, title)
+            assert config["isSynced"] is False and len({p["color"] for p in config["paths"]}) == len(config["paths"])
+        if task == "carry_box":
+            ik, executed = (layout["configById"][p]["maxXValue"] for p in ("Plot!arm-angle", "Plot!hand-error"))
+            assert ik > 2 * executed, (ik, executed)
 
 
 def test_the_carried_box_is_a_scene_entity_of_the_3d_panel(parsed, runs):

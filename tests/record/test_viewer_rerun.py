@@ -184,7 +184,7 @@ def test_the_run_opens_on_its_own_layout(opened):
     names = {v.name for v in client.get_state().views}
     assert f"{shown_stage(stages)}: robot and hand paths" in names, names
     if "execute" in stages:
-        plots = {"hand error [m]", "velocity / limit", "acceleration / limit", "jerk / limit", "contacts"}
+        plots = {"hand error [m] (execute)", "velocity / limit", "acceleration / limit", "jerk / limit", "contacts"}
         assert plots <= names, names
     assert {stage for stage in stages if stage != "approach"} <= names, names  # the "stages" tab: a 3D view per stage
 
@@ -302,3 +302,35 @@ def test_the_carried_box_is_drawn_and_moves_with_the_hands(opened, request):
         blueprint.blueprint[key] = before
         client.set_blueprint(blueprint.blueprint, store_id=blueprint.store_id)
     assert rows[top] < rows[0.0] - 10  # up the image: the box rose with the hands
+
+
+@pytest.mark.parametrize("opened", ["carry_box"], indirect=True)
+def test_each_stage_plots_on_its_own_clock(opened, request):
+    """carry_box: the IK runs on the task's clock (20 s), the execution on its own (6.3 s). The viewer's blueprint gives
+    each hand error plot a time axis, unlinked from the others, from 0 to its stage's last sample (read from run.mcap
+    with the mcap reader), and every plot an axis that ends within the recording."""
+    from mcap.reader import make_reader
+
+    client, _, _, end, _ = opened
+    run = request.getfixturevalue("shipped_runs")["carry_box"]
+    with (run / "run.mcap").open("rb") as f:
+        last = {
+            topic.split("/")[1]: max(
+                json.loads(m.data)["t"] for _, _, m in make_reader(f).iter_messages(topics=[topic])
+            )
+            for topic in ("/ik/sample", "/execute/sample")
+            if not f.seek(0)
+        }
+    assert last["ik"] > 2 * last["execute"]
+    blueprint = client.get_blueprint().blueprint
+    axes = {
+        v.name: blueprint[f"/view/{v.view_id}/TimeAxis"]["TimeAxis"]
+        for v in client.get_state().views
+        if v.view_class == "TimeSeries"
+    }
+    for name, axis in axes.items():
+        assert axis["link"] == "Independent", name
+        assert 0 <= axis["view_range"]["end"]["Absolute"] / 1e9 <= end + 1e-9, name
+    for stage, t in last.items():
+        span = axes[f"hand error [m] ({stage})"]["view_range"]
+        assert span["start"]["Absolute"] == 0 and abs(span["end"]["Absolute"] / 1e9 - t) <= 1e-6, stage

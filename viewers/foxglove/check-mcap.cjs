@@ -15,8 +15,10 @@
 //   - Plot: each path as Studio's path input judges it (parseRosPath; traverseStructure over the
 //     player's datatypes ending on one of the Plot panel's plotableRosTypes), and how many messages
 //     hold a value there;
-//   - 3D: the topics it configures that the file lacks, whether its followTf frame is on /tf, and the
-//     frames of its SceneUpdate topics that /tf does not join to that frame.
+//   - Tab: its tabs' panels, each of which must be configured in the layout;
+//   - 3D: the topics it configures that the file lacks, whether its followTf frame is on /tf, the
+//     frames of its SceneUpdate topics that /tf does not join to that frame, and each URDF layer's URDF,
+//     fetched from its url and checked as /robot_description is ("urdf_layers").
 // Exit 0 when every line is ok, 1 otherwise, 2 when the harness itself failed.
 "use strict";
 
@@ -142,8 +144,14 @@ function layoutChecks(layout, studio, init) {
         return { path: p.value, topic: rosPath?.topicName, names, error, values: 0 };
       });
       checks.push({ panel, kind, paths });
+    } else if (kind === "Tab") {
+      // each tab's panels, the leaves of its layout tree (Studio's mosaic: a panel id, or {first, second, ...})
+      const leaves = (node) => (typeof node === "string" ? [node] : node ? [...leaves(node.first), ...leaves(node.second)] : []);
+      const tabs = (config.tabs ?? []).map((tab) => ({ title: tab.title, panels: leaves(tab.layout) }));
+      checks.push({ panel, kind, tabs, missing: tabs.flatMap((tab) => tab.panels).filter((id) => !(id in layout.configById)) });
     } else if (kind === "3D") {
-      checks.push({ panel, kind, follow: config.followTf, topics: Object.keys(config.topics ?? {}) });
+      const urdfLayers = Object.entries(config.layers ?? {}).filter(([, layer]) => layer.layerId === "foxglove.Urdf" && layer.visible !== false);
+      checks.push({ panel, kind, follow: config.followTf, topics: Object.keys(config.topics ?? {}), urdfLayers });
     }
   }
   return checks;
@@ -226,13 +234,33 @@ async function checkFile(file, layoutFile, studio) {
     if (check.kind === "Plot") {
       line.paths = check.paths.map(({ path, error, values }) => ({ path, error, values }));
       line.ok = check.paths.every((p) => p.error === undefined && p.values > 0);
+    } else if (check.kind === "Tab") {
+      line.tabs = check.tabs;
+      line.missing_panels = check.missing;
+      line.ok = check.tabs.length > 0 && check.missing.length === 0;
     } else {
       const reach = joined(edges, check.follow);
       line.follow = check.follow;
       line.follow_on_tf = edges.has(check.follow);
       line.absent_topics = check.topics.filter((t) => !init.topics.some((known) => known.name === t));
       line.unjoined_frames = Object.fromEntries(check.topics.filter((t) => entityFrames.has(t)).map((t) => [t, [...entityFrames.get(t)].filter((f) => !reach.has(f))]));
-      line.ok = line.follow_on_tf && Object.values(line.unjoined_frames).every((frames) => frames.length === 0);
+      // a URDF layer is fetched from its url when the panel mounts (Urdfs.js _loadUrdf -> _fetchUrdf), then parsed as
+      // the /robot_description topic is
+      line.urdf_layers = {};
+      for (const [id, layer] of check.urdfLayers) {
+        let text;
+        try {
+          text = await (await fetch(layer.url)).text();
+        } catch (err) {
+          line.urdf_layers[id] = { ok: false, error: `Failed to load URDF from "${String(layer.url).slice(0, 80)}": ${err?.message ?? err}` };
+          continue;
+        }
+        line.urdf_layers[id] = await checkUrdf(studio.parseRobot, { data: text });
+      }
+      line.ok =
+        line.follow_on_tf &&
+        Object.values(line.unjoined_frames).every((frames) => frames.length === 0) &&
+        Object.values(line.urdf_layers).every((urdf) => urdf.ok);
     }
     lines.push(line);
   }

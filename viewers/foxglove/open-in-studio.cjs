@@ -6,16 +6,22 @@
 //   - urdf_error: the URDF layer's parse error ("Failed to parse URDF", logged by Studio), if any;
 //   - layer_errors: what the 3D panel's layers report ("[topics > /task/reference_path] Missing
 //     transform from frame <base_link> to frame <world>"); Studio logs each when it is first raised;
-//   - robot_pixels_on_open: whether the robot is drawn on opening, before anything is clicked (watched
-//     for OPEN_LIMIT_MS); 3d-open.png;
+//   - robot_pixels_on_open: how much of the robot is drawn on opening, before anything is clicked
+//     (watched for OPEN_LIMIT_MS until it settles); 3d-open.png;
 //   - robot_pixels: whether the robot is drawn, in the middle of the run (the harness clicks the middle
 //     of the timeline). The harness gives the layout's 3D panel a twin below it, same shape and camera,
-//     with /robot_description hidden: the pixels that differ are the robot.
+//     with /robot_description and URDF layers hidden: the pixels that differ are the robot.
 //
-//   node open-in-studio.cjs [--out DIR] --layout LAYOUT.json RUN.mcap [--layout LAYOUT.json RUN.mcap ...]
+//   node open-in-studio.cjs [--out DIR] [--import K] --layout LAYOUT.json RUN.mcap [--layout LAYOUT.json RUN.mcap ...]
+//
+// --import K: open each file with Studio's default layout, then import its layout K times from the Layouts sidebar,
+// as a user does (otherwise the page opens the file with its layout in place). From the second import on, Studio
+// mounts the panels again with the topics they had, and sends them nothing until a seek
+// (IterablePlayer.setSubscriptions backfills only when the set of topics changes).
 //
 // Prints one JSON line per run; writes DIR/<run directory name>/{studio.png, 3d-urdf.png, 3d-bare.png}.
-// Exit 0 when every run has no problem and no layer error, its URDF parsed and robot pixels > 0 mid-run;
+// Exit 0 when every run has no problem and no layer error, its URDF parsed, robot pixels > 0 mid-run and at least
+// OPEN_SHARE of them on opening;
 // 1 otherwise; 2 when the harness itself failed. Runs are opened one after the other in one browser.
 // Environment: CHROMIUM (default /usr/bin/chromium), STUDIO_DEBUG=1 echoes the page's console.
 "use strict";
@@ -42,18 +48,21 @@ const CHROMIUM_ARGS = [
 // Upper bounds on waiting (Studio takes 10-20 s to load on two shared cores), not assertions on time.
 const LOAD_LIMIT_MS = 180_000;
 const SETTLE_LIMIT_MS = 60_000;
-// How long the 3D panel is watched for the robot on opening, before the harness touches anything.
+// How long the 3D panel is watched for the robot on opening, before the harness touches anything, and the share of
+// the robot's pixels mid-run it must cover then (the frame axes of its links alone cover 15 % of them).
 const OPEN_LIMIT_MS = 10_000;
+const OPEN_SHARE = 0.5;
 const BARE_PANEL = "3D!dualarm-check-bare";
 /** The browser window a layout is judged in [px], and the height of Studio's playback bar below the panels. */
 const VIEWPORT = { width: 1600, height: 1000 };
 const PLAYBACK_BAR_PX = 80;
 
 function parseArgs(argv) {
-  const args = { out: ".", runs: [] };
+  const args = { out: ".", runs: [], imports: 0 };
   let layout;
   for (let i = 0; i < argv.length; i++) {
     if (argv[i] === "--out") args.out = argv[++i];
+    else if (argv[i] === "--import") args.imports = Number(argv[++i]);
     else if (argv[i] === "--layout") layout = argv[++i];
     else {
       args.runs.push({ mcap: path.resolve(argv[i]), layout });
@@ -77,6 +86,9 @@ function withBareTwin(layout) {
   if (panel === undefined) throw new Error("the layout has no 3D panel");
   const bare = structuredClone(layout.configById[panel]);
   bare.topics = { ...bare.topics, "/robot_description": { ...bare.topics?.["/robot_description"], visible: false } };
+  bare.layers = Object.fromEntries(
+    Object.entries(bare.layers ?? {}).map(([id, layer]) => [id, layer.layerId === "foxglove.Urdf" ? { ...layer, visible: false } : layer]),
+  );
   const split = (node) => {
     if (node === panel) return { first: panel, second: BARE_PANEL, direction: "column", splitPercentage: 50 };
     if (typeof node === "object" && node !== null) return { ...node, first: split(node.first), second: split(node.second) };
@@ -160,7 +172,22 @@ async function seekToMiddle(page) {
   await page.mouse.move(0, 0); // away from the timeline, whose hover tooltip would stay in the screenshot
 }
 
-async function openRun(browser, url, index, run, outDir) {
+/**
+ * Import `layout` as a user does once the file is open: the Layouts sidebar's "Import layout" button, whose file
+ * picker (window.showOpenFilePicker, which headless Chromium cannot show) hands Studio the layout as a file.
+ */
+async function importLayout(page, layout) {
+  await page.evaluate((json) => {
+    const file = new File([json], "foxglove-layout.json", { type: "application/json" });
+    window.showOpenFilePicker = async () => [{ getFile: async () => file }];
+  }, JSON.stringify(layout));
+  const button = page.locator('button[title="Import layout"]');
+  if (!(await button.isVisible())) await page.locator('[data-sidebar-key="layouts"]').click(); // the tab toggles it
+  await button.click();
+  await page.locator('[data-testid="panel-mouseenter-container 3D!dualarm-check-bare"]').waitFor({ timeout: SETTLE_LIMIT_MS });
+}
+
+async function openRun(browser, url, index, run, outDir, imports) {
   const { panel, layout } = withBareTwin(JSON.parse(fs.readFileSync(run.layout, "utf8")));
   const started = Date.now();
   const mark = (what) => process.env.STUDIO_DEBUG && process.stderr.write(`[timing] ${what} at ${Date.now() - started} ms\n`);
@@ -183,12 +210,17 @@ async function openRun(browser, url, index, run, outDir) {
     // web/main.js fetches the layout to open from /layout.json: answer with this run's layout plus the twin
     await page.route((u) => u.pathname === "/layout.json", (route) => route.fulfill({ contentType: "application/json", body: JSON.stringify(layout) }));
     const dsUrl = `${url}/data/${index}/${encodeURIComponent(path.basename(run.mcap))}`;
-    await page.goto(`${url}/?ds=remote-file&ds.url=${encodeURIComponent(dsUrl)}&layoutId=dualarm-check&layout=/layout.json`);
+    const withLayout = imports > 0 ? "" : "&layoutId=dualarm-check&layout=/layout.json";
+    await page.goto(`${url}/?ds=remote-file&ds.url=${encodeURIComponent(dsUrl)}${withLayout}`);
     if (!(await waitFor(async () => loaded, LOAD_LIMIT_MS))) throw new Error(`Studio did not finish loading ${dsUrl}`);
     const loadMs = Date.now() - started;
     mark("loaded");
     const { problems, says } = await readProblems(page);
     mark("problems read");
+    for (let i = 0; i < imports; i++) {
+      await importLayout(page, layout);
+      mark(`layout imported (${i + 1})`);
+    }
     // close the first-run hint each 3D panel shows ("Open settings to configure topics and layers.")
     await page.evaluate(() => document.querySelectorAll('[role="tooltip"] button').forEach((button) => button.click()));
     mark("hints closed");
@@ -199,9 +231,10 @@ async function openRun(browser, url, index, run, outDir) {
     let openShots;
     await waitFor(
       async () => {
+        const before = opened.pixels;
         openShots = await shoot();
         opened = differingPixels(...openShots);
-        return opened.pixels > 0;
+        return opened.pixels > 0 && Math.abs(opened.pixels - before) <= 0.01 * opened.pixels; // drawn, and settled
       },
       OPEN_LIMIT_MS,
       1000,
@@ -264,10 +297,13 @@ async function main() {
   let bad = 0;
   try {
     for (const [index, run] of args.runs.entries()) {
-      const result = await openRun(browser, url, index, run, args.out);
-      // robot_pixels_on_open is reported, not required: Studio sometimes remounts its panels after its first seek
-      // and, its subscriptions unchanged, does not backfill them (IterablePlayer.setSubscriptions) until a seek
-      result.ok = result.problems.length === 0 && result.urdf_parsed && result.layer_errors.length === 0 && result.robot_pixels > 0;
+      const result = await openRun(browser, url, index, run, args.out, args.imports);
+      result.ok =
+        result.problems.length === 0 &&
+        result.urdf_parsed &&
+        result.layer_errors.length === 0 &&
+        result.robot_pixels > 0 &&
+        result.robot_pixels_on_open >= OPEN_SHARE * result.robot_pixels;
       bad += result.ok ? 0 : 1;
       process.stdout.write(`${JSON.stringify(result)}\n`);
     }

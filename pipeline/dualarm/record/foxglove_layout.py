@@ -6,11 +6,12 @@ The recorder writes it into each run directory as ``foxglove-layout.json``. To u
 ``run.mcap`` in Foxglove Studio or Lichtblick (its open-source continuation, same layout format),
 then choose Layouts -> Import from file... -> ``foxglove-layout.json``.
 
-What it shows: on the left one 3D panel in frame ``world`` with the robot (the URDF layer of
-``/robot_description``, moved by ``/tf``), the task's reference path, the hands' path (executed,
-when the run executed) and the task's objects, frame axes small and unlabelled, the camera framing
-the whole robot; on the right one Plot panel per quantity, stacked: hand error, arm angle, the joint
-positions of each chain, and the contact counts. Only panels for topics that ``stages`` produce are
+What it shows: on the left one 3D panel in frame ``world`` with the robot (a URDF layer holding what
+``/robot_description`` holds, drawn when the panel mounts, moved by ``/tf``), the task's reference
+path, the hands' path (executed, when the run executed) and the task's objects, frame axes small and
+unlabelled, the camera framing the whole robot; on the right one Plot panel per quantity, in tabs:
+hand error and arm angle, the joint positions of each chain, and the contact counts, each over its
+stage's clock. Only panels for topics that ``stages`` produce are
 included. Plot paths use Studio's message path syntax ``<topic>.<field>.<key>`` over the run's JSON
 messages (see :mod:`dualarm.record.schemas`); ``tests/record/test_viewer_foxglove.py`` opens a run
 with this layout in Studio itself.
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
+from urllib.parse import quote
 
 import numpy as np
 
@@ -27,7 +29,7 @@ from dualarm.contracts.run import ALL_STAGES
 from dualarm.errors import InvalidArgumentError, excerpt
 from dualarm.files import listing
 from dualarm.model.robot import Robot
-from dualarm.record.sink import plot_range, robot_box, shown_stage
+from dualarm.record.sink import SERIES_COLORS, plot_range, robot_box, shown_stage
 
 #: The stages a run may hold, in order.
 STAGES = ALL_STAGES
@@ -57,8 +59,17 @@ TARGET_AHEAD = (0.094, 0.0, 0.0)
 BACKGROUND = "#2b2b2b"
 #: The key of a panel's title in its config (Studio's PANEL_TITLE_CONFIG_KEY).
 TITLE = "foxglovePanelTitle"
-#: The id of the 3D panel (Studio panel ids are ``<panel type>!<any suffix>``).
+#: The 3D panel's URDF layer of the robot. Studio loads a URDF layer from the layout (its ``url``) when the panel
+#: mounts; a message on ``/robot_description`` reaches a panel only when Studio sends it the messages before the
+#: current time, which it does when the topics any panel shows change (IterablePlayer.setSubscriptions), so a panel
+#: mounted again with the same topics gets none (a layout imported into an open file showed no robot, once in four,
+#: until the timeline was clicked). The characters a URDF keeps as they are in that ``data:`` URL (the others, among
+#: them ``%``, ``#`` and line breaks, are percent-encoded).
+ROBOT_LAYER = "robot"
+URL_SAFE = " /+=:;,.-_<>\"'()!*@$?&[]{}~"
+#: The id of the 3D panel (Studio panel ids are ``<panel type>!<any suffix>``), and of the Tab panel holding the plots.
 THREE_D_PANEL = "3D!dualarm"
+PLOT_TABS = "Tab!plots"
 #: Field names Studio's message path grammar takes unquoted (its ``quoteFieldNameIfNeeded``).
 _PLAIN_FIELD = re.compile(r"^[a-zA-Z0-9_-]+$")
 
@@ -70,6 +81,7 @@ def foxglove_layout(
     joint_names: Sequence[str] | None = None,
     ranges: Mapping[str, tuple[float, float]] | None = None,
     carried: bool = False,
+    description: str | None = None,
 ) -> dict:
     """The Foxglove Studio layout of a run of ``stages`` of ``robot`` moving ``hands``.
 
@@ -83,6 +95,8 @@ def foxglove_layout(
             shows its values' range, no narrower than its unit's floor (:func:`~dualarm.record.sink.plot_range`).
             None: Studio's own range.
         carried: whether the hands carry an object (its topic ``/<shown stage>/object`` is then in the 3D panel).
+        description: the URDF ``/robot_description`` carries (:func:`~dualarm.record.mcap_sink.robot_description`):
+            the 3D panel then draws the robot from a URDF layer holding it (:data:`ROBOT_LAYER`), not from the topic.
 
     Returns:
         The layout as Studio exports it: ``configById``, ``globalVariables``, ``userNodes``,
@@ -100,15 +114,18 @@ def foxglove_layout(
     )
     _check("joint_names", joints, robot.joint_names)
     plots = _plots(robot, tuple(stages), tuple(hands), joints, ranges or {})
-    configs = {THREE_D_PANEL: _three_d(robot, stages, carried), **{panel_id: config for panel_id, config in plots}}
+    configs = {
+        THREE_D_PANEL: _three_d(robot, stages, carried, description),
+        **{panel_id: config for _, panel_id, config in plots},
+    }
     layout: str | dict = THREE_D_PANEL
     if plots:
-        layout = {
-            "first": THREE_D_PANEL,
-            "second": _stack([panel_id for panel_id, _ in plots]),
-            "direction": "row",
-            "splitPercentage": 55,
+        tabs = {tab: [panel_id for in_tab, panel_id, _ in plots if in_tab == tab] for tab, _, _ in plots}
+        configs[PLOT_TABS] = {
+            "activeTabIdx": 0,
+            "tabs": [{"title": tab, "layout": _stack(panel_ids)} for tab, panel_ids in tabs.items()],
         }
+        layout = {"first": THREE_D_PANEL, "second": PLOT_TABS, "direction": "row", "splitPercentage": 55}
     return {
         "configById": configs,
         "globalVariables": {},
@@ -133,13 +150,13 @@ def _shown(stages: Sequence[str]) -> str | None:
     return None if shown == "path" else shown
 
 
-def _three_d(robot: Robot, stages: Sequence[str], carried: bool) -> dict:
+def _three_d(robot: Robot, stages: Sequence[str], carried: bool, description: str | None) -> dict:
     """The 3D panel, in ``world``, its camera on ``robot`` (:data:`CAMERA`).
 
-    The URDF layer, the task's paths and objects, the shown stage's hand path (the executed one) and the object its
-    hands carry.
+    The robot (the URDF layer of ``description``, else of ``/robot_description``), the task's paths and objects, the
+    shown stage's hand path (the executed one) and the object its hands carry.
     """
-    topics: dict[str, dict] = {"/robot_description": {"visible": True}}
+    topics: dict[str, dict] = {"/robot_description": {"visible": description is None}}
     if "path" in stages:
         topics["/task/reference_path"] = {"visible": True}
         topics["/task/environment"] = {"visible": True}  # written only when the task has objects
@@ -182,7 +199,20 @@ def _three_d(robot: Robot, stages: Sequence[str], carried: bool) -> dict:
         },
         "transforms": {},
         "topics": topics,
-        "layers": {"floor": grid},
+        "layers": {"floor": grid, **({} if description is None else {ROBOT_LAYER: _urdf_layer(description)})},
+    }
+
+
+def _urdf_layer(description: str) -> dict:
+    """A URDF layer of the 3D panel drawing ``description``, held in its ``url`` (a ``data:`` URL)."""
+    return {
+        "layerId": "foxglove.Urdf",
+        "instanceId": ROBOT_LAYER,
+        "label": "robot",
+        "visible": True,
+        "frameLocked": True,
+        "url": "data:application/xml;charset=utf-8," + quote(description, safe=URL_SAFE),
+        "order": 2,
     }
 
 
@@ -192,31 +222,39 @@ def _plots(
     hands: tuple[str, ...],
     joints: tuple[str, ...],
     ranges: Mapping[str, tuple[float, float]],
-) -> list[tuple[str, dict]]:
-    """``(panel id, Plot config)`` per quantity the run records, in display order.
+) -> list[tuple[str, str, dict]]:
+    """``(tab, panel id, Plot config)`` per quantity the run records, in display order.
 
-    ``ranges``: as :func:`foxglove_layout`'s.
+    ``ranges``: as :func:`foxglove_layout`'s. A tab holds few plots, so that each is tall enough for its legend (a
+    column of five plots showed 5 of an arm's 7 names).
     """
-    plots: list[tuple[str, dict]] = []
+    plots: list[tuple[str, str, dict]] = []
     error_stage = next((s for s in HAND_ERROR_STAGES if s in stages), None)
     if error_stage is not None:
-        paths = [(message_path(f"/{error_stage}/sample", "hand_error_m", hand), hand) for hand in hands]
-        plots.append(("Plot!hand-error", _plot(f"hand position error [m] ({error_stage})", "m", paths, ranges)))
+        topic = f"/{error_stage}/sample"
+        paths = [(message_path(topic, "hand_error_m", hand), hand) for hand in hands]
+        plots.append(
+            ("errors", "Plot!hand-error", _plot(f"hand position error [m] ({error_stage})", "m", topic, paths, ranges))
+        )
     if "ik" in stages:
         paths = [(message_path("/ik/sample", "arm_angle_rad", hand), hand) for hand in hands]
-        plots.append(("Plot!arm-angle", _plot("arm angle psi [rad] (ik)", "rad", paths, ranges)))
+        plots.append(
+            ("errors", "Plot!arm-angle", _plot("arm angle psi [rad] (ik)", "rad", "/ik/sample", paths, ranges))
+        )
     joint_stage = _shown(stages)
     if joint_stage is not None:
+        topic = f"/{joint_stage}/sample"
         for group, names in _joint_groups(robot, joints):
-            paths = [(message_path(f"/{joint_stage}/sample", "position", name), _short(name, names)) for name in names]
-            plots.append(
-                (f"Plot!joints-{group}", _plot(f"{group} joint positions [rad] ({joint_stage})", "rad", paths, ranges))
-            )
+            paths = [(message_path(topic, "position", name), _short(name, names)) for name in names]
+            title = f"{group} joint positions [rad] ({joint_stage})"
+            plots.append((f"{group} joints", f"Plot!joints-{group}", _plot(title, "rad", topic, paths, ranges)))
     if "execute" in stages:
         paths = [
             (message_path("/execute/sample", f"{kind}_contacts"), kind) for kind in ("self", "environment", "expected")
         ]
-        plots.append(("Plot!contacts", _plot("contacts (execute)", "count", paths, ranges)))
+        plots.append(
+            ("contacts", "Plot!contacts", _plot("contacts (execute)", "count", "/execute/sample", paths, ranges))
+        )
     return plots
 
 
@@ -251,25 +289,35 @@ def message_path(topic: str, *fields: str) -> str:
     )
 
 
-def _plot(title: str, unit: str, paths: list[tuple[str, str]], ranges: Mapping[str, tuple[float, float]]) -> dict:
-    """A Plot panel of ``paths`` (message path, legend label) in ``unit`` against the log (motion) time.
+def _plot(
+    title: str, unit: str, topic: str, paths: list[tuple[str, str]], ranges: Mapping[str, tuple[float, float]]
+) -> dict:
+    """A Plot panel of ``paths`` (message path, legend label) on ``topic`` in ``unit``, over motion time.
 
     Its y-range from the ``ranges`` of its paths (:func:`~dualarm.record.sink.plot_range`); none logged: Studio's
-    own, from 0 for a quantity that cannot be negative ([m], counts).
+    own, from 0 for a quantity that cannot be negative ([m], counts). Its x-range is its stage's clock, the range of
+    the topic's ``t`` (the IK on the task's clock, the execution on its own), not linked to the other plots'; the
+    series in :data:`~dualarm.record.sink.SERIES_COLORS`, as in Rerun; the legend on its left.
     """
     logged = [ranges[value] for value, _ in paths if value in ranges]
     config = {
         TITLE: title,
         "paths": [
-            {"value": value, "label": label, "enabled": True, "timestampMethod": "receiveTime"}
-            for value, label in paths
+            {
+                "value": value,
+                "label": label,
+                "enabled": True,
+                "timestampMethod": "receiveTime",
+                "color": "#{:02x}{:02x}{:02x}".format(*SERIES_COLORS[i % len(SERIES_COLORS)]),
+            }
+            for i, (value, label) in enumerate(paths)
         ],
         "showXAxisLabels": True,
         "showYAxisLabels": True,
         "showLegend": True,
         "legendDisplay": "left",
         "showPlotValuesInLegend": False,
-        "isSynced": True,
+        "isSynced": False,
         "xAxisVal": "timestamp",
         "sidebarDimension": 150,
     }
@@ -277,6 +325,9 @@ def _plot(title: str, unit: str, paths: list[tuple[str, str]], ranges: Mapping[s
         config["minYValue"], config["maxYValue"] = plot_range(logged, unit)
     elif unit in ("m", "count"):
         config["minYValue"] = 0.0
+    clock = ranges.get(message_path(topic, "t"))
+    if clock is not None:
+        config["minXValue"], config["maxXValue"] = clock
     return config
 
 

@@ -193,9 +193,8 @@ class McapSink(NullSink):
         for name, text in attachments.items():
             media = "application/xml" if name.endswith(".urdf") else "application/toml"
             self._mcap.attach(log_time=0, create_time=0, name=name, media_type=media, data=text.encode())
-        self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log(
-            {"data": robot_description(robot.urdf.path)}, log_time=0
-        )
+        self._description = robot_description(robot.urdf.path)
+        self._json("/robot_description", schemas.ROBOT_DESCRIPTION).log({"data": self._description}, log_time=0)
 
     def _json(self, topic: str, schema: dict, **keys: Sequence[str]) -> foxglove.Channel:
         """The JSON channel ``topic``, opened on first use with ``schema``.
@@ -208,11 +207,13 @@ class McapSink(NullSink):
             )
         return self._channels[topic]
 
-    def _extents(self, topic: str, **fields: Mapping[str, np.ndarray]) -> None:
+    def _extents(self, topic: str, t: np.ndarray, **fields: Mapping[str, np.ndarray]) -> None:
         """Note the range of each of ``fields`` (field -> key -> values) on ``topic``, for the layout's plots.
 
-        By message path (:func:`~dualarm.record.foxglove_layout.message_path`).
+        And of its times ``t`` [s], its stage's clock. By message path
+        (:func:`~dualarm.record.foxglove_layout.message_path`).
         """
+        extend_range(self._ranges, message_path(topic, "t"), t)
         for field, values in fields.items():
             for key, v in values.items():
                 extend_range(self._ranges, message_path(topic, field, key), v)
@@ -330,6 +331,7 @@ class McapSink(NullSink):
                 )
         self._extents(
             f"{family}/sample",
+            path.t,
             position=dict(zip(names, path.q.T, strict=True)),
             hand_error_m=dict(zip(path.hands, path.hand_error_m.T, strict=True)),
             arm_angle_rad=dict(arm_angles),
@@ -455,7 +457,7 @@ class McapSink(NullSink):
                 ),
                 log_time=_ns(t),
             )
-        self._extents(f"{STAGE_TOPICS[stage]}/sample", position=dict(zip(names, traj.q.T, strict=True)))
+        self._extents(f"{STAGE_TOPICS[stage]}/sample", traj.t, position=dict(zip(names, traj.q.T, strict=True)))
         self._animation(stage, traj.t, names, traj.q, traj.fixed)
         self._hand_path(stage, hand_positions)
 
@@ -503,7 +505,9 @@ class McapSink(NullSink):
                 ),
                 log_time=_ns(t),
             )
-        self._extents(samples, position=dict(zip(names, log.q.T, strict=True)), hand_error_m=dict(log.hand_error_m))
+        self._extents(
+            samples, log.t, position=dict(zip(names, log.q.T, strict=True)), hand_error_m=dict(log.hand_error_m)
+        )
         for kind in ("self", "environment", "expected"):
             extend_range(self._ranges, message_path(samples, f"{kind}_contacts"), getattr(log, f"{kind}_contacts"))
         touching = self._json(contacts, schemas.CONTACT)
@@ -606,7 +610,13 @@ class McapSink(NullSink):
         The layout: ``foxglove-layout.json``.
         """
         layout = foxglove_layout(
-            self.robot, self.stages, self._hands, self._joint_names, self._ranges, self._carried is not None
+            self.robot,
+            self.stages,
+            self._hands,
+            self._joint_names,
+            self._ranges,
+            self._carried is not None,
+            self._description,
         )
         (self.directory / FOXGLOVE_LAYOUT).write_text(json.dumps(layout, indent=1) + "\n")
         self._mcap.write_metadata("manifest", {k: json.dumps(v) for k, v in manifest.items()})

@@ -27,6 +27,7 @@ from dualarm.model.robot import Robot
 from dualarm.record.sink import (
     HAND_COLORS,
     OBJECT_COLOR,
+    SERIES_COLORS,
     STAGE_COLORS,
     NullSink,
     animation_rows,
@@ -56,29 +57,6 @@ RATIOS = {
     "retime": ("velocity", "acceleration", "jerk"),
     "smooth": ("velocity", "acceleration", "jerk"),
 }
-#: The colours of the series of one plot, in order: matplotlib's tab10, then its lighter shades (20 apart).
-SERIES_COLORS = [
-    (31, 119, 180),
-    (255, 127, 14),
-    (44, 160, 44),
-    (214, 39, 40),
-    (148, 103, 189),
-    (140, 86, 75),
-    (227, 119, 194),
-    (127, 127, 127),
-    (188, 189, 34),
-    (23, 190, 207),
-    (174, 199, 232),
-    (255, 187, 120),
-    (152, 223, 138),
-    (255, 152, 150),
-    (197, 176, 213),
-    (196, 156, 148),
-    (247, 182, 210),
-    (199, 199, 199),
-    (219, 219, 141),
-    (158, 218, 229),
-]
 #: The limit line of the ratio plots.
 LIMIT_LINE = rr.SeriesLines(colors=[(200, 0, 0)], widths=[2.0], names=["limit"])
 
@@ -88,16 +66,20 @@ def blueprint(
     stages: Sequence[str],
     focus: str | None = None,
     ranges: Mapping[str, tuple[float, float]] | None = None,
+    clocks: Mapping[str, tuple[float, float]] | None = None,
 ) -> rrb.Blueprint:
     """The Rerun layout a run of ``stages`` opens on, centred on the stage ``focus``.
 
     ``focus`` defaults to :func:`shown_stage`. ``ranges``: the lowest and highest value logged under each
     ``/plots/<path>``; each plot then shows its values' range, no narrower than its unit's floor
     (:func:`~dualarm.record.sink.plot_range`); None: Rerun's own range (the layout sent before the data).
+    ``clocks``: each stage's first and last time [s]. Each stage runs on its own clock from 0 (the IK on the task's,
+    the timed and executed motion on theirs: 20 s against 6.3 s on carry_box), so each plot's time axis then spans
+    its stage's times alone; None: Rerun's own (the whole timeline, shared).
 
     Tab "run": the ``focus`` robot with the reference and its hand paths in one 3D view, beside
-    plots grouped by quantity, each only where the run logs it: the IK's and the execution's hand
-    errors; the quantities of :data:`RATIOS` over their limits (the limit is the line at 1); joint
+    plots grouped by quantity, each only where the run logs it: the execution's and the IK's hand
+    errors (a tab each); the quantities of :data:`RATIOS` over their limits (the limit is the line at 1); joint
     positions, arm angles, the planner's distance to its target, and contacts. Tab "stages": one 3D
     view per stage, each with its robot and hand traces on its own clock. The URDF's collision
     shapes are logged but hidden.
@@ -119,20 +101,23 @@ def blueprint(
 
     def plot(name: str, unit: str, *paths: str, legend: bool = True) -> rrb.TimeSeriesView:
         logged = [ranges[p] for p in paths if ranges and p in ranges]
+        clock = (clocks or {}).get(paths[0].split("/")[0])  # a plot's paths are one stage's
         return rrb.TimeSeriesView(
             origin="/plots",
             name=name,
             contents=[f"+ /plots/{p}/**" for p in paths],
             plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=legend),
             axis_y=rrb.ScalarAxis(range=plot_range(logged, unit)) if logged else None,
+            axis_x=_time_axis(*clock) if clock else None,
         )
 
     driven = next((s for s in ("smooth", "retime") if s in stages), focus) if focus == "execute" else focus
     solved = next((s for s in ("ik", "plan") if s in stages), None)
-    # a hand's pose error: the IK's, the execution's (a planner's is its distance to the target, plotted apart)
-    errors = [f"{s}/hand_error_m" for s in dict.fromkeys((solved, focus)) if s in ("ik", "execute")]
+    # a hand's pose error: the execution's, the IK's, each on its stage's clock (a planner's is its distance to the
+    # target, plotted apart)
+    errors = [s for s in dict.fromkeys((focus, solved)) if s in ("ik", "execute")]
     plots: list[rrb.Container | rrb.View] = [
-        *([plot("hand error [m]", "m", *errors)] if errors else []),
+        *([rrb.Tabs(*[plot(f"hand error [m] ({s})", "m", f"{s}/hand_error_m") for s in errors])] if errors else []),
         *(
             [rrb.Tabs(*[plot(f"{kind} / limit", "ratio", f"{driven}/{kind}_ratio") for kind in RATIOS[driven]])]
             if driven in RATIOS
@@ -164,6 +149,16 @@ def blueprint(
     )
 
 
+def _time_axis(start_s: float, end_s: float) -> rrb.TimeAxis:
+    """A plot's time axis over [``start_s``, ``end_s``], not linked to the other plots'."""
+    return rrb.TimeAxis(
+        link=rrb.components.LinkAxis.Independent,
+        view_range=rrb.TimeRange(
+            start=rrb.TimeRangeBoundary.absolute(seconds=start_s), end=rrb.TimeRangeBoundary.absolute(seconds=end_s)
+        ),
+    )
+
+
 class RerunSink(NullSink):
     """The sink that writes one run's ``run.rrd`` into ``directory``.
 
@@ -185,6 +180,7 @@ class RerunSink(NullSink):
             self._rr.flush()  # in the file before any data, whatever Rerun's batcher does next
         self._robot_trees: dict[str, rr.urdf.UrdfTree] = {}
         self._ranges: dict[str, tuple[float, float]] = {}  # /plots/<prefix> -> its values' lowest and highest
+        self._clocks: dict[str, tuple[float, float]] = {}  # stage -> its first and last time [s]
         self._carried: Any | None = None  # the object both hands carry (environment)
         self._rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
@@ -213,6 +209,7 @@ class RerunSink(NullSink):
     def _rerun_motion(self, stage: str, t: np.ndarray, q: Mapping[str, np.ndarray]) -> None:
         """Animate ``stage``'s robot in Rerun: joint name -> positions (N,) at times t (N,) [s]."""
         tree = self._rerun_robot(stage)
+        extend_range(self._clocks, stage, t)
         times = rr.TimeColumn(TIMELINE, duration=t)
         for joint in tree.joints():
             if joint.joint_type != "fixed":
@@ -234,6 +231,7 @@ class RerunSink(NullSink):
                 f"plots/{prefix}/{name}", indexes=[times], columns=rr.Scalars.columns(scalars=np.asarray(v, float))
             )
             extend_range(self._ranges, prefix, v)
+        extend_range(self._clocks, prefix.split("/")[0], t)
 
     def _ratio(
         self, stage: str, kind: str, t: np.ndarray, names: Sequence[str], values: np.ndarray, limit: np.ndarray
@@ -437,7 +435,9 @@ class RerunSink(NullSink):
     def close(self, manifest: Mapping[str, object]) -> None:
         """Send the layout again with each plot's value range (:func:`blueprint`), then finish the file."""
         self._rr.send_blueprint(
-            blueprint(self.robot, self.stages, ranges=self._ranges), make_active=True, make_default=True
+            blueprint(self.robot, self.stages, ranges=self._ranges, clocks=self._clocks),
+            make_active=True,
+            make_default=True,
         )
         self._rr.flush()
         self._rr.disconnect()

@@ -304,6 +304,31 @@ def robot_box(robot: Robot) -> tuple[np.ndarray, float]:
     return (low + high) / 2, max(float((high - low).max()), 0.1)
 
 
+#: The colours of the series of one plot, in order, in both viewers: matplotlib's tab10, then its lighter shades
+#: (20 apart).
+SERIES_COLORS = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+    (174, 199, 232),
+    (255, 187, 120),
+    (152, 223, 138),
+    (255, 152, 150),
+    (197, 176, 213),
+    (196, 156, 148),
+    (247, 182, 210),
+    (199, 199, 199),
+    (219, 219, 141),
+    (158, 218, 229),
+]
+
 #: The narrowest value range a plot shows, per unit, so that a series constant up to rounding (MC-Inverse's held arm
 #: angle spreads 2.7e-15 rad) is drawn as the flat line it is, not as noise filling the plot: [m], [rad], a ratio to a
 #: limit, a count.
