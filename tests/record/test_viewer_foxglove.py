@@ -340,3 +340,32 @@ def test_the_carried_box_is_a_scene_entity_of_the_3d_panel(parsed, runs):
     assert box["ok"] and box["decoded"] == box["messages"] > 100, box
     layout = json.loads((runs["carry_box"] / LAYOUT_FILE).read_text())
     assert layout["configById"]["3D!dualarm"]["topics"]["/execute/object"]["visible"]
+
+
+@needs_chromium
+def test_studio_draws_the_exported_ros2_bag_robot_moving(runs, tmp_path):
+    """``dualarm export --ros2``'s bag (ros2msg, CDR) opened in Studio with a layout of one 3D panel on /tf's world:
+    no problem, the robot drawn from /robot_description and /tf on opening and mid-run, and moved between the two."""
+    from tests.helpers import dualarm_subprocess
+
+    done = dualarm_subprocess(["export", str(runs["carry_box"]), "--ros2", str(tmp_path / "bag")])
+    assert done.returncode == 0, done.stderr
+    (mcap_file,) = (tmp_path / "bag").glob("*.mcap")
+    layout = json.loads((runs["carry_box"] / LAYOUT_FILE).read_text())  # its playback settings and the 3D panel's
+    three_d = {**layout["configById"]["3D!dualarm"], "topics": {"/robot_description": {"visible": True}}, "layers": {}}
+    layout = {**layout, "configById": {"3D!bag": three_d}, "layout": "3D!bag"}
+    (tmp_path / "layout.json").write_text(json.dumps(layout))
+    (shown,) = _node(
+        "open-in-studio.cjs",
+        "--out",
+        str(tmp_path / "shots"),
+        "--layout",
+        str(tmp_path / "layout.json"),
+        str(mcap_file),
+        timeout_s=300,
+    )
+    assert shown["ok"] and shown["problems"] == [] and shown["urdf_parsed"], shown
+    shots = Path(shown["screenshots"])
+    opened, middle = (_robot_mask(shots / name, shots / "3d-bare.png") for name in ("3d-open.png", "3d-urdf.png"))
+    assert opened.mean() > 0.01 and middle.mean() > 0.01
+    assert (opened != middle).sum() > 0.05 * middle.sum()  # the arms moved between the start and the middle

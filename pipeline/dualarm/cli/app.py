@@ -56,7 +56,7 @@ class _Commands(TyperGroup):
                 soft_wrap=True,
             )
             sys.exit(exc.exit_code)
-        except _click.Abort:
+        except getattr(_click, "Abort", ()):  # typer 0.29's own click has none; an unexpected error then propagates
             err.print("aborted", markup=False)
             sys.exit(1)
         sys.exit(code if isinstance(code, int) else 0)

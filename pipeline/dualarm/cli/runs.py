@@ -1,4 +1,4 @@
-"""Looking at recorded runs: ``dualarm inspect``, ``view``, ``report`` and ``compare``."""
+"""Looking at recorded runs: ``dualarm inspect``, ``view``, ``report``, ``compare`` and ``export``."""
 
 from __future__ import annotations
 
@@ -265,6 +265,53 @@ def compare(
 
 #: How a table ``dualarm compare`` wrote begins.
 COMPARE_HEADER = "topic,field,max_difference,"
+
+
+@app.command()
+@user_errors
+def export(
+    run_dir: Annotated[
+        Path, typer.Argument(help="A run directory (recordings/<task>/<run-id>), recorded with --record full.")
+    ],
+    ros2: Annotated[
+        str | None,
+        typer.Option(
+            "--ros2",
+            metavar="DIR",
+            help=(
+                "Write a ROS 2 bag directory (metadata.yaml and an MCAP file): /joint_trajectory for a joint "
+                "trajectory controller, /joint_states, /tf, /tf_static and /robot_description to play in RViz or "
+                "Foxglove."
+            ),
+        ),
+    ] = None,
+    csv: Annotated[
+        str | None,
+        typer.Option(
+            "--csv",
+            metavar="FILE",
+            help="Write the timed trajectory as CSV: t_s, then one <joint>_rad column per joint.",
+        ),
+    ] = None,
+) -> None:
+    """Export a run for a real robot: its timed trajectory and executed motion as a ROS 2 bag, or CSV.
+
+    Prints each file written. See docs/real-robot.md.
+    """
+    from dualarm.record.readback import read_run
+    from dualarm.record.ros2 import export_bag, export_csv
+
+    if ros2 is None and csv is None:
+        raise DualarmError("export: give --ros2 DIR, --csv FILE, or both")
+    targets = [
+        (_out_path(text, option), write)
+        for text, option, write in ((ros2, "--ros2", export_bag), (csv, "--csv", export_csv))
+        if text is not None
+    ]
+    run = read_run(run_dir)
+    for target, write in targets:
+        with err.status(f"writing {target} ..."):
+            out.print(str(write(run, target)), markup=False, soft_wrap=True)
 
 
 def _compare_csv(text: str) -> Path:

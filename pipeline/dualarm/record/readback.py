@@ -59,7 +59,7 @@ def stage_of(topic: str) -> str:
 
 
 #: Columns of ``/tf``: one row per transform (the per-transform timestamp equals ``t``).
-_TF_COLUMNS = (
+TF_COLUMNS = (
     "parent_frame_id",
     "child_frame_id",
     "translation.x",
@@ -101,7 +101,7 @@ def _frame_transforms(times: list[float], messages: list) -> pd.DataFrame:
         for t, message in zip(times, messages, strict=True)
         for tr in message.transforms
     ]
-    return pd.DataFrame(rows, columns=("t", *_TF_COLUMNS))
+    return pd.DataFrame(rows, columns=("t", *TF_COLUMNS))
 
 
 def _flatten(data: Mapping, prefix: str = "") -> dict:
