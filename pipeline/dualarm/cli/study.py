@@ -1,4 +1,4 @@
-"""``dualarm consistency`` and ``dualarm study``: repeated motion compared across methods and trials."""
+"""``dualarm consistency``, ``analyze`` and ``study``: repeated motion, in runs, bags and studies."""
 
 from __future__ import annotations
 
@@ -91,6 +91,74 @@ def consistency(
             )
     out.print(str(directory), markup=False, soft_wrap=True)
     raise typer.Exit(_worst(result.table["status"]))
+
+
+@app.command()
+@user_errors
+def analyze(
+    bag: Annotated[Path, typer.Argument(help="A ROS 2 bag: a rosbag2 directory (MCAP or sqlite3) or an MCAP file.")],
+    robot_dir: Annotated[
+        Path, typer.Option("--robot", help="Robot directory (or shipped robot's name) the bag was recorded on.")
+    ],
+    task: Annotated[
+        Path | None,
+        typer.Option(help="The task the robot repeated: its start pose cuts the repetitions, its path is compared."),
+    ] = None,
+    reps: Annotated[
+        int | None, typer.Option(min=2, help="How many repetitions the bag holds (refused if the cut finds another).")
+    ] = None,
+    period: Annotated[
+        float | None, typer.Option(help="Cut every PERIOD seconds instead of where the hands pass the start pose.")
+    ] = None,
+    topic: Annotated[str, typer.Option(help="The sensor_msgs/msg/JointState topic.")] = "/joint_states",
+    joint_map: Annotated[
+        str | None,
+        typer.Option(
+            "--joint-map",
+            metavar="BAG=URDF,...",
+            help="Joint names of the bag mapped to the URDF's, for a driver that names them otherwise.",
+        ),
+    ] = None,
+    threshold: Annotated[
+        float, typer.Option(help="Joint deviation above the noise floor that makes repetitions inconsistent [rad].")
+    ] = 0.01,
+    out_text: Annotated[
+        str | None, typer.Option("--out", help="Output directory (default analysis/<bag name>).")
+    ] = None,
+) -> None:
+    """Judge a real robot's repeated motion from a ROS 2 bag, as ``dualarm consistency`` judges a run.
+
+    Cuts the joint states into repetitions, compares each with the first where the hands pass the same place, beyond
+    the noise estimated from the data; checks the velocity, acceleration and jerk limits. Writes analysis.csv,
+    repetitions.csv, analysis.md and figures; prints the table and the directory. See docs/real-robot.md.
+
+    Exits 0 when the repetitions are consistent and within every limit, 3 when they are inconsistent or a limit is
+    exceeded beyond the noise.
+    """
+    from dualarm.report.analyze import analyze_bag
+
+    if reps is not None and period is not None:
+        raise DualarmError("analyze: give --reps or --period, not both")
+    rename = {}
+    for pair in (joint_map or "").split(","):
+        if pair.strip():
+            name, sep, urdf = pair.partition("=")
+            if not sep or not name.strip() or not urdf.strip():
+                raise DualarmError(f"--joint-map: '{excerpt(pair, 80)}' is not BAG_NAME=URDF_NAME")
+            rename[name.strip()] = urdf.strip()
+    directory = _out_path(out_text, "--out") if out_text is not None else Path("analysis") / bag.name
+    with err.status(f"analyzing {bag} ..."):
+        result = analyze_bag(bag, robot_dir, directory, task, reps, period, topic, rename, threshold)
+    table = Table(title=f"{bag}: repetitions (all columns in {directory / 'analysis.csv'})", title_justify="left")
+    table.add_column("metric", no_wrap=True)
+    table.add_column("value", justify="right")
+    for key, value in result.metrics.items():
+        table.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
+    out.print(table)
+    for line in result.violations:
+        err.print(f"limit: {line}", markup=False, soft_wrap=True)
+    out.print(str(directory), markup=False, soft_wrap=True)
+    raise typer.Exit(0 if result.consistent and not result.violations else 3)
 
 
 @app.command()

@@ -102,21 +102,32 @@ def arm_angles(
     (:func:`dualarm.ik.analytic.sew.SewAngle.stereographic` of ``vertical``). Hands whose arm joints are not all in
     the path, or whose arm has neither, are left out.
     """
+    return joint_arm_angles(robot, path.hands, path.joint_names, path.q, vertical)
+
+
+def joint_arm_angles(
+    robot: Robot,
+    hands: tuple[str, ...],
+    joint_names: tuple[str, ...],
+    q: np.ndarray,
+    vertical: tuple[float, float, float] = (0.0, 0.0, 1.0),
+) -> dict[str, np.ndarray]:
+    """The arm angles of :func:`arm_angles` at configurations ``q`` (N, len(joint_names)) [rad], per hand."""
     from dualarm.ik.analytic.sew import SewAngle
     from dualarm.model.sew import sew_chain
 
     v = np.asarray(vertical, dtype=float) / np.linalg.norm(vertical)
     angles = {}
-    for hand in path.hands:
+    for hand in hands:
         chain = robot.hand_chain(hand)
-        if not set(chain.joint_names) <= set(path.joint_names):
+        if not set(chain.joint_names) <= set(joint_names):
             continue
-        q = path.q[:, [path.joint_names.index(n) for n in chain.joint_names]]
+        q_arm = q[:, [joint_names.index(n) for n in chain.joint_names]]
         try:
-            angles[hand] = SrsKinematics.of(chain, tuple(v)).arm_angles(q)
+            angles[hand] = SrsKinematics.of(chain, tuple(v)).arm_angles(q_arm)
         except NotSRSError:
             try:
-                angles[hand] = SewAngle.stereographic(v).angle(*sew_chain(chain).points(q))
+                angles[hand] = SewAngle.stereographic(v).angle(*sew_chain(chain).points(q_arm))
             except NotSRSError:
                 continue
     return angles

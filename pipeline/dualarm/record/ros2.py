@@ -17,6 +17,9 @@ Times are motion time from 0, as in ``run.mcap``: ``ros2 bag play`` keeps their 
 trajectory's time and positions. Both are written beside the target and renamed into place, so an interrupted export
 leaves nothing that looks complete.
 
+:func:`read_joint_states` reads a robot's ``sensor_msgs/msg/JointState`` messages back from a ROS 2 bag (a rosbag2
+directory, MCAP or sqlite3, or a bare MCAP file; rosbags' reader), for ``dualarm analyze``.
+
 Units: times [s] (in the bag, stamps and ``time_from_start`` in s and ns), positions [rad], velocities [rad/s],
 accelerations [rad/s^2], translations [m].
 """
@@ -25,13 +28,15 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
 
+from dualarm.arrays import frozen
 from dualarm.errors import DualarmError, RecordingError, excerpt
 from dualarm.files import cause
 from dualarm.record.readback import TF_COLUMNS, RunData
@@ -231,3 +236,107 @@ def _into_place(target: Path, write: Callable[[Path], None]) -> Path:
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return target
+
+
+#: The message type :func:`read_joint_states` reads.
+JOINT_STATE = "sensor_msgs/msg/JointState"
+
+
+@dataclass(frozen=True)
+class JointStates:
+    """A joint-state topic read from a bag: the messages that carry at least one of the joints asked for.
+
+    Attributes:
+        t_s: each message's header stamp, or its log time where the stamp is 0 (N,) [s], in the bag's order.
+        joint_names: the joints asked for (URDF names).
+        q_rad: their positions (N, n) [rad]; NaN where a message lacks the joint.
+        topic: the topic read.
+        skipped: messages on the topic that carry none of the joints.
+    """
+
+    t_s: np.ndarray
+    joint_names: tuple[str, ...]
+    q_rad: np.ndarray
+    topic: str
+    skipped: int = 0
+
+    def __post_init__(self) -> None:
+        N = len(self.t_s)
+        object.__setattr__(self, "t_s", frozen(self.t_s, (N,), "t_s"))
+        object.__setattr__(self, "q_rad", frozen(self.q_rad, (N, len(self.joint_names)), "q_rad"))
+
+
+def read_joint_states(
+    bag: Path, joints: tuple[str, ...], topic: str = "/joint_states", rename: Mapping[str, str] | None = None
+) -> JointStates:
+    """The positions of ``joints`` on ``topic`` of the ROS 2 bag ``bag``, names mapped by ``rename``.
+
+    ``rename``: bag joint name -> URDF joint name, for names the robot's driver gives otherwise.
+
+    Raises:
+        RecordingError: ``bag`` is no ROS 2 bag (or a ROS 1 one), lacks ``topic``, whose type is not
+            :data:`JOINT_STATE`, or no message of it names one of ``joints``.
+    """
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    rename = dict(rename or {})
+    column = {name: k for k, name in enumerate(joints)}
+    try:
+        reader = AnyReader([Path(bag)], default_typestore=get_typestore(getattr(Stores, DISTRO)))
+        if not reader.is2:
+            raise RecordingError(f"{excerpt(bag)}: a ROS 1 bag; analyze reads ROS 2 bags (rosbag2 or MCAP)")
+        reader.open()
+    except RecordingError:
+        raise
+    except Exception as error:  # rosbags raises its own errors, OSError, and yaml's or mcap's on a corrupt file
+        raise RecordingError(f"{excerpt(bag)}: not a readable ROS 2 bag ({_why(error)})") from error
+    try:
+        connections = [c for c in reader.connections if c.topic == topic]
+        if not connections:
+            states = sorted({c.topic for c in reader.connections if c.msgtype == JOINT_STATE})
+            raise RecordingError(
+                f"{excerpt(bag)}: no topic {excerpt(topic, 80)} (its {JOINT_STATE} topics: "
+                f"{', '.join(states) or 'none'}); name it with --topic"
+            )
+        if any(c.msgtype != JOINT_STATE for c in connections):
+            raise RecordingError(f"{excerpt(bag)}: {excerpt(topic, 80)} is {connections[0].msgtype}, not {JOINT_STATE}")
+        t, rows, skipped, seen = [], [], 0, set()
+        places: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}  # a message's names -> (its indices, ours)
+        try:
+            for connection, log_ns, raw in reader.messages(connections=connections):
+                message: Any = reader.deserialize(raw, connection.msgtype)
+                names = tuple(message.name)
+                if names not in places:
+                    mapped = [rename.get(n, n) for n in names]
+                    seen.update(mapped)
+                    mine = [k for k, n in enumerate(mapped) if n in column]
+                    places[names] = (np.array(mine, dtype=int), np.array([column[mapped[k]] for k in mine], dtype=int))
+                theirs, ours = places[names]
+                position = np.asarray(message.position, dtype=np.float64)
+                if not len(ours) or len(position) != len(names):
+                    skipped += 1
+                    continue
+                row = np.full(len(joints), np.nan)
+                row[ours] = position[theirs]
+                rows.append(row)
+                stamp = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+                t.append(stamp if stamp > 0 else log_ns * 1e-9)
+        except Exception as error:
+            raise RecordingError(f"{excerpt(bag)}: cannot read {excerpt(topic, 80)} ({_why(error)})") from error
+    finally:
+        reader.close()
+    if not rows:
+        raise RecordingError(
+            f"{excerpt(bag)}: no message on {excerpt(topic, 80)} names one of the robot's arm joints "
+            f"({', '.join(joints[:4])}{', ...' if len(joints) > 4 else ''}; the bag's: "
+            f"{excerpt(', '.join(sorted(seen)) or 'none', 200)}); map names with --joint-map BAG_NAME=URDF_NAME"
+        )
+    return JointStates(np.asarray(t), joints, np.asarray(rows), topic, skipped)
+
+
+def _why(error: Exception) -> str:
+    """What a reader's exception says, in one line."""
+    if isinstance(error, OSError | ValueError):
+        return cause(error)
+    return excerpt(" ".join(str(error).split()) or type(error).__name__, 200)

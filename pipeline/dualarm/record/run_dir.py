@@ -161,7 +161,7 @@ STUDY_REPORT_DIGESTS = "report.sha256"
 #:   ``runs/``): ``<task>/<run-id>/`` trees, added beside the others and never deleted; an entry
 #:   dualarm did not write is left alone and does not stop a run. An existing directory without
 #:   the marker is used too (the repository's ``recordings/`` holds ``.gitkeep``), unmarked.
-#: - ``plan``, ``consistency``, ``report``: rewritten in place by the next command into them.
+#: - ``plan``, ``consistency``, ``analysis``, ``report``: rewritten in place by the next command into them.
 #: - ``reproduction``: emptied by the next reproduction, after checking at every depth that it
 #:   holds only what dualarm writes there.
 #:
@@ -173,6 +173,7 @@ KINDS: Mapping[str, Layout] = {
     "consistency": Layout(
         files=("consistency.csv", "consistency.md", "joints_*.png", "arm_angle.png"), dirs={"runs": "recordings"}
     ),
+    "analysis": Layout(files=("analysis.csv", "repetitions.csv", "analysis.md", "joints_*.png", "arm_angle.png")),
     "report": Layout(
         files=(
             "summary.md",
