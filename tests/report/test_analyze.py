@@ -172,3 +172,15 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(trips, tmp_path, args, 
     done = dualarm_subprocess(["analyze", *(a.format(bag=bag) for a in args), "--robot", "humanoid", "--out", str(out)])
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and says in done.stderr, done.stderr
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_cut_or_empty_bag_is_one_line_exit_2(trips, tmp_path):
+    """The noisy MCAP cut in half (a recorder killed), and a directory without metadata.yaml."""
+    (mcap,) = (trips["trac-ik"]["run"].parent.parent.parent / "trac-ik-noisy").glob("*.mcap")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    (tmp_path / "empty").mkdir()
+    for bag, says in ((cut, "not a readable ROS 2 bag"), (tmp_path / "empty", "metadata")):
+        done = dualarm_subprocess(["analyze", str(bag), "--robot", "humanoid", "--out", str(tmp_path / "out")])
+        assert done.returncode == 2 and done.stderr.count("\n") == 1 and says in done.stderr, done.stderr
+    assert not (tmp_path / "out").exists()

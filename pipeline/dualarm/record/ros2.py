@@ -337,6 +337,8 @@ def read_joint_states(
 
 def _why(error: Exception) -> str:
     """What a reader's exception says, in one line."""
+    if isinstance(error, FileNotFoundError) and not error.strerror:  # rosbags' own: a directory without metadata
+        return excerpt(" ".join(str(error).split()) or "no such file or directory", 200)
     if isinstance(error, OSError | ValueError):
         return cause(error)
     return excerpt(" ".join(str(error).split()) or type(error).__name__, 200)

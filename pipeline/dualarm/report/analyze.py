@@ -180,7 +180,9 @@ def analyze_bag(
         how = f"every {period_s} s" if period_s is not None else "where the hands pass the start pose"
         raise RecordingError(
             f"{excerpt(bag)}: cutting {len(t)} samples ({t[-1] - t[0]:.3f} s) {how} gives "
-            f"{max(len(cuts) - 1, 0)} repetition(s) of at least {MIN_REP_SAMPLES} samples; at least 2 are needed"
+            f"{max(len(cuts) - 1, 0)} repetition(s)"
+            + (f", the shortest of {np.diff(cuts).min()} samples" if len(cuts) > 1 else "")
+            + f"; at least 2 of at least {MIN_REP_SAMPLES} samples are needed"
             + ("" if period_s is not None else " (give --task for its start pose, or --period)")
         )
     if repetitions is not None and len(cuts) - 1 != repetitions:
