@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
+from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -174,13 +175,28 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(trips, tmp_path, args, 
     assert not out.exists() or not any(out.iterdir())
 
 
-def test_a_cut_or_empty_bag_is_one_line_exit_2(trips, tmp_path):
-    """The noisy MCAP cut in half (a recorder killed), and a directory without metadata.yaml."""
+def test_a_cut_empty_or_ros1_bag_is_one_line_exit_2(trips, tmp_path):
+    """The noisy MCAP cut in half (a recorder killed), a directory without metadata.yaml, a ROS 1 bag."""
     (mcap,) = (trips["trac-ik"]["run"].parent.parent.parent / "trac-ik-noisy").glob("*.mcap")
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
     (tmp_path / "empty").mkdir()
-    for bag, says in ((cut, "not a readable ROS 2 bag"), (tmp_path / "empty", "metadata")):
+    ros1 = tmp_path / "ros1.bag"
+    store = get_typestore(Stores.ROS1_NOETIC)
+    with Writer1(ros1) as writer:
+        connection = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
+        types = store.types
+        state = types["sensor_msgs/msg/JointState"](
+            header=types["std_msgs/msg/Header"](
+                seq=0, stamp=types["builtin_interfaces/msg/Time"](sec=1, nanosec=0), frame_id=""
+            ),
+            name=["left_elbow"],
+            position=np.zeros(1),
+            velocity=np.empty(0),
+            effort=np.empty(0),
+        )
+        writer.write(connection, 1, store.serialize_ros1(state, "sensor_msgs/msg/JointState"))
+    for bag, says in ((cut, "not a readable ROS 2 bag"), (tmp_path / "empty", "metadata"), (ros1, "a ROS 1 bag")):
         done = dualarm_subprocess(["analyze", str(bag), "--robot", "humanoid", "--out", str(tmp_path / "out")])
         assert done.returncode == 2 and done.stderr.count("\n") == 1 and says in done.stderr, done.stderr
     assert not (tmp_path / "out").exists()
