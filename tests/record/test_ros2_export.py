@@ -125,25 +125,13 @@ def test_the_frames_are_the_runs_split_into_moving_and_static(exported):
     for log_time, tr in recorded:
         pair = (tr.parent_frame_id, tr.child_frame_id)
         got = exported_tf[(True, *pair)][0] if pair in static else exported_tf[(False, *pair)][log_time]
-        a = [
-            tr.translation.x,
-            tr.translation.y,
-            tr.translation.z,
-            tr.rotation.x,
-            tr.rotation.y,
-            tr.rotation.z,
-            tr.rotation.w,
-        ]
-        b = [
-            got.translation.x,
-            got.translation.y,
-            got.translation.z,
-            got.rotation.x,
-            got.rotation.y,
-            got.rotation.z,
-            got.rotation.w,
-        ]
+        a, b = (_seven(x) for x in (tr, got))
         assert np.abs(np.subtract(a, b)).max() <= 1e-9, pair
+
+
+def _seven(transform) -> list[float]:
+    """A transform's translation and rotation quaternion (x, y, z, qx, qy, qz, qw), of either message kind."""
+    return [getattr(transform.translation, k) for k in "xyz"] + [getattr(transform.rotation, k) for k in "xyzw"]
 
 
 def test_the_csv_holds_the_trajectory_in_si_units(exported):
