@@ -128,14 +128,15 @@ def test_analyze_estimates_the_noise_it_was_given_and_reports_no_more_than_it_as
 @pytest.mark.parametrize("case", CASES)
 def test_repetitions_are_cut_where_the_execution_began_each(trips, case):
     """Cut where the hands pass the task's start pose (forward kinematics of the noisy positions): three repetitions,
-    each starting within 20 ms of where the execute stage's own repetition index changes in run.mcap."""
+    each starting within 50 ms of where the execute stage's own repetition index changes in run.mcap (where the hands
+    rest at the start pose between repetitions, any sample of the rest is a pass: 25 ms apart on one TRAC-IK circle)."""
     executed = read_run(trips[case]["run"])["/execute/sample"]
     t, rep = executed["t"].to_numpy(), executed["rep"].to_numpy()
     begins = [t[rep == r][0] for r in np.unique(rep)[1:]]
     cut = trips[case]["repetitions"]
     assert len(cut) == 3
     offset = t[0] - 0.0  # the bag's first sample is the execution's first
-    assert np.allclose([float(r["start_s"]) + offset for r in cut[1:]], begins, atol=0.02)
+    assert np.allclose([float(r["start_s"]) + offset for r in cut[1:]], begins, atol=0.05)
 
 
 def test_a_bag_without_the_robots_joint_names_is_refused_and_joint_map_reads_it(trips, tmp_path):
