@@ -72,14 +72,15 @@ def _columns(frame: pd.DataFrame, field: str) -> tuple[list[str], np.ndarray]:
     return names, np.ascontiguousarray(frame[[f"{field}.{n}" for n in names]].to_numpy(float))
 
 
-def _stamp(types: Any, t_s: float) -> Any:
-    ns = int(round(t_s * 1e9))
-    return types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+def _ns(t_s: float) -> int:
+    """``t_s`` [s] in whole nanoseconds."""
+    return int(round(t_s * 1e9))
 
 
-def _duration(types: Any, t_s: float) -> Any:
-    ns = int(round(t_s * 1e9))
-    return types["builtin_interfaces/msg/Duration"](sec=ns // 10**9, nanosec=ns % 10**9)
+def _stamp(types: Any, t_s: float, msgtype: str = "builtin_interfaces/msg/Time") -> Any:
+    """A ``builtin_interfaces`` Time (or Duration) of ``t_s`` [s]."""
+    ns = _ns(t_s)
+    return types[msgtype](sec=ns // 10**9, nanosec=ns % 10**9)
 
 
 def export_bag(run: RunData, target: Path) -> Path:
@@ -128,7 +129,7 @@ def export_bag(run: RunData, target: Path) -> Path:
                 velocities=qd[k],
                 accelerations=qdd[k],
                 effort=np.empty(0),
-                time_from_start=_duration(types, t),
+                time_from_start=_stamp(types, t, "builtin_interfaces/msg/Duration"),
             )
             for k, t in enumerate(trajectory["t"].to_numpy(float))
         ]
@@ -142,7 +143,7 @@ def export_bag(run: RunData, target: Path) -> Path:
         joint_state = channel("/joint_states", "sensor_msgs/msg/JointState")
         for k, t in enumerate(executed["t"].to_numpy(float)):
             joint_state(
-                int(round(t * 1e9)),
+                _ns(t),
                 types["sensor_msgs/msg/JointState"](
                     header=header(stamp=_stamp(types, t), frame_id=""),
                     name=names,
@@ -199,7 +200,7 @@ def _write_tf(
     first = frames["t"] == frames["t"].min()
     tf_static(0, message(frames[is_static.to_numpy() & first.to_numpy()]))
     for t, rows in frames[~is_static.to_numpy()].groupby("t", sort=True):
-        tf(int(round(float(t) * 1e9)), message(rows))  # type: ignore[arg-type]
+        tf(_ns(float(t)), message(rows))  # type: ignore[arg-type]
 
 
 def export_csv(run: RunData, target: Path) -> Path:

@@ -146,7 +146,7 @@ def analyze_bag(
             f"{excerpt(bag)}: {topic} lacks every hand's arm joints ({excerpt(', '.join(missing), 200)}); "
             "map names with --joint-map BAG_NAME=URDF_NAME"
         )
-    held = (loaded.initial_q if loaded is not None else {}) or {}
+    held = loaded.initial_q if loaded is not None else {}
     q = np.where(np.isnan(states.q_rad), [held.get(n, 0.0) for n in wanted], states.q_rad)
     names = tuple(n for n in wanted if any(n in arm[h] for h in hands))
     columns = [wanted.index(n) for n in names]
@@ -156,7 +156,7 @@ def analyze_bag(
         raise RecordingError(f"{excerpt(bag)}: {len(t)} samples of the arms' joints on {topic}; too few to analyse")
     dt = float(np.polyfit(np.arange(len(t)), t, 1)[0])  # the median step is off by ~1 % under 1 ms of jitter
     if not dt > 0:
-        raise RecordingError(f"{excerpt(bag)}: the stamps on {topic} do not increase (median step {dt} s)")
+        raise RecordingError(f"{excerpt(bag)}: the stamps on {topic} do not increase (mean step {dt} s)")
 
     window = _window(SMOOTH_WINDOW_S, dt)
     smooth = savgol_filter(q, window, 3, axis=0)
@@ -201,12 +201,7 @@ def analyze_bag(
     floor, angle_floor = 0.0, 0.0
     for _ in range(NOISE_DRAWS):
         pair = [
-            _take(
-                seen(
-                    savgol_filter(smooth[first] + rng.normal(0.0, sigma, (len(first), len(wanted))), window, 3, axis=0)
-                ),
-                None,
-            )
+            seen(savgol_filter(smooth[first] + rng.normal(0.0, sigma, (len(first), len(wanted))), window, 3, axis=0))
             for _ in range(2)
         ]
         noise_q, noise_psi, _ = _compare(*pair)
@@ -256,7 +251,7 @@ def analyze_bag(
     written = [
         figures.joints_per_repetition(
             {label: sample},
-            [n for n in model.hand_chain(h).joint_names],
+            list(model.hand_chain(h).joint_names),
             f"{label}: {h} arm joints per repetition",
             out / f"joints_{h}.png",
         )
@@ -279,10 +274,8 @@ def analyze_bag(
 Seen = tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]
 
 
-def _take(seen: Seen, k: np.ndarray | None) -> Seen:
-    """The samples ``k`` (all for None) of joints, hand poses and arm angles."""
-    if k is None:
-        return seen
+def _take(seen: Seen, k: np.ndarray) -> Seen:
+    """The samples ``k`` of joints, hand poses and arm angles."""
     joints, poses, angles = seen
     return joints[k], {h: T[k] for h, T in poses.items()}, {h: a[k] for h, a in angles.items()}
 
@@ -296,17 +289,15 @@ def _compare(first: Seen, later: Seen) -> tuple[np.ndarray, np.ndarray, np.ndarr
     features = [np.hstack([T[:, :3, 3] for T in poses.values()]) for _, poses, _ in (first, later)]
     a, b, lam, place_m = _match(*features)
     joints = np.abs(later[0] - (first[0][a] * (1 - lam)[:, None] + first[0][b] * lam[:, None])).max(axis=1)
-    angles = [
-        np.abs(
-            np.angle(
-                np.exp(
-                    1j * (later[2][h] - first[2][h][a] - lam * np.angle(np.exp(1j * (first[2][h][b] - first[2][h][a]))))
-                )
-            )
-        )
-        for h in first[2]
+    angles = [  # the first repetition's angle at the place, along the shorter way between its two samples
+        np.abs(_wrap(later[2][h] - first[2][h][a] - lam * _wrap(first[2][h][b] - first[2][h][a]))) for h in first[2]
     ]
     return joints, np.max(angles, axis=0) if angles else np.zeros(0), place_m
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles [rad] into (-pi, pi]."""
+    return np.angle(np.exp(1j * angle))
 
 
 def _task(task: str | Path, robot: str | Path):
