@@ -37,19 +37,19 @@ length and its first guess's duration, where its unknowns are of order one. The 
 are then integrated exactly, after the least change that ends the piece at rest (:func:`_exact`).
 
 The check. Between the nodes the limits can be exceeded; so each timing is checked analytically,
-on both sides of every node, and where s passes each knot of P and three points between knots,
-and every :data:`REFINE_CHECK_STEP_S` while refining. Each interval where a limit is exceeded by
+on both sides of every node, where s passes each knot of P and three points between knots, and
+every :data:`CHECK_STEP_S`. While refining, each interval where a limit is exceeded by
 more than :data:`REFINE_ABOVE` is halved (in s), and the program solved again from the last
 timing: from :data:`NODES` intervals (denser at both rest ends) up to :data:`MAX_NODES`. At each
 node a program bounds the acceleration and jerk of only the :data:`LOADED` joints nearest their limits
 in its first guess (:func:`_loaded`); the others' constraints only cost IPOPT time (the ball game, 14
 joints: 1.34 s of compute per s of motion with all, 0.43 with 3, and with 2 its motion took 9.0 s, not
 3.49). A joint left out that exceeds its limit is found by the check,
-its interval refined and the joint selected there next. Then the whole piece is checked every
-:data:`CHECK_STEP_S`, every joint, and what exceeds is
-removed by a uniform slow-down of the piece, k = max(velocity ratio, sqrt(acceleration ratio),
-cbrt(jerk ratio)) (t -> k t scales the velocity by 1/k, the acceleration by 1/k^2, the jerk by
-1/k^3).
+its interval refined and the joint selected there next. Then the ratios of every joint are bounded between each
+two of those points (no peak between them passes the bound: :meth:`PieceTiming._bounds`), and what exceeds is
+removed by a uniform slow-down of the piece,
+k = max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) (t -> k t scales the velocity by 1/k, the
+acceleration by 1/k^2, the jerk by 1/k^3).
 
 A piece equal to an earlier one (within :data:`SAME_PIECE_RAD`: a repetition) reuses its timing, so
 repeated paths give bit-identical repeated trajectories and are solved once.
@@ -70,6 +70,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, replace
+from math import factorial
 
 import casadi as cs
 import numpy as np
@@ -98,13 +99,14 @@ REFINE_ABOVE = 1e-2
 #: Share of each limit a program may use at its nodes (the check takes up the rest), and a straight piece
 #: everywhere.
 MARGIN = 1 - 2e-3
-#: Time step of the analytic check of each piece's limits [s], and of the checks that choose what to refine.
-CHECK_STEP_S = 1e-4
-REFINE_CHECK_STEP_S = 5e-4
-#: The final check looks again every PEAK_STEP_S [s] within a step of each point whose ratio is within PEAK_WITHIN (a
-#: share) of the largest, or of 1.
-PEAK_STEP_S = 2e-6
-PEAK_WITHIN = 1e-3
+#: Time step of the analytic check of each piece's limits [s] (and of its bounds between the points).
+CHECK_STEP_S = 5e-4
+#: The final check looks between two of its points where the bound of the ratio between them could pass the largest
+#: ratio (or 1) by more than ZOOM_ABOVE (a share), up to ZOOM_ROUNDS times, ZOOM_POINTS points at most each time
+#: (:meth:`PieceTiming._peaks`).
+ZOOM_ABOVE = 1e-7
+ZOOM_ROUNDS = 4
+ZOOM_POINTS = 100_000
 #: At each node, the programs constrain the acceleration and jerk of this many joints, those nearest their limits in
 #: the program's first guess (:func:`_loaded`); every joint's velocity, and the final check covers every joint.
 LOADED = 3
@@ -200,46 +202,123 @@ class PieceTiming:
         )
 
     def excess(
-        self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, step_s: float = CHECK_STEP_S
+        self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, bound: bool = True
     ) -> np.ndarray:
         """Each interval's slow-down to meet the limits (K,).
 
-        max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)), checked every ``step_s``, on both sides of
-        every node, and where s passes each knot of P and the points a quarter, half and three quarters between them;
-        at :data:`CHECK_STEP_S`, also every :data:`PEAK_STEP_S` around each point within :data:`PEAK_WITHIN` of the
-        largest ratio, or of 1: a peak between two points of the step can be above both (1.4e-5 of the jerk limit on
-        an MC-Inverse path, every 0.1 ms).
+        max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) at the :meth:`check_times`, and with
+        ``bound`` its upper bound between each two of them (:meth:`_bounds`), looked at more closely where it could
+        pass the largest ratio or 1 (:meth:`_peaks`): a peak between two points 0.1 ms apart was 1.4e-5 of the jerk
+        limit above both on an MC-Inverse path. Without, while refining, the ratios at the times.
         """
-        end = self.duration_s
-        nodes = self.stretch * self.starts_s
-        passes = _passing(self, _dense(self.path, 4))
-        t = np.sort(
-            np.concatenate(
-                [
-                    np.linspace(0.0, end, max(50, int(end / step_s)) + 1),
-                    *(np.clip(x + side, 0, end) for x in (nodes, passes) for side in (-1e-12, 1e-12)),
-                ]
-            )
-        )
-        ratio = self._ratio(t, velocity, acceleration, jerk)
-        if step_s <= CHECK_STEP_S:
-            near = np.flatnonzero(ratio >= (1 - PEAK_WITHIN) * max(ratio.max(), 1.0))
-            around = np.linspace(-step_s, step_s, int(round(2 * step_s / PEAK_STEP_S)) + 1)
-            zoom = np.unique(np.clip((t[near, None] + around).ravel(), 0.0, end))
-            t, ratio = (
-                np.concatenate([t, zoom]),
-                np.concatenate([ratio, self._ratio(zoom, velocity, acceleration, jerk)]),
-            )
+        nodes, t = self.stretch * self.starts_s, self.check_times(CHECK_STEP_S)
+        if bound:
+            at, ratio = self._peaks(t, velocity, acceleration, jerk)
+        else:
+            at, ratio = t, _combined(self._shares(t, velocity, acceleration, jerk)[2])
         excess = np.zeros(len(self.dt))
-        np.maximum.at(excess, np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(self.dt) - 1), ratio)
+        np.maximum.at(excess, np.clip(np.searchsorted(nodes, at, side="right") - 1, 0, len(self.dt) - 1), ratio)
         return excess
 
-    def _ratio(self, t: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> np.ndarray:
-        """max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) over the joints at times ``t`` (M,)."""
-        _, qd, qdd, qddd = self(t)
-        return np.max(
-            [np.abs(qd) / velocity, np.sqrt(np.abs(qdd) / acceleration), np.cbrt(np.abs(qddd) / jerk)], axis=(0, 2)
+    def check_times(self, step_s: float) -> np.ndarray:
+        """The times the check looks at (M,) [s], sorted.
+
+        Every ``step_s``, on both sides of every node, and where s passes each knot of P and the points a quarter, half
+        and three quarters between them.
+        """
+        end = self.duration_s
+        passes = _passing(self, _dense(self.path, 4))
+        points = [np.clip(x + side, 0, end) for x in (self.stretch * self.starts_s, passes) for side in (-1e-12, 1e-12)]
+        return np.sort(np.concatenate([np.linspace(0.0, end, max(50, int(end / step_s)) + 1), *points]))
+
+    def _peaks(
+        self, t: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """An upper bound of the ratio between each two consecutive times ``t`` (M,), and where (their middle).
+
+        Where the bound could pass the largest ratio found (or 1) by more than :data:`ZOOM_ABOVE`, points are put
+        between the two, as many as bring the bound's excess over the ratio at its ends (which falls with the square
+        of their distance) to half that, and their bounds replace it; up to :data:`ZOOM_ROUNDS` times, with at most
+        :data:`ZOOM_POINTS` points a time (the bounds that remain stand: the stretch they give is safe).
+        """
+        ratio, upper = self._bounds(t, velocity, acceleration, jerk)
+        a, b, ends, level = t[:-1], t[1:], np.maximum(ratio[:-1], ratio[1:]), max(float(ratio.max()), 1.0)
+        for _ in range(ZOOM_ROUNDS):
+            zoom = upper > level * (1 + ZOOM_ABOVE)
+            if not zoom.any():
+                break
+            n = np.ceil(np.sqrt(2 * (upper[zoom] - ends[zoom]) / (level * ZOOM_ABOVE)))
+            n = np.maximum(2, (n * min(1.0, ZOOM_POINTS / n.sum())).astype(int))  # parts of each pair zoomed
+            row = np.repeat(np.arange(len(n)), n + 1)
+            part = (np.arange(len(row)) - np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)) / n[row]
+            sub = a[zoom][row] + (b - a)[zoom][row] * part
+            sub_ratio, sub_upper = self._bounds(sub, velocity, acceleration, jerk)
+            level = max(level, float(sub_ratio.max()))
+            inner = row[:-1] == row[1:]  # pairs within one zoomed pair
+            a, b = np.concatenate([a[~zoom], sub[:-1][inner]]), np.concatenate([b[~zoom], sub[1:][inner]])
+            ends = np.concatenate([ends[~zoom], np.maximum(sub_ratio[:-1], sub_ratio[1:])[inner]])
+            upper = np.concatenate([upper[~zoom], sub_upper[inner]])
+        return (a + b) / 2, upper
+
+    def _bounds(
+        self, t: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The ratio at times ``t`` (M,), and an upper bound of it between each two consecutive ones (M - 1,).
+
+        ``t`` sorted, with both sides of every node among them (s''' changes there) and at most one knot of P between
+        two (:meth:`check_times`).
+
+        The ratio is max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) over the joints. Between two
+        times h apart, |q^(m)| is at most the larger of its two values plus h^2 / 8 times a bound of |q^(m+2)| there:
+        by Faa di Bruno's formula (s'''' = 0 within an interval), from bounds of |s'|, |s''|, |s'''| (s' quadratic,
+        s'' linear, s''' constant) and of |P^(i)| (Taylor from the first time's s, with P^(5) piecewise constant).
+        Bounds, not estimates: no peak of the ratio between the times can pass them.
+        """
+        (s, sd, sdd, sddd), p, share = self._shares(t, velocity, acceleration, jerk, 5)
+        h = np.diff(t)
+        u3 = np.maximum(np.abs(sddd[:-1]), np.abs(sddd[1:]))
+        u2 = np.maximum(np.abs(sdd[:-1]), np.abs(sdd[1:]))
+        u1 = (np.maximum(np.abs(sd[:-1]), np.abs(sd[1:])) + h**2 * u3 / 8)[:, None]
+        u2, u3 = u2[:, None], u3[:, None]
+        w = np.abs(np.diff(s))[:, None]
+        b5 = np.maximum(np.abs(p[4][:-1]), np.abs(p[4][1:]))  # P^(5) is constant between knots
+        b4, b3, b2, b1 = (
+            sum(np.abs(p[m + i][:-1]) * w**i / factorial(i) for i in range(4 - m))
+            + b5 * w ** (4 - m) / factorial(4 - m)
+            for m in (3, 2, 1, 0)
         )
+        above = (  # bounds of |q'''|, |q''''|, |q^(5)| between the times
+            b3 * u1**3 + 3 * b2 * u1 * u2 + b1 * u3,
+            b4 * u1**4 + 6 * b3 * u1**2 * u2 + b2 * (3 * u2**2 + 4 * u1 * u3),
+            b5 * u1**5 + 10 * b4 * u1**3 * u2 + b3 * (15 * u1 * u2**2 + 10 * u1**2 * u3) + 10 * b2 * u2 * u3,
+        )
+        upper = [
+            np.maximum(x[:-1], x[1:]) + (h**2 / 8)[:, None] * bound / limit
+            for x, bound, limit in zip(share, above, (velocity, acceleration, jerk), strict=True)
+        ]
+        return _combined(share), _combined(upper)
+
+    def _shares(
+        self, t: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, orders: int = 3
+    ) -> tuple[tuple[np.ndarray, ...], list[np.ndarray], list[np.ndarray]]:
+        """The path state at times ``t`` (M,), P's derivatives there and each joint's share of its limits.
+
+        P^(1..orders) and |q'| / v, |q''| / a, |q'''| / j, each (M, n).
+        """
+        s, sd, sdd, sddd = state = self.path_state(t)
+        n = self.path.c.shape[-1]
+        p = [self.path(s, m) if m <= self.path.k else np.zeros((len(s), n)) for m in range(1, orders + 1)]
+        q = (
+            p[0] * sd[:, None],
+            p[1] * sd[:, None] ** 2 + p[0] * sdd[:, None],
+            p[2] * sd[:, None] ** 3 + 3 * p[1] * (sd * sdd)[:, None] + p[0] * sddd[:, None],
+        )
+        return state, p, [np.abs(x) / limit for x, limit in zip(q, (velocity, acceleration, jerk), strict=True)]
+
+
+def _combined(share: list[np.ndarray]) -> np.ndarray:
+    """max(velocity share, sqrt(acceleration share), cbrt(jerk share)) (M,), the largest over the joints."""
+    return np.max([share[0].max(axis=1), np.sqrt(share[1].max(axis=1)), np.cbrt(share[2].max(axis=1))], axis=0)
 
 
 def jerk_limited(
@@ -520,14 +599,16 @@ class _Pieces:
 def _passing(piece: PieceTiming, s: np.ndarray) -> np.ndarray:
     """When the piece passes the path parameters ``s`` (M,) [s].
 
-    s(t) does not decrease at the nodes, so bisection on each.
+    s does not decrease from node to node: each value's interval by search, then bisection of the interval's cubic.
     """
-    lo, hi = np.zeros(len(s)), np.full(len(s), piece.duration_s)
+    i = np.clip(np.searchsorted(piece.s, s, side="left") - 1, 0, len(piece.dt) - 1)
+    s0, sd, sdd, sddd = piece.s[i], piece.sd[i], piece.sdd[i], piece.sddd[i]
+    lo, hi = np.zeros(len(s)), piece.dt[i].copy()
     for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        before = piece.path_state(mid)[0] < s
-        lo, hi = np.where(before, mid, lo), np.where(before, hi, mid)
-    return np.where(s <= piece.s[0], 0.0, hi)
+        h = 0.5 * (lo + hi)
+        before = s0 + sd * h + sdd * h**2 / 2 + sddd * h**3 / 6 < s
+        lo, hi = np.where(before, h, lo), np.where(before, hi, h)
+    return np.where(s <= piece.s[0], 0.0, piece.stretch * (piece.starts_s[i] + hi))
 
 
 def _time_piece(
@@ -552,7 +633,7 @@ def _time_piece(
             piece = _solve(path, nodes, velocity, acceleration, jerk, samples, None, WARM_START_SHARE)
         except StageError:
             return replace(_bounded(path, velocity, acceleration, jerk), fallback=FALLBACKS[1])
-    excess = piece.excess(velocity, acceleration, jerk, REFINE_CHECK_STEP_S)
+    excess = piece.excess(velocity, acceleration, jerk, bound=False)
     while (excess > 1 + REFINE_ABOVE).any():
         halve = excess > 1 + REFINE_ABOVE
         if len(nodes) - 1 + halve.sum() > MAX_NODES:
@@ -562,7 +643,7 @@ def _time_piece(
             piece = _solve(path, nodes, velocity, acceleration, jerk, samples, piece)
         except StageError:  # a finer program IPOPT cannot solve: the coarser timing, stretched, stands
             break
-        excess = piece.excess(velocity, acceleration, jerk, REFINE_CHECK_STEP_S)
+        excess = piece.excess(velocity, acceleration, jerk, bound=False)
     k = float(piece.excess(velocity, acceleration, jerk).max())
     return replace(piece, stretch=k * (1 + 1e-9) if k > 1 else 1.0, fallback=fallback)
 
