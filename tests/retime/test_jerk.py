@@ -339,7 +339,7 @@ def test_the_final_checks_bound_between_two_points_is_above_the_motion_there(loo
     it: the stretch it gives holds every limit and wastes no time."""
     _, timing, _ = loop
     for piece in timing.evaluate.pieces:
-        t = piece.check_times(1e-3)  # every 1 ms, both sides of every node, and passing P's knots
+        t = piece.check_times(1e-3)  # every 1 ms and both sides of every node
         upper = piece._bounds(t, V, A, J)[1]
         dense = np.linspace(t[:-1], t[1:], 1001, axis=1).ravel()  # 1001 times per pair, the pair's ends included
         _, qd, qdd, qddd = piece(dense)

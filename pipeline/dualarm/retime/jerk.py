@@ -37,8 +37,7 @@ length and its first guess's duration, where its unknowns are of order one. The 
 are then integrated exactly, after the least change that ends the piece at rest (:func:`_exact`).
 
 The check. Between the nodes the limits can be exceeded; so each timing is checked analytically,
-on both sides of every node, where s passes each knot of P and three points between knots, and
-every :data:`CHECK_STEP_S`. While refining, each interval where a limit is exceeded by
+on both sides of every node and every :data:`CHECK_STEP_S`. While refining, each interval where a limit is exceeded by
 more than :data:`REFINE_ABOVE` is halved (in s), and the program solved again from the last
 timing: from :data:`NODES` intervals (denser at both rest ends) up to :data:`MAX_NODES`. At each
 node a program bounds the acceleration and jerk of only the :data:`LOADED` joints nearest their limits
@@ -223,12 +222,13 @@ class PieceTiming:
     def check_times(self, step_s: float) -> np.ndarray:
         """The times the check looks at (M,) [s], sorted.
 
-        Every ``step_s``, on both sides of every node, and where s passes each knot of P and the points a quarter, half
-        and three quarters between them.
+        Every ``step_s``, on both sides of every node (s''' changes there), and where s passes each knot at which
+        P^(4) changes at once (a quartic's or less: the bounds between two times need P four times differentiable).
         """
-        end = self.duration_s
-        passes = _passing(self, _dense(self.path, 4))
-        points = [np.clip(x + side, 0, end) for x in (self.stretch * self.starts_s, passes) for side in (-1e-12, 1e-12)]
+        end, path = self.duration_s, self.path
+        knots, multiplicity = np.unique(path.t[path.k + 1 : -path.k - 1], return_counts=True)
+        rough = _passing(self, knots[path.k - multiplicity < 4])  # where P^(4) jumps: a quartic, a cubic or less
+        points = [np.clip(x + side, 0, end) for x in (self.stretch * self.starts_s, rough) for side in (-1e-12, 1e-12)]
         return np.sort(np.concatenate([np.linspace(0.0, end, max(50, int(end / step_s)) + 1), *points]))
 
     def _peaks(
@@ -265,14 +265,14 @@ class PieceTiming:
     ) -> tuple[np.ndarray, np.ndarray]:
         """The ratio at times ``t`` (M,), and an upper bound of it between each two consecutive ones (M - 1,).
 
-        ``t`` sorted, with both sides of every node among them (s''' changes there) and at most one knot of P between
-        two (:meth:`check_times`).
+        ``t`` sorted, with both sides of every node and of every knot where P^(4) changes at once among them
+        (:meth:`check_times`).
 
         The ratio is max(velocity ratio, sqrt(acceleration ratio), cbrt(jerk ratio)) over the joints. Between two
         times h apart, |q^(m)| is at most the larger of its two values plus h^2 / 8 times a bound of |q^(m+2)| there:
         by Faa di Bruno's formula (s'''' = 0 within an interval), from bounds of |s'|, |s''|, |s'''| (s' quadratic,
-        s'' linear, s''' constant) and of |P^(i)| (Taylor from the first time's s, with P^(5) piecewise constant).
-        Bounds, not estimates: no peak of the ratio between the times can pass them.
+        s'' linear, s''' constant) and of |P^(i)| (Taylor from the first time's s, with the largest |P^(5)| between,
+        :meth:`_fifth`). Bounds, not estimates: no peak of the ratio between the times can pass them.
         """
         (s, sd, sdd, sddd), p, share = self._shares(t, velocity, acceleration, jerk, 5)
         h = np.diff(t)
@@ -281,7 +281,7 @@ class PieceTiming:
         u1 = (np.maximum(np.abs(sd[:-1]), np.abs(sd[1:])) + h**2 * u3 / 8)[:, None]
         u2, u3 = u2[:, None], u3[:, None]
         w = np.abs(np.diff(s))[:, None]
-        b5 = np.maximum(np.abs(p[4][:-1]), np.abs(p[4][1:]))  # P^(5) is constant between knots
+        b5 = self._fifth(s)
         b4, b3, b2, b1 = (
             sum(np.abs(p[m + i][:-1]) * w**i / factorial(i) for i in range(4 - m))
             + b5 * w ** (4 - m) / factorial(4 - m)
@@ -297,6 +297,20 @@ class PieceTiming:
             for x, bound, limit in zip(share, above, (velocity, acceleration, jerk), strict=True)
         ]
         return _combined(share), _combined(upper)
+
+    def _fifth(self, s: np.ndarray) -> np.ndarray:
+        """The largest |P^(5)| between each two consecutive path parameters ``s`` (M,), per joint (M - 1, n).
+
+        P^(5) is constant between two knots: the largest over the knot intervals the two values span.
+        """
+        knots = np.unique(self.path.t)
+        fifth = np.abs(self.path((knots[:-1] + knots[1:]) / 2, 5)) if self.path.k == 5 else np.zeros((1, 1))
+        span = np.clip(np.searchsorted(knots, s, side="right") - 1, 0, len(fifth) - 1)
+        lo, hi = np.minimum(span[:-1], span[1:]), np.maximum(span[:-1], span[1:])
+        largest = fifth[lo]
+        for more in range(1, int((hi - lo).max(initial=0)) + 1):
+            largest = np.maximum(largest, fifth[np.minimum(lo + more, hi)])
+        return largest
 
     def _shares(
         self, t: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, orders: int = 3
