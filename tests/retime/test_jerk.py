@@ -8,6 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
+from scipy.interpolate import make_interp_spline
 from scipy.spatial import cKDTree
 from typer.testing import CliRunner
 
@@ -332,14 +333,30 @@ def test_each_node_constrains_the_joints_nearest_their_limits_as_the_motion_itse
     assert max(_fd_ratios(timing)) <= 1 + 1e-6
 
 
+def _cubic_piece():
+    """A cubic through 12 samples of a bent edge, timed by the program: its jerk jumps where s passes its knots.
+
+    So is a piece of 4 samples whose curve had knots inserted to keep it within a limit (the property test's trial 5).
+    """
+    from dualarm.retime import jerk
+
+    sigma = np.linspace(0.0, 1.0, 12)
+    q = _edge(0, sigma)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    return jerk._time_piece(make_interp_spline(s, q, k=3), V, A, J, (0, 11))
+
+
 def test_the_final_checks_bound_between_two_points_is_above_the_motion_there(loop):
     """Between two of the check's times 1 ms apart, the final check's bound of max(velocity ratio, sqrt(acceleration
     ratio), cbrt(jerk ratio)) (`PieceTiming._bounds`: Faa di Bruno's formula, no sampling) is above that ratio of the
     motion evaluated every 1 us between them (the ends alone are not: a peak between them is above both), and close to
-    it: the stretch it gives holds every limit and wastes no time."""
+    it: the stretch it gives holds every limit and wastes no time. On the loop's quintic pieces, and on a cubic, whose
+    jerk jumps where s passes its knots (the check looks on both sides of each)."""
     _, timing, _ = loop
-    for piece in timing.evaluate.pieces:
-        t = piece.check_times(1e-3)  # every 1 ms and both sides of every node
+    cubic = _cubic_piece()
+    assert cubic.path.k == 3 and len(np.unique(cubic.path.t)) > 2
+    for piece in (*timing.evaluate.pieces, cubic):
+        t = piece.check_times(1e-3)  # every 1 ms, both sides of every node and of each knot where P'''' jumps
         upper = piece._bounds(t, V, A, J)[1]
         dense = np.linspace(t[:-1], t[1:], 1001, axis=1).ravel()  # 1001 times per pair, the pair's ends included
         _, qd, qdd, qddd = piece(dense)
