@@ -280,7 +280,7 @@ class PieceTiming:
         u2 = np.maximum(np.abs(sdd[:-1]), np.abs(sdd[1:]))
         u1 = (np.maximum(np.abs(sd[:-1]), np.abs(sd[1:])) + h**2 * u3 / 8)[:, None]
         u2, u3 = u2[:, None], u3[:, None]
-        w = np.abs(np.diff(s))[:, None]
+        w = h[:, None] * u1  # how far s can go between the times
         b5 = self._fifth(s)
         b4, b3, b2, b1 = (
             sum(np.abs(p[m + i][:-1]) * w**i / factorial(i) for i in range(4 - m))
