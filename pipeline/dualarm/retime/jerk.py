@@ -192,13 +192,7 @@ class PieceTiming:
         q [rad], qd [rad/s], qdd [rad/s^2] and the jerk [rad/s^3], each (M, n).
         """
         s, sd, sdd, sddd = self.path_state(t)
-        d1, d2, d3 = (self.path(s, m) for m in (1, 2, 3))
-        return (
-            self.path(s),
-            d1 * sd[:, None],
-            d2 * sd[:, None] ** 2 + d1 * sdd[:, None],
-            d3 * sd[:, None] ** 3 + 3 * d2 * (sd * sdd)[:, None] + d1 * sddd[:, None],
-        )
+        return (self.path(s), *_chain([self.path(s, m) for m in (1, 2, 3)], sd, sdd, sddd))
 
     def excess(
         self, velocity: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray, bound: bool = True
@@ -322,12 +316,20 @@ class PieceTiming:
         s, sd, sdd, sddd = state = self.path_state(t)
         n = self.path.c.shape[-1]
         p = [self.path(s, m) if m <= self.path.k else np.zeros((len(s), n)) for m in range(1, orders + 1)]
-        q = (
-            p[0] * sd[:, None],
-            p[1] * sd[:, None] ** 2 + p[0] * sdd[:, None],
-            p[2] * sd[:, None] ** 3 + 3 * p[1] * (sd * sdd)[:, None] + p[0] * sddd[:, None],
-        )
+        q = _chain(p, sd, sdd, sddd)
         return state, p, [np.abs(x) / limit for x, limit in zip(q, (velocity, acceleration, jerk), strict=True)]
+
+
+def _chain(
+    p: list[np.ndarray], sd: np.ndarray, sdd: np.ndarray, sddd: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """q', q'', q''' (M, n) of q = P(s(t)), from P', P'', P''' at s (``p``) and s', s'', s''' (M,)."""
+    d1, d2, d3 = p[:3]
+    return (
+        d1 * sd[:, None],
+        d2 * sd[:, None] ** 2 + d1 * sdd[:, None],
+        d3 * sd[:, None] ** 3 + 3 * d2 * (sd * sdd)[:, None] + d1 * sddd[:, None],
+    )
 
 
 def _combined(share: list[np.ndarray]) -> np.ndarray:
