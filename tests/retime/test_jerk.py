@@ -365,3 +365,24 @@ def test_the_final_checks_bound_between_two_points_is_above_the_motion_there(loo
         ends = np.maximum(ratio[::1001], ratio[1000::1001])
         assert (upper >= between * (1 - 1e-12)).all() and (ends < between * (1 - 1e-9)).any()
         assert (upper - between).max() < 1e-4
+
+
+def test_a_program_allowed_a_share_of_its_limits_at_every_node_times_the_motion_slowed_down_by_it():
+    """A program whose nodes each allow lambda of the limits (the velocity times lambda, the acceleration lambda^2, the
+    jerk lambda^3) finds the full program's timing slowed down by 1 / lambda (t -> t / lambda meets exactly those
+    limits): its durations 1 / lambda times, its path velocities lambda times, to IPOPT's tolerance. The refinement
+    tightens the limits of a few nodes so, to slow down there only; on three joints, all constrained at every node."""
+    from dualarm.retime import jerk
+
+    sigma = np.linspace(0.0, 1.0, 40)
+    q = _edge(1, sigma)[:, :3]
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    path, _ = jerk.fit(s, q)
+    nodes = s[-1] * (1 - np.cos(np.linspace(0.0, np.pi, 31))) / 2
+    limits = V[:3], A[:3], J[:3]
+    full = jerk._solve(path, nodes, *limits, (0, 39), None)
+    for share in (0.8, 0.5):
+        slow = jerk._solve(path, nodes, *limits, (0, 39), None, limits=np.full(len(nodes), share))
+        assert slow.duration_s == pytest.approx(full.duration_s / share, rel=1e-6)
+        np.testing.assert_allclose(slow.dt, full.dt / share, rtol=1e-4, atol=1e-6 * full.duration_s)
+        np.testing.assert_allclose(slow.sd, share * full.sd, rtol=1e-4, atol=1e-6 * full.sd.max())

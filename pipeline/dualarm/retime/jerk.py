@@ -37,9 +37,14 @@ length and its first guess's duration, where its unknowns are of order one. The 
 are then integrated exactly, after the least change that ends the piece at rest (:func:`_exact`).
 
 The check. Between the nodes the limits can be exceeded; so each timing is checked analytically,
-on both sides of every node and every :data:`CHECK_STEP_S`. While refining, each interval where a limit is exceeded by
+on both sides of every node and every :data:`REFINE_CHECK_STEP_S` while refining, every :data:`CHECK_STEP_S` at the
+end. While refining, each interval where a limit is exceeded by
 more than :data:`REFINE_ABOVE` is halved (in s), and the program solved again from the last
-timing: from :data:`NODES` intervals (denser at both rest ends) up to :data:`MAX_NODES`. At each
+timing: from :data:`NODES` intervals (denser at both rest ends) up to :data:`MAX_NODES`. Once at most
+:data:`TIGHTEN_AT_MOST` intervals exceed, those that exceed by at most :data:`HALVE_ABOVE` keep their nodes instead,
+and the limits at both are tightened by the interval's slow-down: the same program, not built again, and a slow-down
+there rather than the whole piece's stretch (the circle's last two of eight programs added 4 and 2 nodes, 0.2 s of its
+0.87 s of compute). At each
 node a program bounds the acceleration and jerk of only the :data:`LOADED` joints nearest their limits
 in its first guess (:func:`_loaded`); the others' constraints only cost IPOPT time (the ball game, 14
 joints: 1.34 s of compute per s of motion with all, 0.43 with 3, and with 2 its motion took 9.0 s, not
@@ -92,14 +97,21 @@ FIT_RAD = 5e-7
 #: Intervals of a piece's first program ...
 NODES = 40
 #: ... and of its last: intervals exceeding a limit by more than REFINE_ABOVE (a share) are halved up to
-#: this.
+#: this, ...
 MAX_NODES = 400
 REFINE_ABOVE = 1e-2
+#: ... but once at most TIGHTEN_AT_MOST intervals exceed, those exceeding by at most HALVE_ABOVE have their nodes'
+#: limits tightened instead (the same program solved again), in at most REFINE_ROUNDS programs after the first.
+TIGHTEN_AT_MOST = 4
+HALVE_ABOVE = 5e-2
+REFINE_ROUNDS = 16
 #: Share of each limit a program may use at its nodes (the check takes up the rest), and a straight piece
 #: everywhere.
 MARGIN = 1 - 2e-3
-#: Time step of the analytic check of each piece's limits [s] (and of its bounds between the points).
+#: Time step of the analytic check of each piece's limits [s] (and of its bounds between the points), and of the
+#: ratios that choose the refinements (the same durations as at 0.5 ms on the bench's paths, at a quarter of the cost).
 CHECK_STEP_S = 5e-4
+REFINE_CHECK_STEP_S = 2e-3
 #: The final check looks between two of its points where the bound of the ratio between them could pass the largest
 #: ratio (or 1) by more than ZOOM_ABOVE (a share), up to ZOOM_ROUNDS times, ZOOM_POINTS points at most each time
 #: (:meth:`PieceTiming._peaks`).
@@ -121,6 +133,14 @@ IPOPT = {
     "mu_strategy": "monotone",
     "mu_init": 1e-3,
     "linear_solver": "mumps",
+}
+#: ... and those of a program solved from a timing on the same or coarser nodes, nearly optimal: the barrier from
+#: 1e-6, the first guess pushed only 1e-6 into the bounds (the circle's programs took 160 IPOPT iterations, not 215).
+IPOPT_WARM = {
+    "mu_init": 1e-6,
+    "warm_start_init_point": "yes",
+    "warm_start_bound_push": 1e-6,
+    "warm_start_mult_bound_push": 1e-6,
 }
 #: The fallbacks of a piece whose program IPOPT does not solve from its first guess, in order: the program from the
 #: first guess at this share of its speed, then Ruckig on s within limits that hold wherever on the piece.
@@ -204,7 +224,7 @@ class PieceTiming:
         pass the largest ratio or 1 (:meth:`_peaks`): a peak between two points 0.1 ms apart was 1.4e-5 of the jerk
         limit above both on an MC-Inverse path. Without, while refining, the ratios at the times.
         """
-        nodes, t = self.stretch * self.starts_s, self.check_times(CHECK_STEP_S)
+        nodes, t = self.stretch * self.starts_s, self.check_times(CHECK_STEP_S if bound else REFINE_CHECK_STEP_S)
         if bound:
             at, ratio = self._peaks(t, velocity, acceleration, jerk)
         else:
@@ -649,15 +669,23 @@ def _time_piece(
             piece = _solve(path, nodes, velocity, acceleration, jerk, samples, None, WARM_START_SHARE)
         except StageError:
             return replace(_bounded(path, velocity, acceleration, jerk), fallback=FALLBACKS[1])
+    limits = np.ones(len(nodes))  # the share of its limits each node's constraints allow
     excess = piece.excess(velocity, acceleration, jerk, bound=False)
-    while (excess > 1 + REFINE_ABOVE).any():
-        halve = excess > 1 + REFINE_ABOVE
-        if len(nodes) - 1 + halve.sum() > MAX_NODES:
+    for _ in range(REFINE_ROUNDS):
+        over = excess > 1 + REFINE_ABOVE
+        halve = over if over.sum() > TIGHTEN_AT_MOST else excess > 1 + HALVE_ABOVE
+        if not over.any() or len(nodes) - 1 + halve.sum() > MAX_NODES:
             break
-        nodes = np.sort(np.concatenate([nodes, (nodes[:-1][halve] + nodes[1:][halve]) / 2]))
+        tighten = np.flatnonzero(over & ~halve)
+        for end in (tighten, tighten + 1):  # the interval's slow-down, at both its nodes
+            np.minimum.at(limits, end, limits[end] / excess[tighten])
+        middles = (nodes[:-1] + nodes[1:])[halve] / 2
+        order = np.argsort(np.concatenate([nodes, middles]), kind="stable")
+        nodes = np.concatenate([nodes, middles])[order]
+        limits = np.concatenate([limits, np.minimum(limits[:-1], limits[1:])[halve]])[order]
         try:
-            piece = _solve(path, nodes, velocity, acceleration, jerk, samples, piece)
-        except StageError:  # a finer program IPOPT cannot solve: the coarser timing, stretched, stands
+            piece = _solve(path, nodes, velocity, acceleration, jerk, samples, piece, limits=limits)
+        except StageError:  # a program IPOPT cannot solve: the last timing, stretched, stands
             break
         excess = piece.excess(velocity, acceleration, jerk, bound=False)
     k = float(piece.excess(velocity, acceleration, jerk).max())
@@ -750,16 +778,20 @@ def _solve(
     samples: tuple[int, int],
     start: PieceTiming | None,
     share: float = 0.9,
+    limits: np.ndarray | None = None,
 ) -> PieceTiming:
     """The program on ``nodes`` (K + 1,) [rad] along ``path`` solved (:func:`_program`), unstretched.
 
-    From the timing ``start`` on coarser nodes (or from :func:`_first_guess` at ``share`` of its speed). At each
-    node, the acceleration and jerk of the :data:`LOADED` joints nearest their limits in that first guess are
-    constrained (:func:`_loaded`), every joint's velocity. StageError naming the piece's ``samples`` if IPOPT fails.
+    From the timing ``start`` on the same or coarser nodes (or from :func:`_first_guess` at ``share`` of its speed).
+    At each node, the acceleration and jerk of the :data:`LOADED` joints nearest their limits in that first guess are
+    constrained (:func:`_loaded`), every joint's velocity: to :data:`MARGIN` times the node's ``limits`` (K + 1,) share
+    of each (1 where None; the velocity times it, the acceleration times its square, the jerk its cube: the ratios of
+    a slow-down by it). StageError naming the piece's ``samples`` if IPOPT fails.
     """
     K = len(nodes) - 1
+    limits = np.ones(K + 1) if limits is None else limits
     d1, d2, d3 = (path(nodes, m) for m in (1, 2, 3))
-    cap = MARGIN * np.min(velocity / np.maximum(np.abs(d1), 1e-12), axis=1)  # s' within every joint's velocity limit
+    cap = MARGIN * limits * np.min(velocity / np.maximum(np.abs(d1), 1e-12), axis=1)  # s' within the velocity limits
     if start is None:
         bends = (
             np.min(np.cbrt(jerk / np.maximum(np.abs(d3), 1e-12)), axis=1) / 2
@@ -770,10 +802,13 @@ def _solve(
     else:
         passes = _passing(start, nodes)
         _, sd0, sdd0, _ = start.path_state(passes)
-        sd0, dt0 = np.minimum(sd0, cap), np.maximum(np.diff(passes), 1e-5)
+        # slowed down uniformly to within the velocity caps, which it may pass between its own nodes: clipping s'
+        # instead would break the triple integrator there (by up to 6 % of the speed on the circle)
+        k = max(1.0, float(np.max(sd0 / np.maximum(cap, 1e-300))))
+        sd0, sdd0, dt0 = sd0 / k, sdd0 / k**2, np.maximum(np.diff(passes), 1e-5) * k
     sddd0 = np.diff(sdd0) / dt0
     slots = _loaded(d1, d2, d3, sd0, sdd0, sddd0, acceleration, jerk)
-    solver, lbg, ubg = _program(slots.shape[1], K)
+    solver, lbg, ubg = _program(slots.shape[1], K, warm=start is not None)
     # The program runs in sigma = s / L and tau = t / T (the piece's length, the first guess's duration), where its
     # unknowns are of order one whatever the limits (a Panda's jerk limits are 5000 rad/s^3): the same program, with
     # P's derivatives times L, L^2, L^3 and the limits times T, T^2, T^3.
@@ -788,8 +823,8 @@ def _solve(
         [
             np.diff(nodes) / L,
             *((d[node, slots] * L**m).T.ravel() for m, d in ((1, d1), (2, d2), (3, d3))),
-            (1 / (acceleration[slots] * T**2)).T.ravel(),
-            (1 / (jerk[slots] * T**3)).T.ravel(),
+            (1 / (acceleration[slots] * (limits[:, None] * T) ** 2)).T.ravel(),
+            (1 / (jerk[slots] * (limits[:, None] * T) ** 3)).T.ravel(),
         ]
     )
     x0 = np.concatenate([sd0 / speed, sdd0 * T / speed, sddd0 * T**2 / speed, dt0 / T])
@@ -834,10 +869,10 @@ def _loaded(
 
 
 @functools.cache
-def _program(m: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
+def _program(m: int, K: int, warm: bool = False) -> tuple[cs.Function, np.ndarray, np.ndarray]:
     """A piece's program on ``K`` intervals, ``m`` joints constrained at each node (module docstring).
 
-    The IPOPT solver and the bounds of its constraints.
+    The IPOPT solver (with :data:`IPOPT_WARM` when ``warm``) and the bounds of its constraints.
 
     Variables: s' (K + 1), s'' (K + 1), s''' (K), dt (K). Parameters: the nodes' spacing (K); P', P'', P''' of each
     node's constrained joints, 1 / their acceleration and 1 / their jerk limits ((K + 1) x m each, column-major).
@@ -869,7 +904,10 @@ def _program(m: int, K: int) -> tuple[cs.Function, np.ndarray, np.ndarray]:
         "g": g,
     }
     solver = cs.nlpsol(
-        "jerk_limited", "ipopt", problem, {"print_time": False, **{f"ipopt.{k}": v for k, v in IPOPT.items()}}
+        "jerk_limited",
+        "ipopt",
+        problem,
+        {"print_time": False, **{f"ipopt.{k}": v for k, v in {**IPOPT, **(IPOPT_WARM if warm else {})}.items()}},
     )
     return solver, lower, bound
 
