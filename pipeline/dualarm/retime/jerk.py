@@ -105,6 +105,9 @@ REFINE_ABOVE = 1e-2
 TIGHTEN_AT_MOST = 4
 HALVE_ABOVE = 5e-2
 REFINE_ROUNDS = 16
+#: Programs are built with a multiple of this many intervals (:func:`_solve`): the bench's four paths needed 5 programs,
+#: not 17, and the circle 46-47 ms of compute per s of motion, not 53-54 (a script timing ``plan`` as the bench does).
+PROGRAM_STEP = 32
 #: Share of each limit a program may use at its nodes (the check takes up the rest), and a straight piece
 #: everywhere.
 MARGIN = 1 - 2e-3
@@ -787,6 +790,9 @@ def _solve(
     constrained (:func:`_loaded`), every joint's velocity: to :data:`MARGIN` times the node's ``limits`` (K + 1,) share
     of each (1 where None; the velocity times it, the acceleration times its square, the jerk its cube: the ratios of
     a slow-down by it). StageError naming the piece's ``samples`` if IPOPT fails.
+
+    The program has K intervals rounded up to a multiple of :data:`PROGRAM_STEP`, those after the K null (no length,
+    every unknown fixed at 0): the same timing, from a program built once per size rather than per refinement.
     """
     K = len(nodes) - 1
     limits = np.ones(K + 1) if limits is None else limits
@@ -808,26 +814,36 @@ def _solve(
         sd0, sdd0, dt0 = sd0 / k, sdd0 / k**2, np.maximum(np.diff(passes), 1e-5) * k
     sddd0 = np.diff(sdd0) / dt0
     slots = _loaded(d1, d2, d3, sd0, sdd0, sddd0, acceleration, jerk)
-    solver, lbg, ubg = _program(slots.shape[1], K, warm=start is not None)
+    size = PROGRAM_STEP * -(-K // PROGRAM_STEP)  # the program's intervals: the K nodes', then null ones
+    solver, lbg, ubg = _program(slots.shape[1], size, warm=start is not None)
+    lbg, ubg, null = lbg.copy(), ubg.copy(), np.zeros(size - K)
+    for block in range(3):  # a null interval's integrator: free (its unknowns are all fixed at 0, and its ds is 0)
+        lbg[block * size + K : (block + 1) * size], ubg[block * size + K : (block + 1) * size] = -np.inf, np.inf
     # The program runs in sigma = s / L and tau = t / T (the piece's length, the first guess's duration), where its
     # unknowns are of order one whatever the limits (a Panda's jerk limits are 5000 rad/s^3): the same program, with
     # P's derivatives times L, L^2, L^3 and the limits times T, T^2, T^3.
     L, T = float(nodes[-1]), float(dt0.sum())
     speed = L / T
-    lbx = np.concatenate([np.zeros(K + 1), np.full(K + 1, -np.inf), np.full(K, -np.inf), np.full(K, 1e-5 / T)])
-    ubx = np.concatenate([cap / speed, np.full(K + 1, np.inf), np.full(K, np.inf), np.full(K, np.inf)])
+    free = np.full(K + 1, np.inf)
+    lbx = np.concatenate([np.zeros(K + 1), null, -free, null, -free[1:], null, np.full(K, 1e-5 / T), null])
+    ubx = np.concatenate([cap / speed, null, free, null, free[1:], null, free[1:], null])
     for end in (0, K):  # rest at both ends
-        ubx[end] = lbx[K + 1 + end] = ubx[K + 1 + end] = 0.0
+        ubx[end] = lbx[size + 1 + end] = ubx[size + 1 + end] = 0.0
     node = np.arange(K + 1)[:, None]
+
+    def columns(values: np.ndarray) -> np.ndarray:  # (K + 1, m) at the nodes, 0 at the null ones, column-major
+        return np.vstack([values, np.zeros((size - K, values.shape[1]))]).T.ravel()
+
     parameters = np.concatenate(
         [
             np.diff(nodes) / L,
-            *((d[node, slots] * L**m).T.ravel() for m, d in ((1, d1), (2, d2), (3, d3))),
-            (1 / (acceleration[slots] * (limits[:, None] * T) ** 2)).T.ravel(),
-            (1 / (jerk[slots] * (limits[:, None] * T) ** 3)).T.ravel(),
+            null,
+            *(columns(d[node, slots] * L**m) for m, d in ((1, d1), (2, d2), (3, d3))),
+            columns(1 / (acceleration[slots] * (limits[:, None] * T) ** 2)),
+            columns(1 / (jerk[slots] * (limits[:, None] * T) ** 3)),
         ]
     )
-    x0 = np.concatenate([sd0 / speed, sdd0 * T / speed, sddd0 * T**2 / speed, dt0 / T])
+    x0 = np.concatenate([sd0 / speed, null, sdd0 * T / speed, null, sddd0 * T**2 / speed, null, dt0 / T, null])
     result = solver(x0=x0, p=parameters, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     status = solver.stats()["return_status"]
     if status not in SOLVED:
@@ -837,7 +853,7 @@ def _solve(
             sample=samples[0],
         )
     x = np.asarray(result["x"]).ravel()
-    return _exact(path, x[2 * K + 2 : 3 * K + 2] * speed / T**2, x[3 * K + 2 :] * T)
+    return _exact(path, x[2 * size + 2 : 2 * size + 2 + K] * speed / T**2, x[3 * size + 2 : 3 * size + 2 + K] * T)
 
 
 def _loaded(
