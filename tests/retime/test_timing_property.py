@@ -3,8 +3,9 @@
 Each path is timed as a run times it (jerk-limited, the robot's velocity, acceleration, jerk and position limits), as
 the IK gave it and in three variants: 1e-7 rad of Gaussian noise added (the IK's rounding), reversed half-way (the
 path goes back over itself), and every joint shifted so that its extreme sample sits on its nearest limit. Either the
-timing is refused in one line because the path jumps, or it holds every limit (by finite differences of positions
-every 0.25 ms, and every position within the joint's range or the samples') and passes within 1e-6 rad of every
+timing is refused in one line because the path jumps, or it holds every limit (by finite differences every 0.25 ms:
+of positions, and of accelerations for the jerk, ``test_jerk._fd_ratios``; every position within the joint's range or
+the samples') and passes within 1e-6 rad of every
 sample, also where the curve through the samples would leave a limit between them. Never another error, never a
 crash.
 
@@ -27,6 +28,7 @@ from dualarm.study.spec import study_from_toml
 from dualarm.study.trials import reachable_trial
 from dualarm.tasks.task import Task
 from tests.helpers import REPO
+from tests.retime.test_jerk import STEP_S, _fd_ratios
 from tests.retime.test_topp import joint_path
 
 #: The study the paths come from: short tasks, sparse samples (the variants' timing is what costs).
@@ -42,8 +44,6 @@ control_period_s = 0.05
 """
 #: The trials, and the paths each IK path gives (itself and three variants).
 TRIALS, VARIANTS = 12, 4
-#: Finite-difference step [s].
-STEP_S = 2.5e-4
 
 
 def _variants(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, rng: np.random.Generator):
@@ -102,9 +102,7 @@ def test_the_default_timing_holds_every_limit_or_refuses_a_jump_on_generated_pat
                 assert "the joint path jumps" in str(error) and "\n" not in str(error), where
                 counts["refused: the path jumps"] += 1
                 continue
-            x = timing.evaluate(np.arange(0.0, timing.duration_s, STEP_S))[0]
-            for order, limit in zip((1, 2, 3), (v, a, j), strict=True):
-                assert (np.abs(np.diff(x, order, axis=0)) / STEP_S**order / limit).max() <= 1 + 1e-6, where
+            assert max(_fd_ratios(timing, (v, a, j))) <= 1 + 1e-6, where
             assert _leaves(timing, np.minimum(lower, q.min(axis=0)), np.maximum(upper, q.max(axis=0))) <= 1e-12
             counts["timed"] += 1
             counts["with a fallback piece"] += bool(timing.fallbacks)

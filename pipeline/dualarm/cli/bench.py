@@ -304,7 +304,8 @@ def bench_trajectory_command() -> None:
     table = Table(
         title=(
             "trajectory generation on each task's joint path: velocity, acceleration and jerk "
-            "limit ratios by finite differences of the motion's positions (red above 1 + 1e-6); "
+            "limit ratios by finite differences of the motion's positions (its jerk-limited timing's jerk: of its "
+            "accelerations; red above 1 + 1e-6); "
             "deviation from the path per joint and at the hands; compute time per second of motion"
         ),
         title_justify="left",
