@@ -16,6 +16,7 @@ from dualarm.cli import app
 from dualarm.errors import InvalidArgumentError, StageError
 from dualarm.retime.stage import plan, retime_path
 from dualarm.retime.timing import path_deviation_max_rad
+from dualarm.retime.topp import chord_parameter
 from dualarm.run import run_task
 from dualarm.tasks import load_task
 from dualarm.tasks.schema import Retime
@@ -354,7 +355,7 @@ def _cubic_piece():
 
     sigma = np.linspace(0.0, 1.0, 12)
     q = _edge(0, sigma)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    s = chord_parameter(q)[0]
     return jerk._time_piece(make_interp_spline(s, q, k=3), V, A, J, (0, 11))
 
 
@@ -401,7 +402,7 @@ def _three_joint_piece():
     from dualarm.retime import jerk
 
     q = _edge(1, np.linspace(0.0, 1.0, 40))[:, :3]
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    s = chord_parameter(q)[0]
     path, _ = jerk.fit(s, q)
     return path, s[-1] * (1 - np.cos(np.linspace(0.0, np.pi, 31))) / 2
 

@@ -101,13 +101,12 @@ def _ratios(
     difference (the property test read 1.0000017 on a motion riding that limit), 64 times less at the 1 ms of the
     tracked motions.
     """
-    velocity, acceleration, jerk = (
+    velocity, acceleration = (
         float((np.abs(np.diff(q, order, axis=0)) / step_s**order / limit).max())
-        for order, limit in zip((1, 2, 3), limits, strict=True)
+        for order, limit in zip((1, 2), limits[:2], strict=True)
     )
-    if qdd is not None:
-        jerk = float((np.abs(np.diff(qdd, axis=0)) / step_s / limits[2]).max())
-    return velocity, acceleration, jerk
+    third = np.diff(q, 3, axis=0) / step_s**3 if qdd is None else np.diff(qdd, axis=0) / step_s
+    return velocity, acceleration, float((np.abs(third) / limits[2]).max())
 
 
 def _hand_distance(
